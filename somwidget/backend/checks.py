@@ -1,0 +1,86 @@
+"""Argument checks shared by the public entry points: each failure is a ValueError that names the argument."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+
+import numpy as np
+
+
+def finite_array(name: str, value, ndim: int, dtype=np.float32) -> np.ndarray:
+    """`value` as a C-contiguous array of `dtype` with `ndim` dimensions and only finite entries."""
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # ragged lists and the like
+        raise ValueError(f"{name}: expected a numeric array, got {type(value).__name__} ({exc})") from None
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
+        raise ValueError(f"{name}: expected a numeric array, got dtype {arr.dtype}")
+    if arr.ndim != ndim:
+        raise ValueError(f"{name}: expected {ndim} dimensions, got shape {arr.shape}")
+    if np.issubdtype(arr.dtype, np.complexfloating):
+        raise ValueError(f"{name}: expected real numbers, got complex")
+    arr64 = arr.astype(np.float64)
+    bad = ~np.isfinite(arr64)
+    if bad.any():
+        where = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"{name}: entries must be finite; found {arr64[where]} at index {where}")
+    limit = float(np.finfo(dtype).max) if np.issubdtype(dtype, np.floating) else math.inf
+    if np.abs(arr64).max(initial=0.0) > limit / 1e6:
+        raise ValueError(f"{name}: values must stay well inside {np.dtype(dtype).name} range (|x| <= {limit / 1e6:.3g})")
+    return np.ascontiguousarray(arr64.astype(dtype))
+
+
+def index_array(name: str, value, ndim: int | None = None) -> np.ndarray:
+    """`value` as an int64 array; non-integers (1.5, "a", True) are refused."""
+    arr = np.asarray(value)
+    if arr.dtype == bool or not (np.issubdtype(arr.dtype, np.integer) or arr.size == 0):
+        raise ValueError(f"{name}: expected integer indices, got dtype {arr.dtype}")
+    if ndim is not None and arr.ndim != ndim:
+        raise ValueError(f"{name}: expected {ndim} dimensions, got shape {arr.shape}")
+    return arr.astype(np.int64).reshape(arr.shape)
+
+
+def integer(name: str, value, minimum: int, maximum: int | None = None) -> int:
+    """An int in [minimum, maximum]; bools and non-integral numbers are refused."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        if isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer():
+            value = int(value)
+        else:
+            raise ValueError(f"{name}: expected an integer, got {value!r}")
+    value = int(value)
+    if value < minimum or (maximum is not None and value > maximum):
+        upper = "" if maximum is None else f" and at most {maximum}"
+        raise ValueError(f"{name}: expected at least {minimum}{upper}, got {value}")
+    return value
+
+
+def real(name: str, value, low: float, high: float, low_open: bool = False) -> float:
+    """A finite float in [low, high] (or (low, high] when low_open)."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a number, got {value!r}") from None
+    if isinstance(value, bool) or not math.isfinite(x):
+        raise ValueError(f"{name}: expected a finite number, got {value!r}")
+    ok = (low < x if low_open else low <= x) and x <= high
+    if not ok:
+        interval = f"{'(' if low_open else '['}{low}, {high}]"
+        raise ValueError(f"{name}: expected a value in {interval}, got {x}")
+    return x
+
+
+def dims(name: str, value: Iterable | None, n_dims: int) -> tuple[int, ...]:
+    """A sorted tuple of distinct feature-dimension indices, each in [0, n_dims)."""
+    if value is None:
+        return ()
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        value = (value,)
+    out = []
+    for d in value:
+        if isinstance(d, bool) or not isinstance(d, (int, np.integer)):
+            raise ValueError(f"{name}: expected feature-dimension indices (ints), got {d!r}")
+        if not 0 <= int(d) < n_dims:
+            raise ValueError(f"{name}: dimension {int(d)} is outside the {n_dims} feature dimensions (0..{n_dims - 1})")
+        out.append(int(d))
+    return tuple(sorted(set(out)))

@@ -1,0 +1,33 @@
+"""Choosing the Warp device: None picks CUDA when present, else the CPU."""
+
+from __future__ import annotations
+
+import warp as wp
+
+wp.config.quiet = True
+
+
+def resolve(device: str | None) -> str:
+    """'cpu', 'cuda:N' (or 'cuda' = 'cuda:0') when that GPU exists; None = best available."""
+    wp.init()
+    n_cuda = wp.get_cuda_device_count()
+    if device is None or device == "auto":
+        return "cuda:0" if n_cuda > 0 else "cpu"
+    if not isinstance(device, str):
+        raise ValueError(f"device: expected None, 'auto', 'cpu' or 'cuda:N', got {device!r}")
+    if device == "cpu":
+        return "cpu"
+    if device == "cuda":
+        device = "cuda:0"
+    if device.startswith("cuda:") and device[5:].isdigit():
+        index = int(device[5:])
+        if index >= n_cuda:
+            have = "no CUDA device" if n_cuda == 0 else f"CUDA devices 0..{n_cuda - 1}"
+            raise ValueError(f"device: {device!r} is not available (this machine has {have}); use 'cpu' or None")
+        return device
+    raise ValueError(f"device: expected None, 'auto', 'cpu', 'cuda' or 'cuda:N', got {device!r}")
+
+
+def block_threads(device: str) -> int:
+    """Threads per block of the tiled kernels: Warp runs a CPU block as one thread."""
+    return 1 if device == "cpu" else 256

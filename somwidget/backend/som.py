@@ -1,0 +1,345 @@
+"""The self-organizing map as computational clay: device state and the training cycle (DESIGN.md, the algorithm)."""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from . import checks
+from .kernels import cycle_kernels
+from .device import block_threads, resolve
+from .schedule import learning_table
+from .topology import Topology
+
+MAX_DIMS = 32
+MAX_CONTROLS = 256  # counts the effective list: originals plus mirrored copies
+_KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
+_LONGEST_GRAPH = 512  # cycles in the longest captured graph; runs are split into powers of two
+
+
+class Som:
+    """A SOM whose neurons are the vertices of `topology`, trained towards `controls`.
+
+    weights (N, n) and controls (k, n) share the n feature dimensions (1..32). State stays on `device`
+    ("cpu", "cuda:N", None = best available); `weights` returns a host copy.
+    """
+
+    def __init__(
+        self,
+        topology: Topology,
+        weights,
+        controls,
+        iterations: int = 1000,
+        l_start: float = 0.25,
+        l_end: float = 0.03,
+        smoothing: float = 0.0,
+        smooth_dims=None,
+        metric_weights=None,
+        mirror=(),
+        device: str | None = None,
+    ):
+        if not isinstance(topology, Topology):
+            raise ValueError(f"topology: expected a Topology, got {type(topology).__name__}")
+        self.device = resolve(device)
+        self.topology = topology
+        start = checks.finite_array("weights", weights, 2)
+        if start.shape[0] != topology.n_vertices:
+            raise ValueError(f"weights: expected {topology.n_vertices} rows (one per vertex), got {start.shape[0]}")
+        if not 1 <= start.shape[1] <= MAX_DIMS:
+            raise ValueError(f"weights: expected 1 to {MAX_DIMS} feature dimensions, got {start.shape[1]}")
+        self.n_neurons, self.n_dims = start.shape
+        self._start = start
+        self._iterations = checks.integer("iterations", iterations, 1)
+        self._l_start = checks.real("l_start", l_start, 0.0, 1.0, low_open=True)
+        self._l_end = checks.real("l_end", l_end, 0.0, 1.0, low_open=True)
+        self._smoothing = checks.real("smoothing", smoothing, 0.0, 1.0)
+        self._mirror = checks.dims("mirror", mirror, self.n_dims)
+        self._smooth_dims = self._check_smooth_dims(smooth_dims)
+        self._metric = self._check_metric(metric_weights)
+        self._controls = self._check_controls(controls, self._mirror)
+
+        dev = self.device
+        self._threads = block_threads(dev)
+        self._blocks = 1 if dev == "cpu" else (self.n_neurons + self._threads - 1) // self._threads
+        self._stride = self._blocks * self._threads
+        self._distances = topology.distance_table(dev)
+        self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=dev)
+        neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
+        self._neighbors = wp.array(neighbors, dtype=wp.int32, device=dev)
+        self._k = cycle_kernels(self.n_dims)
+        vec = self._k.vec
+        self._w = wp.array(start, dtype=vec, device=dev)
+        self._w_moved = wp.empty_like(self._w)
+        self._c = wp.zeros(MAX_CONTROLS, dtype=vec, device=dev)
+        self._m = wp.array(self._metric[None, :], dtype=vec, device=dev)
+        self._mask = wp.array(self._mask_of(self._smooth_dims)[None, :], dtype=vec, device=dev)
+        self._keys = wp.full((3, MAX_CONTROLS), _KEY_NONE, dtype=wp.uint64, device=dev)
+        self._cycle = [wp.zeros(1, dtype=wp.int32, device=dev), wp.zeros(1, dtype=wp.int32, device=dev)]
+        self._graphs: dict[tuple, object] = {}
+        self._table = None
+        self._build_table()
+        self._upload_controls()
+        self._s = 0
+        self._parity = 0
+
+    # -- validation ---------------------------------------------------------------------------------------
+    def _check_controls(self, controls, mirror) -> np.ndarray:
+        c = np.asarray(controls) if not isinstance(controls, np.ndarray) else controls
+        if c.ndim == 1:
+            c = c[None, :]
+        c = checks.finite_array("controls", c, 2)
+        if c.shape[1] != self.n_dims:
+            raise ValueError(f"controls: expected {self.n_dims} feature dimensions like the weights, got {c.shape[1]}")
+        k_eff = c.shape[0] * (2 if mirror else 1)
+        if c.shape[0] < 1 or k_eff > MAX_CONTROLS:
+            raise ValueError(f"controls: expected 1 to {MAX_CONTROLS} controls counting mirrored copies, "
+                             f"got {c.shape[0]} ({k_eff} with mirroring)")
+        return c
+
+    def _check_metric(self, metric) -> np.ndarray:
+        if metric is None:
+            return np.ones(self.n_dims, np.float32)
+        m = checks.finite_array("metric_weights", metric, 1)
+        if m.shape[0] != self.n_dims:
+            raise ValueError(f"metric_weights: expected {self.n_dims} weights (one per dimension), got {m.shape[0]}")
+        if (m < 0).any():
+            raise ValueError(f"metric_weights: weights must be >= 0, got {m.tolist()}")
+        if not (m > 0).any():
+            raise ValueError("metric_weights: at least one weight must be positive, all are zero")
+        return m
+
+    def _check_smooth_dims(self, smooth_dims) -> tuple[int, ...]:
+        if smooth_dims is None:
+            return tuple(range(min(3, self.n_dims)))
+        return checks.dims("smooth_dims", smooth_dims, self.n_dims)
+
+    def _mask_of(self, dims: tuple[int, ...]) -> np.ndarray:
+        mask = np.zeros(self.n_dims, np.float32)
+        mask[list(dims)] = 1
+        return mask
+
+    # -- configuration ------------------------------------------------------------------------------------
+    @property
+    def iteration(self) -> int:
+        """s: cycles run since the last (re)start of the schedule."""
+        return self._s
+
+    @property
+    def iterations(self) -> int:
+        """S: cycles in a run. Setting it restarts the schedule from the current weights."""
+        return self._iterations
+
+    @iterations.setter
+    def iterations(self, value: int) -> None:
+        self._iterations = checks.integer("iterations", value, 1)
+        self._build_table()
+        self._restart()
+
+    @property
+    def l_start(self) -> float:
+        return self._l_start
+
+    @l_start.setter
+    def l_start(self, value: float) -> None:
+        self._l_start = checks.real("l_start", value, 0.0, 1.0, low_open=True)
+        self._build_table()
+        self._restart()
+
+    @property
+    def l_end(self) -> float:
+        return self._l_end
+
+    @l_end.setter
+    def l_end(self, value: float) -> None:
+        self._l_end = checks.real("l_end", value, 0.0, 1.0, low_open=True)
+        self._build_table()
+        self._restart()
+
+    @property
+    def smoothing(self) -> float:
+        """lambda of the Laplacian step after each cycle; 0 switches smoothing off."""
+        return self._smoothing
+
+    @smoothing.setter
+    def smoothing(self, value: float) -> None:
+        self._smoothing = checks.real("smoothing", value, 0.0, 1.0)
+        self._graphs.clear()
+
+    @property
+    def smooth_dims(self) -> tuple[int, ...]:
+        return self._smooth_dims
+
+    @smooth_dims.setter
+    def smooth_dims(self, value) -> None:
+        self._smooth_dims = self._check_smooth_dims(value)
+        self._mask.assign(self._mask_of(self._smooth_dims)[None, :])
+
+    @property
+    def metric_weights(self) -> np.ndarray:
+        return self._metric.copy()
+
+    @metric_weights.setter
+    def metric_weights(self, value) -> None:
+        self._metric = self._check_metric(value)
+        self._m.assign(self._metric[None, :])
+        self._winners_valid = False
+
+    @property
+    def mirror(self) -> tuple[int, ...]:
+        """Dims negated in each control's mirrored copy; () = no symmetry."""
+        return self._mirror
+
+    @mirror.setter
+    def mirror(self, value) -> None:
+        mirror = checks.dims("mirror", value, self.n_dims)
+        self._check_controls(self._controls, mirror)
+        self._mirror = mirror
+        self._upload_controls()
+        self._restart()
+
+    @property
+    def controls(self) -> np.ndarray:
+        """(k, n) the controls as given, without mirrored copies."""
+        return self._controls.copy()
+
+    @property
+    def effective_controls(self) -> np.ndarray:
+        """[originals..., mirrored copies...]: the list the cycle applies in order."""
+        if not self._mirror:
+            return self._controls.copy()
+        copies = self._controls.copy()
+        copies[:, list(self._mirror)] *= -1.0
+        return np.concatenate([self._controls, copies])
+
+    @property
+    def weights(self) -> np.ndarray:
+        """(N, n) float32 host copy of the current weights."""
+        return self._w.numpy().reshape(self.n_neurons, self.n_dims).copy()
+
+    @property
+    def start_weights(self) -> np.ndarray:
+        return self._start.copy()
+
+    def learning_table(self) -> np.ndarray:
+        """L[s, d] (S, d_max + 1) float32."""
+        return self._table_host.copy()
+
+    # -- intents ------------------------------------------------------------------------------------------
+    def set_controls(self, controls) -> None:
+        """New controls (any count k); the schedule restarts at s = 0 from the latest weights."""
+        self._controls = self._check_controls(controls, self._mirror)
+        self._upload_controls()
+        self._restart()
+
+    def set_weights(self, weights) -> None:
+        """Replace the current weights (same shape); the schedule restarts at s = 0."""
+        w = checks.finite_array("weights", weights, 2)
+        if w.shape != (self.n_neurons, self.n_dims):
+            raise ValueError(f"weights: expected shape {(self.n_neurons, self.n_dims)}, got {w.shape}")
+        self._w.assign(w)
+        self._restart()
+
+    def reset(self) -> None:
+        """Back to the start weights and s = 0; the controls stay."""
+        self._w.assign(self._start)
+        self._restart()
+
+    def winners(self) -> np.ndarray:
+        """(k_eff,) the nearest neuron (metric-weighted) of each effective control for the current weights."""
+        self._find_winners_now()
+        keys = self._keys.numpy()[self._s % 3, : self._k_eff]
+        return (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
+
+    # -- training -----------------------------------------------------------------------------------------
+    def step(self, n: int = 1) -> int:
+        """Run up to n cycles (stopping at S); returns how many ran."""
+        n = checks.integer("n", n, 0)
+        n = min(n, self._iterations - self._s)
+        done = 0
+        while done < n:
+            chunk = min(_LONGEST_GRAPH, 1 << ((n - done).bit_length() - 1))
+            self._run(chunk)
+            done += chunk
+        return n
+
+    def train(self) -> int:
+        """Run the rest of the schedule (to s = S); returns the cycles run."""
+        return self.step(self._iterations - self._s)
+
+    def synchronize(self) -> None:
+        wp.synchronize_device(self.device)
+
+    # -- internals ----------------------------------------------------------------------------------------
+    def _build_table(self) -> None:
+        self._table_host = learning_table(self._iterations, self.topology.d_max, self._l_start, self._l_end)
+        self._table = wp.array(self._table_host, dtype=wp.float32, device=self.device)
+        self._graphs.clear()
+
+    def _upload_controls(self) -> None:
+        eff = self.effective_controls
+        self._k_eff = eff.shape[0]
+        padded = np.zeros((MAX_CONTROLS, self.n_dims), np.float32)  # fixed size: graphs keep their pointers
+        padded[: self._k_eff] = eff
+        self._c.assign(padded)
+        self._graphs.clear()
+        self._winners_valid = False
+
+    def _restart(self) -> None:
+        self._s = 0
+        self._winners_valid = False
+
+    def _set_cycle(self) -> None:
+        for arr in self._cycle:
+            arr.fill_(self._s)
+
+    def _find_winners_now(self) -> None:
+        if self._winners_valid:
+            return
+        self._set_cycle()
+        self._launch_find()
+        self._winners_valid = True
+
+    def _launch_find(self) -> None:
+        self._keys.fill_(_KEY_NONE)
+        wp.launch_tiled(self._k.find_winners, dim=[self._blocks], block_dim=self._threads, device=self.device,
+                        inputs=[self._w, self._c, self._k_eff, self._m, self._keys, self._cycle[0], self._threads,
+                                self._stride])
+
+    def _run(self, cycles: int) -> None:
+        """`cycles` cycles from s; replayed from a captured graph on CUDA."""
+        fresh = not self._winners_valid
+        if fresh:
+            self._set_cycle()  # both counters hold s; the chain starts reading counter 0
+        smoothing = self._smoothing > 0.0
+        parity = 0 if fresh else self._parity
+        key = (cycles, fresh, parity, smoothing)
+        graph = self._graphs.get(key)
+        if graph is None:
+            with wp.ScopedCapture(device=self.device) as capture:
+                self._record(cycles, fresh, parity, smoothing)
+            graph = self._graphs[key] = capture.graph
+        wp.capture_launch(graph)
+        self._parity = parity if smoothing else (parity + cycles) % 2
+        self._s += cycles
+        self._winners_valid = True
+
+    def _record(self, cycles: int, fresh: bool, parity: int, smoothing: bool) -> None:
+        dev, blocks, threads, stride = self.device, [self._blocks], self._threads, self._stride
+        if fresh:
+            self._launch_find()
+        p = parity
+        for _ in range(cycles):
+            c_in, c_out = self._cycle[p], self._cycle[1 - p]
+            if smoothing:
+                wp.launch_tiled(self._k.move, dim=blocks, block_dim=threads, device=dev,
+                                inputs=[self._w, self._w_moved, self._c, self._k_eff, self._m, self._table,
+                                        self._distances, self._keys, c_in, c_out, 0, threads, stride])
+                wp.launch_tiled(self._k.smooth, dim=blocks, block_dim=threads, device=dev,
+                                inputs=[self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
+                                        self._smoothing, self._c, self._k_eff, self._m, self._keys, c_out, c_in,
+                                        threads, stride])
+            else:
+                wp.launch_tiled(self._k.move, dim=blocks, block_dim=threads, device=dev,
+                                inputs=[self._w, self._w, self._c, self._k_eff, self._m, self._table,
+                                        self._distances, self._keys, c_in, c_out, 1, threads, stride])
+                p = 1 - p
