@@ -27,7 +27,8 @@ def finite_array(name: str, value, ndim: int, dtype=np.float32) -> np.ndarray:
         raise ValueError(f"{name}: entries must be finite; found {arr64[where]} at index {where}")
     limit = float(np.finfo(dtype).max) if np.issubdtype(dtype, np.floating) else math.inf
     if np.abs(arr64).max(initial=0.0) > limit / 1e6:
-        raise ValueError(f"{name}: values must stay well inside {np.dtype(dtype).name} range (|x| <= {limit / 1e6:.3g})")
+        bound = f"|x| <= {limit / 1e6:.3g}"
+        raise ValueError(f"{name}: values must stay well inside the {np.dtype(dtype).name} range ({bound})")
     return np.ascontiguousarray(arr64.astype(dtype))
 
 

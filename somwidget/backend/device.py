@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import warp as wp
 
+from . import kernels
+
 wp.config.quiet = True
 
 
@@ -30,4 +32,4 @@ def resolve(device: str | None) -> str:
 
 def block_threads(device: str) -> int:
     """Threads per block of the tiled kernels: Warp runs a CPU block as one thread."""
-    return 1 if device == "cpu" else 256
+    return 1 if device == "cpu" else int(kernels.CUDA_BLOCK)

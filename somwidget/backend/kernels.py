@@ -19,6 +19,8 @@ import warp as wp
 UNREACHABLE = wp.constant(wp.uint16(65535))
 KEY_NONE = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
 INDEX_MASK = wp.constant(wp.uint64(0xFFFFFFFF))
+#: Threads per block on CUDA: a thread per control scans the block's neurons for the winner search.
+CUDA_BLOCK = wp.constant(32)
 
 
 @wp.func_native("union { float f; uint32_t u; } c; c.f = x; return c.u;")
@@ -79,6 +81,7 @@ def bfs_rows(
 def cycle_kernels(n_dims: int) -> SimpleNamespace:
     """find_winners, move and smooth for weights with n_dims features (compiled once per n_dims)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
+    rate8 = wp.types.vector(length=8, dtype=wp.float32)
 
     @wp.func
     def find_winners_of_block(
@@ -88,29 +91,46 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         metric: vec,
         keys: wp.array2d(dtype=wp.uint64),
         buf: int,
-        first: int,
-        stride: int,
+        block: int,
         lane: int,
+        block_threads: int,
     ):
-        """Step 1: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2; a block reduces its keys, then one atomic min."""
-        for c in range(n_controls):
-            target = controls[c]
-            best = wp.float32(0.0)
-            best_v = int(-1)
-            for v in range(first, weights.shape[0], stride):
-                diff = target - weights[v]
-                dist = wp.dot(wp.cw_mul(diff, metric), diff)
-                if best_v < 0 or dist < best:  # strict: the lowest index wins a tie
-                    best = dist
-                    best_v = v
-            key = KEY_NONE
-            if best_v >= 0:
-                key = winner_key(best, best_v)
-            lowest = wp.tile_min(wp.tile(key))
-            if lane == 0:
-                wp.atomic_min(keys, buf, c, lowest[0])
+        """Step 1: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2 over the block's neurons, then one atomic min per control.
 
-    @wp.kernel(enable_backward=False, module="unique")
+        A thread per control scans the block's neurons (a CPU block is one thread: it scans all of them).
+        """
+        lo = block * block_threads
+        if block_threads == 1:  # the CPU: one thread scans every neuron
+            for c in range(n_controls):
+                target = controls[c]
+                best = wp.float32(0.0)
+                best_v = int(-1)
+                for v in range(weights.shape[0]):
+                    diff = target - weights[v]
+                    dist = wp.dot(wp.cw_mul(diff, metric), diff)
+                    if best_v < 0 or dist < best:  # strict: the lowest index wins a tie
+                        best = dist
+                        best_v = v
+                if best_v >= 0:
+                    wp.atomic_min(keys, buf, c, winner_key(best, best_v))
+        else:
+            wp.tile_sum(wp.tile(0))  # barrier: the block's neurons were just written by its other threads
+            for c in range(lane, n_controls, block_threads):
+                target = controls[c]
+                best = wp.float32(0.0)
+                best_v = int(-1)
+                for i in range(CUDA_BLOCK):  # unrolled: the loads overlap
+                    v = lo + i
+                    if v < weights.shape[0]:
+                        diff = target - weights[v]
+                        dist = wp.dot(wp.cw_mul(diff, metric), diff)
+                        if best_v < 0 or dist < best:
+                            best = dist
+                            best_v = v
+                if best_v >= 0:
+                    wp.atomic_min(keys, buf, c, winner_key(best, best_v))
+
+    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
     def find_winners(
         weights: wp.array(dtype=vec),
         controls: wp.array(dtype=vec),
@@ -123,10 +143,9 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
     ):
         """Winners of cycle s = cycle[0] from the current weights into keys[s % 3] (cleared beforehand)."""
         block, lane = wp.tid()
-        find_winners_of_block(weights, controls, n_controls, metric[0], keys, cycle[0] % 3,
-                              block * block_threads + lane, stride, lane)
+        find_winners_of_block(weights, controls, n_controls, metric[0], keys, cycle[0] % 3, block, lane, block_threads)
 
-    @wp.kernel(enable_backward=False, module="unique")
+    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
     def move(
         weights_in: wp.array(dtype=vec),
         weights_out: wp.array(dtype=vec),
@@ -151,6 +170,7 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         s = cycle_in[0]
         buf = s % 3
         first = block * block_threads + lane
+        last_d = table.shape[1] - 1
         if block_threads == 1:  # one thread walks all neurons (the CPU): control-major, contiguous row reads
             for v in range(first, weights_in.shape[0], stride):
                 weights_out[v] = weights_in[v]
@@ -164,19 +184,23 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
                         if rate != 0.0:
                             w = weights_out[v]
                             weights_out[v] = w + rate * (target - w)
-        else:  # a thread per neuron (CUDA): the row stays in registers across the controls
+        else:  # a thread per neuron (CUDA): the row stays in registers; rates are gathered 8 controls at a time
             for v in range(first, weights_in.shape[0], stride):
                 w = weights_in[v]
-                for c in range(n_controls):
-                    d = distances[wp.int32(keys[buf, c] & INDEX_MASK), v]
-                    if d != UNREACHABLE:
-                        rate = table[s, wp.int32(d)]
-                        if rate != 0.0:
-                            w = w + rate * (controls[c] - w)
+                for c0 in range(0, n_controls, 8):
+                    rates = rate8()
+                    for g in range(8):  # unrolled: eight independent key -> distance -> rate chains
+                        c = wp.min(c0 + g, n_controls - 1)
+                        d = distances[wp.int32(keys[buf, c] & INDEX_MASK), v]
+                        r = table[s, wp.min(wp.int32(d), last_d)]
+                        if d != UNREACHABLE and c0 + g < n_controls:
+                            rates[g] = r
+                    for g in range(8):
+                        w = w + rates[g] * (controls[c0 + g] - w)
                 weights_out[v] = w
         if find_next != 0:
-            find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, first, stride,
-                                  lane)
+            find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane,
+                                  block_threads)
         if block == 0 and lane == 0:
             if find_next != 0:
                 clear_keys(keys, (s + 2) % 3, n_controls)
@@ -184,7 +208,7 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
             else:
                 cycle_out[0] = s
 
-    @wp.kernel(enable_backward=False, module="unique")
+    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
     def smooth(
         weights_in: wp.array(dtype=vec),
         weights_out: wp.array(dtype=vec),
@@ -219,7 +243,8 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
                     total += weights_in[neighbors[e]]
                 w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
             weights_out[v] = w
-        find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, first, stride, lane)
+        find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane,
+                              block_threads)
         if block == 0 and lane == 0:
             clear_keys(keys, (s + 2) % 3, n_controls)
             cycle_out[0] = s + 1

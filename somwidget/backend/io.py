@@ -1,0 +1,436 @@
+"""Mesh import (any mesh trimesh reads) and export (OBJ, PLY, GLB), and session save / load (.npz, no pickle).
+
+Every failure a person can cause (a missing or broken file, an unsupported format, a bad session) is a ValueError
+whose message starts with the file's path and says what is wrong.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from . import checks
+from .presets import DISPLAYS, XYZ, FeatureLayout, Preset, colours_of, line_display_mesh, positions_of
+from .topology import Topology
+
+#: The default vertex limit of `load_mesh`: the dense distance table's cap (2^16 neurons).
+MAX_VERTICES = 65536
+#: File extensions `export_mesh` writes.
+EXPORT_FORMATS = ("obj", "ply", "glb")
+#: The session file format this module writes; `load_session` reads this version and older ones.
+SESSION_FORMAT_VERSION = 1
+#: How far (in the normalised units of a loaded mesh, whose longest side is 2) default controls sit outside it.
+CONTROL_PUSH = 0.25
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Import
+# --------------------------------------------------------------------------------------------------------------
+def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
+    """A `Preset` (3-D nodes, display "surface") from any mesh file trimesh reads: OBJ, PLY, STL, OFF, GLB...
+
+    Duplicate vertices are merged by position (STL stores every triangle's corners apart; glTF splits vertices at
+    UV and normal seams), unreferenced vertices and faces that collapse onto a repeated vertex are dropped. trimesh
+    triangulates polygons on import, so quads arrive as triangle pairs. A file with several meshes (a glTF scene)
+    is flattened into one, with its scene transforms applied.
+
+    The mesh is normalised: its bounding box is centred on the origin (so it lies centred on y = 0, ready for the
+    xz-plane mirror) and scaled so its longest side spans [-1, 1]. `preset.meta["transform"]` holds
+    {"centre": (3,) floats, "scale": float} with normalised = (original - centre) * scale; pass it to
+    `export_mesh(..., transform=...)` to write the original frame back. Default controls: four, one beyond each of
+    the extreme vertices along +x, -x, +y and +z, pushed CONTROL_PUSH outward.
+    """
+    import trimesh
+
+    label = str(path)
+    p = Path(path)
+    max_vertices = checks.integer("max_vertices", max_vertices, 1)
+    if not p.exists():
+        raise ValueError(f"{label}: no such file")
+    if not p.is_file():
+        raise ValueError(f"{label}: not a file")
+    try:
+        loaded = trimesh.load(str(p), process=False)
+        geoms = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
+        if not isinstance(geoms, (list, tuple)):
+            geoms = [geoms]
+    except Exception as exc:  # each format's reader raises its own kinds of error
+        raise ValueError(f"{label}: cannot be read as a mesh ({type(exc).__name__}: {exc})") from None
+
+    meshes = [g for g in geoms if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+    if not meshes:
+        n_points = sum(len(getattr(g, "vertices", ())) for g in geoms)
+        if n_points:
+            raise ValueError(f"{label}: has {n_points} vertices but no faces (a point cloud or lines); "
+                             "a mesh with faces is needed")
+        raise ValueError(f"{label}: holds no mesh (the file is empty or not a mesh file)")
+    mesh = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(meshes)
+
+    vertices = np.asarray(mesh.vertices, np.float64)
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        raise ValueError(f"{label}: {int(bad.sum())} vertices have NaN or infinite coordinates "
+                         f"(first at vertex {int(np.argmax(bad))})")
+    faces = np.asarray(mesh.faces, np.int64)
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise ValueError(f"{label}: a face refers to a vertex that does not exist")
+
+    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    faces = np.asarray(mesh.faces, np.int64)
+    keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    lo, hi = np.asarray(mesh.vertices).min(axis=0), np.asarray(mesh.vertices).max(axis=0)
+    extent = float((hi - lo).max())
+    magnitude = max(1.0, float(np.abs(mesh.vertices).max()))
+    if not np.isfinite(extent) or extent <= 1e-9 * magnitude:
+        raise ValueError(f"{label}: degenerate mesh: all vertices coincide (zero extent)")
+    if not keep.any():
+        raise ValueError(f"{label}: degenerate mesh: every face collapses onto a repeated vertex")
+    mesh.update_faces(keep)
+    mesh.remove_unreferenced_vertices()
+    n = len(mesh.vertices)
+    if n > max_vertices:
+        raise ValueError(f"{label}: {n:,} vertices (after merging duplicates) exceed the limit of {max_vertices:,}; "
+                         "decimate the mesh first (e.g. trimesh's simplify_quadric_decimation)")
+
+    vertices = np.asarray(mesh.vertices, np.float64)
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    centre = (lo + hi) / 2.0
+    scale = 2.0 / float((hi - lo).max())
+    points = ((vertices - centre) * scale).astype(np.float32)
+    topology = Topology.from_faces(np.asarray(mesh.faces, np.int64), n_vertices=n)
+    return Preset(
+        name=p.stem or p.name, title=p.name,
+        description=f"Loaded from {p.name}: {n} vertices, {len(mesh.faces)} triangles.",
+        topology=topology, weights=points, controls=default_controls(points), layout=XYZ, display="surface",
+        meta={"source": str(p), "transform": {"centre": tuple(float(c) for c in centre), "scale": scale}})
+
+
+def default_controls(points, push: float = CONTROL_PUSH) -> np.ndarray:
+    """Four 3-D controls just outside a point set: beyond its extreme points along +x, -x, +y and +z."""
+    pts = np.asarray(points, np.float64)
+    out = []
+    for d in np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float64):
+        out.append(pts[int(np.argmax(pts @ d))] + push * d)
+    return np.asarray(out, np.float32)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Export
+# --------------------------------------------------------------------------------------------------------------
+def export_mesh(path, weights, topology: Topology, layout: FeatureLayout, *, display: str | None = None,
+                transform: dict | None = None) -> None:
+    """Write the current shape to OBJ, PLY or GLB (chosen by the extension) with vertex colours from `layout`.
+
+    display: "surface" (the topology's faces, n-gons fan-triangulated since trimesh holds triangles), "lines" (the
+    line display mesh of case study 3: 2N vertices, two triangles per edge quad), "points" (a point cloud: all three
+    formats store one), or None to choose: "lines" when the layout has direction dims, else "surface" when the
+    topology has faces, else "points". transform: the {"centre", "scale"} of `Preset.meta["transform"]` to map the
+    positions back to a loaded file's frame. Vertex order is kept, so vertex i of the file is neuron i
+    (for "lines": N roots, then N tips).
+    """
+    import trimesh
+
+    label = str(path)
+    ext = Path(path).suffix.lower().lstrip(".")
+    if ext not in EXPORT_FORMATS:
+        what = f"'.{ext}'" if ext else "a name without an extension"
+        raise ValueError(f"{label}: cannot export to {what}; use one of " + ", ".join("." + e for e in EXPORT_FORMATS))
+    w = checks.finite_array("weights", weights, 2)
+    if w.shape != (topology.n_vertices, layout.n_dims):
+        raise ValueError(f"{label}: weights have shape {w.shape}, expected ({topology.n_vertices}, {layout.n_dims}) "
+                         "(topology vertices, layout dims)")
+    if display is None:
+        display = "lines" if layout.direction else ("surface" if topology.faces else "points")
+    if display not in DISPLAYS:
+        raise ValueError(f"{label}: display must be one of {DISPLAYS}, got {display!r}")
+
+    colours = colours_of(w, layout)
+    if display == "lines":
+        points, quads = line_display_mesh(w, topology, layout)
+        colours = np.concatenate([colours, colours])
+        faces = triangulate(quads)
+    elif display == "surface":
+        if not topology.faces:
+            raise ValueError(f"{label}: the topology has no faces to export as a surface; export display='points'")
+        points, faces = positions_of(w, layout), triangulate(topology.faces)
+    else:
+        points, faces = positions_of(w, layout), np.zeros((0, 3), np.int64)
+    points = points.astype(np.float64)
+    if transform is not None:
+        centre = np.asarray(transform["centre"], np.float64)
+        points = points / float(transform["scale"]) + centre
+    rgba = np.concatenate([np.round(colours * 255.0), np.full((len(colours), 1), 255.0)], axis=1).astype(np.uint8)
+    if len(faces):
+        geom = trimesh.Trimesh(vertices=points, faces=faces, vertex_colors=rgba, process=False)
+    else:
+        geom = trimesh.PointCloud(points, colors=rgba)
+    data = geom.export(file_type=ext)
+    with open(path, "wb") as f:
+        f.write(data.encode("utf-8") if isinstance(data, str) else data)
+
+
+def triangulate(faces) -> np.ndarray:
+    """(T, 3) int64 triangles from faces of any size by a fan from each face's first vertex (a k-gon gives k - 2
+    triangles, in face order); faces of fewer than 3 vertices give none."""
+    if isinstance(faces, np.ndarray) and faces.ndim == 2:
+        groups = {faces.shape[1]: np.asarray(faces, np.int64)} if faces.shape[1] >= 3 else {}
+        order = None
+    else:
+        face_list = [np.asarray(f, np.int64).ravel() for f in faces]
+        by_size: dict[int, list[int]] = {}
+        for i, f in enumerate(face_list):
+            if len(f) >= 3:
+                by_size.setdefault(len(f), []).append(i)
+        groups = {k: np.stack([face_list[i] for i in idx]) for k, idx in by_size.items()}
+        order = by_size
+    if not groups:
+        return np.zeros((0, 3), np.int64)
+    tris, keys = [], []
+    for k, arr in groups.items():
+        for j in range(1, k - 1):
+            tris.append(np.stack([arr[:, 0], arr[:, j], arr[:, j + 1]], axis=1))
+            face_ids = np.arange(len(arr)) if order is None else np.asarray(order[k])
+            keys.append(face_ids * 1_000_000 + j)
+    tris_all, keys_all = np.concatenate(tris), np.concatenate(keys)
+    return tris_all[np.argsort(keys_all, kind="stable")]
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Sessions
+# --------------------------------------------------------------------------------------------------------------
+#: Keys a session state must have.
+SESSION_REQUIRED = ("weights", "start_weights", "controls", "topology", "layout")
+#: Keys a session state may have, with the value used when it is absent.
+SESSION_DEFAULTS = {
+    "preset": "", "display": "surface", "iterations": 1000, "l_start": 0.25, "l_end": 0.03, "smoothing": 0.0,
+    "smooth_dims": None, "metric_weights": None, "mirror": (), "iteration": 0,
+}
+
+
+def save_session(path, state: dict) -> None:
+    """Write a modelling session to `path` as a compressed .npz (no pickle), whatever the file's extension.
+
+    state keys (load_session returns the same, plus "format_version" and "n_vertices"):
+      weights (N, n), start_weights (N, n), controls (k, n): float arrays; topology: a Topology (its faces are kept
+      when it has them, else its edges); layout: a FeatureLayout; and optionally preset (str), display (str),
+      iterations, iteration (ints), l_start, l_end, smoothing (floats), smooth_dims (None or dims),
+      metric_weights (None or (n,) floats), mirror (dims). `session_state()` builds one from a Preset and a Som.
+      n_vertices and format_version may be present (as in a loaded state) and are checked / ignored.
+    """
+    label = str(path)
+    unknown = set(state) - set(SESSION_REQUIRED) - set(SESSION_DEFAULTS) - {"n_vertices", "format_version"}
+    if unknown:
+        raise ValueError(f"{label}: unknown session keys {sorted(unknown)}; known: "
+                         f"{sorted([*SESSION_REQUIRED, *SESSION_DEFAULTS])}")
+    full = {**SESSION_DEFAULTS, **{k: v for k, v in state.items() if k != "format_version"}}
+    for key in SESSION_REQUIRED:
+        if key not in full:
+            raise ValueError(f"{label}: session state lacks the key {key!r}")
+    clean = _check_state(full, label)
+    topo, layout = clean["topology"], clean["layout"]
+    arrays: dict[str, np.ndarray] = {
+        "format_version": np.int64(SESSION_FORMAT_VERSION),
+        "preset": np.str_(clean["preset"]),
+        "display": np.str_(clean["display"]),
+        "weights": clean["weights"], "start_weights": clean["start_weights"], "controls": clean["controls"],
+        "n_vertices": np.int64(topo.n_vertices),
+        "edges": np.asarray(topo.edges, np.int64).reshape(-1, 2),
+        "iterations": np.int64(clean["iterations"]), "iteration": np.int64(clean["iteration"]),
+        "l_start": np.float64(clean["l_start"]), "l_end": np.float64(clean["l_end"]),
+        "smoothing": np.float64(clean["smoothing"]),
+        "smooth_dims": np.asarray(clean["smooth_dims"] or (), np.int64),
+        "smooth_dims_default": np.bool_(clean["smooth_dims"] is None),
+        "metric_weights": (np.zeros(0, np.float32) if clean["metric_weights"] is None else clean["metric_weights"]),
+        "metric_weights_default": np.bool_(clean["metric_weights"] is None),
+        "mirror": np.asarray(clean["mirror"], np.int64),
+        "layout_names": np.asarray(layout.names, dtype=np.str_),
+        "layout_position": np.asarray(layout.position, np.int64),
+        "layout_colour": np.asarray(layout.colour, np.int64),
+        "layout_colour_space": np.str_(layout.colour_space),
+        "layout_direction": np.asarray(layout.direction, np.int64),
+        "layout_length": np.int64(-1 if layout.length is None else layout.length),
+    }
+    if topo.faces is not None:
+        face_list = [np.asarray(f, np.int64).ravel() for f in topo.faces]
+        arrays["topology_kind"] = np.str_("faces")
+        arrays["face_indices"] = np.concatenate(face_list) if face_list else np.zeros(0, np.int64)
+        arrays["face_sizes"] = np.asarray([len(f) for f in face_list], np.int64)
+    else:
+        arrays["topology_kind"] = np.str_("edges")
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=".session-", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez_compressed(f, **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def load_session(path) -> dict:
+    """Read a session written by `save_session`; ValueError naming the file and the missing or bad key."""
+    label = str(path)
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{label}: no such session file")
+    try:
+        z = np.load(p, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise ValueError("a single .npy array, not an .npz archive")
+        with z:
+            data = {k: z[k] for k in z.files}
+    except Exception as exc:  # zipfile, zlib, numpy format errors, pickled data refused...
+        raise ValueError(f"{label}: not a readable somwidget session ({type(exc).__name__}: {exc})") from None
+
+    def get(key: str) -> np.ndarray:
+        if key not in data:
+            raise ValueError(f"{label}: session file lacks the key {key!r}")
+        return data[key]
+
+    def scalar(key: str, kind: str):
+        arr = get(key)
+        if arr.ndim != 0:
+            raise ValueError(f"{label}: key {key!r}: expected a single value, got shape {arr.shape}")
+        ok = {"i": np.issubdtype(arr.dtype, np.integer), "f": np.issubdtype(arr.dtype, np.number),
+              "s": arr.dtype.kind == "U", "b": arr.dtype == np.bool_}[kind]
+        if not ok:
+            raise ValueError(f"{label}: key {key!r}: unexpected type {arr.dtype}")
+        return {"i": int, "f": float, "s": str, "b": bool}[kind](arr[()])
+
+    def ints(key: str, ndim: int = 1) -> np.ndarray:
+        arr = get(key)
+        if arr.ndim != ndim or not (np.issubdtype(arr.dtype, np.integer) or arr.size == 0):
+            raise ValueError(f"{label}: key {key!r}: expected a {ndim}-D integer array, got {arr.dtype} {arr.shape}")
+        return arr.astype(np.int64)
+
+    version = scalar("format_version", "i")
+    if version < 1 or version > SESSION_FORMAT_VERSION:
+        raise ValueError(f"{label}: key 'format_version': session format {version} is not one this somwidget reads "
+                         f"(1 to {SESSION_FORMAT_VERSION}); it may come from a newer somwidget")
+
+    n_vertices = scalar("n_vertices", "i")
+    if n_vertices < 1:
+        raise ValueError(f"{label}: key 'n_vertices': expected at least 1, got {n_vertices}")
+    kind = scalar("topology_kind", "s")
+    try:
+        if kind == "faces":
+            flat, sizes = ints("face_indices"), ints("face_sizes")
+            if (sizes < 0).any() or sizes.sum() != len(flat):
+                raise ValueError(f"{label}: key 'face_sizes': sizes sum to {int(sizes.sum())}, but 'face_indices' "
+                                 f"holds {len(flat)} indices")
+            topology = Topology.from_faces(np.split(flat, np.cumsum(sizes)[:-1]) if len(sizes) else [],
+                                           n_vertices=n_vertices)
+        elif kind == "edges":
+            topology = Topology.from_edges(ints("edges", 2), n_vertices)
+        else:
+            raise ValueError(f"{label}: key 'topology_kind': expected 'faces' or 'edges', got {kind!r}")
+    except ValueError as exc:
+        msg = str(exc)
+        raise ValueError(msg if msg.startswith(label) else f"{label}: bad topology ({msg})") from None
+    stored_edges = ints("edges", 2) if get("edges").size else np.zeros((0, 2), np.int64)
+    if stored_edges.shape != topology.edges.shape or not np.array_equal(stored_edges, topology.edges):
+        raise ValueError(f"{label}: key 'edges' does not match the edges of the stored topology")
+
+    length = scalar("layout_length", "i")
+    try:
+        layout = FeatureLayout(names=tuple(str(s) for s in get("layout_names").ravel()),
+                               position=tuple(ints("layout_position")), colour=tuple(ints("layout_colour")),
+                               colour_space=scalar("layout_colour_space", "s"),
+                               direction=tuple(ints("layout_direction")), length=None if length < 0 else length)
+    except ValueError as exc:
+        msg = str(exc)
+        raise ValueError(msg if msg.startswith(label) else f"{label}: bad layout ({msg})") from None
+
+    state = {
+        "preset": scalar("preset", "s"), "display": scalar("display", "s"),
+        "weights": get("weights"), "start_weights": get("start_weights"), "controls": get("controls"),
+        "topology": topology, "layout": layout,
+        "iterations": scalar("iterations", "i"), "iteration": scalar("iteration", "i"),
+        "l_start": scalar("l_start", "f"), "l_end": scalar("l_end", "f"), "smoothing": scalar("smoothing", "f"),
+        "smooth_dims": None if scalar("smooth_dims_default", "b") else tuple(int(d) for d in ints("smooth_dims")),
+        "metric_weights": None if scalar("metric_weights_default", "b") else get("metric_weights"),
+        "mirror": tuple(int(d) for d in ints("mirror")),
+    }
+    clean = _check_state(state, label)
+    clean["format_version"] = version
+    clean["n_vertices"] = topology.n_vertices
+    return clean
+
+
+def _check_state(state: dict, label: str) -> dict:
+    """Types, shapes and ranges of a session state; returns a cleaned copy (float32 arrays, tuples, ints)."""
+    out = dict(state)
+    topo, layout = state["topology"], state["layout"]
+    if not isinstance(topo, Topology):
+        raise ValueError(f"{label}: key 'topology': expected a Topology, got {type(topo).__name__}")
+    if not isinstance(layout, FeatureLayout):
+        raise ValueError(f"{label}: key 'layout': expected a FeatureLayout, got {type(layout).__name__}")
+    if state.get("n_vertices") is not None and state["n_vertices"] != topo.n_vertices:
+        raise ValueError(f"{label}: key 'n_vertices': {state['n_vertices']} does not match the topology's "
+                         f"{topo.n_vertices}")
+    n = layout.n_dims
+    for key in ("weights", "start_weights"):
+        arr = checks.finite_array(f"{label}: key {key!r}", state[key], 2)
+        if arr.shape != (topo.n_vertices, n):
+            raise ValueError(f"{label}: key {key!r}: expected shape ({topo.n_vertices}, {n}) (topology vertices, "
+                             f"layout dims), got {arr.shape}")
+        out[key] = arr
+    controls = np.asarray(state["controls"])
+    controls = checks.finite_array(f"{label}: key 'controls'", controls.reshape(0, n) if controls.size == 0
+                                   else controls, 2)
+    if controls.shape[1] != n:
+        raise ValueError(f"{label}: key 'controls': expected {n} dims (the layout's), got shape {controls.shape}")
+    out["controls"] = controls
+    for key in ("preset", "display"):
+        if not isinstance(state[key], str):
+            raise ValueError(f"{label}: key {key!r}: expected a string, got {type(state[key]).__name__}")
+    if state["display"] not in DISPLAYS:
+        raise ValueError(f"{label}: key 'display': expected one of {DISPLAYS}, got {state['display']!r}")
+    out["iterations"] = checks.integer(f"{label}: key 'iterations'", state["iterations"], 1)
+    out["iteration"] = checks.integer(f"{label}: key 'iteration'", state["iteration"], 0, out["iterations"])
+    out["l_start"] = checks.real(f"{label}: key 'l_start'", state["l_start"], 0.0, 1.0, low_open=True)
+    out["l_end"] = checks.real(f"{label}: key 'l_end'", state["l_end"], 0.0, 1.0, low_open=True)
+    out["smoothing"] = checks.real(f"{label}: key 'smoothing'", state["smoothing"], 0.0, 1.0)
+    out["mirror"] = checks.dims(f"{label}: key 'mirror'", state["mirror"], n)
+    if state["smooth_dims"] is not None:
+        out["smooth_dims"] = checks.dims(f"{label}: key 'smooth_dims'", state["smooth_dims"], n)
+    if state["metric_weights"] is not None:
+        mw = checks.finite_array(f"{label}: key 'metric_weights'", state["metric_weights"], 1)
+        if mw.shape != (n,) or (mw < 0).any():
+            raise ValueError(f"{label}: key 'metric_weights': expected {n} values >= 0, got {mw}")
+        out["metric_weights"] = mw
+    return out
+
+
+def session_state(preset: Preset, som=None) -> dict:
+    """A `save_session` state from a preset and, if given, the Som trained from it (its current weights,
+    controls, iteration and settings); without a Som the preset's start is saved."""
+    state = {
+        "preset": preset.name, "display": preset.display, "topology": preset.topology, "layout": preset.layout,
+        "start_weights": preset.weights, "weights": preset.weights, "controls": preset.controls,
+        "iterations": preset.iterations, "iteration": 0, "l_start": preset.l_start, "l_end": preset.l_end,
+        "smoothing": preset.smoothing, "smooth_dims": preset.smooth_dims, "metric_weights": preset.metric_weights,
+        "mirror": preset.mirror,
+    }
+    if som is not None:
+        state.update(weights=som.weights, controls=som.controls, iteration=som.iteration, iterations=som.iterations,
+                     l_start=som.l_start, l_end=som.l_end, smoothing=som.smoothing, smooth_dims=som.smooth_dims,
+                     metric_weights=som.metric_weights, mirror=som.mirror)
+    return state
+
+
+def preset_from_session(state: dict) -> Preset:
+    """The Preset a session started from (start weights, the session's controls and settings). The session's
+    current weights are state["weights"]: give them to `Som.set_weights` to carry on from where it was saved."""
+    return Preset(
+        name=state.get("preset") or "session", title=state.get("preset") or "Session", description="A saved session.",
+        topology=state["topology"], weights=state["start_weights"], controls=state["controls"],
+        layout=state["layout"], iterations=state["iterations"], l_start=state["l_start"], l_end=state["l_end"],
+        smoothing=state["smoothing"], mirror=state["mirror"], metric_weights=state["metric_weights"],
+        display=state["display"], smooth_dims=state["smooth_dims"])

@@ -1,0 +1,57 @@
+"""Shared fixtures for the engine tests.
+
+`device` is parametrised over DEVICES: "cpu" always, "cuda:0" only when Warp reports a CUDA device
+(otherwise that case is skipped with a reason). Every engine test runs the real Warp kernels.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+# The reference module lives beside the tests; make it importable whatever pytest's import mode.
+_HERE = os.path.dirname(os.path.abspath(__file__))
+if _HERE not in sys.path:
+    sys.path.insert(0, _HERE)
+
+
+def _cuda_device_count() -> int:
+    try:
+        import warp as wp
+
+        wp.config.quiet = True
+        wp.init()
+        return int(wp.get_cuda_device_count())
+    except (ImportError, RuntimeError, OSError):  # no warp, or no usable CUDA driver: CPU only
+        return 0
+
+
+HAS_CUDA = _cuda_device_count() > 0
+
+DEVICES = [
+    "cpu",
+    pytest.param(
+        "cuda:0",
+        marks=pytest.mark.skipif(not HAS_CUDA, reason="warp reports no CUDA device on this machine"),
+    ),
+]
+
+
+@pytest.fixture(params=DEVICES)
+def device(request) -> str:
+    """A Warp device string the engine is run on: "cpu", or "cuda:0" where one exists."""
+    return request.param
+
+
+@pytest.fixture(params=DEVICES)
+def devices(request) -> str:
+    """The same parametrisation under the plural name."""
+    return request.param
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20181210)
