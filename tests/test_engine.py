@@ -668,3 +668,22 @@ def test_winner_margins_of_compared_runs_are_recorded():
     ref.train()
     assert len(ref.margins) == 9 and all(m.shape == (6,) for m in ref.margins)
     assert np.all(np.concatenate(ref.margins) >= 0)
+
+
+@pytest.mark.parametrize("smoothing", [0.0, 0.3])
+@pytest.mark.parametrize("cores", [2, 3])
+def test_cpu_cores_split_gives_the_reference_weights(cores, smoothing):
+    """The CPU cycle split over several cores (barriers between phases) matches the float64 reference."""
+    faces = torus_quads(9, 7)
+    points = torus_points(9, 7).astype(np.float32)
+    controls = np.array([[2.0, 1.0, 0.5], [-1.5, 0.5, 1.0], [0.3, -2.0, -0.4]], np.float32)
+    som = Som(Topology.from_faces(faces), points, controls, iterations=40, smoothing=smoothing, mirror=(1,),
+              device="cpu", cpu_cores=cores)
+    expect = ReferenceSom(len(points), edges_from_faces(faces), points, controls, iterations=40,
+                          smoothing=smoothing, mirror=(1,))
+    som.step(9)
+    expect.step(9)
+    som.train()
+    expect.train()
+    assert expect.min_margin() > 1e-4
+    np.testing.assert_allclose(som.weights, expect.weights, atol=1e-4)

@@ -1,8 +1,10 @@
 """Warp kernels of the SOM engine: BFS grid distances, winner search, move and smoothing.
 
-The same kernels run on CUDA and on the CPU. The cycle kernels are specialised per feature count n (a row of
-weights is a Warp vector of length n) and written as grid-stride loops: on CUDA each thread handles one neuron;
-on the CPU Warp runs a block as a single thread, which then walks all neurons.
+The cycle kernels are specialised per feature count n (a row of weights is a Warp vector of length n) and come in
+two decompositions of the same cycle. On CUDA a thread per neuron moves it, a thread per control scans each block
+of 32 neurons for the winners, and the whole cycle is one kernel (two with smoothing). On the CPU, where Warp
+runs a launch on one thread, each core replays its own graph: the neurons are split between the cores for the
+move and smoothing, the controls for the winner search, with a spinning barrier between the phases.
 
 Winner keys pack (distance bits << 32 | neuron index) into one uint64: distances are non-negative floats, whose
 bit patterns order like the values, so the smallest key is the nearest neuron with the lowest index on a tie.
@@ -11,6 +13,7 @@ of the next cycle and clears buffer s + 2, so a whole run replays from a capture
 """
 
 
+import ctypes
 import functools
 from types import SimpleNamespace
 
@@ -19,6 +22,7 @@ import warp as wp
 UNREACHABLE = wp.constant(wp.uint16(65535))
 KEY_NONE = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
 INDEX_MASK = wp.constant(wp.uint64(0xFFFFFFFF))
+FLOAT_MAX = wp.constant(wp.float32(3.4028234663852886e38))
 #: Threads per block on CUDA: a thread per control scans the block's neurons for the winner search.
 CUDA_BLOCK = wp.constant(32)
 
@@ -36,6 +40,47 @@ def winner_key(distance: wp.float32, v: int) -> wp.uint64:
 def clear_keys(keys: wp.array2d(dtype=wp.uint64), buf: int, n_controls: int):
     for c in range(n_controls):
         keys[buf, c] = KEY_NONE
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+return 0;
+#else
+long long ticket = __atomic_add_fetch(&counter[0], 1LL, __ATOMIC_ACQ_REL);
+long long target = ((ticket - 1) / parties + 1) * parties;
+for (long long spins = 0; __atomic_load_n(&counter[0], __ATOMIC_ACQUIRE) < target; ++spins) {
+    if (spins < 2000 || yield_address == 0) {
+#if defined(__x86_64__) || defined(__i386__)
+        __builtin_ia32_pause();
+#endif
+    } else {  /* the other core is busy elsewhere: give this one away */
+        typedef signed (*yield_fn)(void);  /* signed = int: Warp defines a macro int(x) */
+        ((yield_fn)yield_address)();
+    }
+    if (spins > 2000000000LL) return 1;
+}
+return 0;
+#endif
+""")
+def wait_for_cores(counter: wp.array(dtype=wp.int64), parties: wp.int64, yield_address: wp.uint64) -> int: ...
+
+
+@wp.kernel(enable_backward=False)
+def barrier(
+    counter: wp.array(dtype=wp.int64), parties: wp.int64, yield_address: wp.uint64, failed: wp.array(dtype=wp.int32)
+):
+    """All CPU cores of a run meet here between the phases of a cycle. Real atomics (Warp's CPU ones are plain);
+    after a short spin a waiting core calls yield_address (libc's sched_yield) so a busy machine is not starved."""
+    if wait_for_cores(counter, parties, yield_address) != 0:
+        failed[0] = 1
+
+
+def sched_yield_address() -> int:
+    """Address of libc's sched_yield, or 0 where there is none (then the barrier only spins)."""
+    try:
+        return ctypes.cast(ctypes.CDLL(None).sched_yield, ctypes.c_void_p).value or 0
+    except (AttributeError, OSError, TypeError):
+        return 0
 
 
 @wp.kernel(enable_backward=False)
@@ -79,10 +124,23 @@ def bfs_rows(
 
 @functools.cache
 def cycle_kernels(n_dims: int) -> SimpleNamespace:
-    """find_winners, move and smooth for weights with n_dims features (compiled once per n_dims)."""
+    """The cycle's kernels for weights with n_dims features (each compiled once, on first use per device)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     rate8 = wp.types.vector(length=8, dtype=wp.float32)
+    options = {"max_unroll": 32}
 
+    @wp.func
+    def distance(target: vec, w: vec, metric: vec) -> wp.float32:
+        """sum_j m_j (C_cj - W_vj)^2: the winner criterion with metric weights."""
+        diff = target - w
+        return wp.dot(wp.cw_mul(diff, metric), diff)
+
+    @wp.func
+    def rate_of(table: wp.array2d(dtype=wp.float32), s: int, d: wp.uint16) -> wp.float32:
+        """L[s, d], and 0 for unreachable neurons."""
+        return wp.where(d != UNREACHABLE, table[s, wp.min(wp.int32(d), table.shape[1] - 1)], wp.float32(0.0))
+
+    # -- CUDA: a thread per neuron, a block of 32 ----------------------------------------------------------
     @wp.func
     def find_winners_of_block(
         weights: wp.array(dtype=vec),
@@ -93,44 +151,24 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         buf: int,
         block: int,
         lane: int,
-        block_threads: int,
     ):
-        """Step 1: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2 over the block's neurons, then one atomic min per control.
+        """Step 1: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2; a thread per control scans the block's neurons,
+        then one atomic min per control and block."""
+        wp.tile_sum(wp.tile(0))  # barrier: the block's neurons were just written by its other threads
+        lo = block * CUDA_BLOCK
+        for c in range(lane, n_controls, CUDA_BLOCK):
+            target = controls[c]
+            best = FLOAT_MAX
+            best_v = lo
+            for i in range(CUDA_BLOCK):  # unrolled: the loads overlap
+                v = wp.min(lo + i, weights.shape[0] - 1)
+                dist = distance(target, weights[v], metric)
+                nearer = dist < best  # strict: the lowest index wins a tie
+                best = wp.where(nearer, dist, best)
+                best_v = wp.where(nearer, v, best_v)
+            wp.atomic_min(keys, buf, c, winner_key(best, best_v))
 
-        A thread per control scans the block's neurons (a CPU block is one thread: it scans all of them).
-        """
-        lo = block * block_threads
-        if block_threads == 1:  # the CPU: one thread scans every neuron
-            for c in range(n_controls):
-                target = controls[c]
-                best = wp.float32(0.0)
-                best_v = int(-1)
-                for v in range(weights.shape[0]):
-                    diff = target - weights[v]
-                    dist = wp.dot(wp.cw_mul(diff, metric), diff)
-                    if best_v < 0 or dist < best:  # strict: the lowest index wins a tie
-                        best = dist
-                        best_v = v
-                if best_v >= 0:
-                    wp.atomic_min(keys, buf, c, winner_key(best, best_v))
-        else:
-            wp.tile_sum(wp.tile(0))  # barrier: the block's neurons were just written by its other threads
-            for c in range(lane, n_controls, block_threads):
-                target = controls[c]
-                best = wp.float32(0.0)
-                best_v = int(-1)
-                for i in range(CUDA_BLOCK):  # unrolled: the loads overlap
-                    v = lo + i
-                    if v < weights.shape[0]:
-                        diff = target - weights[v]
-                        dist = wp.dot(wp.cw_mul(diff, metric), diff)
-                        if best_v < 0 or dist < best:
-                            best = dist
-                            best_v = v
-                if best_v >= 0:
-                    wp.atomic_min(keys, buf, c, winner_key(best, best_v))
-
-    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def find_winners(
         weights: wp.array(dtype=vec),
         controls: wp.array(dtype=vec),
@@ -138,14 +176,12 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         metric: wp.array(dtype=vec),
         keys: wp.array2d(dtype=wp.uint64),
         cycle: wp.array(dtype=wp.int32),
-        block_threads: int,
-        stride: int,
     ):
         """Winners of cycle s = cycle[0] from the current weights into keys[s % 3] (cleared beforehand)."""
         block, lane = wp.tid()
-        find_winners_of_block(weights, controls, n_controls, metric[0], keys, cycle[0] % 3, block, lane, block_threads)
+        find_winners_of_block(weights, controls, n_controls, metric[0], keys, cycle[0] % 3, block, lane)
 
-    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def move(
         weights_in: wp.array(dtype=vec),
         weights_out: wp.array(dtype=vec),
@@ -158,49 +194,29 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         cycle_in: wp.array(dtype=wp.int32),
         cycle_out: wp.array(dtype=wp.int32),
         find_next: int,
-        block_threads: int,
-        stride: int,
     ):
         """Step 2 of cycle s: W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v) for the controls in list order.
 
-        With find_next (no smoothing) the same kernel finds the winners of cycle s + 1 on the moved weights, which
-        each thread holds for its own neurons, and advances the cycle counter.
+        The row stays in registers; rates are gathered eight controls at a time so their loads overlap. With
+        find_next (no smoothing) the kernel then finds the winners of cycle s + 1 and advances the counter.
         """
         block, lane = wp.tid()
         s = cycle_in[0]
         buf = s % 3
-        first = block * block_threads + lane
-        last_d = table.shape[1] - 1
-        if block_threads == 1:  # one thread walks all neurons (the CPU): control-major, contiguous row reads
-            for v in range(first, weights_in.shape[0], stride):
-                weights_out[v] = weights_in[v]
-            for c in range(n_controls):
-                target = controls[c]
-                u = wp.int32(keys[buf, c] & INDEX_MASK)
-                for v in range(first, weights_in.shape[0], stride):
-                    d = distances[u, v]
-                    if d != UNREACHABLE:
-                        rate = table[s, wp.int32(d)]
-                        if rate != 0.0:
-                            w = weights_out[v]
-                            weights_out[v] = w + rate * (target - w)
-        else:  # a thread per neuron (CUDA): the row stays in registers; rates are gathered 8 controls at a time
-            for v in range(first, weights_in.shape[0], stride):
-                w = weights_in[v]
-                for c0 in range(0, n_controls, 8):
-                    rates = rate8()
-                    for g in range(8):  # unrolled: eight independent key -> distance -> rate chains
-                        c = wp.min(c0 + g, n_controls - 1)
-                        d = distances[wp.int32(keys[buf, c] & INDEX_MASK), v]
-                        r = table[s, wp.min(wp.int32(d), last_d)]
-                        if d != UNREACHABLE and c0 + g < n_controls:
-                            rates[g] = r
-                    for g in range(8):
-                        w = w + rates[g] * (controls[c0 + g] - w)
-                weights_out[v] = w
+        v = block * CUDA_BLOCK + lane
+        if v < weights_in.shape[0]:
+            w = weights_in[v]
+            for c0 in range(0, n_controls, 8):
+                rates = rate8()
+                for g in range(8):  # unrolled: eight independent key -> distance -> rate chains
+                    c = wp.min(c0 + g, n_controls - 1)
+                    r = rate_of(table, s, distances[wp.int32(keys[buf, c] & INDEX_MASK), v])
+                    rates[g] = wp.where(c0 + g < n_controls, r, wp.float32(0.0))
+                for g in range(8):
+                    w = w + rates[g] * (controls[c0 + g] - w)
+            weights_out[v] = w
         if find_next != 0:
-            find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane,
-                                  block_threads)
+            find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
         if block == 0 and lane == 0:
             if find_next != 0:
                 clear_keys(keys, (s + 2) % 3, n_controls)
@@ -208,7 +224,24 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
             else:
                 cycle_out[0] = s
 
-    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
+    @wp.func
+    def smoothed(
+        weights: wp.array(dtype=vec), v: int, offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32),
+        pull: vec,
+    ) -> vec:
+        """One Jacobi step of uniform Laplacian smoothing: W_v + lambda (mean of W over v's neighbours - W_v) on the
+        masked dims (pull = lambda * mask), from the pre-smoothing weights; a neuron without neighbours stays."""
+        w = weights[v]
+        lo = offsets[v]
+        hi = offsets[v + 1]
+        if hi > lo:
+            total = vec()
+            for e in range(lo, hi):
+                total += weights[neighbors[e]]
+            w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
+        return w
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def smooth(
         weights_in: wp.array(dtype=vec),
         weights_out: wp.array(dtype=vec),
@@ -222,31 +255,88 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         keys: wp.array2d(dtype=wp.uint64),
         cycle_in: wp.array(dtype=wp.int32),
         cycle_out: wp.array(dtype=wp.int32),
-        block_threads: int,
-        stride: int,
     ):
-        """Step 3 of cycle s: one Jacobi step of uniform Laplacian smoothing on the masked dims,
-        W_v <- W_v + lambda (mean of W over v's neighbours - W_v), all from the pre-smoothing weights; then the
-        winners of cycle s + 1 and the counter advance, as in `move`.
-        """
+        """Step 3 of cycle s (smoothing, see `smoothed`), then the winners of cycle s + 1 and the counter advance."""
         block, lane = wp.tid()
         s = cycle_in[0]
-        first = block * block_threads + lane
-        pull = strength * mask[0]
-        for v in range(first, weights_in.shape[0], stride):
-            w = weights_in[v]
-            lo = offsets[v]
-            hi = offsets[v + 1]
-            if hi > lo:
-                total = vec()
-                for e in range(lo, hi):
-                    total += weights_in[neighbors[e]]
-                w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
-            weights_out[v] = w
-        find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane,
-                              block_threads)
+        v = block * CUDA_BLOCK + lane
+        if v < weights_in.shape[0]:
+            weights_out[v] = smoothed(weights_in, v, offsets, neighbors, strength * mask[0])
+        find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
         if block == 0 and lane == 0:
             clear_keys(keys, (s + 2) % 3, n_controls)
             cycle_out[0] = s + 1
 
-    return SimpleNamespace(vec=vec, find_winners=find_winners, move=move, smooth=smooth)
+    # -- CPU: each core runs one launch over its share ------------------------------------------------------
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def move_part(
+        weights_in: wp.array(dtype=vec),
+        weights_out: wp.array(dtype=vec),
+        controls: wp.array(dtype=vec),
+        n_controls: int,
+        table: wp.array2d(dtype=wp.float32),
+        distances: wp.array2d(dtype=wp.uint16),
+        keys: wp.array2d(dtype=wp.uint64),
+        cycle: wp.array(dtype=wp.int32),
+        lo: int,
+        hi: int,
+    ):
+        """Step 2 of cycle s for neurons lo..hi-1, control-major so each distance row is read in order."""
+        s = cycle[0]
+        buf = s % 3
+        for v in range(lo, hi):
+            weights_out[v] = weights_in[v]
+        for c in range(n_controls):
+            target = controls[c]
+            u = wp.int32(keys[buf, c] & INDEX_MASK)
+            for v in range(lo, hi):
+                w = weights_out[v]
+                weights_out[v] = w + rate_of(table, s, distances[u, v]) * (target - w)
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def smooth_part(
+        weights_in: wp.array(dtype=vec),
+        weights_out: wp.array(dtype=vec),
+        offsets: wp.array(dtype=wp.int32),
+        neighbors: wp.array(dtype=wp.int32),
+        mask: wp.array(dtype=vec),
+        strength: wp.float32,
+        lo: int,
+        hi: int,
+    ):
+        """Step 3 for neurons lo..hi-1."""
+        pull = strength * mask[0]
+        for v in range(lo, hi):
+            weights_out[v] = smoothed(weights_in, v, offsets, neighbors, pull)
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def find_part(
+        weights: wp.array(dtype=vec),
+        controls: wp.array(dtype=vec),
+        n_controls: int,
+        metric: wp.array(dtype=vec),
+        keys: wp.array2d(dtype=wp.uint64),
+        cycle: wp.array(dtype=wp.int32),
+        first: int,
+        step: int,
+        ahead: int,
+    ):
+        """Step 1 for controls first, first + step, ...: winners over all neurons into keys[(s + ahead) % 3];
+        with ahead = 1 this is the next cycle's search and the core's counter advances."""
+        s = cycle[0]
+        buf = (s + ahead) % 3
+        m = metric[0]
+        for c in range(first, n_controls, step):
+            target = controls[c]
+            best = FLOAT_MAX
+            best_v = int(0)
+            for v in range(weights.shape[0]):
+                dist = distance(target, weights[v], m)
+                nearer = dist < best  # strict: the lowest index wins a tie
+                best = wp.where(nearer, dist, best)
+                best_v = wp.where(nearer, v, best_v)
+            keys[buf, c] = winner_key(best, best_v)
+        cycle[0] = s + ahead
+
+    return SimpleNamespace(vec=vec, find_winners=find_winners, move=move, smooth=smooth, move_part=move_part,
+                           smooth_part=smooth_part, find_part=find_part)

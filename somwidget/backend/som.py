@@ -2,26 +2,31 @@
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import warp as wp
 
 from . import checks
-from .kernels import cycle_kernels
-from .device import block_threads, resolve
+from .device import resolve
+from .kernels import CUDA_BLOCK, barrier, cycle_kernels, sched_yield_address
 from .schedule import learning_table
 from .topology import Topology
 
 MAX_DIMS = 32
 MAX_CONTROLS = 256  # counts the effective list: originals plus mirrored copies
 _KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
-_LONGEST_GRAPH = 512  # cycles in the longest captured graph; runs are split into powers of two
+_LONGEST_GRAPH = 512
+_YIELD = sched_yield_address()  # cycles in the longest captured graph; runs are split into powers of two
 
 
 class Som:
     """A SOM whose neurons are the vertices of `topology`, trained towards `controls`.
 
     weights (N, n) and controls (k, n) share the n feature dimensions (1..32). State stays on `device`
-    ("cpu", "cuda:N", None = best available); `weights` returns a host copy.
+    ("cpu", "cuda:N", None = best available); `weights` returns a host copy. On the CPU the cycle is split over
+    `cpu_cores` cores (None: the cores this process may use, at most 8, at least 256 neurons each).
     """
 
     def __init__(
@@ -37,6 +42,8 @@ class Som:
         metric_weights=None,
         mirror=(),
         device: str | None = None,
+        *,
+        cpu_cores: int | None = None,
     ):
         if not isinstance(topology, Topology):
             raise ValueError(f"topology: expected a Topology, got {type(topology).__name__}")
@@ -59,9 +66,13 @@ class Som:
         self._controls = self._check_controls(controls, self._mirror)
 
         dev = self.device
-        self._threads = block_threads(dev)
-        self._blocks = 1 if dev == "cpu" else (self.n_neurons + self._threads - 1) // self._threads
-        self._stride = self._blocks * self._threads
+        self._blocks = (self.n_neurons + int(CUDA_BLOCK) - 1) // int(CUDA_BLOCK)
+        if cpu_cores is not None:
+            cpu_cores = min(checks.integer("cpu_cores", cpu_cores, 1, 64), self.n_neurons)
+        self._cores = (cpu_cores or _cpu_cores(self.n_neurons)) if dev == "cpu" else 1
+        bounds = np.linspace(0, self.n_neurons, self._cores + 1).astype(int)
+        self._ranges = list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
+        self._pool = ThreadPoolExecutor(self._cores - 1) if self._cores > 1 else None
         self._distances = topology.distance_table(dev)
         self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=dev)
         neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
@@ -74,7 +85,10 @@ class Som:
         self._m = wp.array(self._metric[None, :], dtype=vec, device=dev)
         self._mask = wp.array(self._mask_of(self._smooth_dims)[None, :], dtype=vec, device=dev)
         self._keys = wp.full((3, MAX_CONTROLS), _KEY_NONE, dtype=wp.uint64, device=dev)
-        self._cycle = [wp.zeros(1, dtype=wp.int32, device=dev), wp.zeros(1, dtype=wp.int32, device=dev)]
+        # CUDA: two cycle counters that the kernels pass on (ping-pong); CPU: one counter per core
+        self._cycle = [wp.zeros(1, dtype=wp.int32, device=dev) for _ in range(max(2, self._cores))]
+        self._meet = wp.zeros(1, dtype=wp.int64, device=dev)
+        self._meet_failed = wp.zeros(1, dtype=wp.int32, device=dev)
         self._graphs: dict[tuple, object] = {}
         self._table = None
         self._build_table()
@@ -300,31 +314,77 @@ class Som:
         self._winners_valid = True
 
     def _launch_find(self) -> None:
+        if self.device == "cpu":
+            wp.launch(self._k.find_part, dim=1, device="cpu", inputs=[self._w, self._c, self._k_eff, self._m,
+                                                                     self._keys, self._cycle[0], 0, 1, 0])
+            return
         self._keys.fill_(_KEY_NONE)
-        wp.launch_tiled(self._k.find_winners, dim=[self._blocks], block_dim=self._threads, device=self.device,
-                        inputs=[self._w, self._c, self._k_eff, self._m, self._keys, self._cycle[0], self._threads,
-                                self._stride])
+        wp.launch_tiled(self._k.find_winners, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=self.device,
+                        inputs=[self._w, self._c, self._k_eff, self._m, self._keys, self._cycle[0]])
 
     def _run(self, cycles: int) -> None:
-        """`cycles` cycles from s; replayed from a captured graph on CUDA."""
+        """`cycles` cycles from s, replayed from captured graphs (one per CPU core)."""
         fresh = not self._winners_valid
         if fresh:
-            self._set_cycle()  # both counters hold s; the chain starts reading counter 0
+            self._set_cycle()
         smoothing = self._smoothing > 0.0
-        parity = 0 if fresh else self._parity
-        key = (cycles, fresh, parity, smoothing)
-        graph = self._graphs.get(key)
-        if graph is None:
-            with wp.ScopedCapture(device=self.device) as capture:
-                self._record(cycles, fresh, parity, smoothing)
-            graph = self._graphs[key] = capture.graph
-        wp.capture_launch(graph)
-        self._parity = parity if smoothing else (parity + cycles) % 2
+        if self.device == "cpu":
+            self._run_cpu(cycles, fresh, smoothing)
+        else:
+            parity = 0 if fresh else self._parity
+            graph = self._graph((cycles, fresh, parity, smoothing),
+                                lambda: self._record_cuda(cycles, fresh, parity, smoothing))
+            wp.capture_launch(graph)
+            self._parity = parity if smoothing else (parity + cycles) % 2
         self._s += cycles
         self._winners_valid = True
 
-    def _record(self, cycles: int, fresh: bool, parity: int, smoothing: bool) -> None:
-        dev, blocks, threads, stride = self.device, [self._blocks], self._threads, self._stride
+    def _graph(self, key: tuple, record) -> object:
+        graph = self._graphs.get(key)
+        if graph is None:
+            with wp.ScopedCapture(device=self.device) as capture:
+                record()
+            graph = self._graphs[key] = capture.graph
+        return graph
+
+    def _run_cpu(self, cycles: int, fresh: bool, smoothing: bool) -> None:
+        graphs = [self._graph((cycles, fresh, smoothing, core), lambda core=core: self._record_cpu(core, cycles, fresh,
+                                                                                                smoothing))
+                  for core in range(self._cores)]
+        others = [self._pool.submit(wp.capture_launch, g) for g in graphs[1:]] if self._pool else []
+        wp.capture_launch(graphs[0])
+        for job in others:
+            job.result()
+        if self._cores > 1 and self._meet_failed.numpy()[0]:
+            raise RuntimeError("Som: a CPU core did not reach the cycle barrier (was a worker thread stopped?)")
+
+    def _record_cpu(self, core: int, cycles: int, fresh: bool, smoothing: bool) -> None:
+        """One core's share: move and smooth its neurons, find the winners of its controls, meet between phases."""
+        k, cores, (lo, hi), counter = self._k, self._cores, self._ranges[core], self._cycle[core]
+
+        def meet():
+            if cores > 1:
+                wp.launch(barrier, dim=1, device="cpu", inputs=[self._meet, cores, _YIELD, self._meet_failed])
+
+        find = [self._w, self._c, self._k_eff, self._m, self._keys, counter, core, cores]
+        if fresh:
+            wp.launch(k.find_part, dim=1, device="cpu", inputs=[*find, 0])
+            meet()
+        moved = self._w_moved if smoothing else self._w
+        for _ in range(cycles):
+            wp.launch(k.move_part, dim=1, device="cpu", inputs=[self._w, moved, self._c, self._k_eff, self._table,
+                                                                self._distances, self._keys, counter, lo, hi])
+            meet()
+            if smoothing:
+                wp.launch(k.smooth_part, dim=1, device="cpu", inputs=[moved, self._w, self._offsets, self._neighbors,
+                                                                      self._mask, self._smoothing, lo, hi])
+                meet()
+            wp.launch(k.find_part, dim=1, device="cpu", inputs=[*find, 1])
+            meet()
+
+    def _record_cuda(self, cycles: int, fresh: bool, parity: int, smoothing: bool) -> None:
+        """A kernel a cycle (move + next winners), or two with smoothing (move; smooth + next winners)."""
+        dev, blocks, threads = self.device, [self._blocks], int(CUDA_BLOCK)
         if fresh:
             self._launch_find()
         p = parity
@@ -333,13 +393,21 @@ class Som:
             if smoothing:
                 wp.launch_tiled(self._k.move, dim=blocks, block_dim=threads, device=dev,
                                 inputs=[self._w, self._w_moved, self._c, self._k_eff, self._m, self._table,
-                                        self._distances, self._keys, c_in, c_out, 0, threads, stride])
+                                        self._distances, self._keys, c_in, c_out, 0])
                 wp.launch_tiled(self._k.smooth, dim=blocks, block_dim=threads, device=dev,
                                 inputs=[self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
-                                        self._smoothing, self._c, self._k_eff, self._m, self._keys, c_out, c_in,
-                                        threads, stride])
+                                        self._smoothing, self._c, self._k_eff, self._m, self._keys, c_out, c_in])
             else:
                 wp.launch_tiled(self._k.move, dim=blocks, block_dim=threads, device=dev,
                                 inputs=[self._w, self._w, self._c, self._k_eff, self._m, self._table,
-                                        self._distances, self._keys, c_in, c_out, 1, threads, stride])
+                                        self._distances, self._keys, c_in, c_out, 1])
                 p = 1 - p
+
+
+def _cpu_cores(n_neurons: int) -> int:
+    """Cores for a CPU Som: those this process may use, at most 8, and at least 256 neurons each."""
+    try:
+        available = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        available = os.cpu_count() or 1
+    return max(1, min(available, 8, n_neurons // 256))
