@@ -18,7 +18,9 @@ MAX_DIMS = 32
 MAX_CONTROLS = 256  # counts the effective list: originals plus mirrored copies
 _KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
 _LONGEST_GRAPH = 512
-_YIELD = sched_yield_address()  # cycles in the longest captured graph; runs are split into powers of two
+_YIELD = sched_yield_address()
+#: neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each)
+_PAIRS_PER_EXTRA_CORE = 1 << 18  # cycles in the longest captured graph; runs are split into powers of two
 
 
 class Som:
@@ -26,7 +28,7 @@ class Som:
 
     weights (N, n) and controls (k, n) share the n feature dimensions (1..32). State stays on `device`
     ("cpu", "cuda:N", None = best available); `weights` returns a host copy. On the CPU the cycle is split over
-    `cpu_cores` cores (None: the cores this process may use, at most 8, at least 256 neurons each).
+    `cpu_cores` cores (None: one for small meshes, else the cores this process may use, at most 8).
     """
 
     def __init__(
@@ -67,12 +69,9 @@ class Som:
 
         dev = self.device
         self._blocks = (self.n_neurons + int(CUDA_BLOCK) - 1) // int(CUDA_BLOCK)
-        if cpu_cores is not None:
-            cpu_cores = min(checks.integer("cpu_cores", cpu_cores, 1, 64), self.n_neurons)
-        self._cores = (cpu_cores or _cpu_cores(self.n_neurons)) if dev == "cpu" else 1
-        bounds = np.linspace(0, self.n_neurons, self._cores + 1).astype(int)
-        self._ranges = list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
-        self._pool = ThreadPoolExecutor(self._cores - 1) if self._cores > 1 else None
+        self._cpu_cores = None if cpu_cores is None else checks.integer("cpu_cores", cpu_cores, 1, 64)
+        self._cores = 1
+        self._pool: ThreadPoolExecutor | None = None
         self._distances = topology.distance_table(dev)
         self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=dev)
         neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
@@ -86,7 +85,7 @@ class Som:
         self._mask = wp.array(self._mask_of(self._smooth_dims)[None, :], dtype=vec, device=dev)
         self._keys = wp.full((3, MAX_CONTROLS), _KEY_NONE, dtype=wp.uint64, device=dev)
         # CUDA: two cycle counters that the kernels pass on (ping-pong); CPU: one counter per core
-        self._cycle = [wp.zeros(1, dtype=wp.int32, device=dev) for _ in range(max(2, self._cores))]
+        self._cycle = [wp.zeros(1, dtype=wp.int32, device=dev) for _ in range(64 if dev == "cpu" else 2)]
         self._meet = wp.zeros(1, dtype=wp.int64, device=dev)
         self._meet_failed = wp.zeros(1, dtype=wp.int32, device=dev)
         self._graphs: dict[tuple, object] = {}
@@ -296,7 +295,20 @@ class Som:
         padded[: self._k_eff] = eff
         self._c.assign(padded)
         self._graphs.clear()
+        if self.device == "cpu":
+            self._plan_cores()
         self._winners_valid = False
+
+    def _plan_cores(self) -> None:
+        """Split the CPU cycle: neuron ranges for the move and smoothing, a thread per extra core."""
+        cores = min(self._cpu_cores or _cpu_cores(self.n_neurons, self._k_eff), self.n_neurons)
+        bounds = np.linspace(0, self.n_neurons, cores + 1).astype(int)
+        self._ranges = list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
+        if cores > 1 and self._pool is None:
+            self._pool = ThreadPoolExecutor(63, thread_name_prefix="som-core")
+        if cores != self._cores:
+            self._meet.zero_()  # barrier generations count in multiples of the core count
+        self._cores = cores
 
     def _restart(self) -> None:
         self._s = 0
@@ -356,6 +368,8 @@ class Som:
         for job in others:
             job.result()
         if self._cores > 1 and self._meet_failed.numpy()[0]:
+            self._meet_failed.zero_()
+            self._meet.zero_()
             raise RuntimeError("Som: a CPU core did not reach the cycle barrier (was a worker thread stopped?)")
 
     def _record_cpu(self, core: int, cycles: int, fresh: bool, smoothing: bool) -> None:
@@ -404,10 +418,13 @@ class Som:
                 p = 1 - p
 
 
-def _cpu_cores(n_neurons: int) -> int:
-    """Cores for a CPU Som: those this process may use, at most 8, and at least 256 neurons each."""
+def _cpu_cores(n_neurons: int, n_controls: int) -> int:
+    """Cores for a CPU Som: one for small cycles (a barrier costs more than it saves on a busy machine), else
+    those this process may use, at most 8."""
+    if n_neurons * n_controls < _PAIRS_PER_EXTRA_CORE:
+        return 1
     try:
         available = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         available = os.cpu_count() or 1
-    return max(1, min(available, 8, n_neurons // 256))
+    return max(1, min(available, 8, n_neurons * n_controls // _PAIRS_PER_EXTRA_CORE))
