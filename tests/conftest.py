@@ -22,7 +22,7 @@ def _cuda_device_count() -> int:
     try:
         import warp as wp
 
-        wp.config.quiet = True
+        wp.config.log_level = wp.LOG_WARNING
         wp.init()
         return int(wp.get_cuda_device_count())
     except (ImportError, RuntimeError, OSError):  # no warp, or no usable CUDA driver: CPU only

@@ -6,7 +6,7 @@ import warp as wp
 
 from . import kernels
 
-wp.config.quiet = True
+wp.config.log_level = wp.LOG_WARNING  # no start-up banner; warnings still show
 
 
 def resolve(device: str | None) -> str:

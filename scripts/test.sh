@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# Set up (scripts/setup.sh), lint (ruff), then run the test suite (pytest). Arguments go to pytest:
+#   bash scripts/test.sh -k cli -x
+set -euo pipefail
+
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+bash scripts/setup.sh
+
+# headless rendering: VTK's EGL window on Mesa unless a display or an explicit choice says otherwise
+if [ -z "${DISPLAY:-}" ] && [ -z "${VTK_DEFAULT_OPENGL_WINDOW:-}" ]; then
+    export VTK_DEFAULT_OPENGL_WINDOW=vtkEGLRenderWindow
+fi
+
+echo "[test] ruff check ."
+.venv/bin/python -m ruff check .
+
+echo "[test] pytest -q $*"
+rc=0
+.venv/bin/python -m pytest -q "$@" || rc=$?
+if [ "$rc" -eq 5 ]; then
+    echo "[test] pytest collected no tests: that is a failure here" >&2
+fi
+exit "$rc"
