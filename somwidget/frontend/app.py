@@ -1,0 +1,715 @@
+"""The web app: a trame (vue3 + vuetify3) page with the session's panel and its server-rendered 3-D view.
+
+`somwidget serve` calls `run_server(...)`. One server holds one `Session`; every tab on it shares the session and
+the same server-side render window, so any tab can drag a control and all of them see the clay follow.
+
+Threads: the session trains on its own thread and hands frames to `SomApp._on_frame`, which only stores the
+latest one. A task on the server's event loop (`_pump`) applies the latest frame to the pyvista scene, keeps
+trame's image stream animating while frames flow, and refreshes the panel's numbers a few times a second. All
+VTK work happens on the event loop's thread.
+
+A read-only JSON route, GET /api/state, reports the session, the scene and the connected clients (for tests,
+benchmarks and scripts); add ?positions=1 for every node's position.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import os
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+from aiohttp import web  # noqa: E402
+from trame.app import get_server  # noqa: E402
+from trame.ui.vuetify3 import SinglePageWithDrawerLayout  # noqa: E402
+from trame.widgets import html  # noqa: E402
+from trame.widgets import vuetify3 as v3  # noqa: E402
+from trame_pyvista import PyVistaRemoteView  # noqa: E402
+from wslink.websocket import LinkProtocol  # noqa: E402
+
+from ..backend import presets as _presets  # noqa: E402
+from .session import DEFAULT_MAX_VERTICES, Frame, Session, hex_colour  # noqa: E402
+from .view import SceneView, control_colours  # noqa: E402
+
+log = logging.getLogger(__name__)
+
+#: Largest file the upload fields accept (a mesh or a session).
+MAX_UPLOAD_BYTES = 50 * 1024 * 1024
+#: Images per second the server-rendered view aims at while the clay moves.
+VIEW_FPS = 30
+#: Image size (share of the view's pixels) and JPEG quality while the clay moves; the still image after it is full.
+ANIMATION_RATIO = float(os.environ.get("SOMWIDGET_ANIMATION_RATIO", "0.75"))
+ANIMATION_QUALITY = int(os.environ.get("SOMWIDGET_ANIMATION_QUALITY", "85"))
+#: Panel numbers (iteration, gaps, cycle time) refresh at most this often per second.
+PANEL_HZ = 8
+#: Keep the image stream running this long after the last change (s).
+LINGER = 0.6
+PRESET_LABELS = {
+    "space-grid": "Case study 1: space grid (16^3 lattice)",
+    "car": "Case study 2: car (602 nodes, colours)",
+    "lines": "Case study 3: lines (8-D nodes)",
+    "lattice": "Lattice 8^3",
+    "grid": "Open grid 32 x 32",
+    "sphere": "Sphere",
+    "torus": "Torus",
+}
+MIME = {"obj": "text/plain", "ply": "application/octet-stream", "glb": "model/gltf-binary"}
+
+
+def _fmt(x: float, digits: int = 3) -> str:
+    return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
+
+
+class _ClientWatch(LinkProtocol):
+    """Counts websocket clients and tells the app when one goes away (to end a drag it left behind)."""
+
+    def __init__(self, app: SomApp):
+        super().__init__()
+        self._app = app
+
+    def onConnect(self, request, client_id):  # noqa: N802 (wslink's name)
+        self._app._client_connected(client_id)
+
+    def onClose(self, client_id):  # noqa: N802
+        self._app._client_closed(client_id)
+
+
+class SomApp:
+    """The trame app around one Session: layout, panel callbacks, the 3-D view and the frame pump."""
+
+    def __init__(self, session: Session, server=None, title: str = "somwidget"):
+        self.session = session
+        self.server = server if server is not None else get_server("somwidget", client_type="vue3")
+        self.server.client_type = "vue3"
+        self.state, self.ctrl = self.server.state, self.server.controller
+        self.title = title
+        self.scene = SceneView(session)
+        self.scene.on_drag = self._on_drag
+        self.scene.build(session.frame)
+        self.clients: set[str] = set()
+        self.images = 0  # frames applied to the scene
+        self._latest: Frame | None = None
+        self._latest_lock = threading.Lock()
+        self._applied_seq = -1
+        self._last_change = 0.0
+        self._last_panel = 0.0
+        self._panel_seq = -1
+        self._animating = False
+        self._pump_task = None
+        self._extra_presets: list[dict] = []
+        self._uploaded: dict[str, object] = {}  # name -> Preset of the meshes loaded in this server's life
+        if session.preset.name not in _presets.PRESETS:  # started from `somwidget serve --mesh FILE`
+            self._remember_upload(session.preset)
+        self._init_state()
+        self._build_ui()
+        self._register()
+        session.add_listener(self._on_frame)
+
+    def close(self) -> None:
+        """Detach from the session and free the render window (call on the server's thread, after it stopped)."""
+        self.session.remove_listener(self._on_frame)
+        if self._pump_task is not None:
+            self._pump_task.cancel()
+            self._pump_task = None
+        self.scene.plotter.close()
+
+    # -- session -> app -------------------------------------------------------------------------------------
+    def _on_frame(self, frame: Frame) -> None:
+        """Training thread: keep only the latest frame; the pump shows it."""
+        with self._latest_lock:
+            self._latest = frame
+
+    def _on_drag(self, index):
+        self._last_change = time.monotonic()
+        if index is not None:
+            self._start_animation()
+
+    def _client_connected(self, client_id) -> None:
+        self.clients.add(str(client_id))
+
+    def _client_closed(self, client_id) -> None:
+        self.clients.discard(str(client_id))
+        # a tab closed with the mouse button down leaves the button "pressed" in VTK's web application (it
+        # compares each event's buttons with the last ones) and the widget grabbed: release both, so the
+        # session keeps the last position and the next tab starts clean
+        try:
+            if self.scene.dragging is not None or self._button_down():
+                self._release_button()
+            self.scene.cancel_drag()
+        except Exception:  # pragma: no cover - never let a closing socket break the server
+            log.exception("releasing the mouse failed")
+
+    def _mouse_handler(self):
+        protocol = self.server.protocol
+        if protocol is None:
+            return None
+        for link in protocol.getLinkProtocols():
+            if hasattr(link, "mouse_interaction") and hasattr(link, "last_action"):
+                return link
+        return None
+
+    def _button_down(self) -> bool:
+        handler = self._mouse_handler()
+        return handler is not None and handler.last_action == "down"
+
+    def _release_button(self) -> None:
+        handler = self._mouse_handler()
+        if handler is None:
+            return
+        w, h = self.scene.plotter.render_window.GetSize()
+        x = y = 0.5
+        if self.scene.dragging is not None:  # release where the sphere is, so it stays put
+            centre = self.scene.widgets[self.scene.dragging].GetCenter()
+            sx, sy = self.scene.screen_positions([centre])[0]
+            x, y = sx / max(w, 1), 1.0 - sy / max(h, 1)
+        handler.mouse_interaction({
+            "view": self.state[f"{self.view.ref_name}Id"], "action": "up", "buttonLeft": False,
+            "buttonMiddle": False, "buttonRight": False, "shiftKey": False, "ctrlKey": False, "altKey": False,
+            "metaKey": False, "x": x, "y": y})
+
+    async def _pump(self) -> None:
+        period = 1.0 / (2 * VIEW_FPS)
+        while True:
+            try:
+                self._pump_once()
+            except Exception:
+                log.exception("frame pump failed")
+            await asyncio.sleep(period)
+
+    def _pump_once(self) -> None:
+        with self._latest_lock:
+            frame = self._latest
+        now = time.monotonic()
+        changed = frame is not None and frame.seq != self._applied_seq
+        if changed:
+            rebuilt = self.scene.apply(frame)
+            self._applied_seq = frame.seq
+            self.images += 1
+            self._last_change = now
+            if rebuilt:
+                self._on_rebuild()
+            self._start_animation()
+        if self._animating and self.scene.dragging is None and now - self._last_change > LINGER:
+            self._stop_animation()
+        if frame is not None and now - self._last_panel > 1 / PANEL_HZ and (
+                frame.seq != self._panel_seq or now - self._last_panel > 1.0):
+            self._update_panel(frame)
+            self._panel_seq = frame.seq
+            self._last_panel = now
+
+    def _start_animation(self) -> None:
+        if not self._animating and self.server.protocol is not None:
+            self._animating = True
+            self.view.start_animation(fps=VIEW_FPS, quality=ANIMATION_QUALITY, ratio=ANIMATION_RATIO)
+
+    def _stop_animation(self) -> None:
+        if self._animating:
+            self._animating = False
+            self.view.stop_animation()  # pushes one last still image
+
+    def _on_rebuild(self) -> None:
+        with self.state:
+            self._sync_session_state()
+        self.view.update()
+
+    # -- state -------------------------------------------------------------------------------------------------------
+    def _preset_items(self) -> list[dict]:
+        items = [{"title": PRESET_LABELS.get(name, name), "value": name} for name in _presets.PRESETS]
+        return items + self._extra_presets
+
+    def _init_state(self) -> None:
+        s = self.state
+        s.trame__title = self.title
+        s.preset_items = self._preset_items()
+        s.preset_name = self.session.preset.name
+        s.error_message = ""
+        s.info_message = ""
+        s.busy = False
+        s.mesh_upload = None
+        s.session_upload = None
+        s.stats = {}
+        s.controls_ui = []
+        s.features_ui = []
+        s.param_errors = {}
+        self._sync_session_state()
+        self._update_panel(self.session.frame)
+
+    def _sync_session_state(self) -> None:
+        """Panel fields that change with the preset or a parameter intent (not every frame)."""
+        s, sess = self.state, self.session
+        p = sess.parameters
+        s.preset_name = sess.preset.name
+        s.preset_title = sess.preset.title
+        s.preset_description = sess.preset.description
+        s.param_S = str(p["iterations"])
+        s.param_l_start = _fmt(p["l_start"], 6)
+        s.param_l_end = _fmt(p["l_end"], 6)
+        s.param_smoothing = _fmt(p["smoothing"], 6)
+        s.param_symmetry = bool(p["symmetry"])
+        s.paused = sess.paused
+        layout = sess.layout
+        roles = {}
+        for d in layout.position:
+            roles[d] = "position"
+        for d in layout.colour:
+            roles[d] = f"colour ({layout.colour_space})"
+        for d in layout.direction:
+            roles[d] = "direction"
+        if layout.length is not None:
+            roles[layout.length] = "length"
+        s.features_ui = [{"d": d, "name": layout.names[d], "role": roles.get(d, "feature"),
+                          "colour": d in layout.colour, "weight": _fmt(p["metric_weights"][d], 6)}
+                         for d in range(layout.n_dims)]
+        s.has_colour = layout.colour_space != "none"
+        s.param_errors = {}
+
+    def _update_panel(self, frame: Frame) -> None:
+        sess = self.session
+        k = frame.n_controls
+        gaps = frame.gaps
+        own, _ = control_colours(frame, frame.layout.colour_space != "none")
+        controls = []
+        for i in range(k):
+            g = [float(gaps[i])]
+            if len(gaps) >= 2 * k:  # mirrored copy i sits at k + i
+                g.append(float(gaps[k + i]))
+            controls.append({"i": i, "colour": hex_colour(own[i]),
+                             "position": ", ".join(f"{x:.2f}" for x in frame.control_positions[i]),
+                             "gap": " / ".join(f"{x:.3f}" for x in g)})
+        with self.state as s:
+            s.controls_ui = controls
+            s.stats = {
+                "iteration": frame.iteration, "S": frame.iterations,
+                "progress": round(100.0 * frame.progress, 1),
+                "running": frame.running, "paused": frame.paused,
+                "cycle_ms": _fmt(frame.cycle_time * 1e3, 3),
+                "fps": _fmt(sess.frames_per_second, 3),
+                "n_vertices": int(frame.positions.shape[0]), "k": k, "k_eff": int(len(gaps)),
+                "max_gap": _fmt(float(gaps.max()) if len(gaps) else 0.0, 3),
+            }
+            s.paused = frame.paused
+            if sess.error and not s.error_message:
+                s.error_message = sess.error
+
+    def _error(self, message: str) -> None:
+        log.info("refused: %s", message)
+        self.state.error_message = message
+        self.state.flush()
+
+    # -- intents from the panel ---------------------------------------------------------------------------------
+    def set_param(self, name, value) -> None:
+        errors = dict(self.state.param_errors or {})
+        try:
+            self.session.set_parameter(name, value)
+            errors.pop(name, None)
+            self.state.error_message = ""
+        except ValueError as exc:
+            errors[name] = str(exc)
+            self.state.error_message = str(exc)
+        with self.state:
+            self.state.param_errors = errors
+            if name not in errors:
+                self._sync_session_state()
+
+    def set_metric(self, dim, value) -> None:
+        try:
+            self.session.set_metric_weight(int(dim), value)
+            self.state.error_message = ""
+        except (ValueError, TypeError) as exc:
+            self._error(str(exc))
+        with self.state:
+            self._sync_session_state()
+
+    def set_colour(self, index, colour) -> None:
+        try:
+            self.session.set_control_colour(int(index), colour)
+        except (ValueError, TypeError) as exc:
+            self._error(str(exc))
+
+    def add_control(self) -> None:
+        try:
+            self.session.add_control()
+        except ValueError as exc:
+            self._error(str(exc))
+
+    def remove_control(self, index) -> None:
+        try:
+            self.session.remove_control(int(index))
+        except (ValueError, TypeError) as exc:
+            self._error(str(exc))
+
+    def toggle_training(self) -> None:
+        if self.session.paused:
+            self.session.train()
+        else:
+            self.session.pause()
+        self.state.paused = self.session.paused
+
+    def reset(self) -> None:
+        self.session.reset()
+
+    def _remember_upload(self, preset) -> None:
+        self._uploaded = {preset.name: preset}  # keep the latest upload only
+        self._extra_presets = [{"title": f"Uploaded: {preset.title} ({preset.n_vertices} nodes)",
+                                "value": preset.name}]
+
+    async def choose_preset(self, name) -> None:
+        if not name or name == self.session.preset.name:
+            return
+        if name in self._uploaded:
+            preset = self._uploaded[name]
+            await self._replace(lambda: self.session.load_preset(preset))
+            return
+        if name not in _presets.PRESETS:
+            self._error(f"unknown preset {name!r}")
+            with self.state:
+                self.state.preset_name = self.session.preset.name
+            return
+        await self._replace(lambda: self.session.load_preset(name))
+
+    async def _replace(self, fn) -> bool:
+        """Run a slow session replacement off the event loop; errors go to the panel."""
+        with self.state:
+            self.state.busy = True
+        try:
+            await asyncio.get_running_loop().run_in_executor(None, fn)
+            ok = True
+            self.state.error_message = ""
+        except (ValueError, OSError) as exc:
+            ok = False
+            self.state.error_message = str(exc)
+        except Exception as exc:  # keep the server up whatever a file does to a reader
+            log.exception("loading failed")
+            ok = False
+            self.state.error_message = f"could not load: {type(exc).__name__}: {exc}"
+        with self.state:
+            self.state.busy = False
+            self.state.preset_name = self.session.preset.name
+        return ok
+
+    @staticmethod
+    def _file_of(value):
+        """trame's file dict (or the first of a list) -> (name, bytes) or raise ValueError."""
+        if isinstance(value, list):
+            value = value[0] if value else None
+        if not value:
+            return None
+        if not isinstance(value, dict):
+            raise ValueError("upload: unexpected data from the browser")
+        size = int(value.get("size") or 0)
+        if size > MAX_UPLOAD_BYTES:
+            raise ValueError(f"upload: {value.get('name')!r} is {size / 1e6:.1f} MB; the limit is "
+                             f"{MAX_UPLOAD_BYTES / 1e6:.0f} MB")
+        content = value.get("content")
+        if isinstance(content, list):
+            content = b"".join(content)
+        if isinstance(content, str):
+            content = content.encode("latin-1")
+        if not content:
+            raise ValueError(f"upload: {value.get('name')!r} is empty")
+        if len(content) > MAX_UPLOAD_BYTES:
+            raise ValueError(f"upload: file is larger than {MAX_UPLOAD_BYTES / 1e6:.0f} MB")
+        name = os.path.basename(str(value.get("name") or "upload")) or "upload"
+        return name, bytes(content)
+
+    async def upload_mesh(self, value) -> None:
+        try:
+            got = self._file_of(value)
+        except ValueError as exc:
+            self._error(str(exc))
+            got = None
+        if got is None:
+            return
+        name, content = got
+        folder = tempfile.mkdtemp(prefix="somwidget-upload-")
+        path = Path(folder) / name
+        path.write_bytes(content)
+        try:
+            ok = await self._replace(lambda: self.session.load_mesh(path))
+        finally:
+            path.unlink(missing_ok=True)
+            os.rmdir(folder)
+        if ok:
+            preset = self.session.preset
+            self._remember_upload(preset)
+            with self.state:
+                self.state.preset_items = self._preset_items()
+                self.state.preset_name = preset.name
+                self.state.info_message = f"loaded {name}: {preset.n_vertices} vertices"
+        with self.state:
+            self.state.mesh_upload = None
+
+    async def upload_session(self, value) -> None:
+        try:
+            got = self._file_of(value)
+        except ValueError as exc:
+            self._error(str(exc))
+            got = None
+        if got is None:
+            return
+        name, content = got
+        fd, tmp = tempfile.mkstemp(prefix="somwidget-session-", suffix=".npz")
+        with os.fdopen(fd, "wb") as f:
+            f.write(content)
+        try:
+            ok = await self._replace(lambda: self.session.load(tmp))
+        finally:
+            os.remove(tmp)
+        if ok:
+            with self.state:
+                self.state.info_message = f"session {name} loaded"
+        with self.state:
+            self.state.session_upload = None
+
+    def export_mesh(self, fmt) -> bytes | None:
+        fmt = str(fmt).lower()
+        if fmt not in MIME:
+            self._error(f"export: unknown format {fmt!r}; use obj, ply or glb")
+            return None
+        fd, tmp = tempfile.mkstemp(prefix="somwidget-export-", suffix="." + fmt)
+        os.close(fd)
+        try:
+            self.session.export_mesh(tmp)
+            return Path(tmp).read_bytes()
+        except (ValueError, OSError) as exc:
+            self._error(str(exc))
+            return None
+        finally:
+            os.remove(tmp)
+
+    def save_session(self) -> bytes | None:
+        fd, tmp = tempfile.mkstemp(prefix="somwidget-save-", suffix=".npz")
+        os.close(fd)
+        try:
+            self.session.save(tmp)
+            return Path(tmp).read_bytes()
+        except (ValueError, OSError) as exc:
+            self._error(str(exc))
+            return None
+        finally:
+            os.remove(tmp)
+
+    # -- wiring ----------------------------------------------------------------------------------------------------
+    def _register(self) -> None:
+        server, state, ctrl = self.server, self.state, self.ctrl
+        server.trigger("set_param")(self.set_param)
+        server.trigger("set_metric")(self.set_metric)
+        server.trigger("set_colour")(self.set_colour)
+        server.trigger("add_control")(self.add_control)
+        server.trigger("remove_control")(self.remove_control)
+        server.trigger("toggle_training")(self.toggle_training)
+        server.trigger("reset")(self.reset)
+        server.trigger("export_mesh")(self.export_mesh)
+        server.trigger("save_session")(self.save_session)
+        server.trigger("reset_camera")(lambda: (self.scene._frame_camera(self.scene.frame.positions),
+                                                self.view.update()))
+
+        @state.change("preset_name")
+        async def _preset_changed(preset_name, **_):
+            await self.choose_preset(preset_name)
+
+        @state.change("mesh_upload")
+        async def _mesh_uploaded(mesh_upload, **_):
+            if mesh_upload:
+                await self.upload_mesh(mesh_upload)
+
+        @state.change("session_upload")
+        async def _session_uploaded(session_upload, **_):
+            if session_upload:
+                await self.upload_session(session_upload)
+
+        @state.change("param_symmetry")
+        def _symmetry(param_symmetry, **_):
+            if bool(param_symmetry) != self.session.parameters["symmetry"]:
+                self.set_param("symmetry", bool(param_symmetry))
+
+        ctrl.on_server_bind.add(self._bind_routes)
+        ctrl.on_server_ready.add(self._on_ready)
+        server.add_protocol_to_configure(lambda protocol: protocol.registerLinkProtocol(_ClientWatch(self)))
+
+    def _on_ready(self, **_):
+        loop = asyncio.get_event_loop()
+        if self._pump_task is None:
+            self._pump_task = loop.create_task(self._pump())
+
+    def _bind_routes(self, wslink_server) -> None:
+        wslink_server.app.router.add_get("/api/state", self._api_state)
+
+    async def _api_state(self, request: web.Request) -> web.Response:
+        positions = request.query.get("positions", "0") not in ("0", "", "false")
+        body = {"session": self.session.state(positions=positions), "view": self.scene.describe(),
+                "clients": len(self.clients), "applied_frames": self.images, "animating": self._animating,
+                "panel": {"error_message": self.state.error_message, "param_S": self.state.param_S,
+                          "preset_name": self.state.preset_name}}
+        return web.json_response(body, headers={"Cache-Control": "no-store"})
+
+    # -- layout --------------------------------------------------------------------------------------------------
+    def _build_ui(self) -> None:
+        with SinglePageWithDrawerLayout(self.server, full_height=True) as layout:
+            layout.title.set_text("somwidget: computational clay")
+            with layout.toolbar:
+                v3.VSpacer()
+                html.Div("{{ stats.iteration }} / {{ stats.S }}", classes="mr-3 text-body-2", id="iteration-label")
+                v3.VBtn("{{ paused ? 'Train' : 'Pause' }}", id="train-button", click="trigger('toggle_training')",
+                        prepend_icon=("paused ? 'mdi-play' : 'mdi-pause'",), variant="tonal", classes="mr-2")
+                v3.VBtn("Reset", id="reset-button", click="trigger('reset')", prepend_icon="mdi-restore",
+                        variant="tonal", classes="mr-2")
+                v3.VBtn(icon="mdi-crop-free", click="trigger('reset_camera')", title="Reset the camera")
+            with layout.drawer as drawer:
+                drawer.width = 390
+                self._panel()
+            with layout.content:
+                with v3.VContainer(fluid=True, classes="pa-0 fill-height", id="view-container"):
+                    self.view = PyVistaRemoteView(self.scene.plotter, interactive_ratio=1, still_ratio=1,
+                                                  interactive_quality=85, still_quality=95)
+        self.layout = layout
+
+    @staticmethod
+    def _on_enter_or_change(handler: str) -> list[str]:
+        return [f'@change="{handler}"', f'@keydown.enter="{handler}"']
+
+    def _panel(self) -> None:
+        with v3.VContainer(classes="pa-2 text-body-2", id="panel"):
+            v3.VAlert(v_if="error_message", text=("error_message",), type="error", density="compact",
+                      closable=True, id="error-alert", classes="mb-2",
+                      click_close="error_message = ''")
+            v3.VAlert(v_if="info_message && !error_message", text=("info_message",), type="info",
+                      density="compact", closable=True, classes="mb-2", click_close="info_message = ''")
+            v3.VProgressLinear(v_if="busy", indeterminate=True, classes="mb-2")
+
+            # preset and files
+            v3.VSelect(v_model=("preset_name",), items=("preset_items",), label="Preset", density="compact",
+                       hide_details=True, id="preset-select", classes="mb-1", disabled=("busy",))
+            html.Div("{{ preset_description }}", classes="text-caption mb-2")
+            v3.VFileInput(v_model=("mesh_upload",), label="Upload a mesh (OBJ, PLY, STL, OFF, GLB)",
+                          density="compact", hide_details=True, prepend_icon="mdi-upload", id="mesh-upload",
+                          accept=".obj,.ply,.stl,.off,.glb,.gltf", classes="mb-2", disabled=("busy",))
+
+            # progress
+            with v3.VCard(variant="outlined", classes="pa-2 mb-2"):
+                html.Div("iteration {{ stats.iteration }} / {{ stats.S }}"
+                         " {{ stats.running ? '(training)' : (stats.paused ? '(paused)' : '(converged)') }}",
+                         id="iteration-text")
+                v3.VProgressLinear(model_value=("stats.progress",), height=6, color="primary", classes="my-1",
+                                   id="progress-bar")
+                html.Div("cycle {{ stats.cycle_ms }} ms, {{ stats.fps }} frames/s; {{ stats.n_vertices }} nodes, "
+                         "{{ stats.k }} controls ({{ stats.k_eff }} with mirrors)", classes="text-caption",
+                         id="speed-text")
+
+            # schedule
+            html.Div("Schedule", classes="text-subtitle-2 mt-2")
+            with v3.VRow(dense=True):
+                for key, name, label in (("param_S", "iterations", "S (iterations)"),
+                                         ("param_smoothing", "smoothing", "smoothing"),
+                                         ("param_l_start", "l_start", "l_start"),
+                                         ("param_l_end", "l_end", "l_end")):
+                    with v3.VCol(cols=6):
+                        v3.VTextField(v_model=(key,), label=label, density="compact", type="number",
+                                      error_messages=(f"param_errors['{name}'] || []",), hide_details="auto",
+                                      id=f"field-{name}",
+                                      raw_attrs=self._on_enter_or_change(
+                                          f"trigger('set_param', ['{name}', $event.target.value])"))
+            v3.VSwitch(v_model=("param_symmetry",), label="symmetry (mirror across the xz-plane)",
+                       density="compact", hide_details=True, color="primary", id="symmetry-switch")
+
+            # features
+            html.Div("Feature dimensions (metric weights)", classes="text-subtitle-2 mt-2")
+            with v3.VTable(density="compact", id="features-table"):
+                with html.Tbody():
+                    with html.Tr(v_for="f in features_ui", key="f.d"):
+                        html.Td("{{ f.d }}")
+                        html.Td("{{ f.name }}")
+                        html.Td("{{ f.role }}", classes="text-caption")
+                        with html.Td(style="width: 96px"):
+                            v3.VTextField(model_value=("f.weight",), density="compact", type="number",
+                                          hide_details=True, variant="plain",
+                                          raw_attrs=self._on_enter_or_change(
+                                              "trigger('set_metric', [f.d, $event.target.value])"))
+
+            # controls
+            with html.Div(classes="d-flex align-center mt-2"):
+                html.Div("Controls (gap to the nearest node: original / mirror)", classes="text-subtitle-2")
+                v3.VSpacer()
+                v3.VBtn(icon="mdi-plus", size="small", variant="text", click="trigger('add_control')",
+                        id="add-control", title="Add a control")
+            with v3.VTable(density="compact", id="controls-table"):
+                with html.Tbody():
+                    with html.Tr(v_for="c in controls_ui", key="c.i"):
+                        html.Td("{{ c.i }}")
+                        with html.Td():
+                            html.Input(type="color", value=("c.colour",), disabled=("!has_colour",),
+                                       style="width: 32px; height: 22px; border: none; padding: 0",
+                                       change="trigger('set_colour', [c.i, $event.target.value])",
+                                       title="control colour")
+                        html.Td("{{ c.position }}", classes="text-caption")
+                        html.Td("{{ c.gap }}", classes="text-caption gap-cell")
+                        with html.Td():
+                            v3.VBtn(icon="mdi-close", size="x-small", variant="text",
+                                    click="trigger('remove_control', [c.i])", title="Remove")
+
+            # files out
+            html.Div("Export and sessions", classes="text-subtitle-2 mt-2")
+            with html.Div(classes="d-flex flex-wrap ga-1 mb-2"):
+                for fmt in ("obj", "ply", "glb"):
+                    v3.VBtn(fmt.upper(), size="small", variant="tonal", prepend_icon="mdi-download",
+                            id=f"export-{fmt}",
+                            click=f"utils.download('somwidget-mesh.{fmt}', trigger('export_mesh', ['{fmt}']), "
+                                  f"'{MIME[fmt]}')")
+                v3.VBtn("Save session", size="small", variant="tonal", prepend_icon="mdi-content-save",
+                        id="save-session",
+                        click="utils.download('somwidget-session.npz', trigger('save_session'), "
+                              "'application/octet-stream')")
+            v3.VFileInput(v_model=("session_upload",), label="Load a session (.npz)", density="compact",
+                          hide_details=True, prepend_icon="mdi-folder-open", accept=".npz", id="session-upload",
+                          disabled=("busy",))
+
+
+def build_app(session: Session, server=None, title: str = "somwidget") -> SomApp:
+    """The trame app for `session` on `server` (a fresh vue3 trame server by default)."""
+    return SomApp(session, server=server, title=title)
+
+
+def run_server(preset=None, mesh=None, host: str = "127.0.0.1", port: int = 8080, device: str = "auto",
+               open_browser: bool = False) -> None:
+    """Serve the app until interrupted: `somwidget serve`.
+
+    preset: a preset name (default "car", case study 2); mesh: a mesh file to start from instead (io.load_mesh);
+    host: interface to listen on (loopback by default; use 0.0.0.0 to share on the LAN); port: 0 picks a free one;
+    device: "auto", "cpu", "cuda" or "cuda:N" for the training.
+    """
+    if preset is not None and mesh is not None:
+        raise ValueError("give either a preset or a mesh, not both")
+    start = preset or "car"
+    if mesh is not None:
+        from ..backend import io as sw_io
+
+        start = sw_io.load_mesh(mesh, max_vertices=DEFAULT_MAX_VERTICES)
+        start.name = f"mesh:{start.name}"
+    session = Session(start, device=device, start=False)
+    app = build_app(session)
+    session.start()
+
+    def announce(**_):
+        bound = app.server.port
+        shown = "127.0.0.1" if host in ("0.0.0.0", "", None) else host
+        shown = f"[{shown}]" if ":" in shown else shown
+        print(f"somwidget serving {session.preset.name!r} at http://{shown}:{bound}/", flush=True)
+
+    app.ctrl.on_server_ready.add(announce)
+    argv = sys.argv
+    sys.argv = argv[:1]  # trame parses sys.argv for its own options: keep `somwidget serve ...` away from it
+    try:
+        app.server.start(host=host, port=port, open_browser=open_browser, show_connection_info=False,
+                         timeout=0, disable_logging=True)
+    except OSError as exc:  # port taken, address not available...
+        raise ValueError(f"cannot serve on {host}:{port}: {exc.strerror or exc}") from None
+    finally:
+        sys.argv = argv
+        session.close()

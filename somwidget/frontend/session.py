@@ -1,0 +1,930 @@
+"""One modelling session: the single source of truth that every view (web app, notebook, WebXR) shares.
+
+A `Session` owns the `Som`, the controls and the training thread. Views send *intents* (move control i, set a
+parameter, reset, train, pause, load a preset) and receive *frames* through listeners. Data flows one way:
+
+    view --intent--> Session --(training thread: som.step(k))--> Frame --> every listener
+
+Intents are validated in the caller's thread before anything changes: a bad index, NaN, inf or a wrong length
+raises ValueError with a message and leaves the session as it was. Valid intents update the session's own copy
+of the controls and parameters at once (so `session.controls` reflects them immediately) and are queued for the
+training thread, which applies them to the Som in order between two steps; several control moves that arrive
+within one frame collapse into one `set_controls`. The caller therefore never waits for a training step.
+
+The training thread runs `som.step(k)` with k sized so that a step takes about `step_fraction / frame_rate`
+seconds, publishes a Frame after each step (and after each batch of intents), and sleeps once s reaches S until
+the next intent. Listeners run on the training thread: they must return quickly (copy what they need, hand the
+frame to their own loop).
+
+This module must not import trame, pyvista or any other UI package.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..backend import presets as _presets
+from ..backend.presets import FeatureLayout, Preset
+
+log = logging.getLogger(__name__)
+
+#: Bounds the session puts on parameters coming from a view (the engine has its own, wider checks).
+MAX_ITERATIONS = 1_000_000
+#: The engine's limit on effective controls (originals plus mirrored copies).
+MAX_CONTROLS = _presets.MAX_CONTROLS
+#: Largest mesh a session accepts by default: the dense distance table is N^2 uint16 (16384 -> 512 MiB).
+DEFAULT_MAX_VERTICES = 16384
+#: Largest |value| accepted for a control coordinate or feature.
+MAX_ABS_VALUE = 1e6
+
+PARAMETERS = ("iterations", "l_start", "l_end", "smoothing", "symmetry", "metric_weights")
+
+
+@dataclass(frozen=True)
+class Frame:
+    """What a view needs to draw one moment of the session. Arrays are read-only copies.
+
+    seq:                frame number, increasing by one per published frame
+    generation:         increases when the preset (topology, layout) changes: views rebuild their scene
+    iteration, iterations: s and S of the schedule
+    running:            True while the training thread is stepping (not paused and s < S)
+    paused:             the user's Train / Pause choice
+    weights:            (N, n) float32
+    positions:          (N, 3) float32 node positions (layout.position dims)
+    colours:            (N, 3) float32 RGB in [0, 1] (presets.colours_of)
+    controls:           (k, n) the controls as given; control_colours (k, 3)
+    effective_controls: (k_eff, n) originals then mirrored copies; effective_colours (k_eff, 3)
+    control_positions / effective_positions: (k, 3) / (k_eff, 3) their position dims
+    cycle_time:         seconds per training cycle (moving average over the recent steps; 0 before any step)
+    step_cycles:        cycles run by the step that produced this frame (0 for a frame after an intent only)
+    gaps:               (k_eff,) distance in position space from each effective control to its nearest node
+    preset:             the Preset (topology, layout, display) this frame belongs to: draw with these, not with
+                        the session's current ones, which may already be the next generation's
+    time:               time.monotonic() when the frame was made
+    """
+
+    seq: int
+    generation: int
+    iteration: int
+    iterations: int
+    running: bool
+    paused: bool
+    weights: np.ndarray
+    positions: np.ndarray
+    colours: np.ndarray
+    controls: np.ndarray
+    control_colours: np.ndarray
+    effective_controls: np.ndarray
+    effective_colours: np.ndarray
+    control_positions: np.ndarray
+    effective_positions: np.ndarray
+    cycle_time: float
+    step_cycles: int
+    gaps: np.ndarray
+    preset: Preset | None = None
+    time: float = field(default_factory=time.monotonic)
+
+    @property
+    def layout(self) -> FeatureLayout:
+        return self.preset.layout
+
+    @property
+    def topology(self):
+        return self.preset.topology
+
+    @property
+    def display(self) -> str:
+        return self.preset.display
+
+    @property
+    def n_controls(self) -> int:
+        return int(self.controls.shape[0])
+
+    @property
+    def progress(self) -> float:
+        return self.iteration / self.iterations if self.iterations else 1.0
+
+
+FrameListener = Callable[[Frame], None]
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
+
+
+def _finite_vector(name: str, value, length: int) -> np.ndarray:
+    """A float32 vector of `length` finite values within +-MAX_ABS_VALUE, or ValueError."""
+    if isinstance(value, (str, bytes)):
+        raise ValueError(f"{name}: expected {length} numbers, got {value!r}")
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected {length} numbers, got {value!r}") from None
+    if arr.ndim != 1 or arr.shape[0] != length:
+        raise ValueError(f"{name}: expected {length} numbers, got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name}: values must be finite, got {arr.tolist()}")
+    if np.abs(arr).max(initial=0.0) > MAX_ABS_VALUE:
+        raise ValueError(f"{name}: values must lie within +-{MAX_ABS_VALUE:g}, got {arr.tolist()}")
+    return arr.astype(np.float32)
+
+
+def _check_int(name: str, value, low: int, high: int) -> int:
+    if isinstance(value, bool):
+        raise ValueError(f"{name}: expected an integer, got {value!r}")
+    if isinstance(value, str):
+        try:
+            value = float(value.strip())
+        except ValueError:
+            raise ValueError(f"{name}: expected an integer, got {value!r}") from None
+    if isinstance(value, (float, np.floating)):
+        if not math.isfinite(value) or not float(value).is_integer():
+            raise ValueError(f"{name}: expected an integer, got {value!r}")
+        value = int(value)
+    if not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name}: expected an integer, got {value!r}")
+    value = int(value)
+    if not low <= value <= high:
+        raise ValueError(f"{name}: expected an integer in [{low}, {high}], got {value}")
+    return value
+
+
+def _check_real(name: str, value, low: float, high: float, low_open: bool = False) -> float:
+    if isinstance(value, bool):
+        raise ValueError(f"{name}: expected a number, got {value!r}")
+    try:
+        x = float(value.strip() if isinstance(value, str) else value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise ValueError(f"{name}: expected a finite number, got {value!r}")
+    if not ((low < x) if low_open else (low <= x)) or x > high:
+        interval = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+        raise ValueError(f"{name}: expected a value in {interval}, got {x:g}")
+    return x
+
+
+def _check_bool(name: str, value) -> bool:
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)) and int(value) in (0, 1):
+        return bool(value)
+    if isinstance(value, str) and value.strip().lower() in ("true", "false", "on", "off", "1", "0"):
+        return value.strip().lower() in ("true", "on", "1")
+    raise ValueError(f"{name}: expected true or false, got {value!r}")
+
+
+def _check_index(name: str, value, count: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name}: expected an integer index, got {value!r}")
+    i = int(value)
+    if not 0 <= i < count:
+        raise ValueError(f"{name}: index {i} is out of range (there are {count} controls: 0..{count - 1})")
+    return i
+
+
+def default_mirror(preset: Preset) -> tuple[int, ...]:
+    """Dims negated by symmetry: the preset's own, else position y (and direction y where there is one)."""
+    if preset.mirror:
+        return tuple(preset.mirror)
+    layout = preset.layout
+    dims = [layout.position[1]]
+    if layout.direction:
+        dims.append(layout.direction[1])
+    return tuple(sorted(dims))
+
+
+def rgb_to_colour_dims(rgb, layout: FeatureLayout) -> np.ndarray:
+    """The inverse of presets.colours_of for one colour: RGB in [0, 1] -> the layout's colour dims values."""
+    rgb = _finite_vector("colour", rgb, 3).astype(np.float64)
+    if (rgb < 0).any() or (rgb > 1).any():
+        raise ValueError(f"colour: RGB values must lie in [0, 1], got {rgb.tolist()}")
+    space = layout.colour_space
+    if space == "none":
+        raise ValueError("colour: this preset's features have no colour dimensions")
+    h, s, _v = colorsys.rgb_to_hsv(*rgb)
+    if space == "hue":
+        return np.float32([h])
+    if space == "hs":
+        return np.float32([h, s])
+    return rgb.astype(np.float32)  # "rgb"
+
+
+def parse_hex_colour(text: str) -> np.ndarray:
+    """'#rrggbb' (or '#rrggbbaa', alpha ignored) -> RGB float32 in [0, 1]; ValueError otherwise."""
+    if not isinstance(text, str):
+        raise ValueError(f"colour: expected '#rrggbb', got {text!r}")
+    t = text.strip().lstrip("#")
+    if len(t) not in (6, 8) or any(c not in "0123456789abcdefABCDEF" for c in t):
+        raise ValueError(f"colour: expected '#rrggbb', got {text!r}")
+    return np.float32([int(t[i:i + 2], 16) / 255.0 for i in (0, 2, 4)])
+
+
+def hex_colour(rgb) -> str:
+    r, g, b = (int(round(float(np.clip(c, 0.0, 1.0)) * 255)) for c in rgb[:3])
+    return f"#{r:02x}{g:02x}{b:02x}"
+
+
+class Session:
+    """A live modelling session: one Som, its controls and a background training thread.
+
+    preset:     a preset name (presets.PRESETS), a Preset, or None for "car"
+    device:     Warp device for the Som: "auto"/None (best available), "cpu", "cuda", "cuda:N"
+    frame_rate: frames per second the training thread aims at while training
+    step_fraction: share of each frame interval spent in som.step (the rest is left to rendering)
+    start:      start the training thread now (else call `start()`)
+    paused:     begin paused (no training until `train()`)
+    """
+
+    def __init__(self, preset: str | Preset | None = "car", device: str | None = "auto", frame_rate: float = 30.0,
+                 step_fraction: float = 0.6, start: bool = True, paused: bool = False,
+                 max_vertices: int = DEFAULT_MAX_VERTICES):
+        self.frame_rate = _check_real("frame_rate", frame_rate, 0.0, 1000.0, low_open=True)
+        self.step_fraction = _check_real("step_fraction", step_fraction, 0.0, 1.0, low_open=True)
+        self.max_vertices = _check_int("max_vertices", max_vertices, 1, 65536)
+        self.device = "auto" if device is None else device
+        self._lock = threading.RLock()  # the session's own state: controls, parameters, op queue
+        self._wake = threading.Condition(self._lock)
+        self._som_lock = threading.Lock()  # the Som: held by the training thread while it steps
+        self._listeners: list[FrameListener] = []
+        self._ops: list[tuple[str, object]] = []
+        self._thread: threading.Thread | None = None
+        self._closed = False
+        self._paused = bool(paused)
+        self._seq = 0
+        self._generation = 0
+        self._frame: Frame | None = None
+        self._cycle_time = 0.0
+        self._cycles_per_step = 1
+        self._frames_published = 0
+        self._frame_times: list[float] = []
+        self._busy = False  # training thread is applying ops / stepping
+        self._error: str | None = None
+        self._install(self._build(preset))
+        self._frame = self._make_frame(0)
+        if start:
+            self.start()
+
+    # -- construction ------------------------------------------------------------------------------------------
+    def _build(self, preset: str | Preset | None) -> tuple[Preset, object]:
+        if preset is None:
+            preset = "car"
+        if isinstance(preset, str):
+            preset = _presets.get_preset(preset)
+        if not isinstance(preset, Preset):
+            raise ValueError(f"preset: expected a preset name or a Preset, got {type(preset).__name__}")
+        if preset.n_vertices > self.max_vertices:
+            raise ValueError(f"mesh has {preset.n_vertices} vertices; this session accepts at most "
+                             f"{self.max_vertices} (the distance table grows as N^2)")
+        if preset.controls.shape[0] < 1:
+            raise ValueError(f"preset {preset.name!r} has no controls; at least one is needed")
+        device = None if self.device in (None, "auto") else self.device
+        som = preset.make_som(device=device)
+        return preset, som
+
+    def _install(self, built: tuple[Preset, object]) -> None:
+        preset, som = built
+        self._preset = preset
+        self._som = som
+        self._layout = preset.layout
+        self._controls = np.array(som.controls, dtype=np.float32)
+        self._mirror_dims = default_mirror(preset)
+        self._params = {
+            "iterations": int(som.iterations), "l_start": float(som.l_start), "l_end": float(som.l_end),
+            "smoothing": float(som.smoothing), "symmetry": bool(som.mirror),
+            "metric_weights": [float(x) for x in som.metric_weights],
+        }
+        self._cycle_time = 0.0
+        self._cycles_per_step = 1
+        self._generation += 1
+
+    # -- thread --------------------------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Start the training thread (idempotent)."""
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("session is closed")
+            if self._thread is not None:
+                return
+            self._thread = threading.Thread(target=self._run, name="somwidget-session", daemon=True)
+            self._thread.start()
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Stop the training thread; the session accepts no more intents."""
+        with self._wake:
+            self._closed = True
+            self._wake.notify_all()
+        t = self._thread
+        if t is not None and t is not threading.current_thread():
+            t.join(timeout)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def _run(self) -> None:
+        while True:
+            with self._wake:
+                while not self._closed and not self._ops and not self._should_step():
+                    self._busy = False
+                    self._wake.notify_all()
+                    self._wake.wait()
+                if self._closed:
+                    self._busy = False
+                    self._wake.notify_all()
+                    return
+                ops, self._ops = self._ops, []
+                self._busy = True
+            t0 = time.monotonic()
+            try:
+                self._apply_and_step(ops)
+            except Exception as exc:  # keep the thread alive; views show the error
+                log.exception("training step failed")
+                with self._lock:
+                    self._error = f"training failed: {exc}"
+                    self._paused = True
+                self._publish(self._make_frame(0))
+            # pace: a frame every 1 / frame_rate seconds while training; wake early for a new intent
+            with self._wake:
+                if self._should_step() and not self._ops and not self._closed:
+                    rest = 1.0 / self.frame_rate - (time.monotonic() - t0)
+                    if rest > 0:
+                        self._wake.wait(rest)
+
+    def _should_step(self) -> bool:
+        # caller holds self._lock; _som is only swapped under both locks
+        return not self._paused and self._som.iteration < self._som.iterations
+
+    def _apply_and_step(self, ops) -> None:
+        with self._som_lock:
+            som = self._som
+            for kind, payload in ops:
+                self._apply(som, kind, payload)
+            cycles = 0
+            with self._lock:
+                paused = self._paused
+            if not paused and som.iteration < som.iterations:
+                k = self._cycles_per_step
+                if ops:  # a fresh intent (a drag): a short first step gets the moved clay out sooner
+                    k = max(1, k // 4)
+                k = max(1, min(k, som.iterations - som.iteration))
+                t = time.perf_counter()
+                cycles = som.step(k)
+                if hasattr(som, "synchronize"):
+                    som.synchronize()
+                dt = time.perf_counter() - t
+                if cycles > 0:
+                    self._tune(dt / cycles)
+            frame = self._make_frame(cycles)
+        self._publish(frame)
+
+    def _tune(self, per_cycle: float) -> None:
+        per_cycle = max(per_cycle, 1e-7)
+        self._cycle_time = per_cycle if self._cycle_time == 0.0 else 0.7 * self._cycle_time + 0.3 * per_cycle
+        budget = self.step_fraction / self.frame_rate
+        target = int(budget / self._cycle_time)
+        # grow at most x2 a frame so one slow first call does not overshoot
+        self._cycles_per_step = max(1, min(target, 2 * self._cycles_per_step, MAX_ITERATIONS))
+
+    @staticmethod
+    def _apply(som, kind: str, payload) -> None:
+        if kind == "controls":
+            som.set_controls(payload)
+        elif kind == "iterations":
+            som.iterations = payload
+        elif kind == "l_start":
+            som.l_start = payload
+        elif kind == "l_end":
+            som.l_end = payload
+        elif kind == "smoothing":
+            som.smoothing = payload
+        elif kind == "mirror":
+            som.mirror = payload
+        elif kind == "metric_weights":
+            som.metric_weights = payload
+        elif kind == "reset":
+            som.reset()
+        elif kind == "weights":
+            som.set_weights(payload)
+        elif kind == "restart":
+            som.set_controls(som.controls)
+        elif kind == "publish":
+            pass
+        else:  # pragma: no cover - programming error
+            raise RuntimeError(f"unknown op {kind!r}")
+
+    def _enqueue(self, kind: str, payload=None) -> None:
+        # caller holds self._lock
+        if self._closed:
+            raise RuntimeError("session is closed")
+        if kind == "controls" and self._ops and self._ops[-1][0] == "controls":
+            self._ops[-1] = (kind, payload)  # several moves within one frame: only the latest counts
+        else:
+            self._ops.append((kind, payload))
+        self._busy = True
+        self._wake.notify_all()
+
+    # -- frames ----------------------------------------------------------------------------------------------------
+    def _make_frame(self, cycles: int) -> Frame:
+        """Called with the Som quiescent (under _som_lock, or before the thread starts)."""
+        som, layout = self._som, self._layout
+        w = np.asarray(som.weights, dtype=np.float32)
+        controls = np.asarray(som.controls, dtype=np.float32)
+        eff = np.asarray(som.effective_controls, dtype=np.float32)
+        pos = _presets.positions_of(w, layout)
+        cpos = _presets.positions_of(controls, layout)
+        epos = _presets.positions_of(eff, layout)
+        gaps = self._gaps(pos, epos)
+        with self._lock:
+            self._seq += 1
+            seq = self._seq
+            paused = self._paused
+        s, S = int(som.iteration), int(som.iterations)
+        return Frame(
+            seq=seq, generation=self._generation, iteration=s, iterations=S, running=(not paused and s < S),
+            paused=paused, weights=_readonly(w), positions=_readonly(pos),
+            colours=_readonly(_presets.colours_of(w, layout)), controls=_readonly(controls),
+            control_colours=_readonly(_presets.colours_of(controls, layout)), effective_controls=_readonly(eff),
+            effective_colours=_readonly(_presets.colours_of(eff, layout)), control_positions=_readonly(cpos),
+            effective_positions=_readonly(epos), cycle_time=float(self._cycle_time), step_cycles=int(cycles),
+            gaps=_readonly(gaps), preset=self._preset)
+
+    @staticmethod
+    def _gaps(nodes: np.ndarray, points: np.ndarray) -> np.ndarray:
+        if len(points) == 0 or len(nodes) == 0:
+            return np.zeros(len(points), np.float32)
+        out = np.empty(len(points), np.float32)
+        block = max(1, 4_000_000 // max(1, len(nodes)))
+        for i in range(0, len(points), block):
+            d = points[i:i + block, None, :] - nodes[None, :, :]
+            out[i:i + block] = np.sqrt(np.min(np.einsum("kni,kni->kn", d, d), axis=1))
+        return out
+
+    def _publish(self, frame: Frame) -> None:
+        with self._lock:
+            self._frame = frame
+            self._frames_published += 1
+            self._frame_times.append(frame.time)
+            if len(self._frame_times) > 60:
+                del self._frame_times[:-60]
+            listeners = list(self._listeners)
+        for cb in listeners:
+            try:
+                cb(frame)
+            except Exception:  # a broken view must not stop the others
+                log.exception("frame listener %r failed", cb)
+
+    def add_listener(self, callback: FrameListener, replay: bool = True) -> FrameListener:
+        """Call `callback(frame)` for every new frame (on the training thread); replay the latest one now."""
+        if not callable(callback):
+            raise ValueError("listener: expected a callable")
+        with self._lock:
+            self._listeners.append(callback)
+            frame = self._frame
+        if replay and frame is not None:
+            try:
+                callback(frame)
+            except Exception:
+                log.exception("frame listener %r failed", callback)
+        return callback
+
+    def remove_listener(self, callback: FrameListener) -> None:
+        with self._lock:
+            if callback in self._listeners:
+                self._listeners.remove(callback)
+
+    @property
+    def frame(self) -> Frame:
+        """The latest published frame."""
+        with self._lock:
+            return self._frame
+
+    @property
+    def frames_per_second(self) -> float:
+        """Frames published per second over the last few frames (0 when idle)."""
+        with self._lock:
+            times = list(self._frame_times)
+        if len(times) < 2 or time.monotonic() - times[-1] > 1.0:
+            return 0.0
+        return (len(times) - 1) / max(times[-1] - times[0], 1e-9)
+
+    def wait_idle(self, timeout: float = 10.0) -> bool:
+        """Block until every queued intent is applied and training has stopped (s = S or paused)."""
+        deadline = time.monotonic() + timeout
+        with self._wake:
+            while self._ops or self._busy or (self._thread is not None and self._should_step()):
+                if self._thread is None or self._closed:
+                    return not self._ops
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._wake.wait(min(left, 0.05))
+        return True
+
+    def wait_applied(self, timeout: float = 10.0) -> bool:
+        """Block until every intent queued so far has reached the Som and a frame shows it."""
+        deadline = time.monotonic() + timeout
+        with self._lock:
+            target = self._seq + 1 if (self._ops or self._busy) else self._seq
+        while time.monotonic() < deadline:
+            with self._lock:
+                if not self._ops and self._seq >= target:
+                    return True
+            time.sleep(0.005)
+        return False
+
+    # -- read-only state ------------------------------------------------------------------------------------------
+    @property
+    def preset(self) -> Preset:
+        return self._preset
+
+    @property
+    def layout(self) -> FeatureLayout:
+        return self._layout
+
+    @property
+    def topology(self):
+        return self._preset.topology
+
+    @property
+    def display(self) -> str:
+        return self._preset.display
+
+    @property
+    def generation(self) -> int:
+        return self._generation
+
+    @property
+    def controls(self) -> np.ndarray:
+        """(k, n) the controls as the session holds them now (intents already applied here)."""
+        with self._lock:
+            return self._controls.copy()
+
+    @property
+    def n_controls(self) -> int:
+        with self._lock:
+            return int(self._controls.shape[0])
+
+    @property
+    def n_dims(self) -> int:
+        return self._layout.n_dims
+
+    @property
+    def parameters(self) -> dict:
+        with self._lock:
+            p = dict(self._params)
+            p["metric_weights"] = list(p["metric_weights"])
+            p["mirror"] = list(self._mirror_dims) if p["symmetry"] else []
+            return p
+
+    @property
+    def paused(self) -> bool:
+        return self._paused
+
+    @property
+    def error(self) -> str | None:
+        return self._error
+
+    def state(self, positions: bool = False) -> dict:
+        """A JSON-friendly summary (for debug routes and tests); `positions` adds every node's x, y, z."""
+        frame = self.frame
+        with self._lock:
+            controls = self._controls.copy()
+            params = self.parameters
+            pending = len(self._ops)
+        layout = self._layout
+        out = {
+            "preset": self._preset.name, "title": self._preset.title, "display": self._preset.display,
+            "generation": frame.generation, "n_vertices": int(self._preset.n_vertices), "n_dims": layout.n_dims,
+            "feature_names": list(layout.names), "position_dims": list(layout.position),
+            "colour_dims": list(layout.colour), "colour_space": layout.colour_space,
+            "controls": controls.tolist(), "parameters": params, "paused": self._paused, "pending_intents": pending,
+            "frame": {
+                "seq": frame.seq, "iteration": frame.iteration, "iterations": frame.iterations,
+                "running": frame.running, "cycle_time": frame.cycle_time,
+                "controls": frame.controls.tolist(), "effective_controls": frame.effective_controls.tolist(),
+                "gaps": frame.gaps.tolist(), "centroid": frame.positions.mean(axis=0).tolist(),
+            },
+            "frames_per_second": self.frames_per_second, "error": self._error,
+        }
+        if positions:
+            out["frame"]["positions"] = frame.positions.tolist()
+        return out
+
+    # -- intents: controls ----------------------------------------------------------------------------------------
+    def _check_controls(self, controls: np.ndarray, symmetry: bool | None = None) -> None:
+        if symmetry is None:
+            symmetry = self._params["symmetry"]
+        k = controls.shape[0]
+        if k < 1:
+            raise ValueError("controls: at least one control is needed")
+        if k * (2 if symmetry else 1) > MAX_CONTROLS:
+            raise ValueError(f"controls: at most {MAX_CONTROLS} controls counting mirrored copies; "
+                             f"{k} controls{' with symmetry' if symmetry else ''} is too many")
+
+    def move_control(self, index: int, position) -> None:
+        """Move control `index` to `position`: 3 numbers (x, y, z; the other features stay) or all n features."""
+        n = self._layout.n_dims
+        with self._lock:
+            i = _check_index("control", index, self._controls.shape[0])
+            length = len(position) if hasattr(position, "__len__") and not isinstance(position, str) else -1
+            if length == n:
+                values = _finite_vector(f"control {i}", position, n)
+            else:
+                p = _finite_vector(f"control {i} position", position, 3)
+                values = self._controls[i].copy()
+                values[list(self._layout.position)] = p
+            controls = self._controls.copy()
+            controls[i] = values
+            self._controls = controls
+            self._enqueue("controls", controls.copy())
+
+    def set_control(self, index: int, values) -> None:
+        """Replace all n features of control `index`."""
+        with self._lock:
+            i = _check_index("control", index, self._controls.shape[0])
+            v = _finite_vector(f"control {i}", values, self._layout.n_dims)
+            controls = self._controls.copy()
+            controls[i] = v
+            self._controls = controls
+            self._enqueue("controls", controls.copy())
+
+    def set_control_feature(self, index: int, dim: int, value) -> None:
+        """Set one feature dim of control `index`."""
+        with self._lock:
+            i = _check_index("control", index, self._controls.shape[0])
+            d = _check_int("feature dimension", dim, 0, self._layout.n_dims - 1)
+            x = _check_real(f"control {i} {self._layout.names[d]}", value, -MAX_ABS_VALUE, MAX_ABS_VALUE)
+            controls = self._controls.copy()
+            controls[i, d] = x
+            self._controls = controls
+            self._enqueue("controls", controls.copy())
+
+    def set_controls(self, controls) -> None:
+        """Replace every control: (k, n) finite values, 1 <= k (counting mirrored copies <= 256)."""
+        n = self._layout.n_dims
+        try:
+            arr = np.asarray(controls, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError("controls: expected a (k, n) array of numbers") from None
+        if arr.ndim != 2 or arr.shape[1] != n:
+            raise ValueError(f"controls: expected shape (k, {n}), got {arr.shape}")
+        if not np.isfinite(arr).all():
+            raise ValueError("controls: values must be finite (no NaN or inf)")
+        if np.abs(arr).max(initial=0.0) > MAX_ABS_VALUE:
+            raise ValueError(f"controls: values must lie within +-{MAX_ABS_VALUE:g}")
+        arr = arr.astype(np.float32)
+        with self._lock:
+            self._check_controls(arr)
+            self._controls = arr.copy()
+            self._enqueue("controls", arr)
+
+    def set_control_colour(self, index: int, colour) -> None:
+        """Set control `index`'s colour dims from an RGB triple in [0, 1] or a '#rrggbb' string."""
+        rgb = parse_hex_colour(colour) if isinstance(colour, str) else colour
+        with self._lock:
+            i = _check_index("control", index, self._controls.shape[0])
+            dims = rgb_to_colour_dims(rgb, self._layout)
+            controls = self._controls.copy()
+            controls[i, list(self._layout.colour)] = dims
+            self._controls = controls
+            self._enqueue("controls", controls.copy())
+
+    def add_control(self, values=None) -> int:
+        """Append a control (all n features; default: next to the last one); returns its index."""
+        n = self._layout.n_dims
+        with self._lock:
+            if values is None:
+                base = self._controls[-1].copy()
+                pos = self._frame.positions if self._frame is not None else np.zeros((1, 3), np.float32)
+                span = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0))) or 1.0
+                p = list(self._layout.position)
+                base[p[2]] += 0.15 * span
+                v = base
+            else:
+                v = _finite_vector("new control", values, n)
+            controls = np.concatenate([self._controls, v[None, :]]).astype(np.float32)
+            self._check_controls(controls)
+            self._controls = controls
+            self._enqueue("controls", controls.copy())
+            return controls.shape[0] - 1
+
+    def remove_control(self, index: int) -> None:
+        with self._lock:
+            i = _check_index("control", index, self._controls.shape[0])
+            if self._controls.shape[0] <= 1:
+                raise ValueError("controls: cannot remove the last control")
+            controls = np.delete(self._controls, i, axis=0)
+            self._controls = controls
+            self._enqueue("controls", controls.copy())
+
+    # -- intents: parameters -----------------------------------------------------------------------------------
+    def set_parameter(self, name: str, value) -> None:
+        """Set one of PARAMETERS: iterations (S), l_start, l_end, smoothing, symmetry, metric_weights."""
+        setters = {
+            "iterations": self.set_iterations, "S": self.set_iterations, "l_start": self.set_l_start,
+            "l_end": self.set_l_end, "smoothing": self.set_smoothing, "symmetry": self.set_symmetry,
+            "metric_weights": self.set_metric_weights,
+        }
+        if name not in setters:
+            raise ValueError(f"unknown parameter {name!r}; known: {', '.join(PARAMETERS)}")
+        setters[name](value)
+
+    def set_iterations(self, value) -> None:
+        """S: cycles in a run. Restarts the schedule from the latest weights."""
+        s = _check_int("S (iterations)", value, 1, MAX_ITERATIONS)
+        with self._lock:
+            self._params["iterations"] = s
+            self._enqueue("iterations", s)
+
+    def set_l_start(self, value) -> None:
+        x = _check_real("l_start", value, 0.0, 1.0, low_open=True)
+        with self._lock:
+            self._params["l_start"] = x
+            self._enqueue("l_start", x)
+
+    def set_l_end(self, value) -> None:
+        x = _check_real("l_end", value, 0.0, 1.0, low_open=True)
+        with self._lock:
+            self._params["l_end"] = x
+            self._enqueue("l_end", x)
+
+    def set_learning_rates(self, l_start, l_end) -> None:
+        a = _check_real("l_start", l_start, 0.0, 1.0, low_open=True)
+        b = _check_real("l_end", l_end, 0.0, 1.0, low_open=True)
+        with self._lock:
+            self._params["l_start"], self._params["l_end"] = a, b
+            self._enqueue("l_start", a)
+            self._enqueue("l_end", b)
+
+    def set_smoothing(self, value) -> None:
+        """lambda of one Laplacian step per cycle, in [0, 1]; 0 is off."""
+        x = _check_real("smoothing", value, 0.0, 1.0)
+        with self._lock:
+            self._params["smoothing"] = x
+            self._enqueue("smoothing", x)
+
+    def set_symmetry(self, value) -> None:
+        """Mirror every control across the xz-plane (the preset's mirror dims) or not."""
+        on = _check_bool("symmetry", value)
+        with self._lock:
+            self._check_controls(self._controls, symmetry=on)
+            self._params["symmetry"] = on
+            self._enqueue("mirror", self._mirror_dims if on else ())
+
+    def set_metric_weights(self, value) -> None:
+        """One weight >= 0 per feature dim (at least one positive) for the winner search."""
+        n = self._layout.n_dims
+        m = _finite_vector("metric_weights", value, n)
+        if (m < 0).any():
+            raise ValueError(f"metric_weights: weights must be >= 0, got {m.tolist()}")
+        if not (m > 0).any():
+            raise ValueError("metric_weights: at least one weight must be positive")
+        with self._lock:
+            self._params["metric_weights"] = [float(x) for x in m]
+            self._enqueue("metric_weights", m)
+
+    def set_metric_weight(self, dim: int, value) -> None:
+        with self._lock:
+            d = _check_int("feature dimension", dim, 0, self._layout.n_dims - 1)
+            m = list(self._params["metric_weights"])
+            m[d] = _check_real(f"metric weight of {self._layout.names[d]}", value, 0.0, MAX_ABS_VALUE)
+            self.set_metric_weights(m)
+
+    # -- intents: run control ------------------------------------------------------------------------------
+    def train(self) -> None:
+        """Resume training; a converged run (s = S) starts again from s = 0 with the latest weights."""
+        with self._lock:
+            self._paused = False
+            self._error = None
+            if self._som.iteration >= self._som.iterations and not self._ops:
+                self._enqueue("restart")
+            else:
+                self._enqueue("publish")
+
+    def pause(self) -> None:
+        with self._lock:
+            self._paused = True
+            self._enqueue("publish")
+
+    def reset(self) -> None:
+        """Back to the start mesh and s = 0; the controls stay."""
+        with self._lock:
+            self._enqueue("reset")
+
+    # -- intents: whole session -----------------------------------------------------------------------------
+    def load_preset(self, preset: str | Preset) -> None:
+        """Replace the mesh, layout, controls and parameters with a preset (a name or a Preset).
+
+        The new Som is built in the caller's thread (this can take a while for a big mesh); a failure leaves the
+        session as it was.
+        """
+        if isinstance(preset, str) and preset not in _presets.PRESETS:
+            raise ValueError(f"unknown preset {preset!r}; known presets: {', '.join(_presets.PRESETS)}")
+        built = self._build(preset)
+        with self._som_lock, self._lock:
+            if self._closed:
+                raise RuntimeError("session is closed")
+            self._ops.clear()
+            self._install(built)
+            self._error = None
+            self._frame = self._make_frame(0)  # `frame` matches `preset` at once; listeners get the next one
+            self._enqueue("publish")
+
+    def load_mesh(self, path) -> Preset:
+        """Load a mesh file (io.load_mesh) as the new start mesh; ValueError for a bad file, session unchanged."""
+        from ..backend import io as sw_io
+
+        preset = sw_io.load_mesh(path, max_vertices=self.max_vertices)
+        preset.name = f"mesh:{preset.name}"  # never mistaken for a built-in preset of the same name
+        self.load_preset(preset)
+        return preset
+
+    def snapshot(self) -> dict:
+        """A consistent copy of the session's state (for export and save): taken between training steps."""
+        with self._som_lock, self._lock:
+            som = self._som
+            return {
+                "preset": self._preset, "weights": np.asarray(som.weights, np.float32),
+                "controls": self._controls.copy(), "iteration": int(som.iteration),
+                "parameters": self.parameters,
+            }
+
+    def export_mesh(self, path) -> None:
+        """Write the current mesh (OBJ, PLY, GLB by extension) with its vertex colours (io.export_mesh).
+
+        A loaded mesh is written back in its file's original frame (io.load_mesh normalised it)."""
+        from ..backend import io as sw_io
+
+        snap = self.snapshot()
+        preset = snap["preset"]
+        sw_io.export_mesh(path, snap["weights"], preset.topology, preset.layout, display=preset.display,
+                          transform=preset.meta.get("transform"))
+
+    def session_state(self) -> dict:
+        """The state io.save_session writes: the start mesh, the current weights, controls and parameters."""
+        snap = self.snapshot()
+        preset: Preset = snap["preset"]
+        params = snap["parameters"]
+        return {
+            "preset": preset.name, "display": preset.display, "topology": preset.topology, "layout": preset.layout,
+            "start_weights": np.asarray(preset.weights, np.float32), "weights": snap["weights"],
+            "controls": snap["controls"], "iterations": params["iterations"], "iteration": snap["iteration"],
+            "l_start": params["l_start"], "l_end": params["l_end"], "smoothing": params["smoothing"],
+            "smooth_dims": preset.smooth_dims, "metric_weights": np.asarray(params["metric_weights"], np.float32),
+            "mirror": tuple(params["mirror"]),
+        }
+
+    def save(self, path) -> None:
+        """Save the session (io.save_session, a versioned .npz)."""
+        from ..backend import io as sw_io
+
+        sw_io.save_session(path, self.session_state())
+
+    def load(self, path) -> None:
+        """Load a session saved by `save` (io.load_session); ValueError for a bad file, session unchanged."""
+        from ..backend import io as sw_io
+
+        self.restore(sw_io.load_session(path))
+
+    def restore(self, state: dict) -> None:
+        """Rebuild the session from a loaded session state: its start mesh and settings, then its saved weights
+        (the schedule restarts at s = 0 from them). ValueError if the state does not describe a session."""
+        from ..backend import io as sw_io
+
+        try:
+            preset = sw_io.preset_from_session(state)
+            weights = np.asarray(state["weights"], np.float32)
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"session: missing or malformed entry ({exc})") from None
+        if weights.shape != preset.weights.shape or not np.isfinite(weights).all():
+            raise ValueError(f"session: weights have shape {weights.shape}, expected {preset.weights.shape}")
+        built = self._build(preset)
+        built[1].set_weights(weights)
+        with self._som_lock, self._lock:
+            self._ops.clear()
+            self._install(built)
+            self._error = None
+            self._frame = self._make_frame(0)  # `frame` matches `preset` at once; listeners get the next one
+            self._enqueue("publish")
+
+
+__all__ = ["Frame", "Session", "PARAMETERS", "default_mirror", "rgb_to_colour_dims", "parse_hex_colour",
+           "hex_colour"]
+

@@ -1,0 +1,452 @@
+"""The web app in a real browser: Debian's Chromium driven by Playwright against `somwidget serve`.
+
+Interaction tests act as the person does: Playwright's mouse drags a control's sphere on the server-rendered view.
+Server-side state is read through the app's read-only debug route GET /api/state; nothing here sets it directly.
+Needs /usr/bin/chromium, Python Playwright and EGL/Mesa for headless VTK (scripts/setup.sh installs them).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+ROOT = Path(__file__).resolve().parents[1]
+VIEWPORT = {"width": 1200, "height": 800}
+
+playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
+if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
+    pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Server:
+    """`python -m somwidget.cli serve` on a free loopback port, with its debug route."""
+
+    def __init__(self, *args: str):
+        self.port = _free_port()
+        self.url = f"http://127.0.0.1:{self.port}/"
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+        env.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+        self.log_path = Path(tempfile.mkdtemp(prefix="somwidget-test-")) / "serve.log"
+        self.log = open(self.log_path, "w")
+        self.proc = subprocess.Popen([sys.executable, "-m", "somwidget.cli", "serve", "--port", str(self.port),
+                                      "--device", "cpu", *args], cwd=ROOT, env=env, stdout=self.log,
+                                     stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 90
+        while True:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"somwidget serve exited with {self.proc.returncode}")
+            try:
+                self.state()
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    self.stop()
+                    raise RuntimeError("somwidget serve did not come up within 90 s") from None
+                time.sleep(0.25)
+
+    def state(self, positions: bool = False) -> dict:
+        url = self.url + "api/state" + ("?positions=1" if positions else "")
+        with urllib.request.urlopen(url, timeout=10) as r:
+            return json.loads(r.read())
+
+    def wait(self, predicate, timeout: float = 20.0, what: str = "condition") -> dict:
+        deadline = time.monotonic() + timeout
+        while True:
+            st = self.state(positions=True)
+            if predicate(st):
+                return st
+            if time.monotonic() > deadline:
+                raise AssertionError(f"timed out waiting for {what}; last state: {json.dumps(st)[:800]}")
+            time.sleep(0.1)
+
+    def idle(self, timeout: float = 30.0) -> dict:
+        """Wait until training has stopped and the scene shows the latest frame."""
+        def done(st):
+            f = st["session"]["frame"]
+            return (not f["running"] and st["session"]["pending_intents"] == 0
+                    and st["view"]["frame_seq"] == f["seq"])
+        return self.wait(done, timeout, "the session to go idle")
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+        self.log.close()
+
+
+@pytest.fixture(scope="module")
+def server():
+    srv = Server()
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with playwright_sync.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+def open_page(browser, server):
+    page = browser.new_page(viewport=VIEWPORT)
+    page.goto(server.url)
+    page.wait_for_selector("#view-container img", state="attached", timeout=30000)
+    # the first image has arrived once the view's <img> has a blob: source
+    page.wait_for_function("() => { const i = document.querySelector('#view-container img');"
+                           " return i && i.src && i.src.startsWith('blob:') && i.naturalWidth > 0; }", timeout=30000)
+    return page
+
+
+def view_image(page) -> np.ndarray:
+    from PIL import Image
+
+    png = page.locator("#view-container").screenshot()
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
+
+
+def not_blank(img: np.ndarray) -> float:
+    """Share of pixels that differ clearly from the most common (background) colour."""
+    flat = img.reshape(-1, 3)
+    values, counts = np.unique(flat[:: max(1, len(flat) // 20000)], axis=0, return_counts=True)
+    bg = values[np.argmax(counts)]
+    return float((np.abs(flat - bg).sum(axis=1) > 30).mean())
+
+
+def control_on_screen(page, st: dict, index: int) -> tuple[float, float]:
+    box = page.locator("#view-container img").bounding_box()
+    w, h = st["view"]["window_size"]
+    sx, sy = st["view"]["widget_screen"][index]
+    return box["x"] + sx * box["width"] / w, box["y"] + sy * box["height"] / h
+
+
+def pick_control(page, st: dict, prefer=(2, 5, 3, 6, 4, 0, 1, 7, 8), margin: float = 90.0, exclude=()) -> int:
+    """A control whose sphere is on screen, away from the view's edges and from the other spheres."""
+    box = page.locator("#view-container img").bounding_box()
+    spots = [control_on_screen(page, st, j) for j in range(len(st["view"]["widget_screen"]))]
+    for i in prefer:
+        if i in exclude or i >= len(spots):
+            continue
+        x, y = spots[i]
+        inside = box["x"] + margin < x < box["x"] + box["width"] - margin and \
+            box["y"] + margin < y < box["y"] + box["height"] - margin
+        clear = all(np.hypot(x - u, y - v) > 45 for j, (u, v) in enumerate(spots) if j != i)
+        if inside and clear:
+            return i
+    raise AssertionError(f"no control sphere is clear on screen: {spots}")
+
+
+def toward_centre(page, start, length: float = 80.0) -> tuple[float, float]:
+    """A drag vector of `length` pixels from `start` toward the middle of the view (so it stays on screen)."""
+    box = page.locator("#view-container img").bounding_box()
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    v = np.array([cx - start[0], cy - start[1]])
+    n = float(np.linalg.norm(v))
+    v = v / n if n > 1 else np.array([0.0, -1.0])
+    # turn by 30 degrees so the control does not slide along the view direction only
+    c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    v = np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+    return float(v[0] * length), float(v[1] * length)
+
+
+def mouse_drag(page, start, delta, steps: int = 24, pause: float = 0.03, release: bool = True):
+    """A real mouse drag: press on `start`, move by `delta` in `steps`, release."""
+    x0, y0 = start
+    page.mouse.move(x0, y0)
+    page.mouse.down()
+    for i in range(1, steps + 1):
+        page.mouse.move(x0 + delta[0] * i / steps, y0 + delta[1] * i / steps)
+        time.sleep(pause)
+    if release:
+        page.mouse.up()
+
+
+def nearest(positions, p) -> float:
+    return float(np.sqrt(((np.asarray(positions) - np.asarray(p)) ** 2).sum(axis=1)).min())
+
+
+def test_page_loads_on_the_car_and_renders(browser, server):
+    page = open_page(browser, server)
+    try:
+        st = server.idle()
+        assert st["session"]["preset"] == "car"
+        assert st["session"]["frame"]["iteration"] == 1000
+        page.wait_for_function("() => document.querySelector('#iteration-text').innerText"
+                               ".startsWith('iteration 1000 / 1000')", timeout=10000)
+        img = view_image(page)
+        assert not_blank(img) > 0.05, "the 3-D view looks blank"
+        assert st["clients"] >= 1
+    finally:
+        page.close()
+
+
+def test_mouse_drag_moves_control_and_clay_follows(browser, server):
+    page = open_page(browser, server)
+    try:
+        st0 = server.idle()
+        before_img = view_image(page)
+        i = pick_control(page, st0)  # the car's nose (2) unless it is hidden
+        c0 = np.array(st0["session"]["controls"][i][:3])
+        start = control_on_screen(page, st0, i)
+        mouse_drag(page, start, toward_centre(page, start, 130), release=False)
+        mid = server.state(positions=True)  # still holding the button: the clay follows during the drag
+        page.mouse.up()
+        assert mid["view"]["dragging"] == i
+        assert mid["view"]["drag_moves"] > st0["view"]["drag_moves"]
+        c_mid = np.array(mid["session"]["controls"][i][:3])
+        assert np.linalg.norm(c_mid - c0) > 0.2, "the control did not follow the mouse"
+        assert mid["session"]["frame"]["seq"] > st0["session"]["frame"]["seq"]
+        st1 = server.idle()
+        c1 = np.array(st1["session"]["controls"][i][:3])
+        assert np.linalg.norm(c1 - c0) > 0.3
+        assert st1["view"]["dragging"] is None
+        # the mirrored copy followed its original (y negated)
+        eff = np.array(st1["session"]["frame"]["effective_controls"])
+        np.testing.assert_allclose(eff[9 + i, :3], c1 * [1, -1, 1], atol=1e-5)
+        # the mesh moved toward the new control
+        d_before = nearest(st0["session"]["frame"]["positions"], c1)
+        d_after = nearest(st1["session"]["frame"]["positions"], c1)
+        assert d_after < 0.5 * d_before, (d_before, d_after)
+        assert st1["session"]["frame"]["gaps"][i] == pytest.approx(d_after, rel=1e-4)
+        after_img = view_image(page)
+        assert not_blank(after_img) > 0.05
+        changed = float((np.abs(after_img - before_img).sum(axis=2) > 30).mean())
+        assert changed > 0.01, f"only {changed:.4f} of the view changed"
+    finally:
+        page.close()
+
+
+def test_panel_sets_schedule_and_refuses_bad_values(browser, server):
+    page = open_page(browser, server)
+    try:
+        for field, value in (("#field-iterations", "1500"), ("#field-l_start", "0.4"), ("#field-l_end", "0.05"),
+                             ("#field-smoothing", "0.1")):
+            page.locator(field).fill(value)
+            page.locator(field).press("Enter")
+        st = server.wait(lambda s: s["session"]["parameters"]["iterations"] == 1500
+                         and s["session"]["parameters"]["l_start"] == 0.4
+                         and s["session"]["parameters"]["l_end"] == 0.05
+                         and s["session"]["parameters"]["smoothing"] == 0.1, what="the panel's parameters")
+        st = server.idle()
+        assert st["session"]["frame"]["iterations"] == 1500 and st["session"]["frame"]["iteration"] == 1500
+        page.wait_for_function("() => document.querySelector('#iteration-text').innerText.includes('1500 / 1500')")
+        # out of range: refused with a message, the session keeps its value
+        page.locator("#field-l_start").fill("1.5")
+        page.locator("#field-l_start").press("Enter")
+        alert = page.locator("#error-alert")
+        alert.wait_for(timeout=10000)
+        assert "l_start" in alert.inner_text()
+        assert server.state()["session"]["parameters"]["l_start"] == 0.4
+        page.locator("#field-iterations").fill("-5")
+        page.locator("#field-iterations").press("Enter")
+        page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('iterations')")
+        assert server.state()["session"]["parameters"]["iterations"] == 1500
+        # symmetry off from the switch: the mirrored copies go
+        page.locator("#symmetry-switch").click()
+        server.wait(lambda s: len(s["session"]["frame"]["effective_controls"]) == 9, what="symmetry off")
+        page.locator("#symmetry-switch").click()
+        server.wait(lambda s: len(s["session"]["frame"]["effective_controls"]) == 18, what="symmetry on")
+        # a metric weight from the features table, and Pause / Train
+        weight = page.locator("#features-table tr").nth(3).locator("input")
+        weight.fill("2.5")
+        weight.press("Enter")
+        server.wait(lambda s: s["session"]["parameters"]["metric_weights"][3] == 2.5, what="metric weight")
+        weight.fill("-1")
+        weight.press("Enter")
+        page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('metric weight')")
+        assert server.state()["session"]["parameters"]["metric_weights"][3] == 2.5
+        weight.fill("1")
+        weight.press("Enter")
+        page.locator("#train-button").click()
+        server.wait(lambda s: s["session"]["paused"], what="paused")
+        page.locator("#train-button").click()
+        server.wait(lambda s: not s["session"]["paused"], what="training again")
+        # controls from the panel: add one, recolour it, remove it
+        page.locator("#add-control").click()
+        server.wait(lambda s: len(s["session"]["controls"]) == 10, what="a tenth control")
+        page.locator("#controls-table tr").nth(9).locator("input[type=color]").fill("#00ff00")
+        st = server.wait(lambda s: len(s["session"]["controls"]) == 10
+                         and abs(s["session"]["controls"][9][3] - 1 / 3) < 1e-3
+                         and abs(s["session"]["controls"][9][4] - 1.0) < 1e-3, what="the green control")
+        page.locator("#controls-table tr").nth(9).locator("button").click()
+        server.wait(lambda s: len(s["session"]["controls"]) == 9, what="back to nine controls")
+        # back to the preset's schedule for the tests that follow
+        for field, value in (("#field-iterations", "1000"), ("#field-l_start", "0.25"), ("#field-l_end", "0.03"),
+                             ("#field-smoothing", "0")):
+            page.locator(field).fill(value)
+            page.locator(field).press("Enter")
+        server.wait(lambda s: s["session"]["parameters"]["iterations"] == 1000
+                    and s["session"]["parameters"]["smoothing"] == 0.0, what="defaults back")
+    finally:
+        page.close()
+
+
+def test_bad_upload_shows_an_error_and_the_session_goes_on(browser, server, tmp_path):
+    page = open_page(browser, server)
+    try:
+        gen = server.state()["session"]["generation"]
+        bad = tmp_path / "not-a-mesh.obj"
+        bad.write_bytes(b"\x00\x01 this is no mesh at all \xff" * 50)
+        page.locator("#mesh-upload").set_input_files(str(bad))
+        alert = page.locator("#error-alert")
+        alert.wait_for(timeout=20000)
+        assert "not-a-mesh.obj" in alert.inner_text()
+        flat = tmp_path / "flat.obj"
+        flat.write_text("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n")
+        page.locator("#mesh-upload").set_input_files(str(flat))
+        page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('degenerate')",
+                               timeout=20000)
+        # too many vertices for the session (a 130 x 130 grid: 16900 > 16384)
+        n = 130
+        big = tmp_path / "big.obj"
+        idx = np.arange(n * n).reshape(n, n) + 1
+        verts = "".join(f"v {i % n} {i // n} 0\n" for i in range(n * n))
+        faces = "".join(f"f {a} {b} {c} {d}\n" for a, b, c, d in zip(idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(),
+                                                                     idx[1:, 1:].ravel(), idx[1:, :-1].ravel()))
+        big.write_text(verts + faces)
+        page.locator("#mesh-upload").set_input_files(str(big))
+        page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('exceed the limit')",
+                               timeout=30000)
+        st = server.state()
+        assert st["session"]["preset"] == "car" and st["session"]["generation"] == gen
+        # the session still answers intents from the view
+        st = server.idle()
+        page.locator("#reset-button").click()
+        server.wait(lambda s: s["session"]["frame"]["seq"] > st["session"]["frame"]["seq"], what="reset frame")
+        server.idle()
+    finally:
+        page.close()
+
+
+def test_two_pages_share_the_session(browser, server):
+    a = open_page(browser, server)
+    b = open_page(browser, server)
+    try:
+        st0 = server.idle()
+        assert st0["clients"] >= 2
+        a_before = view_image(a)
+        # page B drags a control; page A sees it
+        i = pick_control(b, st0, prefer=(5, 6, 4, 2, 3, 0, 1, 7, 8))
+        start = control_on_screen(b, st0, i)
+        mouse_drag(b, start, toward_centre(b, start))
+        st1 = server.idle()
+        moved = np.linalg.norm(np.array(st1["session"]["controls"][i]) - np.array(st0["session"]["controls"][i]))
+        assert moved > 0.2
+        time.sleep(1.0)  # the last still image reaches both pages
+        a_after = view_image(a)
+        assert float((np.abs(a_after - a_before).sum(axis=2) > 30).mean()) > 0.005, "page A did not see B's move"
+        # and the other way round: page A drags another control
+        b_before = view_image(b)
+        j = pick_control(a, st1, prefer=(3, 7, 1, 4, 0, 2, 5, 6, 8), exclude=(i,))
+        start = control_on_screen(a, st1, j)
+        mouse_drag(a, start, toward_centre(a, start))
+        st2 = server.idle()
+        assert np.linalg.norm(np.array(st2["session"]["controls"][j]) - np.array(st1["session"]["controls"][j])) > 0.2
+        time.sleep(1.0)
+        b_after = view_image(b)
+        assert float((np.abs(b_after - b_before).sum(axis=2) > 30).mean()) > 0.005, "page B did not see A's move"
+    finally:
+        a.close()
+        b.close()
+
+
+def test_client_leaving_mid_drag_leaves_the_session_consistent(browser, server):
+    page = open_page(browser, server)
+    st0 = server.idle()
+    i = pick_control(page, st0)
+    start = control_on_screen(page, st0, i)
+    mouse_drag(page, start, toward_centre(page, start, 60), release=False)
+    assert server.state()["view"]["dragging"] == i
+    page.close()  # the button is still down
+    st1 = server.wait(lambda s: s["view"]["dragging"] is None, what="the drag to be released")
+    st1 = server.idle()
+    controls = np.array(st1["session"]["controls"])
+    assert np.isfinite(controls).all()
+    np.testing.assert_allclose(np.array(st1["session"]["frame"]["controls"]), controls, atol=1e-6)
+    np.testing.assert_allclose(np.array(st1["view"]["widget_centres"]), controls[:, :3], atol=1e-5)
+    # a new tab can drag again
+    page = open_page(browser, server)
+    try:
+        j = pick_control(page, st1)
+        start = control_on_screen(page, st1, j)
+        mouse_drag(page, start, toward_centre(page, start, 60))
+        st2 = server.idle()
+        assert np.linalg.norm(np.array(st2["session"]["controls"][j]) - controls[j]) > 0.1
+    finally:
+        page.close()
+
+
+def test_preset_chooser_lines_and_export(browser, server, tmp_path):
+    page = open_page(browser, server)
+    try:
+        gen = server.state()["session"]["generation"]
+        page.locator(".v-select:has(#preset-select) .v-field").click()
+        page.get_by_text("Case study 3: lines").click()
+        st = server.wait(lambda s: s["session"]["preset"] == "lines" and s["session"]["generation"] > gen,
+                         what="the lines preset")
+        st = server.idle()
+        assert st["session"]["n_dims"] == 8 and len(st["session"]["frame"]["effective_controls"]) == 16
+        time.sleep(1.0)
+        assert not_blank(view_image(page)) > 0.05
+        with page.expect_download(timeout=20000) as dl:
+            page.locator("#export-obj").click()
+        path = tmp_path / "lines.obj"
+        dl.value.save_as(path)
+        text = path.read_text()
+        assert text.count("\nv ") + text.startswith("v ") == 1204  # roots and tips
+        with page.expect_download(timeout=20000) as dl:
+            page.locator("#save-session").click()
+        saved = tmp_path / "session.npz"
+        dl.value.save_as(saved)
+        assert saved.stat().st_size > 1000
+        page.locator(".v-select:has(#preset-select) .v-field").click()
+        page.get_by_text("Case study 2: car").click()
+        server.wait(lambda s: s["session"]["preset"] == "car", what="back to the car")
+        page.locator("#session-upload").set_input_files(str(saved))
+        server.wait(lambda s: s["session"]["preset"] == "lines" and s["session"]["n_dims"] == 8,
+                    what="the saved session")
+        server.idle()
+        # a good mesh file: an octahedron becomes the clay
+        octa = tmp_path / "octa.obj"
+        octa.write_text("v 1 0 0\nv -1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nv 0 0 -1\n"
+                        "f 1 3 5\nf 3 2 5\nf 2 4 5\nf 4 1 5\nf 3 1 6\nf 2 3 6\nf 4 2 6\nf 1 4 6\n")
+        page.locator("#mesh-upload").set_input_files(str(octa))
+        st = server.wait(lambda s: s["session"]["n_vertices"] == 6, what="the uploaded mesh")
+        assert st["session"]["preset"] == "mesh:octa" and st["panel"]["error_message"] == ""
+        st = server.idle()
+        assert len(st["view"]["widget_centres"]) == len(st["session"]["controls"]) == 4
+        time.sleep(1.0)
+        assert not_blank(view_image(page)) > 0.02
+    finally:
+        page.close()
+
+
+def test_server_prints_its_url(server):
+    text = server.log_path.read_text()
+    assert f"http://127.0.0.1:{server.port}/" in text, text[-2000:]

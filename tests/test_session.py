@@ -1,0 +1,370 @@
+"""The modelling session (somwidget.frontend.session): intents in, frames out, one training thread.
+
+These tests drive the Session through its Python API, as a view would (the protocol, not the interaction:
+tests/test_app_browser.py drags with a real mouse). They run the real Som on the CPU.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from somwidget.backend import presets
+from somwidget.frontend.session import Frame, Session, parse_hex_colour, rgb_to_colour_dims
+
+
+@pytest.fixture
+def session():
+    s = Session("car", device="cpu")
+    yield s
+    s.close()
+
+
+def _nearest(positions: np.ndarray, p) -> float:
+    return float(np.sqrt(((positions - np.asarray(p, np.float32)) ** 2).sum(axis=1)).min())
+
+
+def test_session_does_not_import_ui_packages():
+    code = ("import sys, somwidget.frontend.session as s; "
+            "bad = [m for m in ('trame', 'pyvista', 'vtk', 'vtkmodules', 'ipywidgets') if m in sys.modules]; "
+            "print(bad); raise SystemExit(1 if bad else 0)")
+    import subprocess
+
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_trains_to_S_in_frames_and_stops(session):
+    frames: list[Frame] = []
+    session.add_listener(frames.append)
+    assert session.wait_idle(30)
+    last = session.frame
+    assert last.iteration == last.iterations == 1000
+    assert not last.running
+    # several frames on the way, numbered in order, each a consistent picture
+    seqs = [f.seq for f in frames]
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+    assert len(frames) >= 3
+    f = frames[-1]
+    n = session.preset.n_vertices
+    assert f.weights.shape == (n, 5) and f.positions.shape == (n, 3) and f.colours.shape == (n, 3)
+    assert f.controls.shape == (9, 5) and f.effective_controls.shape == (18, 5)
+    assert f.control_colours.shape == (9, 3) and f.effective_colours.shape == (18, 3)
+    assert f.gaps.shape == (18,) and f.cycle_time > 0
+    assert not f.weights.flags.writeable  # shared by every listener: read-only
+    np.testing.assert_allclose(f.positions, f.weights[:, :3])
+    # mirrored copies: y negated
+    np.testing.assert_allclose(f.effective_controls[9:, 1], -f.effective_controls[:9, 1])
+    # gaps: distance to the nearest node, by brute force
+    for j in (0, 11):
+        assert f.gaps[j] == pytest.approx(_nearest(f.positions, f.effective_positions[j]), rel=1e-5, abs=1e-6)
+    # once converged, no more frames arrive
+    count = len(frames)
+    time.sleep(0.3)
+    assert len(frames) == count
+
+
+def test_step_size_targets_the_frame_rate():
+    s = Session("car", device="cpu", paused=True)
+    try:
+        frames: list[Frame] = []
+        s.set_iterations(200_000)
+        s.add_listener(frames.append, replay=False)
+        s.train()
+        time.sleep(2.0)
+        s.pause()
+        assert s.wait_idle(10)
+        steps = [f for f in frames if f.step_cycles > 0]
+        span = steps[-1].time - steps[len(steps) // 2].time
+        rate = (len(steps) - len(steps) // 2 - 1) / span
+        # k grows until a step fills most of a frame: many cycles per frame, about 30 frames a second
+        assert max(f.step_cycles for f in steps) > 10
+        assert rate > 10, f"{rate:.1f} frames/s"  # 30 on an idle machine; leave room for a loaded one
+        assert 0 < s.frame.iteration < 200_000
+    finally:
+        s.close()
+
+
+def test_move_control_restarts_schedule_and_mesh_follows(session):
+    assert session.wait_idle(30)
+    before = session.frame
+    target = np.array([3.2, 1.4, 0.9], np.float32)
+    d_before = _nearest(before.positions, target)
+    session.move_control(2, target)
+    # the session's own copy changes at once; the other features stay
+    np.testing.assert_allclose(session.controls[2, :3], target)
+    np.testing.assert_allclose(session.controls[2, 3:], before.controls[2, 3:])
+    assert session.wait_idle(30)
+    after = session.frame
+    assert after.iteration == after.iterations
+    np.testing.assert_allclose(after.controls[2, :3], target)
+    np.testing.assert_allclose(after.effective_controls[9 + 2, :3], target * [1, -1, 1])
+    d_after = _nearest(after.positions, target)
+    assert d_after < 0.5 * d_before
+    # the schedule restarts from the latest weights, not from the start mesh
+    session.pause()
+    session.move_control(2, [3.0, 1.0, 0.5])
+    assert session.wait_applied(10)
+    paused = session.frame
+    assert paused.iteration == 0
+    np.testing.assert_array_equal(paused.weights, after.weights)
+
+
+def test_moves_within_a_frame_collapse_and_all_land(session):
+    session.pause()
+    for x in np.linspace(1.0, 3.0, 50):
+        session.move_control(0, [x, 0.9, -0.7])
+    assert session.wait_applied(10)
+    np.testing.assert_allclose(session.frame.controls[0, :3], [3.0, 0.9, -0.7], rtol=1e-6)
+
+
+@pytest.mark.parametrize("bad", [
+    (99, [0, 0, 0]), (-1, [0, 0, 0]), (1.5, [0, 0, 0]), (True, [0, 0, 0]), (0, [np.nan, 0, 0]),
+    (0, [0, np.inf, 0]), (0, [0, 0]), (0, [0, 0, 0, 0]), (0, "abc"), (0, [[0, 0, 0]]), (0, [1e9, 0, 0]),
+])
+def test_bad_move_is_refused_and_changes_nothing(session, bad):
+    assert session.wait_idle(30)
+    seq, controls = session.frame.seq, session.controls
+    with pytest.raises(ValueError, match=r"control"):
+        session.move_control(*bad)
+    np.testing.assert_array_equal(session.controls, controls)
+    time.sleep(0.1)
+    assert session.frame.seq == seq  # nothing queued, no frame
+
+
+def test_parameters_are_validated_and_reach_the_som(session):
+    session.set_iterations(500)
+    session.set_learning_rates(0.4, 0.05)
+    session.set_smoothing(0.2)
+    session.set_parameter("S", "600")  # a text field's value
+    assert session.wait_idle(30)
+    p = session.parameters
+    assert (p["iterations"], p["l_start"], p["l_end"], p["smoothing"]) == (600, 0.4, 0.05, 0.2)
+    som = session._som
+    assert (som.iterations, som.l_start, som.l_end, som.smoothing) == (600, 0.4, 0.05, 0.2)
+    assert session.frame.iteration == 600
+    for name, value in [("iterations", 0), ("iterations", -3), ("iterations", 2.5), ("iterations", "ten"),
+                        ("iterations", float("nan")), ("iterations", True), ("iterations", 10**9),
+                        ("l_start", 0.0), ("l_start", 1.5), ("l_end", float("nan")), ("l_end", "inf"),
+                        ("smoothing", -0.1), ("smoothing", 2), ("metric_weights", [1, 1, 1]),
+                        ("metric_weights", [0, 0, 0, 0, 0]), ("metric_weights", [1, 1, -1, 1, 1]),
+                        ("metric_weights", [1, 1, np.nan, 1, 1]), ("symmetry", "maybe"), ("nonsense", 1)]:
+        with pytest.raises(ValueError):
+            session.set_parameter(name, value)
+    assert session.parameters == p
+    session.set_metric_weights([1, 1, 1, 0.5, 0])
+    assert session.wait_idle(30)
+    np.testing.assert_allclose(session._som.metric_weights, [1, 1, 1, 0.5, 0])
+
+
+def test_symmetry_off_and_on(session):
+    session.set_symmetry(False)
+    assert session.wait_idle(30)
+    assert session.frame.effective_controls.shape == (9, 5)
+    session.set_symmetry(True)
+    assert session.wait_idle(30)
+    assert session.frame.effective_controls.shape == (18, 5)
+
+
+def test_reset_restores_the_start_mesh(session):
+    assert session.wait_idle(30)
+    start = session.preset.weights
+    assert np.abs(session.frame.weights - start).max() > 0.1
+    session.pause()
+    session.reset()
+    assert session.wait_idle(30)
+    np.testing.assert_array_equal(session.frame.weights, start)
+    assert session.frame.iteration == 0 and not session.frame.running
+    session.train()
+    assert session.wait_idle(30)
+    assert session.frame.iteration == 1000
+
+
+def test_pause_and_train(session):
+    session.set_iterations(100_000)
+    time.sleep(0.3)
+    session.pause()
+    assert session.wait_idle(10)
+    s = session.frame.iteration
+    time.sleep(0.3)
+    assert session.frame.iteration == s and session.frame.paused and not session.frame.running
+    session.train()
+    time.sleep(0.3)
+    assert session.frame.iteration > s
+    session.pause()
+
+
+def test_add_remove_control_and_colour(session):
+    i = session.add_control()
+    assert i == 9 and session.n_controls == 10
+    session.set_control_colour(i, "#00ff00")
+    assert session.wait_idle(30)
+    f = session.frame
+    assert f.controls.shape == (10, 5) and f.effective_controls.shape == (20, 5)
+    np.testing.assert_allclose(f.control_colours[i], [0, 1, 0], atol=1e-6)
+    session.remove_control(0)
+    assert session.wait_idle(30)
+    assert session.frame.controls.shape == (9, 5)
+    for bad in ["#12345", "red", "#gg0000", None]:
+        with pytest.raises(ValueError):
+            session.set_control_colour(0, bad)
+    with pytest.raises(ValueError):
+        session.set_control_colour(0, [1.5, 0, 0])
+    with pytest.raises(ValueError):
+        session.remove_control(9)
+    for _ in range(8):
+        session.remove_control(0)
+    with pytest.raises(ValueError, match="last control"):
+        session.remove_control(0)
+    assert session.n_controls == 1
+
+
+def test_colour_conversion_inverts_colours_of():
+    layout = presets.car().layout
+    for rgb in ([1, 0, 0], [0.2, 0.4, 1.0], [1, 1, 1]):
+        dims = rgb_to_colour_dims(rgb, layout)
+        row = np.zeros(5, np.float32)
+        row[list(layout.colour)] = dims
+        np.testing.assert_allclose(presets.colours_of(row, layout)[0], rgb, atol=1e-5)
+    np.testing.assert_allclose(parse_hex_colour("#ff8000"), [1, 128 / 255, 0], atol=1e-6)
+    with pytest.raises(ValueError, match="no colour"):
+        rgb_to_colour_dims([1, 0, 0], presets.XYZ)
+
+
+def test_listeners(session):
+    got_a, got_b = [], []
+
+    def broken(frame):
+        raise RuntimeError("a broken view")
+
+    session.add_listener(broken)
+    session.add_listener(got_a.append)
+    session.add_listener(got_b.append)
+    session.move_control(0, [1.0, 1.0, -1.0])
+    assert session.wait_idle(30)
+    assert got_a and [f.seq for f in got_a] == [f.seq for f in got_b]
+    session.remove_listener(got_a.append)
+    n = len(got_a)
+    session.move_control(0, [1.2, 1.0, -1.0])
+    assert session.wait_idle(30)
+    assert len(got_a) == n and len(got_b) > n
+    with pytest.raises(ValueError):
+        session.add_listener("not callable")
+
+
+def test_intents_from_many_threads_leave_a_consistent_session(session):
+    errors = []
+
+    def tab(seed):
+        rng = np.random.default_rng(seed)
+        try:
+            for _ in range(60):
+                r = rng.random()
+                if r < 0.6:
+                    session.move_control(int(rng.integers(0, 9)), rng.normal(size=3))
+                elif r < 0.7:
+                    session.set_iterations(int(rng.integers(50, 400)))
+                elif r < 0.8:
+                    session.set_l_start(float(rng.uniform(0.1, 0.9)))
+                elif r < 0.85:
+                    session.reset()
+                else:
+                    try:
+                        session.move_control(0, [np.nan, 0, 0])
+                    except ValueError:
+                        pass
+                time.sleep(0.002)
+        except Exception as exc:  # pragma: no cover - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=tab, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    assert session.wait_idle(60)
+    f = session.frame
+    np.testing.assert_array_equal(f.controls, session.controls)  # the Som got the last word of every tab
+    assert np.isfinite(f.weights).all() and f.iteration == f.iterations == session.parameters["iterations"]
+    assert session.error is None
+
+
+def test_load_preset_and_bad_inputs(session, tmp_path):
+    gen = session.generation
+    with pytest.raises(ValueError, match="unknown preset"):
+        session.load_preset("nope")
+    assert session.preset.name == "car" and session.generation == gen
+    session.load_preset("lines")
+    assert session.wait_idle(30)
+    f = session.frame
+    assert f.generation == gen + 1 and f.weights.shape == (602, 8) and f.effective_controls.shape == (16, 8)
+    assert session.display == "lines"
+    bad = tmp_path / "bad.obj"
+    bad.write_text("this is not a mesh\n")
+    with pytest.raises(ValueError):
+        session.load_mesh(bad)
+    flat = tmp_path / "flat.obj"
+    flat.write_text("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n")
+    with pytest.raises(ValueError, match="degenerate"):
+        session.load_mesh(flat)
+    assert session.preset.name == "lines" and session.generation == gen + 1
+    small = Session("sphere", device="cpu", max_vertices=500, start=False)
+    try:
+        with pytest.raises(ValueError, match="at most 500"):
+            small.load_preset("torus")
+    finally:
+        small.close()
+    good = tmp_path / "tetra.obj"
+    good.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n")
+    session.load_mesh(good)
+    assert session.wait_idle(30)
+    assert session.frame.positions.shape == (4, 3) and session.preset.n_vertices == 4
+
+
+def test_save_load_and_export(session, tmp_path):
+    session.set_iterations(300)
+    session.move_control(1, [-1.8, 1.2, -0.4])
+    assert session.wait_idle(30)
+    weights = session.frame.weights.copy()
+    path = tmp_path / "s.npz"
+    session.save(path)
+    for fmt in ("obj", "ply", "glb"):
+        out = tmp_path / f"m.{fmt}"
+        session.export_mesh(out)
+        assert out.stat().st_size > 1000
+    session.load_preset("sphere")
+    assert session.wait_idle(30)
+    session.pause()
+    session.load(path)
+    assert session.wait_idle(30)
+    f = session.frame
+    np.testing.assert_allclose(f.weights, weights, atol=1e-6)  # paused: the saved weights, untouched
+    np.testing.assert_allclose(f.controls[1, :3], [-1.8, 1.2, -0.4])
+    assert session.parameters["iterations"] == 300 and session.display == "surface"
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"PK\x03\x04 not really a zip")
+    with pytest.raises(ValueError):
+        session.load(junk)
+    np.testing.assert_allclose(session.frame.weights, weights, atol=1e-6)
+
+
+def test_state_is_json_friendly(session):
+    import json
+
+    assert session.wait_idle(30)
+    st = session.state(positions=True)
+    text = json.dumps(st)
+    assert '"preset": "car"' in text
+    assert len(st["frame"]["positions"]) == 602 and len(st["frame"]["gaps"]) == 18
+
+
+def test_closed_session_refuses_intents():
+    s = Session("sphere", device="cpu")
+    s.close()
+    with pytest.raises(RuntimeError):
+        s.move_control(0, [0, 0, 0])
