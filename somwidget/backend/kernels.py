@@ -10,6 +10,9 @@ Winner keys pack (distance bits << 32 | neuron index) into one uint64: distances
 bit patterns order like the values, so the smallest key is the nearest neuron with the lowest index on a tie.
 Keys live in three rotating buffers indexed by s % 3: cycle s reads buffer s, fills buffer s + 1 with the winners
 of the next cycle and clears buffer s + 2, so a whole run replays from a captured graph with no host work.
+
+Past the dense table (distance rows mode) the same cycle reads int32 distance rows that the host keeps for recent
+winners; a cycle whose winner has no row stalls (see the `*_rows` kernels), and BFS kernels compute rows on demand.
 """
 
 
@@ -120,6 +123,164 @@ def bfs_rows(
                         queue[b, tail] = w
                         tail += 1
     eccentricity[b] = far
+
+
+# -- distance rows past the dense table: int32 hop counts, -1 = unreachable ------------------------------------
+@wp.kernel(enable_backward=False)
+def bfs_wide(
+    offsets: wp.array(dtype=wp.int32),
+    neighbors: wp.array(dtype=wp.int32),
+    sources: wp.array(dtype=wp.int32),
+    first: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.int32),
+    rows: wp.array2d(dtype=wp.int32),
+    queue: wp.array2d(dtype=wp.int32),
+    far: wp.array(dtype=wp.int32),
+):
+    """A breadth-first search per thread b into rows[slots[b]] from the sources first[b] .. first[b + 1] - 1 (the
+    hops to the nearest of them; -1 where none is reachable). far[b]: the largest distance found."""
+    b = wp.tid()
+    slot = slots[b]
+    for v in range(rows.shape[1]):
+        rows[slot, v] = -1
+    tail = int(0)
+    for j in range(first[b], first[b + 1]):
+        src = sources[j]
+        if rows[slot, src] < 0:
+            rows[slot, src] = 0
+            queue[b, tail] = src
+            tail += 1
+    head = int(0)
+    deepest = int(0)
+    while head < tail:
+        u = queue[b, head]
+        head += 1
+        du = rows[slot, u]
+        deepest = du
+        for e in range(offsets[u], offsets[u + 1]):
+            w = neighbors[e]
+            if rows[slot, w] < 0:
+                rows[slot, w] = du + 1
+                queue[b, tail] = w
+                tail += 1
+    far[b] = deepest
+
+
+@wp.kernel(enable_backward=False)
+def bfs_clear(rows: wp.array2d(dtype=wp.int32), slots: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32)):
+    """Level-synchronous search, step 0: rows[slots[b]] = -1 for the count[0] rows of the batch."""
+    v = wp.tid()
+    for b in range(count[0]):
+        rows[slots[b], v] = -1
+
+
+@wp.kernel(enable_backward=False)
+def bfs_seed(
+    sources: wp.array(dtype=wp.int32),
+    first: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.int32),
+    count: wp.array(dtype=wp.int32),
+    rows: wp.array2d(dtype=wp.int32),
+    queue: wp.array2d(dtype=wp.int32),
+    base: wp.array2d(dtype=wp.int32),
+    size: wp.array2d(dtype=wp.int32),
+    far: wp.array(dtype=wp.int32),
+):
+    """Step 1: row b's sources at distance 0 form level 0 of its queue."""
+    b = wp.tid()
+    if b < count[0]:
+        slot = slots[b]
+        tail = int(0)
+        for j in range(first[b], first[b + 1]):
+            src = sources[j]
+            if rows[slot, src] < 0:
+                rows[slot, src] = 0
+                queue[b, tail] = src
+                tail += 1
+        base[0, b] = 0
+        size[0, b] = tail
+        size[1, b] = 0
+        size[2, b] = 0
+        far[b] = 0
+
+
+@wp.kernel(enable_backward=False)
+def bfs_level(
+    offsets: wp.array(dtype=wp.int32),
+    neighbors: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.int32),
+    count: wp.array(dtype=wp.int32),
+    rows: wp.array2d(dtype=wp.int32),
+    queue: wp.array2d(dtype=wp.int32),
+    base: wp.array2d(dtype=wp.int32),
+    size: wp.array2d(dtype=wp.int32),
+    far: wp.array(dtype=wp.int32),
+    level: int,
+    threads: int,
+):
+    """Step 2 + level: row b's `threads` threads share out its vertices at distance `level` (a segment of its
+    queue) and append their unvisited neighbours at level + 1. Segment starts and sizes rotate through three slots."""
+    b, t = wp.tid()
+    if b < count[0]:
+        now = level % 3
+        nxt = (level + 1) % 3
+        slot = slots[b]
+        start = base[now, b]
+        end = start + size[now, b]
+        for i in range(start + t, end, threads):
+            u = queue[b, i]
+            for e in range(offsets[u], offsets[u + 1]):
+                w = neighbors[e]
+                if rows[slot, w] < 0:
+                    if wp.atomic_cas(rows, slot, w, -1, level + 1) == -1:
+                        queue[b, end + wp.atomic_add(size, nxt, b, 1)] = w
+                        far[b] = level + 1
+        if t == 0:
+            base[nxt, b] = end
+            size[(level + 2) % 3, b] = 0
+
+
+@wp.kernel(enable_backward=False)
+def label_components(
+    offsets: wp.array(dtype=wp.int32),
+    neighbors: wp.array(dtype=wp.int32),
+    labels: wp.array(dtype=wp.int32),
+    hops: wp.array(dtype=wp.int32),
+    order: wp.array(dtype=wp.int32),
+):
+    """One thread: connected components numbered by their lowest vertex, hops from that vertex, and `order` = the
+    vertices grouped by component (a breadth-first order within each)."""
+    n = labels.shape[0]
+    for v in range(n):
+        labels[v] = -1
+    count = int(0)
+    head = int(0)
+    tail = int(0)
+    for r in range(n):
+        if labels[r] < 0:
+            labels[r] = count
+            hops[r] = 0
+            order[tail] = r
+            tail += 1
+            while head < tail:
+                u = order[head]
+                head += 1
+                for e in range(offsets[u], offsets[u + 1]):
+                    w = neighbors[e]
+                    if labels[w] < 0:
+                        labels[w] = count
+                        hops[w] = hops[u] + 1
+                        order[tail] = w
+                        tail += 1
+            count += 1
+
+
+@wp.kernel(enable_backward=False)
+def assign_slots(slot_of: wp.array(dtype=wp.int32), neurons: wp.array(dtype=wp.int32),
+                 slots: wp.array(dtype=wp.int32)):
+    """slot_of[neurons[i]] = slots[i]: the cache row of each neuron (-1 = not cached)."""
+    i = wp.tid()
+    slot_of[neurons[i]] = slots[i]
 
 
 @functools.cache
@@ -338,5 +499,190 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
             keys[buf, c] = winner_key(best, best_v)
         cycle[0] = s + ahead
 
+    # -- distance rows (past the dense table) ----------------------------------------------------------------
+    # The same cycle with D[u_c, v] read from rows[slot_of[u_c], v] (int32, -1 = unreachable), the rows a host-side
+    # cache keeps for recent winners. A cycle whose winners lack a row stalls: the move sets stalled[0] and leaves
+    # everything as it was, the later kernels of the graph see the flag (or the same miss) and do nothing, and the
+    # host computes the missing rows and replays from that cycle. A cycle moves by controls c_lo .. c_hi - 1, so a
+    # cache smaller than the winner count can still run it in parts (each neuron applies the controls in order).
+    @wp.func
+    def wide_rate(table: wp.array2d(dtype=wp.float32), s: int, d: wp.int32) -> wp.float32:
+        """L[s, d], and 0 for unreachable neurons (d = -1)."""
+        return wp.where(d >= 0, table[s, wp.clamp(d, 0, table.shape[1] - 1)], wp.float32(0.0))
+
+    @wp.func
+    def row_of(keys: wp.array2d(dtype=wp.uint64), buf: int, c: int, slot_of: wp.array(dtype=wp.int32)) -> int:
+        """The cache row holding the distances from control c's winner, -1 when it has none."""
+        return slot_of[wp.int32(keys[buf, c] & INDEX_MASK)]
+
+    @wp.func
+    def rows_missing(keys: wp.array2d(dtype=wp.uint64), buf: int, c_lo: int, c_hi: int,
+                     slot_of: wp.array(dtype=wp.int32)) -> int:
+        missing = int(0)
+        for c in range(c_lo, c_hi):
+            missing = wp.where(row_of(keys, buf, c, slot_of) < 0, 1, missing)
+        return missing
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def move_rows(
+        weights_in: wp.array(dtype=vec),
+        weights_out: wp.array(dtype=vec),
+        controls: wp.array(dtype=vec),
+        c_lo: int,
+        c_hi: int,
+        n_controls: int,
+        metric: wp.array(dtype=vec),
+        table: wp.array2d(dtype=wp.float32),
+        rows: wp.array2d(dtype=wp.int32),
+        slot_of: wp.array(dtype=wp.int32),
+        keys: wp.array2d(dtype=wp.uint64),
+        cycle_in: wp.array(dtype=wp.int32),
+        cycle_out: wp.array(dtype=wp.int32),
+        find_next: int,
+        stalled: wp.array(dtype=wp.int32),
+    ):
+        """`move` (CUDA) reading distance rows, for controls c_lo .. c_hi - 1; stalls on a missing row."""
+        block, lane = wp.tid()
+        s = cycle_in[0]
+        buf = s % 3
+        v = block * CUDA_BLOCK + lane
+        u = wp.min(v, weights_in.shape[0] - 1)  # every thread looks up every row: all find the same miss
+        w = weights_in[u]
+        missing = int(0)
+        for c0 in range(c_lo, c_hi, 8):
+            rates = rate8()
+            for g in range(8):  # unrolled: eight independent key -> row -> distance -> rate chains
+                c = wp.min(c0 + g, c_hi - 1)
+                slot = row_of(keys, buf, c, slot_of)
+                missing = wp.where(slot < 0, 1, missing)
+                r = wide_rate(table, s, rows[wp.max(slot, 0), u])
+                rates[g] = wp.where(c0 + g < c_hi, r, wp.float32(0.0))
+            for g in range(8):
+                w = w + rates[g] * (controls[wp.min(c0 + g, c_hi - 1)] - w)
+        if missing == 0:
+            if v < weights_in.shape[0]:
+                weights_out[v] = w
+            if find_next != 0:
+                find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
+            if block == 0 and lane == 0:
+                if find_next != 0:
+                    clear_keys(keys, (s + 2) % 3, n_controls)
+                    cycle_out[0] = s + 1
+                else:
+                    cycle_out[0] = s
+        elif block == 0 and lane == 0:
+            stalled[0] = 1
+            cycle_out[0] = s
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def smooth_rows(
+        weights_in: wp.array(dtype=vec),
+        weights_out: wp.array(dtype=vec),
+        offsets: wp.array(dtype=wp.int32),
+        neighbors: wp.array(dtype=wp.int32),
+        mask: wp.array(dtype=vec),
+        strength: wp.float32,
+        controls: wp.array(dtype=vec),
+        n_controls: int,
+        metric: wp.array(dtype=vec),
+        keys: wp.array2d(dtype=wp.uint64),
+        cycle_in: wp.array(dtype=wp.int32),
+        cycle_out: wp.array(dtype=wp.int32),
+        stalled: wp.array(dtype=wp.int32),
+    ):
+        """`smooth` (CUDA), skipped when the cycle stalled."""
+        block, lane = wp.tid()
+        s = cycle_in[0]
+        if stalled[0] == 0:
+            v = block * CUDA_BLOCK + lane
+            if v < weights_in.shape[0]:
+                weights_out[v] = smoothed(weights_in, v, offsets, neighbors, strength * mask[0])
+            find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
+            if block == 0 and lane == 0:
+                clear_keys(keys, (s + 2) % 3, n_controls)
+                cycle_out[0] = s + 1
+        elif block == 0 and lane == 0:
+            cycle_out[0] = s
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def move_part_rows(
+        weights_in: wp.array(dtype=vec),
+        weights_out: wp.array(dtype=vec),
+        controls: wp.array(dtype=vec),
+        c_lo: int,
+        c_hi: int,
+        table: wp.array2d(dtype=wp.float32),
+        rows: wp.array2d(dtype=wp.int32),
+        slot_of: wp.array(dtype=wp.int32),
+        keys: wp.array2d(dtype=wp.uint64),
+        cycle: wp.array(dtype=wp.int32),
+        lo: int,
+        hi: int,
+        stalled: wp.array(dtype=wp.int32),
+    ):
+        """`move_part` (CPU) reading distance rows, for controls c_lo .. c_hi - 1; stalls on a missing row."""
+        s = cycle[0]
+        buf = s % 3
+        if rows_missing(keys, buf, c_lo, c_hi, slot_of) != 0:  # every core finds the same
+            stalled[0] = 1
+        else:
+            for v in range(lo, hi):
+                weights_out[v] = weights_in[v]
+            for c in range(c_lo, c_hi):
+                target = controls[c]
+                slot = row_of(keys, buf, c, slot_of)
+                for v in range(lo, hi):
+                    w = weights_out[v]
+                    weights_out[v] = w + wide_rate(table, s, rows[slot, v]) * (target - w)
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def smooth_part_rows(
+        weights_in: wp.array(dtype=vec),
+        weights_out: wp.array(dtype=vec),
+        offsets: wp.array(dtype=wp.int32),
+        neighbors: wp.array(dtype=wp.int32),
+        mask: wp.array(dtype=vec),
+        strength: wp.float32,
+        lo: int,
+        hi: int,
+        stalled: wp.array(dtype=wp.int32),
+    ):
+        """`smooth_part`, skipped when the cycle stalled."""
+        if stalled[0] == 0:
+            pull = strength * mask[0]
+            for v in range(lo, hi):
+                weights_out[v] = smoothed(weights_in, v, offsets, neighbors, pull)
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def find_part_rows(
+        weights: wp.array(dtype=vec),
+        controls: wp.array(dtype=vec),
+        n_controls: int,
+        metric: wp.array(dtype=vec),
+        keys: wp.array2d(dtype=wp.uint64),
+        cycle: wp.array(dtype=wp.int32),
+        first: int,
+        step: int,
+        stalled: wp.array(dtype=wp.int32),
+    ):
+        """`find_part` of the next cycle, skipped (the counter stays) when the cycle stalled."""
+        if stalled[0] == 0:
+            s = cycle[0]
+            buf = (s + 1) % 3
+            m = metric[0]
+            for c in range(first, n_controls, step):
+                target = controls[c]
+                best = FLOAT_MAX
+                best_v = int(0)
+                for v in range(weights.shape[0]):
+                    dist = distance(target, weights[v], m)
+                    nearer = dist < best  # strict: the lowest index wins a tie
+                    best = wp.where(nearer, dist, best)
+                    best_v = wp.where(nearer, v, best_v)
+                keys[buf, c] = winner_key(best, best_v)
+            cycle[0] = s + 1
+
     return SimpleNamespace(vec=vec, find_winners=find_winners, move=move, smooth=smooth, move_part=move_part,
-                           smooth_part=smooth_part, find_part=find_part)
+                           smooth_part=smooth_part, find_part=find_part, move_rows=move_rows, smooth_rows=smooth_rows,
+                           move_part_rows=move_part_rows, smooth_part_rows=smooth_part_rows,
+                           find_part_rows=find_part_rows)

@@ -22,7 +22,7 @@ def learning_table(iterations: int, d_max: int, l_start: float = 0.25, l_end: fl
     theta(0, s) = 1 always (also for d_max = 0, where c is 0).
     """
     S = checks.integer("iterations", iterations, 1)
-    d_max = checks.integer("d_max", d_max, 0, 65534)
+    d_max = checks.integer("d_max", d_max, 0, 2**31 - 2)
     l_start = checks.real("l_start", l_start, 0.0, 1.0, low_open=True)
     l_end = checks.real("l_end", l_end, 0.0, 1.0, low_open=True)
     s = np.arange(S, dtype=np.float64)[:, None]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -10,9 +11,9 @@ import warp as wp
 
 from . import checks
 from .device import resolve
-from .kernels import CUDA_BLOCK, barrier, cycle_kernels, sched_yield_address
+from .kernels import CUDA_BLOCK, assign_slots, barrier, cycle_kernels, sched_yield_address
 from .schedule import learning_table
-from .topology import Topology
+from .topology import MAX_DENSE_NEURONS, RowSearch, Topology
 
 MAX_DIMS = 32
 MAX_CONTROLS = 256  # counts the effective list: originals plus mirrored copies
@@ -21,6 +22,11 @@ _LONGEST_GRAPH = 512
 _YIELD = sched_yield_address()
 #: neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each)
 _PAIRS_PER_EXTRA_CORE = 1 << 18  # cycles in the longest captured graph; runs are split into powers of two
+#: Distance rows mode: the cache's default size in bytes (int32 rows of N), at least 2 x MAX_CONTROLS rows.
+_CACHE_BYTES = 1 << 30
+_CACHE_MOST_ROWS = 4096
+#: Learning table entries (S x (d_max + 1) float32) a Som may hold: 2 GiB.
+_MAX_TABLE_ENTRIES = 1 << 29
 
 
 class Som:
@@ -29,6 +35,11 @@ class Som:
     weights (N, n) and controls (k, n) share the n feature dimensions (1..32). State stays on `device`
     ("cpu", "cuda:N", None = best available); `weights` returns a host copy. On the CPU the cycle is split over
     `cpu_cores` cores (None: one for small meshes, else the cores this process may use, at most 8).
+
+    distances: "dense" reads D[u, v] from the topology's dense N x N table (N <= 65,536); "rows" computes the
+    distance rows of the current winners on demand and keeps the `cache_rows` most recently used on the device
+    (None: as many as fit in 1 GiB, at least 512 and at most 4096); None picks dense up to 65,536 neurons, else rows.
+    Both give the same weights.
     """
 
     def __init__(
@@ -46,6 +57,8 @@ class Som:
         device: str | None = None,
         *,
         cpu_cores: int | None = None,
+        distances: str | None = None,
+        cache_rows: int | None = None,
     ):
         if not isinstance(topology, Topology):
             raise ValueError(f"topology: expected a Topology, got {type(topology).__name__}")
@@ -72,7 +85,14 @@ class Som:
         self._cpu_cores = None if cpu_cores is None else checks.integer("cpu_cores", cpu_cores, 1, 64)
         self._cores = 1
         self._pool: ThreadPoolExecutor | None = None
-        self._distances = topology.distance_table(dev)
+        self._rows_mode = self._check_distances(distances)
+        size = None if cache_rows is None else checks.integer("cache_rows", cache_rows, 1)
+        self._cache: _RowCache | None = None
+        if self._rows_mode:
+            self._cache = _RowCache(topology, dev, size)
+            self._stalled = wp.zeros(1, dtype=wp.int32, device=dev)
+        else:
+            self._distances = topology.distance_table(dev)
         self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=dev)
         neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
         self._neighbors = wp.array(neighbors, dtype=wp.int32, device=dev)
@@ -96,6 +116,17 @@ class Som:
         self._parity = 0
 
     # -- validation ---------------------------------------------------------------------------------------
+    def _check_distances(self, distances) -> bool:
+        """True for distance rows on demand, False for the dense table."""
+        if distances is None:
+            return self.n_neurons > MAX_DENSE_NEURONS
+        if distances not in ("dense", "rows"):
+            raise ValueError(f"distances: expected 'dense', 'rows' or None, got {distances!r}")
+        if distances == "dense" and self.n_neurons > MAX_DENSE_NEURONS:
+            raise ValueError(f"distances: the dense table holds at most {MAX_DENSE_NEURONS:,} neurons, this mesh has "
+                             f"{self.n_neurons:,}; use distances='rows' (distance rows computed on demand)")
+        return distances == "rows"
+
     def _check_controls(self, controls, mirror) -> np.ndarray:
         c = np.asarray(controls) if not isinstance(controls, np.ndarray) else controls
         if c.ndim == 1:
@@ -144,8 +175,12 @@ class Som:
 
     @iterations.setter
     def iterations(self, value: int) -> None:
-        self._iterations = checks.integer("iterations", value, 1)
-        self._build_table()
+        old, self._iterations = self._iterations, checks.integer("iterations", value, 1)
+        try:
+            self._build_table()
+        except ValueError:
+            self._iterations = old
+            raise
         self._restart()
 
     @property
@@ -230,6 +265,11 @@ class Som:
         return self._w.numpy().reshape(self.n_neurons, self.n_dims).copy()
 
     @property
+    def distances(self) -> str:
+        """"dense" (the N x N table) or "rows" (distance rows of the winners, computed on demand and cached)."""
+        return "rows" if self._rows_mode else "dense"
+
+    @property
     def start_weights(self) -> np.ndarray:
         return self._start.copy()
 
@@ -260,8 +300,7 @@ class Som:
     def winners(self) -> np.ndarray:
         """(k_eff,) the nearest neuron (metric-weighted) of each effective control for the current weights."""
         self._find_winners_now()
-        keys = self._keys.numpy()[self._s % 3, : self._k_eff]
-        return (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
+        return self._current_winners()
 
     # -- training -----------------------------------------------------------------------------------------
     def step(self, n: int = 1) -> int:
@@ -284,7 +323,12 @@ class Som:
 
     # -- internals ----------------------------------------------------------------------------------------
     def _build_table(self) -> None:
-        self._table_host = learning_table(self._iterations, self.topology.d_max, self._l_start, self._l_end)
+        d_max = self.topology.diameter(self.device) if self._rows_mode else self.topology.d_max
+        if self._iterations * (d_max + 1) > _MAX_TABLE_ENTRIES:
+            raise ValueError(f"iterations: the learning table S x (d_max + 1) = {self._iterations:,} x {d_max + 1:,} "
+                             f"exceeds {_MAX_TABLE_ENTRIES:,} entries (2 GiB); use fewer iterations")
+        self._table_host = learning_table(self._iterations, d_max, self._l_start, self._l_end)
+        self._d_max = d_max
         self._table = wp.array(self._table_host, dtype=wp.float32, device=self.device)
         self._graphs.clear()
 
@@ -325,6 +369,10 @@ class Som:
         self._launch_find()
         self._winners_valid = True
 
+    def _current_winners(self) -> np.ndarray:
+        keys = self._keys.numpy()[self._s % 3, : self._k_eff]
+        return (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
+
     def _launch_find(self) -> None:
         if self.device == "cpu":
             wp.launch(self._k.find_part, dim=1, device="cpu", inputs=[self._w, self._c, self._k_eff, self._m,
@@ -336,6 +384,9 @@ class Som:
 
     def _run(self, cycles: int) -> None:
         """`cycles` cycles from s, replayed from captured graphs (one per CPU core)."""
+        if self._rows_mode:
+            self._run_rows(cycles)
+            return
         fresh = not self._winners_valid
         if fresh:
             self._set_cycle()
@@ -363,6 +414,10 @@ class Som:
         graphs = [self._graph((cycles, fresh, smoothing, core), lambda core=core: self._record_cpu(core, cycles, fresh,
                                                                                                 smoothing))
                   for core in range(self._cores)]
+        self._replay_cpu(graphs)
+
+    def _replay_cpu(self, graphs: list) -> None:
+        """Each core's graph on its own thread (the first on this one)."""
         others = [self._pool.submit(wp.capture_launch, g) for g in graphs[1:]] if self._pool else []
         wp.capture_launch(graphs[0])
         for job in others:
@@ -416,6 +471,175 @@ class Som:
                                 inputs=[self._w, self._w, self._c, self._k_eff, self._m, self._table,
                                         self._distances, self._keys, c_in, c_out, 1])
                 p = 1 - p
+
+    # -- distance rows mode -------------------------------------------------------------------------------
+    def _run_rows(self, cycles: int) -> None:
+        """`cycles` cycles reading distance rows: the winners' rows are fetched, then a graph runs until done or a
+        cycle stalls on a winner without a row (it then leaves everything as it was); the host fetches that cycle's
+        rows and goes on from it. A cycle whose distinct winners outnumber the cache rows runs in parts."""
+        target = self._s + cycles
+        smoothing = self._smoothing > 0.0
+        while self._s < target:
+            self._find_winners_now()
+            winners = self._current_winners()
+            distinct = list(dict.fromkeys(winners.tolist()))
+            if len(distinct) > self._cache.size:
+                self._cycle_in_parts(winners, smoothing)
+                continue
+            self._cache.fetch(distinct, self._d_max)
+            left = target - self._s
+            chunk = min(self._cache.span, 1 << (left.bit_length() - 1))
+            if self.device == "cpu":
+                self._replay_cpu([self._graph(("rows", chunk, smoothing, core),
+                                              lambda core=core: self._record_cpu_rows(core, chunk, smoothing))
+                                  for core in range(self._cores)])
+                reached = int(self._cycle[0].numpy()[0])
+            else:  # every graph starts from counter 0 (one graph per length), which then gets the last one's count
+                wp.capture_launch(self._graph(("rows", chunk, smoothing),
+                                              lambda: self._record_cuda_rows(chunk, 0, smoothing)))
+                last = 0 if smoothing else chunk % 2
+                reached = int(self._cycle[last].numpy()[0])
+                if last:
+                    self._cycle[0].fill_(reached)
+            if reached < self._s + chunk:  # stalled: the graph's later cycles did nothing, try shorter ones
+                self._stalled.zero_()
+                self._cache.stalls += 1
+                self._cache.span = max(1, self._cache.span // 4)
+            else:
+                self._cache.span = min(_LONGEST_GRAPH, self._cache.span * 2)
+            self._s = reached
+            self._winners_valid = True
+
+    def _cycle_in_parts(self, winners: np.ndarray, smoothing: bool) -> None:
+        """One cycle in consecutive runs of controls whose winners fit in the cache (each neuron still applies the
+        controls in list order)."""
+        parts, lo, seen = [], 0, set()
+        for c, u in enumerate(winners.tolist()):
+            if u not in seen and len(seen) == self._cache.size:
+                parts.append((lo, c))
+                lo, seen = c, set()
+            seen.add(u)
+        parts.append((lo, len(winners)))
+        k, dev, cache = self._k, self.device, self._cache
+        moved = self._w_moved if smoothing else self._w
+        source = self._w
+        c_in, c_out = self._cycle[0], self._cycle[1]
+        for i, (lo, hi) in enumerate(parts):
+            cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), self._d_max)
+            if dev == "cpu":
+                wp.launch(k.move_part_rows, dim=1, device=dev,
+                          inputs=[source, moved, self._c, lo, hi, self._table, cache.rows, cache.slot_of, self._keys,
+                                  c_in, 0, self.n_neurons, self._stalled])
+            else:
+                find_next = int(not smoothing and i == len(parts) - 1)
+                wp.launch_tiled(k.move_rows, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
+                                inputs=[source, moved, self._c, lo, hi, self._k_eff, self._m, self._table, cache.rows,
+                                        cache.slot_of, self._keys, c_in, c_out, find_next, self._stalled])
+            source = moved
+        if dev == "cpu":
+            if smoothing:
+                wp.launch(k.smooth_part_rows, dim=1, device=dev,
+                          inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing, 0,
+                                  self.n_neurons, self._stalled])
+            wp.launch(k.find_part_rows, dim=1, device=dev,
+                      inputs=[self._w, self._c, self._k_eff, self._m, self._keys, c_in, 0, 1, self._stalled])
+        elif smoothing:
+            wp.launch_tiled(k.smooth_rows, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
+                            inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing,
+                                    self._c, self._k_eff, self._m, self._keys, c_out, c_in, self._stalled])
+        self._s += 1
+        self._set_cycle()
+        self._winners_valid = True
+
+    def _record_cpu_rows(self, core: int, cycles: int, smoothing: bool) -> None:
+        """`_record_cpu` reading distance rows (the winners of the first cycle are known)."""
+        k, cores, (lo, hi), counter = self._k, self._cores, self._ranges[core], self._cycle[core]
+        rows, slot_of, stalled = self._cache.rows, self._cache.slot_of, self._stalled
+
+        def meet():
+            if cores > 1:
+                wp.launch(barrier, dim=1, device="cpu", inputs=[self._meet, cores, _YIELD, self._meet_failed])
+
+        moved = self._w_moved if smoothing else self._w
+        for _ in range(cycles):
+            wp.launch(k.move_part_rows, dim=1, device="cpu",
+                      inputs=[self._w, moved, self._c, 0, self._k_eff, self._table, rows, slot_of, self._keys, counter,
+                              lo, hi, stalled])
+            meet()
+            if smoothing:
+                wp.launch(k.smooth_part_rows, dim=1, device="cpu",
+                          inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing, lo, hi,
+                                  stalled])
+                meet()
+            wp.launch(k.find_part_rows, dim=1, device="cpu",
+                      inputs=[self._w, self._c, self._k_eff, self._m, self._keys, counter, core, cores, stalled])
+            meet()
+
+    def _record_cuda_rows(self, cycles: int, parity: int, smoothing: bool) -> None:
+        """`_record_cuda` reading distance rows (the winners of the first cycle are known)."""
+        dev, blocks, threads, k = self.device, [self._blocks], int(CUDA_BLOCK), self._k_eff
+        rows, slot_of, stalled = self._cache.rows, self._cache.slot_of, self._stalled
+        p = parity
+        for _ in range(cycles):
+            c_in, c_out = self._cycle[p], self._cycle[1 - p]
+            if smoothing:
+                wp.launch_tiled(self._k.move_rows, dim=blocks, block_dim=threads, device=dev,
+                                inputs=[self._w, self._w_moved, self._c, 0, k, k, self._m, self._table, rows, slot_of,
+                                        self._keys, c_in, c_out, 0, stalled])
+                wp.launch_tiled(self._k.smooth_rows, dim=blocks, block_dim=threads, device=dev,
+                                inputs=[self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
+                                        self._smoothing, self._c, k, self._m, self._keys, c_out, c_in, stalled])
+            else:
+                wp.launch_tiled(self._k.move_rows, dim=blocks, block_dim=threads, device=dev,
+                                inputs=[self._w, self._w, self._c, 0, k, k, self._m, self._table, rows, slot_of,
+                                        self._keys, c_in, c_out, 1, stalled])
+                p = 1 - p
+
+
+class _RowCache:
+    """Distance rows (int32 hops, -1 = unreachable) from recent winners, kept on the Som's device; the least
+    recently used row makes way for a new one. slot_of[v] is the row of neuron v, -1 when it has none."""
+
+    def __init__(self, topology: Topology, device: str, size: int | None):
+        n = topology.n_vertices
+        if size is None:
+            size = max(2 * MAX_CONTROLS, min(_CACHE_MOST_ROWS, _CACHE_BYTES // (4 * n)))
+        self.size = min(size, n)
+        self.device = device
+        self.rows = wp.empty((self.size, n), dtype=wp.int32, device=device)
+        self.slot_of = wp.full(n, -1, dtype=wp.int32, device=device)
+        self._search = RowSearch(topology, device)
+        self._lru: OrderedDict[int, int] = OrderedDict()  # neuron -> row, least recently used first
+        self._free = list(range(self.size - 1, -1, -1))
+        self.computed = 0  # rows searched so far
+        self.stalls = 0  # graphs that stopped on a missing row
+        self.span = _LONGEST_GRAPH  # cycles in the next graph: fewer while winners keep lacking rows
+
+    def fetch(self, neurons: list[int], levels: int) -> None:
+        """Rows for `neurons` (distinct, at most `size`), searching those not kept; levels: the deepest search."""
+        missing = []
+        for u in neurons:
+            if u in self._lru:
+                self._lru.move_to_end(u)
+            else:
+                missing.append(u)
+        if not missing:
+            return
+        slots, evicted = [], []
+        for u in missing:  # the neurons asked for are the most recent: the oldest row is never one of them
+            if self._free:
+                slot = self._free.pop()
+            else:
+                old, slot = self._lru.popitem(last=False)
+                evicted.append(old)
+            self._lru[u] = slot
+            slots.append(slot)
+        self._search.run([[u] for u in missing], slots, self.rows, levels)
+        neurons_changed = wp.array(np.array(evicted + missing, dtype=np.int32), device=self.device)
+        values = wp.array(np.array([-1] * len(evicted) + slots, dtype=np.int32), device=self.device)
+        wp.launch(assign_slots, dim=len(neurons_changed), device=self.device,
+                  inputs=[self.slot_of, neurons_changed, values])
+        self.computed += len(missing)
 
 
 def _cpu_cores(n_neurons: int, n_controls: int) -> int:

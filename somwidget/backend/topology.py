@@ -1,4 +1,8 @@
-"""Mesh topology: faces or edges -> undirected adjacency (CSR) -> BFS grid distances (paper section III-D)."""
+"""Mesh topology: faces or edges -> undirected adjacency (CSR) -> BFS grid distances (paper section III-D).
+
+Up to 65,536 vertices the distances form one dense uint16 table. Past that the engine computes distance rows on
+demand for its current winners (`RowSearch`, int32), and d_max comes from an exact diameter search (`diameter`).
+"""
 
 from __future__ import annotations
 
@@ -15,6 +19,17 @@ MAX_DENSE_NEURONS = 65536
 UNREACHABLE = 65535
 #: Rows computed per BFS launch; bounds the int32 queue to BATCH x N entries.
 _BFS_BATCH = 4096
+#: Bytes of BFS queue a RowSearch may hold (a row's queue has N int32 entries).
+_QUEUE_BYTES = {"cpu": 64 << 20, "cuda": 512 << 20}
+#: Threads per row of a level-synchronous search on CUDA; they share out each level's vertices.
+_LEVEL_THREADS = 1024
+#: A level launch costs about as much as a thread visiting this many vertices and edges (see RowSearch.level_sync);
+#: on an H200, 1M-vertex grid: a level 7 us, a thread 0.17 us per vertex or edge.
+_LEVEL_COST = 40
+#: iFUB rounds (one search per component each) run on the CPU before batches move to a CUDA device.
+_ROUNDS_ON_CPU = 4
+#: Centres tried per component in the diameter search (each costs two BFS sweeps).
+_CENTRE_TRIES = 3
 
 
 class Topology:
@@ -69,9 +84,20 @@ class Topology:
 
     @property
     def d_max(self) -> int:
-        """The largest finite grid distance (0 for a graph without edges)."""
+        """The largest finite grid distance (0 for a graph without edges): from the dense table up to 65,536
+        vertices, from `diameter()` past that."""
         if self._d_max is None:
+            if self.n_vertices > MAX_DENSE_NEURONS:
+                return self.diameter()
             self.distance_table(None)
+        return self._d_max
+
+    def diameter(self, device: str | None = None) -> int:
+        """d_max without the dense table: exact, by the iFUB method (Crescenzi et al. 2013) over each connected
+        component. A few BFS sweeps on the CPU settle most meshes; a highly symmetric one (a torus) can need a
+        search from half its vertices, which then run in batches on `device` (None = best available)."""
+        if self._d_max is None:
+            self._d_max = _diameter(self, resolve(device))
         return self._d_max
 
     def grid_distances(self) -> np.ndarray:
@@ -86,8 +112,9 @@ class Topology:
         if self.n_vertices > MAX_DENSE_NEURONS:
             raise ValueError(
                 f"topology: {self.n_vertices:,} vertices exceed the dense distance table's limit of "
-                f"{MAX_DENSE_NEURONS:,} (2^16 neurons, 8 GiB of uint16); use a coarser mesh (decimate it, e.g. with "
-                "trimesh's simplify_quadric_decimation) for the dense table"
+                f"{MAX_DENSE_NEURONS:,} (2^16 neurons, 8 GiB of uint16); past that size the engine computes distance "
+                "rows on demand for the current winners (Som(..., distances='rows'), its default there), and "
+                "Topology.d_max still works; for the whole table use a coarser mesh (decimate it)"
             )
         if self._tables:  # computed on another device already: copy rather than search again
             table = wp.clone(next(iter(self._tables.values())), device=device)
@@ -119,6 +146,167 @@ class Topology:
 
     def __repr__(self) -> str:
         return f"Topology(n_vertices={self.n_vertices}, edges={len(self.edges)})"
+
+
+class RowSearch:
+    """Distance rows on demand: BFS hop counts (int32, -1 = unreachable) from given sources into rows of a device
+    array. On the CPU one search per row (a thread, O(N + E)). On CUDA the rows of a batch go level by level, the
+    threads sharing out each level (a captured graph of `levels` launches), or, for long thin graphs whose many
+    levels would cost more than that, one thread per row."""
+
+    def __init__(self, topology: Topology, device: str):
+        self.device = device
+        self.n = n = topology.n_vertices
+        self._cost = len(topology.neighbors) + n
+        self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=device)
+        neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
+        self._neighbors = wp.array(neighbors, dtype=wp.int32, device=device)
+        budget = _QUEUE_BYTES["cpu" if device == "cpu" else "cuda"]
+        #: rows per launch (the queue holds a row of N int32 per search)
+        self.batch = int(max(1, min(256, budget // (4 * n))))
+        self._buffers: dict[str, wp.array] | None = None
+        self._graphs: dict[tuple, object] = {}
+
+    def level_sync(self, levels: int) -> bool:
+        """Level by level (CUDA) when its `levels` launches cost less than a thread walking the whole graph."""
+        return self.device != "cpu" and levels * _LEVEL_COST <= self._cost
+
+    def run(self, sources, slots, rows: wp.array, levels: int, far: bool = False) -> np.ndarray | None:
+        """rows[slots[i]] = hops to the nearest of sources[i] (a sequence of vertices), -1 where none is reachable.
+        levels bounds the depth of every search (d_max will do). far=True returns each row's largest distance."""
+        out = []
+        for lo in range(0, len(sources), self.batch):
+            out.append(self._run_batch(sources[lo : lo + self.batch], slots[lo : lo + self.batch], rows, levels, far))
+        return np.concatenate(out) if far else None
+
+    def _run_batch(self, sources, slots, rows: wp.array, levels: int, far: bool) -> np.ndarray | None:
+        count = len(sources)
+        flat = np.concatenate([np.asarray(s, dtype=np.int32).ravel() for s in sources])
+        first = np.concatenate([[0], np.cumsum([np.size(s) for s in sources])]).astype(np.int32)
+        b = self._buffer()
+        b["sources"][: len(flat)].assign(flat)
+        b["first"][: count + 1].assign(first)
+        b["slots"][:count].assign(np.asarray(slots, dtype=np.int32))
+        if self.level_sync(levels):
+            b["count"].fill_(count)
+            key = (levels, rows.ptr)
+            graph = self._graphs.get(key)
+            if graph is None:
+                with wp.ScopedCapture(device=self.device) as capture:
+                    self._record_levels(rows, levels)
+                graph = self._graphs[key] = capture.graph
+            wp.capture_launch(graph)
+        else:
+            wp.launch(kernels.bfs_wide, dim=count, device=self.device,
+                      inputs=[self._offsets, self._neighbors, b["sources"], b["first"], b["slots"], rows, b["queue"],
+                              b["far"]])
+        return b["far"].numpy()[:count] if far else None
+
+    def _record_levels(self, rows: wp.array, levels: int) -> None:
+        b, dev = self._buffers, self.device
+        wp.launch(kernels.bfs_clear, dim=self.n, device=dev, inputs=[rows, b["slots"], b["count"]])
+        wp.launch(kernels.bfs_seed, dim=self.batch, device=dev,
+                  inputs=[b["sources"], b["first"], b["slots"], b["count"], rows, b["queue"], b["base"], b["size"],
+                          b["far"]])
+        for level in range(levels):
+            wp.launch(kernels.bfs_level, dim=(self.batch, _LEVEL_THREADS), device=dev,
+                      inputs=[self._offsets, self._neighbors, b["slots"], b["count"], rows, b["queue"], b["base"],
+                              b["size"], b["far"], level, _LEVEL_THREADS])
+
+    def _buffer(self) -> dict[str, wp.array]:
+        if self._buffers is None:
+            dev, k = self.device, self.batch
+            self._buffers = {
+                "sources": wp.empty(self.n, dtype=wp.int32, device=dev),
+                "first": wp.empty(k + 1, dtype=wp.int32, device=dev),
+                "slots": wp.empty(k, dtype=wp.int32, device=dev),
+                "count": wp.zeros(1, dtype=wp.int32, device=dev),
+                "queue": wp.empty((k, self.n), dtype=wp.int32, device=dev),
+                "base": wp.zeros((3, k), dtype=wp.int32, device=dev),
+                "size": wp.zeros((3, k), dtype=wp.int32, device=dev),
+                "far": wp.zeros(k, dtype=wp.int32, device=dev),
+            }
+        return self._buffers
+
+
+def _components(topology: Topology) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(labels, hops from each component's lowest vertex, vertices grouped by component), one CPU thread."""
+    n = topology.n_vertices
+    offsets = wp.array(topology.offsets, dtype=wp.int32, device="cpu")
+    neighbors = wp.array(topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32), dtype=wp.int32,
+                         device="cpu")
+    out = [wp.empty(n, dtype=wp.int32, device="cpu") for _ in range(3)]
+    wp.launch(kernels.label_components, dim=1, device="cpu", inputs=[offsets, neighbors, *out])
+    return tuple(a.numpy() for a in out)
+
+
+def _diameter(topology: Topology, device: str) -> int:
+    """The largest finite BFS distance, exactly, by iFUB (Crescenzi, Grossi, Habib, Lanzi, Marino 2013).
+
+    Per component: sweeps from far-apart vertices give a lower bound (their eccentricities) and a centre u (least
+    largest distance to the sweeps' sources, refined by a sweep from the vertex farthest from it). Vertices are then
+    taken by falling distance i from u, each search adding its eccentricity, until the bound reaches 2 i: any two
+    vertices left lie within 2 i of each other through u. The bound is shared: it prunes every component. The
+    searches of a step (one per component) share one multi-source BFS.
+    """
+    n = topology.n_vertices
+    if len(topology.edges) == 0:
+        return 0
+    labels, hops, order = _components(topology)
+    sizes = np.bincount(labels)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    cpu = RowSearch(topology, "cpu")
+    row = wp.empty((1, n), dtype=wp.int32, device="cpu")
+
+    def sweep(sources: np.ndarray) -> np.ndarray:
+        cpu.run([sources], [0], row, n)
+        return row.numpy()[0].copy()
+
+    def pick(d: np.ndarray, largest: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Per component: the first vertex (in `order`) where d is largest (or least), and that value."""
+        in_order = d[order]
+        best = (np.maximum if largest else np.minimum).reduceat(in_order, starts)
+        hit = np.flatnonzero(in_order == np.repeat(best, sizes))
+        comp = labels[order[hit]]
+        return order[hit[np.r_[True, comp[1:] != comp[:-1]]]], best
+
+    a, _ = pick(hops, True)
+    swept = [sweep(a)]
+    swept.append(sweep(pick(swept[0], True)[0]))
+    lower = int(max(d.max() for d in swept))
+    centre_hops, centre_ecc = None, None
+    for _ in range(_CENTRE_TRIES):
+        u, _ = pick(np.maximum.reduce(swept), False)
+        du = sweep(u)
+        far, ecc = pick(du, True)
+        lower = max(lower, int(ecc.max()))
+        if centre_hops is None:
+            centre_hops, centre_ecc = du, ecc
+        else:
+            better = ecc < centre_ecc
+            centre_hops = np.where(better[labels], du, centre_hops)
+            centre_ecc = np.minimum(ecc, centre_ecc)
+        if (2 * centre_ecc <= lower + 1).all():  # at most the outermost level of a centre is left
+            break
+        swept.append(sweep(far))
+        lower = max(lower, int(swept[-1].max()))
+    key = np.lexsort((-centre_hops, labels))  # by component, then by falling distance from its centre
+    level = centre_hops[key]
+    pos, end = starts.copy(), starts + sizes
+    depth = int(2 * centre_ecc.max())  # no eccentricity exceeds twice that of a component's centre
+    search, buf, width = cpu, row, 1
+    for rounds in range(n + 1):
+        active = np.flatnonzero((pos < end) & (2 * level[np.minimum(pos, n - 1)] > lower))
+        if not active.size:
+            return lower
+        if rounds == _ROUNDS_ON_CPU and device != "cpu":  # a symmetric graph: batches of searches on the device
+            search = RowSearch(topology, device)
+            buf, width = wp.empty((search.batch, n), dtype=wp.int32, device=device), search.batch
+        take = np.minimum(width, end[active] - pos[active])
+        sources = [key[pos[active[take > j]] + j] for j in range(int(take.max()))]
+        lower = max(lower, int(search.run(sources, np.arange(len(sources)), buf, depth, far=True).max()))
+        pos[active] += take
+    raise AssertionError("unreachable: every round takes a vertex")
 
 
 def _face_list(faces) -> list[np.ndarray]:
