@@ -1,10 +1,38 @@
 """somwidget: a self-organizing map as computational clay (after Felbrich et al., IEEE AIVR 2018).
 
-Compute lives in somwidget.backend (numpy + warp only); the views in somwidget.frontend.
+Compute lives in somwidget.backend (numpy + warp only); the views in somwidget.frontend. `import somwidget` loads
+no UI package: `show` (Jupyter) and `render` (static pictures) import theirs when called.
 """
 
 from .backend import presets
 from .backend.som import Som
 from .backend.topology import Topology
 
-__all__ = ["Som", "Topology", "presets"]
+
+def show(what="car", **kwargs):
+    """The interactive SOM in a Jupyter cell: a panel beside the live, draggable view of one Session.
+
+    See somwidget.frontend.notebook.show for the arguments."""
+    from .frontend.notebook import show as _show
+
+    return _show(what, **kwargs)
+
+
+def render(what, path=None, **kwargs):
+    """An off-screen picture of a Som, Session, Preset or preset name: (H, W, 3) uint8, saved to `path` if given.
+
+    See somwidget.frontend.picture.render for the arguments."""
+    from .frontend.picture import render as _render
+
+    return _render(what, path, **kwargs)
+
+
+def serve(preset: str | None = None, mesh=None, host: str = "127.0.0.1", port: int = 8080, device: str = "auto",
+          open_browser: bool = False):
+    """Run the web app (what `somwidget serve` runs) until interrupted."""
+    from .frontend.app import run_server
+
+    return run_server(preset=preset, mesh=mesh, host=host, port=port, device=device, open_browser=open_browser)
+
+
+__all__ = ["Som", "Topology", "presets", "serve", "show", "render"]

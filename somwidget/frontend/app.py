@@ -44,9 +44,9 @@ log = logging.getLogger(__name__)
 MAX_UPLOAD_BYTES = 50 * 1024 * 1024
 #: Images per second the server-rendered view aims at while the clay moves.
 VIEW_FPS = 30
-#: Image size (share of the view's pixels) and JPEG quality while the clay moves; the still image after it is full.
-ANIMATION_RATIO = float(os.environ.get("SOMWIDGET_ANIMATION_RATIO", "0.75"))
-ANIMATION_QUALITY = int(os.environ.get("SOMWIDGET_ANIMATION_QUALITY", "85"))
+#: JPEG quality while the clay moves (the still image after it is sharper). The images keep the view's full size:
+#: a smaller render window during a drag would move the dragged sphere under the pointer.
+ANIMATION_QUALITY = 85
 #: Panel numbers (iteration, gaps, cycle time) refresh at most this often per second.
 PANEL_HZ = 8
 #: Keep the image stream running this long after the last change (s).
@@ -207,7 +207,7 @@ class SomApp:
     def _start_animation(self) -> None:
         if not self._animating and self.server.protocol is not None:
             self._animating = True
-            self.view.start_animation(fps=VIEW_FPS, quality=ANIMATION_QUALITY, ratio=ANIMATION_RATIO)
+            self.view.start_animation(fps=VIEW_FPS, quality=ANIMATION_QUALITY, ratio=1)
 
     def _stop_animation(self) -> None:
         if self._animating:
