@@ -37,8 +37,8 @@ def _build_parser() -> argparse.ArgumentParser:
         help="start from a mesh file (OBJ, PLY, STL, OFF, GLB): its vertices become the neurons, its edges "
         "the synapses",
     )
-    serve.add_argument("--host", default="127.0.0.1", help="address to listen on (default: %(default)s; "
-                       "0.0.0.0 to reach it from other machines)")
+    serve.add_argument("--host", default=None, help="address to listen on (default: 127.0.0.1, or this machine's "
+                       "LAN address with --lan); any address beyond loopback is served over HTTPS with an access token")
     serve.add_argument("--port", type=int, default=8080, help="port to listen on (default: %(default)s)")
     serve.add_argument(
         "--device",
@@ -47,6 +47,8 @@ def _build_parser() -> argparse.ArgumentParser:
         help="where the map trains: auto = the GPU when there is one, else the CPU (default: %(default)s)",
     )
     serve.add_argument("--open", action="store_true", help="open the app in the default web browser once it is up")
+    serve.add_argument("--lan", action="store_true", help="serve on the LAN for an AR headset: HTTPS with a "
+                       "self-signed certificate, an access token in the URL, and a QR code to open it")
 
     bench = sub.add_parser(
         "bench",
@@ -92,10 +94,11 @@ def _serve(args: argparse.Namespace) -> int:
     run_server(
         preset=args.preset,
         mesh=args.mesh,
-        host=args.host,
+        host=args.host if args.host is not None else (None if args.lan else "127.0.0.1"),
         port=args.port,
         device=args.device,
         open_browser=args.open,
+        lan=args.lan,
     )
     return 0
 

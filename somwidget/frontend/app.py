@@ -15,6 +15,7 @@ benchmarks and scripts); add ?positions=1 for every node's position.
 from __future__ import annotations
 
 import asyncio
+import ipaddress
 import logging
 import math
 import os
@@ -37,6 +38,7 @@ from wslink.websocket import LinkProtocol  # noqa: E402
 from ..backend import presets as _presets  # noqa: E402
 from .session import DEFAULT_MAX_VERTICES, Frame, Session, hex_colour  # noqa: E402
 from .view import SceneView, control_colours  # noqa: E402
+from .xr import attach as attach_xr  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +88,7 @@ class SomApp:
 
     def __init__(self, session: Session, server=None, title: str = "somwidget"):
         self.session = session
+        self.xr_token: str | None = None  # the LAN access token, when served beyond loopback
         self.server = server if server is not None else get_server("somwidget", client_type="vue3")
         self.server.client_type = "vue3"
         self.state, self.ctrl = self.server.state, self.server.controller
@@ -541,6 +544,7 @@ class SomApp:
 
     def _bind_routes(self, wslink_server) -> None:
         wslink_server.app.router.add_get("/api/state", self._api_state)
+        self.xr = attach_xr(wslink_server, self.session, token=self.xr_token)
 
     async def _api_state(self, request: web.Request) -> web.Response:
         positions = request.query.get("positions", "0") not in ("0", "", "false")
@@ -671,18 +675,29 @@ class SomApp:
                           disabled=("busy",))
 
 
+def _is_loopback(host: str | None) -> bool:
+    if host in (None, "", "localhost"):
+        return host is None or host == "localhost"
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a host name
+        return False
+
+
 def build_app(session: Session, server=None, title: str = "somwidget") -> SomApp:
     """The trame app for `session` on `server` (a fresh vue3 trame server by default)."""
     return SomApp(session, server=server, title=title)
 
 
-def run_server(preset=None, mesh=None, host: str = "127.0.0.1", port: int = 8080, device: str = "auto",
-               open_browser: bool = False) -> None:
+def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080, device: str = "auto",
+               open_browser: bool = False, lan: bool = False) -> None:
     """Serve the app until interrupted: `somwidget serve`.
 
     preset: a preset name (default "car", case study 2); mesh: a mesh file to start from instead (io.load_mesh);
-    host: interface to listen on (loopback by default; use 0.0.0.0 to share on the LAN); port: 0 picks a free one;
-    device: "auto", "cpu", "cuda" or "cuda:N" for the training.
+    host: interface to listen on (loopback by default); port: 0 picks a free one; device: "auto", "cpu", "cuda" or
+    "cuda:N" for the training. lan: serve on this machine's LAN address. Any address beyond loopback is served
+    over HTTPS (a self-signed certificate, made once and reused) with an access token on every route, and the
+    URL, certificate fingerprint and a QR code for a headset are printed.
     """
     if preset is not None and mesh is not None:
         raise ValueError("give either a preset or a mesh, not both")
@@ -694,13 +709,25 @@ def run_server(preset=None, mesh=None, host: str = "127.0.0.1", port: int = 8080
         start.name = f"mesh:{start.name}"
     session = Session(start, device=device, start=False)
     app = build_app(session)
+    lan_cfg = None
+    if lan or not _is_loopback(host):
+        from . import lan as _lan
+
+        lan_cfg = _lan.prepare_lan(host)  # host None: this machine's LAN address
+        host = lan_cfg.bind
+        app.xr_token = lan_cfg.token
+        app.ctrl.on_server_bind.add(lambda wslink_server: _lan.apply_lan(wslink_server, lan_cfg))
+    host = host or "127.0.0.1"
     session.start()
 
     def announce(**_):
         bound = app.server.port
-        shown = "127.0.0.1" if host in ("0.0.0.0", "", None) else host
-        shown = f"[{shown}]" if ":" in shown else shown
-        print(f"somwidget serving {session.preset.name!r} at http://{shown}:{bound}/", flush=True)
+        if lan_cfg is not None:
+            print(_lan.announcement(lan_cfg, bound), flush=True)
+            return
+        shown = f"[{host}]" if ":" in host else host
+        print(f"somwidget serving {session.preset.name!r} at http://{shown}:{bound}/ "
+              f"(WebXR page: http://{shown}:{bound}/xr/)", flush=True)
 
     app.ctrl.on_server_ready.add(announce)
     argv = sys.argv

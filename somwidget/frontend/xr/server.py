@@ -1,0 +1,365 @@
+"""The WebXR client's server side: the static page at /xr/ and the websocket /xr/ws on an aiohttp app.
+
+`attach(server, session, token=None)` adds the routes to a running trame/wslink server (call it from
+`ctrl.on_server_bind`, whose argument is the wslink server) or to any aiohttp `web.Application`. One `XRHub` per
+app holds the connected clients and who holds which control; every client shares the one `Session`, so a desktop
+tab, the trame panel and a headset all see each other's moves.
+
+Threads: the session calls `XRHub._on_frame` on its training thread; that only stores the frame and wakes the
+event loop. Everything else (encoding, sending, intents) happens on the event loop's thread. Each client has a
+small outbox in which frames coalesce: a slow client gets the latest frame, never a backlog.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import json
+import logging
+import threading
+import time
+from pathlib import Path
+
+from aiohttp import WSMsgType, web
+
+from .. import lan
+from . import protocol
+
+log = logging.getLogger(__name__)
+
+HERE = Path(__file__).resolve().parent
+DIST = HERE / "dist"
+#: Frames a second sent to one client at most (the session publishes about 30 while it trains).
+MAX_FPS = 60.0
+#: Refused messages a client may send within ERROR_WINDOW seconds before the server closes its socket.
+MAX_ERRORS = 200
+ERROR_WINDOW = 10.0
+#: JSON messages waiting for one client beyond which it is dropped as too slow.
+MAX_OUTBOX = 512
+NOT_BUILT = """<!doctype html><meta charset="utf-8"><title>somwidget XR: not built</title>
+<p>The WebXR client is not built. Run <code>npm ci &amp;&amp; npm run build</code> in
+<code>somwidget/frontend/xr</code> (<code>bash scripts/setup.sh</code> does it), then reload.</p>"""
+
+
+class _Client:
+    def __init__(self, cid: int, ws: web.WebSocketResponse, remote: str | None):
+        self.id = cid
+        self.ws = ws
+        self.remote = remote
+        self.outbox: collections.deque = collections.deque()  # ("text", str) | ("frame", bytes)
+        self.wake = asyncio.Event()
+        self.generation = -1
+        self.errors: collections.deque = collections.deque()
+        self.refused = 0
+        self.frames_sent = 0
+        self.bytes_sent = 0
+        self.closed = False
+
+    def push_text(self, text: str) -> None:
+        self.outbox.append(("text", text))
+        self.wake.set()
+
+    def push_frame(self, data: bytes) -> None:
+        if self.outbox and self.outbox[-1][0] == "frame":
+            self.outbox[-1] = ("frame", data)  # not sent yet: the newer frame replaces it
+        else:
+            self.outbox.append(("frame", data))
+        self.wake.set()
+
+
+class XRHub:
+    """The /xr/ routes and their clients, for one Session."""
+
+    def __init__(self, session, token: str | None = None, dist: Path | None = None, max_fps: float = MAX_FPS):
+        self.session = session
+        self.token = token or None
+        self.dist = Path(dist) if dist is not None else DIST
+        self.max_fps = float(max_fps)
+        self.clients: dict[int, _Client] = {}
+        self.grabs: dict[int, int] = {}  # control index -> client id
+        self.refused_total = 0
+        self.intents_total = 0
+        self._next_id = 1
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._latest = None
+        self._latest_lock = threading.Lock()
+        self._scheduled = False
+        self._sent_seq = -1
+        self._encoded: tuple[int, bytes] | None = None
+        self._topology: tuple[int, dict] | None = None
+        session.add_listener(self._on_frame, replay=False)
+
+    # -- routes ----------------------------------------------------------------------------------------------
+    def add_routes(self, router) -> None:
+        router.add_get("/xr", self._redirect)
+        router.add_get("/xr/", self._index)
+        router.add_get("/xr/ws", self._websocket)
+        router.add_get("/xr/status", self._status)
+        router.add_get("/xr/{name:[A-Za-z0-9_.-]+\\.html}", self._page)
+        if (self.dist / "assets").is_dir():
+            router.add_static("/xr/assets/", self.dist / "assets", append_version=False)
+        else:
+            router.add_get("/xr/assets/{tail:.*}", self._not_built)
+
+    def _allowed(self, request) -> bool:
+        return lan.token_ok(request, self.token)
+
+    def _cookie(self, request, response):
+        if self.token is not None and lan.presented_token(request)[1] in ("query", "header"):
+            response.set_cookie(lan.COOKIE, self.token, httponly=True, samesite="Strict", secure=request.secure,
+                                path="/")
+        return response
+
+    async def _redirect(self, request):
+        if not self._allowed(request):
+            return lan.forbidden()
+        qs = f"?{request.query_string}" if request.query_string else ""
+        raise web.HTTPFound(f"/xr/{qs}")
+
+    async def _index(self, request):
+        return await self._serve_page(request, "index.html")
+
+    async def _page(self, request):
+        return await self._serve_page(request, request.match_info["name"])
+
+    async def _serve_page(self, request, name: str):
+        if not self._allowed(request):
+            return lan.forbidden()
+        path = self.dist / name
+        if not self.dist.is_dir():
+            return web.Response(status=503, text=NOT_BUILT, content_type="text/html")
+        if not path.is_file():
+            raise web.HTTPNotFound(text=f"no page {name!r} under /xr/")
+        response = web.FileResponse(path, headers={"Cache-Control": "no-cache"})
+        return self._cookie(request, response)
+
+    async def _not_built(self, request):
+        if not self._allowed(request):
+            return lan.forbidden()
+        return web.Response(status=503, text=NOT_BUILT, content_type="text/html")
+
+    async def _status(self, request):
+        """JSON: connected XR clients, grabs, counters (for tests and benchmarks)."""
+        if not self._allowed(request):
+            return lan.forbidden()
+        body = {"clients": [{"id": c.id, "frames_sent": c.frames_sent, "bytes_sent": c.bytes_sent,
+                             "refused": c.refused} for c in self.clients.values()],
+                "grabs": {str(i): cid for i, cid in self.grabs.items()}, "refused_total": self.refused_total,
+                "intents_total": self.intents_total, "built": (self.dist / "index.html").is_file()}
+        return web.json_response(body, headers={"Cache-Control": "no-store"})
+
+    # -- frames ---------------------------------------------------------------------------------------------------
+    def _on_frame(self, frame) -> None:
+        """Training thread: keep the latest frame and wake the loop once."""
+        with self._latest_lock:
+            self._latest = frame
+            if self._scheduled or not self.clients or self._loop is None:
+                return
+            self._scheduled = True
+        try:
+            self._loop.call_soon_threadsafe(self._broadcast)
+        except RuntimeError:  # the loop is closed: the server is going down
+            with self._latest_lock:
+                self._scheduled = False
+
+    def _topology_for(self, frame) -> dict | None:
+        if self._topology is not None and self._topology[0] == frame.generation:
+            return self._topology[1]
+        if self.session.generation != frame.generation:
+            return None  # a newer preset is being installed; its own frames follow
+        msg = protocol.topology_message(self.session, frame)
+        self._topology = (frame.generation, msg)
+        return msg
+
+    def _encode(self, frame) -> bytes | None:
+        if self._encoded is not None and self._encoded[0] == frame.seq:
+            return self._encoded[1]
+        if self.session.generation != frame.generation:
+            return None
+        data = protocol.encode_frame(frame, self.session)
+        self._encoded = (frame.seq, data)
+        return data
+
+    def _send_frame(self, client: _Client, frame) -> None:
+        try:
+            topo = self._topology_for(frame)
+            data = self._encode(frame)
+        except Exception:  # never let one odd frame stop the stream
+            log.exception("encoding an XR frame failed")
+            return
+        if topo is None or data is None:
+            return
+        if client.generation != frame.generation:
+            client.generation = frame.generation
+            client.push_text(json.dumps({**topo, "client": client.id}))
+        client.push_frame(data)
+
+    def _broadcast(self) -> None:
+        with self._latest_lock:
+            frame = self._latest
+            self._scheduled = False
+        if frame is None:
+            return
+        for client in list(self.clients.values()):
+            self._send_frame(client, frame)
+        self._sent_seq = frame.seq
+        self._check_grabs(frame)
+
+    def _check_grabs(self, frame) -> None:
+        stale = [i for i in self.grabs if i >= frame.n_controls]
+        if stale:  # controls removed (or a new preset): their grabs end
+            for i in stale:
+                del self.grabs[i]
+            self._broadcast_grabs()
+
+    def _broadcast_grabs(self) -> None:
+        for c in self.clients.values():
+            c.push_text(json.dumps({"type": "grabs", "grabs": [{"index": i, "own": cid == c.id}
+                                                               for i, cid in sorted(self.grabs.items())]}))
+
+    async def _sender(self, client: _Client) -> None:
+        period = 1.0 / self.max_fps if self.max_fps > 0 else 0.0
+        last_frame = 0.0
+        ws = client.ws
+        try:
+            while not ws.closed:
+                await client.wake.wait()
+                client.wake.clear()
+                while client.outbox and not ws.closed:
+                    kind, data = client.outbox[0]
+                    if kind == "frame":
+                        wait = last_frame + period - time.monotonic()
+                        if wait > 0:
+                            await asyncio.sleep(wait)
+                            continue  # a newer frame may have replaced this one meanwhile
+                        client.outbox.popleft()
+                        await ws.send_bytes(data)
+                        last_frame = time.monotonic()
+                        client.frames_sent += 1
+                    else:
+                        client.outbox.popleft()
+                        await ws.send_str(data)
+                    client.bytes_sent += len(data)
+        except (ConnectionError, RuntimeError, asyncio.CancelledError):
+            pass
+
+    # -- websocket -----------------------------------------------------------------------------------------------
+    async def _websocket(self, request):
+        if not self._allowed(request):
+            log.info("refused an XR websocket from %s: no valid token", request.remote)
+            return lan.forbidden()
+        ws = web.WebSocketResponse(heartbeat=20.0, max_msg_size=64 * 1024, compress=False)
+        await ws.prepare(request)
+        if self._loop is None:
+            self._loop = asyncio.get_running_loop()
+        client = _Client(self._next_id, ws, request.remote)
+        self._next_id += 1
+        self.clients[client.id] = client
+        log.info("XR client %d connected from %s", client.id, request.remote)
+        sender = asyncio.ensure_future(self._sender(client))
+        try:
+            self._send_frame(client, self.session.frame)
+            self._broadcast_grabs()
+            async for msg in ws:
+                if msg.type == WSMsgType.TEXT:
+                    self._handle(client, msg.data)
+                elif msg.type == WSMsgType.BINARY:
+                    self._handle(client, msg.data)
+                elif msg.type == WSMsgType.ERROR:
+                    break
+                if len(client.outbox) > MAX_OUTBOX:
+                    log.warning("XR client %d: too slow (%d messages waiting); closing", client.id,
+                                len(client.outbox))
+                    await ws.close(code=1008, message=b"too slow")
+                    break
+                if client.closed:
+                    await ws.close(code=1008, message=b"too many refused messages")
+                    break
+        finally:
+            self.clients.pop(client.id, None)
+            released = [i for i, cid in self.grabs.items() if cid == client.id]
+            for i in released:
+                del self.grabs[i]
+            if released:
+                self._broadcast_grabs()
+            client.wake.set()
+            sender.cancel()
+            log.info("XR client %d disconnected (%d frames, %d bytes sent, %d refused)", client.id,
+                     client.frames_sent, client.bytes_sent, client.refused)
+        return ws
+
+    def _refuse(self, client: _Client, exc: Exception, intent: str | None) -> None:
+        client.refused += 1
+        self.refused_total += 1
+        now = time.monotonic()
+        client.errors.append(now)
+        while client.errors and now - client.errors[0] > ERROR_WINDOW:
+            client.errors.popleft()
+        if client.refused <= 20 or client.refused % 100 == 0:
+            log.warning("XR client %d: refused a message (%d so far): %s", client.id, client.refused, exc)
+        client.push_text(protocol.error_message(str(exc), intent))
+        if len(client.errors) > MAX_ERRORS:
+            client.closed = True
+
+    def _handle(self, client: _Client, data) -> None:
+        try:
+            intent = protocol.parse_intent(data, self.session.n_controls)
+        except protocol.IntentError as exc:
+            self._refuse(client, exc, exc.intent)
+            return
+        try:
+            self._apply(client, intent)
+            self.intents_total += 1
+        except (ValueError, RuntimeError) as exc:  # the session's own checks (or a closed session)
+            self._refuse(client, exc, intent.type)
+
+    def _apply(self, client: _Client, intent: protocol.Intent) -> None:
+        kind, i = intent.type, intent.index
+        if kind == "ping":
+            client.push_text(json.dumps({"type": "pong", "t": intent.t}))
+        elif kind == "grab":
+            holder = self.grabs.get(i)
+            if holder is not None and holder != client.id:
+                raise ValueError(f"grab: control {i} is held by another client")
+            self.grabs[i] = client.id
+            self._broadcast_grabs()
+        elif kind in ("move", "release"):
+            if self.grabs.get(i) != client.id:
+                raise ValueError(f"{kind}: control {i} is not held by this client; send grab first")
+            if intent.position is not None:
+                self.session.move_control(i, list(intent.position))
+            if kind == "release":
+                del self.grabs[i]
+                self._broadcast_grabs()
+        elif kind == "reset":
+            self.session.reset()
+        elif kind == "train":
+            self.session.train()
+        elif kind == "pause":
+            self.session.pause()
+
+    async def close(self, *_):
+        for c in list(self.clients.values()):
+            await c.ws.close(code=1001, message=b"server shutdown")
+
+    def detach(self) -> None:
+        self.session.remove_listener(self._on_frame)
+
+
+def attach(server, session, token: str | None = None, dist=None) -> XRHub:
+    """Serve the WebXR client on `server`: a wslink server (what `ctrl.on_server_bind` passes), an aiohttp
+    `web.Application` or its router. Adds GET /xr/ (the page; /xr redirects), /xr/<page>.html, /xr/assets/...,
+    the websocket /xr/ws and GET /xr/status. With `token`, every one of them answers 403 unless the request
+    carries it (?token=, the cookie, or Authorization: Bearer). Returns the hub."""
+    app = getattr(server, "app", server)
+    router = getattr(app, "router", app)
+    if not hasattr(router, "add_get"):
+        raise TypeError(f"attach: expected a wslink server, an aiohttp Application or a router, got {server!r}")
+    hub = XRHub(session, token=token, dist=dist)
+    hub.add_routes(router)
+    if isinstance(app, web.Application) and not app.frozen:
+        app.on_shutdown.append(hub.close)
+    return hub
+
+
+__all__ = ["XRHub", "attach", "DIST"]

@@ -1,0 +1,272 @@
+// The clay in three.js: the mesh (surface, lines or points) with its vertex colours, and the control objects.
+//
+// Scene graph: stage (placement in the room: position, yaw) > scaler (uniform scale) > frame (the model's z-up
+// turned to three's y-up) > content (centred on the start mesh) > the meshes. Model coordinates are the session's
+// own (x forward, y sideways, z up): `worldToModel` / `modelToWorld` convert.
+
+import * as THREE from 'three';
+
+const HELD = new THREE.Color(0xff2020);
+const HOVER_EMISSIVE = new THREE.Color(0x555555);
+const NO_EMISSIVE = new THREE.Color(0x000000);
+const HELD_EMISSIVE = new THREE.Color(0x660000);
+
+export class Clay {
+  constructor() {
+    this.stage = new THREE.Group();
+    this.stage.name = 'stage';
+    this.scaler = new THREE.Group();
+    this.frame = new THREE.Group();
+    this.frame.rotation.x = -Math.PI / 2; // model z (up) -> world y (up); model y -> world -z
+    this.content = new THREE.Group();
+    this.stage.add(this.scaler);
+    this.scaler.add(this.frame);
+    this.frame.add(this.content);
+    this.topology = null;
+    this.k = 0;
+    this.kEff = 0;
+    this.controlMeshes = [];
+    this.local = new Map(); // original index -> [x, y, z] model position while this client drags it
+    this.held = new Set(); // original indices held by any client (server's grabs)
+    this.hover = new Set(); // effective indices hovered by an input
+    this.radius = 1;
+    this.controlRadius = 0.05;
+    this.objects = [];
+    this.lastFrame = null;
+    this.sphere = new THREE.SphereGeometry(1, 24, 16);
+  }
+
+  get ready() {
+    return this.topology !== null;
+  }
+
+  setTopology(t) {
+    for (const o of this.objects) {
+      this.content.remove(o);
+      o.geometry?.dispose?.();
+      o.material?.dispose?.();
+    }
+    this.objects = [];
+    for (const m of this.controlMeshes) {
+      this.content.remove(m);
+      m.material.dispose();
+    }
+    this.controlMeshes = [];
+    this.kEff = 0;
+    this.local.clear();
+    this.topology = t;
+    const n = t.n_vertices;
+    const pos = new THREE.BufferAttribute(new Float32Array(3 * n), 3);
+    pos.setUsage(THREE.DynamicDrawUsage);
+    const col = new THREE.BufferAttribute(new Uint8Array(3 * n), 3, true);
+    col.setUsage(THREE.DynamicDrawUsage);
+    this.positionAttr = pos;
+    this.colourAttr = col;
+    this.surface = null;
+    const lines = t.display === 'lines';
+    if (t.triangles.length) {
+      const g = new THREE.BufferGeometry();
+      g.setAttribute('position', pos);
+      g.setAttribute('color', col);
+      g.setIndex(new THREE.BufferAttribute(new Uint32Array(t.triangles), 1));
+      const m = new THREE.Mesh(g, new THREE.MeshStandardMaterial({
+        vertexColors: true, side: THREE.DoubleSide, roughness: 0.8, metalness: 0.0,
+        transparent: lines, opacity: lines ? 0.55 : 1.0, depthWrite: !lines,
+      }));
+      m.name = 'clay-surface';
+      this.surface = m;
+      this.objects.push(m);
+    }
+    if (t.segments.length) {
+      const g = new THREE.BufferGeometry();
+      g.setAttribute('position', pos);
+      g.setAttribute('color', col);
+      g.setIndex(new THREE.BufferAttribute(new Uint32Array(t.segments), 1));
+      const m = new THREE.LineSegments(g, new THREE.LineBasicMaterial(lines
+        ? { vertexColors: true }
+        : { color: 0x303040, transparent: true, opacity: t.points ? 0.3 : 0.35 }));
+      m.name = 'clay-segments';
+      this.objects.push(m);
+    }
+    if (t.points) {
+      const g = new THREE.BufferGeometry();
+      g.setAttribute('position', pos);
+      g.setAttribute('color', col);
+      this.pointsMaterial = new THREE.PointsMaterial({ vertexColors: true, size: 0.01, sizeAttenuation: true });
+      const m = new THREE.Points(g, this.pointsMaterial);
+      m.name = 'clay-points';
+      this.objects.push(m);
+    } else {
+      this.pointsMaterial = null;
+    }
+    for (const o of this.objects) {
+      o.frustumCulled = false;
+      this.content.add(o);
+    }
+    const lo = new THREE.Vector3().fromArray(t.bounds.min);
+    const hi = new THREE.Vector3().fromArray(t.bounds.max);
+    this.centre = lo.clone().add(hi).multiplyScalar(0.5);
+    this.radius = Math.max(hi.distanceTo(lo) / 2, 1e-6);
+    this.controlRadius = t.control_radius;
+    this.content.position.copy(this.centre).multiplyScalar(-1);
+    this.mirrorAxes = t.mirror_axes || [false, false, false];
+  }
+
+  // Scale so that the model's bounding radius is `worldRadius` (metres in XR, scene units on the desktop).
+  fit(worldRadius) {
+    this.setScale(worldRadius / this.radius);
+  }
+
+  setScale(s) {
+    this.scaler.scale.setScalar(s);
+    if (this.pointsMaterial) this.pointsMaterial.size = 0.3 * this.controlRadius * s;
+  }
+
+  get scale() {
+    return this.scaler.scale.x;
+  }
+
+  get worldRadius() {
+    return this.radius * this.scale;
+  }
+
+  get worldControlRadius() {
+    return this.controlRadius * this.scale;
+  }
+
+  applyFrame(f) {
+    if (!this.topology || f.n !== this.topology.n_vertices || f.generation !== this.topology.generation) return false;
+    this.positionAttr.array.set(f.positions);
+    this.positionAttr.needsUpdate = true;
+    this.colourAttr.array.set(f.colours);
+    this.colourAttr.needsUpdate = true;
+    if (this.surface) this.surface.geometry.computeVertexNormals();
+    this.k = f.k;
+    if (f.kEff !== this.kEff) this.rebuildControls(f.kEff);
+    const c = new THREE.Color();
+    for (let j = 0; j < this.kEff; j++) {
+      const m = this.controlMeshes[j];
+      m.userData.base = c.setRGB(f.controlColours[3 * j] / 255, f.controlColours[3 * j + 1] / 255,
+        f.controlColours[3 * j + 2] / 255).clone();
+      m.userData.server = [f.controlPositions[3 * j], f.controlPositions[3 * j + 1], f.controlPositions[3 * j + 2]];
+      m.userData.mirror = j >= this.k;
+      m.userData.original = j >= this.k ? j - this.k : j;
+    }
+    this.lastFrame = f;
+    this.refreshControls();
+    return true;
+  }
+
+  rebuildControls(kEff) {
+    for (const m of this.controlMeshes) {
+      this.content.remove(m);
+      m.material.dispose();
+    }
+    this.controlMeshes = [];
+    for (let j = 0; j < kEff; j++) {
+      const m = new THREE.Mesh(this.sphere, new THREE.MeshStandardMaterial({ roughness: 0.4, metalness: 0.1 }));
+      m.name = `control-${j}`;
+      m.userData.index = j;
+      m.frustumCulled = false;
+      this.controlMeshes.push(m);
+      this.content.add(m);
+    }
+    this.kEff = kEff;
+  }
+
+  mirrored(p) {
+    return p.map((v, a) => (this.mirrorAxes[a] ? -v : v));
+  }
+
+  // Positions, colours and highlights of the control spheres (local drags win over the server's positions).
+  refreshControls() {
+    for (const m of this.controlMeshes) {
+      const i = m.userData.original;
+      let p = m.userData.server;
+      if (this.local.has(i)) p = m.userData.mirror ? this.mirrored(this.local.get(i)) : this.local.get(i);
+      if (p) m.position.set(p[0], p[1], p[2]);
+      const held = this.held.has(i) || this.local.has(i);
+      const hovered = this.hover.has(m.userData.index);
+      const mat = m.material;
+      mat.color.copy(held ? HELD : (m.userData.base || HELD));
+      mat.emissive.copy(held ? HELD_EMISSIVE : hovered ? HOVER_EMISSIVE : NO_EMISSIVE);
+      mat.transparent = m.userData.mirror;
+      mat.opacity = m.userData.mirror ? 0.55 : 1.0;
+      const grow = held ? (m.userData.mirror ? 1.35 : 1.6) : hovered ? 1.3 : 1.0;
+      m.scale.setScalar(this.controlRadius * grow);
+    }
+  }
+
+  setLocal(i, modelPos) {
+    this.local.set(i, modelPos);
+    this.refreshControls();
+  }
+
+  clearLocal(i) {
+    this.local.delete(i);
+    this.refreshControls();
+  }
+
+  setHover(set) {
+    const same = set.size === this.hover.size && [...set].every((j) => this.hover.has(j));
+    if (same) return;
+    this.hover = set;
+    this.refreshControls();
+  }
+
+  modelToWorld(p, target = new THREE.Vector3()) {
+    this.stage.updateWorldMatrix(true, true);
+    return this.content.localToWorld(target.set(p[0], p[1], p[2]));
+  }
+
+  worldToModel(v) {
+    this.stage.updateWorldMatrix(true, true);
+    const p = this.content.worldToLocal(v.clone());
+    return [p.x, p.y, p.z];
+  }
+
+  controlWorld(j, target = new THREE.Vector3()) {
+    const m = this.controlMeshes[j];
+    if (!m) return null;
+    this.stage.updateWorldMatrix(true, true);
+    return m.getWorldPosition(target);
+  }
+
+  // The effective control nearest to a world point, within maxDistance (world units): {index, distance} or null.
+  nearest(worldPoint, maxDistance) {
+    let best = null;
+    const w = new THREE.Vector3();
+    for (let j = 0; j < this.kEff; j++) {
+      this.controlWorld(j, w);
+      const d = w.distanceTo(worldPoint);
+      if (d <= maxDistance && (!best || d < best.distance)) best = { index: j, distance: d };
+    }
+    return best;
+  }
+
+  // The effective control a ray hits first (spheres padded by `pad` x their radius): {index, point} or null.
+  hitByRay(raycaster, pad = 1.5) {
+    let best = null;
+    const w = new THREE.Vector3();
+    const sphere = new THREE.Sphere();
+    const hit = new THREE.Vector3();
+    for (let j = 0; j < this.kEff; j++) {
+      this.controlWorld(j, w);
+      sphere.set(w, this.worldControlRadius * pad);
+      if (raycaster.ray.intersectSphere(sphere, hit)) {
+        const d = hit.distanceTo(raycaster.ray.origin);
+        if (!best || d < best.distance) best = { index: j, distance: d, point: hit.clone() };
+      }
+    }
+    return best;
+  }
+
+  // Which original control an effective index moves, and the model point to send for a wanted model point.
+  originalOf(j) {
+    return j >= this.k ? j - this.k : j;
+  }
+
+  toOriginal(j, modelPos) {
+    return j >= this.k ? this.mirrored(modelPos) : modelPos;
+  }
+}

@@ -1,0 +1,139 @@
+// Holding controls: grab / move / release intents, the local preview while dragging, and the move -> mesh latency.
+//
+// While this client drags control i, its sphere (and its mirrored copy) follows the hand at once (a local
+// override); the server's frames bring the clay. Moves go out at most every MOVE_INTERVAL ms, the last one always.
+
+import { intents } from './protocol.js';
+
+const MOVE_INTERVAL = 22; // ms: about 45 moves a second at most
+const SETTLE_MS = 1000; // keep the local position after a release until a frame shows it (or this long)
+
+const round6 = (v) => Math.round(v * 1e6) / 1e6;
+
+export class Grabs {
+  constructor(link, clay) {
+    this.link = link;
+    this.clay = clay;
+    this.active = new Map(); // original index -> {pos, lastSent, pending}
+    this.settling = new Map(); // original index -> {pos, until}
+    this.pendingMoves = []; // {t, index, pos, digest}
+    this.latencies = []; // ms from a move's send to the first frame showing it with a changed mesh
+    this.controlLatencies = []; // ms from a move's send to the first frame showing the control there
+    this.latencyLog = []; // {sent, arrived, index, seq} (page clock, ms) for the latencies above
+    this.moves = 0;
+    this.lastDigest = 0;
+  }
+
+  holds(i) {
+    return this.active.has(i);
+  }
+
+  begin(i) {
+    if (this.active.has(i)) return false;
+    const m = this.clay.controlMeshes[i];
+    const p = m ? [m.position.x, m.position.y, m.position.z] : [0, 0, 0];
+    this.active.set(i, { pos: p, lastSent: 0, pending: null, sentPos: p.map(round6) });
+    this.settling.delete(i);
+    this.clay.setLocal(i, p);
+    this.link.send(intents.grab(i));
+    return true;
+  }
+
+  update(i, pos) {
+    const g = this.active.get(i);
+    if (!g) return;
+    g.pos = pos;
+    this.clay.setLocal(i, pos);
+    // a hand held still sends nothing: every move restarts the map's schedule
+    const p = pos.map(round6);
+    const eps = 1e-5 * this.clay.radius;
+    const same = (a) => a && Math.max(...a.map((v, a2) => Math.abs(v - p[a2]))) <= eps;
+    g.pending = same(g.sentPos) ? null : p;
+    this.flushOne(i, g, performance.now());
+  }
+
+  flushOne(i, g, now) {
+    if (!g.pending || now - g.lastSent < MOVE_INTERVAL) return;
+    const p = g.pending;
+    g.pending = null;
+    g.lastSent = now;
+    g.sentPos = p;
+    if (this.link.send(intents.move(i, p))) {
+      this.moves += 1;
+      this.pendingMoves.push({ t: now, index: i, pos: p.map(Math.fround), digest: this.lastDigest });
+      if (this.pendingMoves.length > 64) this.pendingMoves.shift();
+    }
+  }
+
+  flush() {
+    const now = performance.now();
+    for (const [i, g] of this.active) this.flushOne(i, g, now);
+    for (const [i, s] of this.settling) {
+      if (now > s.until) {
+        this.settling.delete(i);
+        if (!this.active.has(i)) this.clay.clearLocal(i);
+      }
+    }
+  }
+
+  end(i) {
+    const g = this.active.get(i);
+    if (!g) return;
+    this.active.delete(i);
+    const p = g.pos.map(round6);
+    const now = performance.now();
+    if (this.link.send(intents.release(i, p))) {
+      this.pendingMoves.push({ t: now, index: i, pos: p.map(Math.fround), digest: this.lastDigest });
+    }
+    this.settling.set(i, { pos: p.map(Math.fround), until: now + SETTLE_MS });
+  }
+
+  cancel(i) {
+    this.active.delete(i);
+    this.settling.delete(i);
+    this.clay.clearLocal(i);
+  }
+
+  // The server says who holds what: a control we drag that another client holds is not ours.
+  onGrabs(list) {
+    const held = new Set();
+    for (const g of list) {
+      held.add(g.index);
+      if (!g.own && this.active.has(g.index)) this.cancel(g.index);
+    }
+    this.clay.held = held;
+    this.clay.refreshControls();
+  }
+
+  // Every arriving frame: settle released controls, measure latency.
+  onFrame(f, digest) {
+    const now = performance.now();
+    const cp = f.controlPositions;
+    const at = (i, pos) => cp[3 * i] === pos[0] && cp[3 * i + 1] === pos[1] && cp[3 * i + 2] === pos[2];
+    for (const [i, s] of this.settling) {
+      if (i < f.k && at(i, s.pos)) {
+        this.settling.delete(i);
+        if (!this.active.has(i)) this.clay.clearLocal(i);
+      }
+    }
+    for (let m = this.pendingMoves.length - 1; m >= 0; m--) {
+      const pm = this.pendingMoves[m];
+      if (pm.index < f.k && at(pm.index, pm.pos)) {
+        if (pm.controlLatency === undefined) {
+          pm.controlLatency = now - pm.t;
+          this.controlLatencies.push(pm.controlLatency);
+        }
+        if (digest !== pm.digest) {
+          this.latencies.push(now - pm.t);
+          this.latencyLog.push({ sent: pm.t, arrived: now, index: pm.index, seq: f.seq });
+          if (this.latencyLog.length > 200) this.latencyLog.shift();
+          this.pendingMoves.splice(0, m + 1); // this one and every older one are answered
+        }
+        break;
+      }
+    }
+    if (this.latencies.length > 1000) this.latencies.splice(0, 500);
+    if (this.controlLatencies.length > 1000) this.controlLatencies.splice(0, 500);
+    this.lastDigest = digest;
+  }
+}

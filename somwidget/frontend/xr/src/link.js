@@ -1,0 +1,87 @@
+// The websocket to the server (/xr/ws next to the page), reconnecting with a growing pause when it drops.
+
+import { parseFrame } from './protocol.js';
+
+export function socketURL(loc = window.location) {
+  const scheme = loc.protocol === 'https:' ? 'wss:' : 'ws:';
+  const base = loc.pathname.endsWith('/') ? loc.pathname : loc.pathname.replace(/[^/]*$/, '');
+  const token = new URLSearchParams(loc.search).get('token');
+  return `${scheme}//${loc.host}${base}ws${token ? `?token=${encodeURIComponent(token)}` : ''}`;
+}
+
+export class Link {
+  constructor(url, handlers) {
+    this.url = url;
+    this.handlers = handlers; // {onTopology, onFrame, onGrabs, onError, onPong, onStatus}
+    this.ws = null;
+    this.connected = false;
+    this.retry = 500;
+    this.stats = { frames: 0, bytes: 0, messages: 0, sent: 0, reconnects: 0, badFrames: 0 };
+    this.closedByUser = false;
+    this.connect();
+  }
+
+  connect() {
+    const ws = new WebSocket(this.url);
+    ws.binaryType = 'arraybuffer';
+    this.ws = ws;
+    ws.onopen = () => {
+      this.connected = true;
+      this.retry = 500;
+      this.handlers.onStatus?.('connected');
+    };
+    ws.onmessage = (ev) => this.receive(ev.data);
+    ws.onclose = (ev) => {
+      this.connected = false;
+      this.handlers.onStatus?.(`disconnected (${ev.code}${ev.reason ? ` ${ev.reason}` : ''})`);
+      if (this.closedByUser) return;
+      setTimeout(() => {
+        this.stats.reconnects += 1;
+        this.connect();
+      }, this.retry);
+      this.retry = Math.min(this.retry * 2, 8000);
+    };
+    ws.onerror = () => {};
+  }
+
+  receive(data) {
+    if (typeof data !== 'string') {
+      let frame;
+      try {
+        frame = parseFrame(data);
+      } catch (err) {
+        this.stats.badFrames += 1;
+        console.warn('somwidget xr: bad frame', err);
+        return;
+      }
+      this.stats.frames += 1;
+      this.stats.bytes += data.byteLength;
+      this.handlers.onFrame?.(frame);
+      return;
+    }
+    this.stats.messages += 1;
+    this.stats.bytes += data.length;
+    let msg;
+    try {
+      msg = JSON.parse(data);
+    } catch {
+      return;
+    }
+    if (msg.type === 'topology') this.handlers.onTopology?.(msg);
+    else if (msg.type === 'grabs') this.handlers.onGrabs?.(msg.grabs);
+    else if (msg.type === 'error') this.handlers.onError?.(msg);
+    else if (msg.type === 'pong') this.handlers.onPong?.(msg);
+  }
+
+  send(obj) {
+    if (!this.ws || this.ws.readyState !== WebSocket.OPEN) return false;
+    this.ws.send(JSON.stringify(obj));
+    this.stats.sent += 1;
+    return true;
+  }
+
+  close() {
+    this.closedByUser = true;
+    this.ws?.close();
+  }
+}

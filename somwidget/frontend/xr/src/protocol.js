@@ -1,0 +1,62 @@
+// The /xr/ws protocol, client side: the twin of somwidget/frontend/xr/protocol.py (the layout is documented there).
+//
+// Binary frame, little-endian: a 32-byte header (magic "SOMF", u16 version, u16 flags, u32 seq, u32 generation,
+// u32 iteration, u32 iterations, u32 n, u16 k, u16 kEff), then Float32 positions (n x 3), Float32 control
+// positions (kEff x 3), Uint8 RGB colours (n x 3), Uint8 RGB control colours (kEff x 3), zero padding to 4 bytes.
+
+export const PROTOCOL_VERSION = 1;
+export const HEADER_SIZE = 32;
+export const FLAG_RUNNING = 1;
+export const FLAG_PAUSED = 2;
+export const FLAG_MIRRORED = 4;
+const MAGIC = [0x53, 0x4f, 0x4d, 0x46]; // "SOMF"
+
+export function parseFrame(buffer) {
+  if (!(buffer instanceof ArrayBuffer) || buffer.byteLength < HEADER_SIZE) {
+    throw new Error(`frame too short (${buffer && buffer.byteLength} bytes)`);
+  }
+  const bytes = new Uint8Array(buffer, 0, 4);
+  for (let i = 0; i < 4; i++) {
+    if (bytes[i] !== MAGIC[i]) throw new Error('not a somwidget frame (bad magic)');
+  }
+  const dv = new DataView(buffer);
+  const version = dv.getUint16(4, true);
+  if (version !== PROTOCOL_VERSION) throw new Error(`frame protocol ${version}, expected ${PROTOCOL_VERSION}`);
+  const flags = dv.getUint16(6, true);
+  const n = dv.getUint32(24, true);
+  const k = dv.getUint16(28, true);
+  const kEff = dv.getUint16(30, true);
+  let size = HEADER_SIZE + 15 * (n + kEff);
+  size += (4 - (size % 4)) % 4;
+  if (buffer.byteLength !== size) throw new Error(`frame of ${buffer.byteLength} bytes, expected ${size}`);
+  let o = HEADER_SIZE;
+  const positions = new Float32Array(buffer, o, 3 * n);
+  o += 12 * n;
+  const controlPositions = new Float32Array(buffer, o, 3 * kEff);
+  o += 12 * kEff;
+  const colours = new Uint8Array(buffer, o, 3 * n);
+  o += 3 * n;
+  const controlColours = new Uint8Array(buffer, o, 3 * kEff);
+  return {
+    flags,
+    running: (flags & FLAG_RUNNING) !== 0,
+    paused: (flags & FLAG_PAUSED) !== 0,
+    seq: dv.getUint32(8, true),
+    generation: dv.getUint32(12, true),
+    iteration: dv.getUint32(16, true),
+    iterations: dv.getUint32(20, true),
+    n, k, kEff, positions, controlPositions, colours, controlColours,
+    bytes: buffer.byteLength,
+  };
+}
+
+// Intents (client -> server), one JSON object per message.
+export const intents = {
+  grab: (index) => ({ type: 'grab', index }),
+  move: (index, position) => ({ type: 'move', index, position }),
+  release: (index, position) => (position ? { type: 'release', index, position } : { type: 'release', index }),
+  reset: () => ({ type: 'reset' }),
+  train: () => ({ type: 'train' }),
+  pause: () => ({ type: 'pause' }),
+  ping: (t) => ({ type: 'ping', t }),
+};

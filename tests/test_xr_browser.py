@@ -1,0 +1,378 @@
+"""The WebXR page in a real browser: Debian's Chromium driven by Playwright, on an emulated Meta Quest 3.
+
+The emulator is npm's `iwer` (2.5.0), bundled by the client's own build into /xr/emulator.html (never from a CDN);
+the page installs it over Chromium's navigator.xr (`installRuntime({forceInstall: true})`) before the app starts.
+
+Interaction tests act as the person does: Playwright's mouse clicks "Enter AR" and drags controls on the desktop
+preview; the emulated controllers and hands are moved, their triggers pulled and their fingers pinched through the
+iwer device. What the page shows is read through its read-only `window.somxr` views; the session's state is read in
+Python. Nothing here sends an intent itself (test_xr_protocol.py does that, to show the protocol).
+
+The server is the XR route on a small aiohttp server (XRServer) around a real Session; test_xr_serve.py runs the
+same page against `somwidget serve`. Needs /usr/bin/chromium, Python Playwright and the built client (npm run build).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import numpy as np
+import pytest
+
+from somwidget.frontend.xr.server import DIST
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+VIEWPORT = {"width": 480, "height": 360}  # small: SwiftShader renders on the CPU
+
+playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
+if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
+    pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
+if not (DIST / "emulator.html").is_file():  # pragma: no cover
+    pytest.skip("the WebXR client is not built (npm ci && npm run build in somwidget/frontend/xr)",
+                allow_module_level=True)
+
+
+def wait_for(predicate, timeout: float = 20.0, what: str = "condition", interval: float = 0.05):
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(interval)
+
+
+@pytest.fixture(scope="module")
+def session():
+    from somwidget.frontend.session import Session
+
+    s = Session("car", device="cpu")
+    assert s.wait_idle(120), "the session did not converge"
+    yield s
+    s.close()
+
+
+@pytest.fixture(scope="module")
+def server(session):
+    from somwidget.frontend.xr.standalone import XRServer
+
+    with XRServer(session) as srv:
+        yield srv
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with playwright_sync.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
+        yield b
+        b.close()
+
+
+def open_page(browser, url: str):
+    page = browser.new_page(viewport=VIEWPORT)
+    page.errors = []
+    page.on("pageerror", lambda e: page.errors.append(str(e)))
+    page.goto(url)
+    page.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=30000)
+    return page
+
+
+def enter_ar(page) -> None:
+    """Click "Enter AR" with the mouse, as a person would, and wait for the immersive session."""
+    page.wait_for_selector("#enter-ar:not([hidden])", timeout=10000)
+    box = page.locator("#enter-ar").bounding_box()
+    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.wait_for_function("somxr.state().presenting && somxr.state().mode === 'immersive-ar'", timeout=15000)
+    wait_frames(page, 3)
+
+
+@pytest.fixture
+def ar_page(browser, server):
+    page = open_page(browser, server.base + "/xr/emulator.html")
+    enter_ar(page)
+    yield page
+    assert not page.errors, page.errors
+    page.close()
+
+
+def wait_frames(page, n: int = 2, timeout: float = 15000) -> None:
+    """Let the emulated headset run `n` more XR frames."""
+    start = page.evaluate("somxr.state().xrFrames")
+    page.wait_for_function(f"somxr.state().xrFrames >= {start + n}", timeout=timeout)
+
+
+def device_input(page, kind: str) -> str:
+    return f"iwerDevice.{'hands' if kind == 'hand' else 'controllers'}.right"
+
+
+def input_point(page, hand: bool, key: str = "point") -> np.ndarray:
+    """Where the page sees the right controller's tip / the right hand's pinch point (key "point") or index finger
+    tip (key "tip"), in world metres."""
+    for inp in page.evaluate("somxr.inputs()"):
+        if inp["handedness"] == "right" and inp["hand"] == hand and inp[key] is not None:
+            return np.array(inp[key])
+    seen = page.evaluate("somxr.inputs()")
+    raise AssertionError(f"no right {'hand' if hand else 'controller'} seen by the page: {seen}")
+
+
+def get_position(page, dev: str) -> np.ndarray:
+    return np.array(page.evaluate(f"(() => {{ const p = {dev}.position; return [p.x, p.y, p.z]; }})()"))
+
+
+def set_position(page, dev: str, p) -> None:
+    page.evaluate(f"([x, y, z]) => {dev}.position.set(x, y, z)", [float(v) for v in p])
+
+
+def bring_to(page, dev: str, hand: bool, world, key: str = "point") -> None:
+    """Move the emulated input so that its grab point (controller tip / pinch point; key "tip": index finger tip)
+    lies at `world`."""
+    for _ in range(3):  # the point sits at a fixed offset from the tracked position; refine twice
+        offset = input_point(page, hand, key) - get_position(page, dev)
+        set_position(page, dev, np.asarray(world) - offset)
+        wait_frames(page, 2)
+    assert np.linalg.norm(input_point(page, hand, key) - np.asarray(world)) < 2e-3
+
+
+def glide(page, dev: str, delta, steps: int = 8) -> None:
+    """Move the emulated input by `delta` (metres) over several XR frames, as a hand moves."""
+    start = get_position(page, dev)
+    for s in range(1, steps + 1):
+        set_position(page, dev, start + np.asarray(delta) * s / steps)
+        wait_frames(page, 2)
+
+
+def grab_move_release(page, server, session, dev: str, hand: bool, index: int, delta, press, release):
+    """The person's gesture: bring the input to control `index`, press, move by `delta`, let go. Returns what the
+    test needs to check: the control's world start, the expected model end point and the frames seen."""
+    target = np.array(page.evaluate(f"somxr.controlWorld({index})"))
+    bring_to(page, dev, hand, target)
+    page.wait_for_function(f"somxr.state().hover.includes({index})", timeout=5000)  # hovered before the grab
+    before = page.evaluate("somxr.state()")
+    page.evaluate(press)
+    wait_for(lambda: server.hub.grabs.get(index) is not None, what=f"the server to see control {index} grabbed")
+    page.wait_for_function(f"somxr.state().held.includes({index})", timeout=5000)
+    look = page.evaluate(f"somxr.controlLook({index})")
+    assert look["colour"] == "#ff2020" and look["scale"] > 1.5, look  # the grabbed control: red and enlarged
+    mirror_look = page.evaluate(f"somxr.controlLook({index} + somxr.state().k)")
+    assert mirror_look["colour"] == "#ff2020", mirror_look  # its mirrored copy too
+    glide(page, dev, delta)
+    expected = np.array(page.evaluate("(p) => somxr.worldToModel(p)", [float(v) for v in target + delta]))
+    page.evaluate(release)
+    wait_for(lambda: index not in server.hub.grabs, what=f"control {index} released")
+    return target, expected, before
+
+
+def check_moved(page, session, index: int, expected, before, start_controls):
+    """The session's control is where the hand left it, its mirror follows, and new mesh frames arrived."""
+    wait_for(lambda: np.allclose(session.controls[index, :3], expected, atol=2e-3), timeout=10,
+             what=f"control {index} at {expected} (now {session.controls[index, :3]})")
+    moved = np.linalg.norm(session.controls[index, :3] - start_controls[index, :3])
+    assert moved > 0.3, f"control {index} moved only {moved}"
+    others = np.delete(np.arange(len(start_controls)), index)
+    np.testing.assert_allclose(session.controls[others], start_controls[others])  # nothing else moved
+    assert session.wait_idle(60)
+    frame = session.frame
+    k = frame.n_controls
+    mirror = frame.effective_positions[k + index]
+    np.testing.assert_allclose(mirror, frame.control_positions[index] * np.array([1, -1, 1]), atol=1e-5)
+    # the page: new frames with a changed mesh, showing the control (and its mirrored copy) where it now is
+    page.wait_for_function(f"somxr.state().seq >= {frame.seq}", timeout=10000)
+    after = page.evaluate("somxr.state()")
+    assert after["frames"] > before["frames"] and after["digest"] != before["digest"]
+    np.testing.assert_allclose(page.evaluate(f"somxr.serverControl({index})"), frame.control_positions[index],
+                               atol=1e-5)
+    np.testing.assert_allclose(page.evaluate(f"somxr.controlModel({k + index})"), mirror, atol=1e-4)
+    shown = np.array(page.evaluate("somxr.positions(602)")).reshape(-1, 3)
+    np.testing.assert_allclose(shown, frame.positions, atol=1e-5)
+    assert not after["held"] and page.evaluate(f"somxr.controlLook({index})")["colour"] != "#ff2020"
+
+
+def test_enter_ar_places_clay_in_front(ar_page):
+    st = ar_page.evaluate("somxr.state()")
+    assert st["mode"] == "immersive-ar" and st["supported"]["ar"] and st["transparent"]  # passthrough shows
+    stage = np.array(st["stage"])
+    head = np.array(ar_page.evaluate("[iwerDevice.position.x, iwerDevice.position.y, iwerDevice.position.z]"))
+    offset = stage - head
+    assert 0.3 < -offset[2] < 1.0 and -0.5 < offset[1] < 0.0, offset  # in front of the eyes, a little lower
+    radius = ar_page.evaluate("somxr.worldRadius()")
+    assert 0.15 < radius < 0.4  # a sensible size in metres
+    assert st["k"] == 9 and st["kEff"] == 18
+
+
+def test_falls_back_to_vr_without_ar(browser, server):
+    """A headset without immersive-ar (emulated: ?modes=vr) gets "Enter VR" only, and an opaque VR scene."""
+    page = open_page(browser, server.base + "/xr/emulator.html?modes=vr")
+    try:
+        page.wait_for_selector("#enter-vr:not([hidden])", timeout=10000)
+        assert page.is_hidden("#enter-ar")
+        box = page.locator("#enter-vr").bounding_box()
+        page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        page.wait_for_function("somxr.state().presenting && somxr.state().mode === 'immersive-vr'", timeout=15000)
+        wait_frames(page, 3)
+        st = page.evaluate("somxr.state()")
+        assert not st["transparent"] and st["supported"] == {"ar": False, "vr": True}
+        assert 0.15 < page.evaluate("somxr.worldRadius()") < 0.4
+        assert not page.errors, page.errors
+    finally:
+        page.close()
+
+
+def test_controller_trigger_grabs_moves_and_releases(ar_page, server, session):
+    start = session.controls
+    dev = device_input(ar_page, "controller")
+    delta = np.array([0.04, 0.05, 0.03])
+    target, expected, before = grab_move_release(
+        ar_page, server, session, dev, False, 2, delta,
+        press=f"{dev}.updateButtonValue('trigger', 1)", release=f"{dev}.updateButtonValue('trigger', 0)")
+    check_moved(ar_page, session, 2, expected, before, start)
+    assert ar_page.evaluate("somxr.state().xr.releases") >= 1
+
+
+def test_hand_pinch_grabs_moves_and_releases(ar_page, server, session):
+    ar_page.evaluate("iwerDevice.primaryInputMode = 'hand'")
+    ar_page.wait_for_function("somxr.inputs().some((i) => i.hand && i.handedness === 'right' && i.point)",
+                              timeout=10000)
+    dev = device_input(ar_page, "hand")
+    ar_page.evaluate(f"{dev}.poseId = 'pinch'")  # fingers closing on the way (no pinch event yet)
+    wait_frames(ar_page, 2)
+    start = session.controls
+    delta = np.array([-0.03, 0.04, -0.04])
+    target, expected, before = grab_move_release(
+        ar_page, server, session, dev, True, 4, delta,
+        press=f"{dev}.updatePinchValue(1)", release=f"{dev}.updatePinchValue(0)")
+    check_moved(ar_page, session, 4, expected, before, start)
+
+
+def test_move_and_scale_the_clay(ar_page):
+    """Squeeze one controller and move it: the clay follows. Squeeze both and pull them apart: it grows."""
+    right, left = "iwerDevice.controllers.right", "iwerDevice.controllers.left"
+    stage0 = np.array(ar_page.evaluate("somxr.state().stage"))
+    scale0 = ar_page.evaluate("somxr.state().scale")
+    ar_page.evaluate(f"{right}.updateButtonValue('squeeze', 1)")
+    wait_frames(ar_page, 2)
+    delta = np.array([0.1, -0.05, 0.08])
+    glide(ar_page, right, delta, steps=5)
+    ar_page.evaluate(f"{right}.updateButtonValue('squeeze', 0)")
+    wait_frames(ar_page, 2)
+    np.testing.assert_allclose(np.array(ar_page.evaluate("somxr.state().stage")) - stage0, delta, atol=1e-3)
+    assert ar_page.evaluate("somxr.state().scale") == pytest.approx(scale0)
+    # two hands: pull the controllers apart by half their distance -> the clay grows with the distance between
+    # their grip points (the controller tips the page draws)
+    def tips():
+        pts = {i["handedness"]: np.array(i["point"]) for i in ar_page.evaluate("somxr.inputs()") if not i["hand"]}
+        return np.linalg.norm(pts["right"] - pts["left"])
+
+    gap = np.linalg.norm(get_position(ar_page, right) - get_position(ar_page, left))
+    tips0 = tips()
+    ar_page.evaluate(f"{right}.updateButtonValue('squeeze', 1); {left}.updateButtonValue('squeeze', 1)")
+    wait_frames(ar_page, 2)
+    direction = (get_position(ar_page, right) - get_position(ar_page, left)) / gap
+    glide(ar_page, right, 0.25 * gap * direction, steps=4)
+    glide(ar_page, left, -0.25 * gap * direction, steps=4)
+    ar_page.evaluate(f"{right}.updateButtonValue('squeeze', 0); {left}.updateButtonValue('squeeze', 0)")
+    wait_frames(ar_page, 2)
+    ratio = tips() / tips0
+    assert ratio > 1.4
+    assert ar_page.evaluate("somxr.state().scale") == pytest.approx(ratio * scale0, rel=1e-3)
+    assert ar_page.evaluate("somxr.state().held") == []  # squeezing moved the clay, not a control
+
+
+def _look_along(direction) -> list[float]:
+    """The quaternion (x, y, z, w) turning -z onto `direction`."""
+    a = np.array([0.0, 0.0, -1.0])
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    axis = np.cross(a, d)
+    s = np.linalg.norm(axis)
+    angle = math.atan2(s, float(a @ d))
+    axis = axis / s if s > 1e-9 else np.array([1.0, 0.0, 0.0])
+    return [*(axis * math.sin(angle / 2)), math.cos(angle / 2)]
+
+
+def test_menu_pause_reset_train_in_xr(ar_page, session):
+    """Point the controller at "Pause" and pull the trigger; touch "Reset" with a finger; point at "Train"."""
+    dev = device_input(ar_page, "controller")
+
+    def point_and_pull(name):
+        b = ar_page.evaluate(f"somxr.button('{name}')")
+        centre, normal = np.array(b["centre"]), np.array(b["normal"])
+        set_position(ar_page, dev, centre + 0.2 * normal)
+        ar_page.evaluate("(q) => iwerDevice.controllers.right.quaternion.set(q[0], q[1], q[2], q[3])",
+                         _look_along(-normal))
+        wait_frames(ar_page, 2)
+        ar_page.evaluate(f"{dev}.updateButtonValue('trigger', 1)")
+        wait_frames(ar_page, 2)
+        ar_page.evaluate(f"{dev}.updateButtonValue('trigger', 0)")
+        wait_frames(ar_page, 2)
+        ar_page.evaluate("iwerDevice.controllers.right.quaternion.set(0, 0, 0, 1)")
+
+    assert not session.paused
+    point_and_pull("train")  # labelled "Pause" while training
+    wait_for(lambda: session.paused, what="the session paused from the XR menu")
+    ar_page.wait_for_function("somxr.button('train').label === 'Train'", timeout=5000)
+
+    # reset: touch the button with the right index finger tip
+    session.move_control(0, session.controls[0, :3] + np.float32([0.0, 0.0, 0.3]))
+    ar_page.evaluate("iwerDevice.primaryInputMode = 'hand'")
+    ar_page.wait_for_function("somxr.inputs().some((i) => i.hand && i.handedness === 'right')", timeout=10000)
+    wait_frames(ar_page, 2)
+    hand = device_input(ar_page, "hand")
+    b = ar_page.evaluate("somxr.button('reset')")
+    ar_page.evaluate(f"{hand}.poseId = 'point'")  # index finger out
+    wait_frames(ar_page, 2)
+    # the finger tip 5 cm in front of the button, then pushed through it
+    bring_to(ar_page, hand, True, np.array(b["centre"]) + 0.05 * np.array(b["normal"]), key="tip")
+    glide(ar_page, hand, -0.07 * np.array(b["normal"]), steps=7)
+    wait_for(lambda: "reset" in ar_page.evaluate("somxr.state().pressed"), what="the reset button touched")
+    wait_for(lambda: session.frame.iteration == 0, what="the session reset")
+    ar_page.evaluate("iwerDevice.primaryInputMode = 'controller'")
+    ar_page.wait_for_function("somxr.inputs().some((i) => !i.hand && i.handedness === 'right')", timeout=10000)
+    set_position(ar_page, dev, [0.25, 1.5, -0.4])
+    wait_frames(ar_page, 2)
+    point_and_pull("train")
+    wait_for(lambda: not session.paused, what="the session training again")
+    assert session.wait_idle(60)
+
+
+def test_desktop_preview_mouse_drag_and_headset_sees_it(browser, server, session):
+    """Without a headset the page is a desktop preview: drag a control with the mouse. A headset page open at the
+    same time sees the move (they share the session), and sees the control held while it is dragged."""
+    desk = open_page(browser, server.base + "/xr/")
+    headset = open_page(browser, server.base + "/xr/emulator.html")
+    try:
+        enter_ar(headset)
+        st = desk.evaluate("somxr.state()")
+        assert not st["presenting"] and st["mode"] is None
+        assert desk.is_visible("#no-xr") or desk.is_visible("#enter-vr")  # the page says it is a preview
+        start = session.controls
+        index = 6
+        x, y = desk.evaluate(f"somxr.controlScreen({index})")
+        before_seq = session.frame.seq
+        desk.mouse.move(x, y)
+        # the ray may meet the mirrored copy first (it is nearer the camera): dragging it moves the original too
+        desk.wait_for_function(f"somxr.state().hover.some((j) => j % 9 === {index})", timeout=5000)
+        desk.mouse.down()
+        wait_for(lambda: server.hub.grabs.get(index) is not None, what="the desktop grab")
+        headset.wait_for_function(f"somxr.state().held.includes({index})", timeout=5000)  # red on the headset
+        for s in range(1, 9):
+            desk.mouse.move(x + 8 * s, y - 5 * s)
+            desk.wait_for_timeout(40)
+        desk.mouse.up()
+        wait_for(lambda: index not in server.hub.grabs, what="the desktop release")
+        wait_for(lambda: np.linalg.norm(session.controls[index, :3] - start[index, :3]) > 0.2,
+                 what="the control to move")
+        assert session.wait_idle(60)
+        frame = session.frame
+        assert frame.seq > before_seq
+        for page in (desk, headset):
+            page.wait_for_function(f"somxr.state().seq >= {frame.seq}", timeout=10000)
+            np.testing.assert_allclose(page.evaluate(f"somxr.serverControl({index})"),
+                                       frame.control_positions[index], atol=1e-5)
+        assert not desk.errors and not headset.errors, desk.errors + headset.errors
+    finally:
+        desk.close()
+        headset.close()

@@ -1,0 +1,131 @@
+"""Serving the XR page on the LAN (somwidget.frontend.lan): the self-signed certificate made once and reused, the
+access token (403 without it, a cookie with it), the QR code, and HTTPS end to end with a real Session."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import ssl
+import stat
+
+import aiohttp
+import numpy as np
+import pytest
+
+from somwidget.frontend import lan
+from somwidget.frontend.xr import protocol
+from somwidget.frontend.xr.standalone import XRServer
+
+
+def test_certificate_made_once_and_reused(tmp_path):
+    from cryptography import x509
+
+    cert, key = lan.make_certificate(tmp_path, hosts=["192.168.1.20"])
+    assert cert.is_file() and key.is_file()
+    assert stat.S_IMODE(os.stat(key).st_mode) == 0o600  # the private key: owner only
+    c = x509.load_pem_x509_certificate(cert.read_bytes())
+    san = c.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert "192.168.1.20" in {str(i) for i in san.get_values_for_type(x509.IPAddress)}
+    assert "127.0.0.1" in {str(i) for i in san.get_values_for_type(x509.IPAddress)}
+    assert "localhost" in san.get_values_for_type(x509.DNSName)
+    assert (c.not_valid_after_utc - c.not_valid_before_utc).days <= 825  # Apple's limit
+    fingerprint = lan.certificate_fingerprint(cert)
+    assert lan.make_certificate(tmp_path, hosts=["192.168.1.20"]) == (cert, key)
+    assert lan.certificate_fingerprint(cert) == fingerprint  # reused, not remade
+    lan.make_certificate(tmp_path, hosts=["10.0.0.7"])  # another address: a new certificate naming it
+    assert lan.certificate_fingerprint(cert) != fingerprint
+    assert isinstance(lan.ssl_context(cert, key), ssl.SSLContext)
+    cert.write_text("garbage")  # a broken file is replaced
+    lan.make_certificate(tmp_path, hosts=["10.0.0.7"])
+    lan.ssl_context(cert, key)
+
+
+def test_data_dir_and_prepare(tmp_path, monkeypatch):
+    monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(tmp_path / "data"))
+    assert lan.data_dir() == tmp_path / "data"
+    cfg = lan.prepare_lan(host="127.0.0.1")
+    assert cfg.cert.parent == tmp_path / "data" and cfg.host == "127.0.0.1"
+    assert cfg.url(8443, "/xr/") == f"https://127.0.0.1:8443/xr/?token={cfg.token}"
+    assert lan.prepare_lan(host="127.0.0.1").token != cfg.token  # a fresh token each time
+    wild = lan.prepare_lan(host="0.0.0.0")  # bind everywhere, show the LAN address
+    assert wild.bind == "0.0.0.0" and wild.host == lan.lan_address() and cfg.bind == "127.0.0.1"
+    text = lan.announcement(cfg, 8443)
+    assert cfg.url(8443, "/xr/") in text and "SHA-256" in text and "\u2588" in text
+    monkeypatch.delenv("SOMWIDGET_DATA_DIR")
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    assert lan.data_dir() == tmp_path / "xdg" / "somwidget"
+
+
+def test_lan_address_is_an_ip():
+    import ipaddress
+
+    ipaddress.ip_address(lan.lan_address())
+
+
+def test_tokens_are_fresh_and_url_safe():
+    tokens = {lan.make_token() for _ in range(50)}
+    assert len(tokens) == 50
+    assert all(len(t) >= 24 and t.replace("-", "").replace("_", "").isalnum() for t in tokens)
+
+
+def test_qr_text_encodes_the_url():
+    """Read the terminal drawing back into modules and compare with the QR code segno computes for the URL."""
+    import segno
+
+    url = "https://192.168.1.20:8080/xr/?token=abcdefghijklmnopqrstuvwx"
+    text = lan.qr_text(url, border=2)
+    rows = text.rstrip("\n").split("\n")
+    qr = segno.make(url, error="m")
+    size = qr.symbol_size(border=2)[0]
+    # compact drawing: one character per column and two module rows; light modules are drawn
+    dark = np.zeros((2 * len(rows), len(rows[0])), bool)
+    for r, line in enumerate(rows):
+        for col, ch in enumerate(line):
+            top_light = ch in "\u2588\u2580"
+            bottom_light = ch in "\u2588\u2584"
+            dark[2 * r, col] = not top_light
+            dark[2 * r + 1, col] = not bottom_light
+    want = np.array([[bool(m) for m in row] for row in qr.matrix_iter(border=2)])
+    assert dark.shape[1] == size
+    np.testing.assert_array_equal(dark[:size], want)
+
+
+def test_https_with_token_end_to_end(tmp_path):
+    """The XR route over TLS with the token middleware: 403 without the token, the page and the websocket with it
+    (the client checks the server's certificate is the one made)."""
+    from somwidget.frontend.session import Session
+
+    cfg = lan.prepare_lan(host="127.0.0.1", directory=tmp_path)
+    client_ctx = ssl.create_default_context()
+    client_ctx.check_hostname = False
+    client_ctx.verify_mode = ssl.CERT_NONE  # self-signed: compare the fingerprint instead
+
+    with Session("car", device="cpu", paused=True) as session, \
+            XRServer(session, host="127.0.0.1", token=cfg.token, ssl_context=cfg.ssl_context()) as srv:
+        assert srv.base.startswith("https://")
+
+        async def main():
+            conn = aiohttp.TCPConnector(ssl=client_ctx)
+            async with aiohttp.ClientSession(connector=conn, cookie_jar=aiohttp.CookieJar(unsafe=True)) as cs:
+                async with cs.get(srv.base + "/xr/") as r:
+                    assert r.status == 403
+                with pytest.raises(aiohttp.WSServerHandshakeError) as info:
+                    await cs.ws_connect(srv.base.replace("https", "wss") + "/xr/ws")
+                assert info.value.status == 403
+                async with cs.get(srv.url) as r:
+                    assert r.status == 200
+                    assert "Secure" in r.headers.get("Set-Cookie", "") and "HttpOnly" in r.headers["Set-Cookie"]
+                    der = r.connection.transport.get_extra_info("ssl_object").getpeercert(binary_form=True)
+                async with cs.ws_connect(srv.base.replace("https", "wss") + "/xr/ws") as ws:  # the cookie
+                    topo = json.loads((await ws.receive(timeout=10)).data)
+                    frame = protocol.decode_frame((await ws.receive(timeout=10)).data)
+                return der, topo, frame
+
+        der, topo, frame = asyncio.run(main())
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes
+
+    seen = ":".join(f"{b:02X}" for b in x509.load_der_x509_certificate(der).fingerprint(hashes.SHA256()))
+    assert seen == lan.certificate_fingerprint(cfg.cert)
+    assert topo["type"] == "topology" and frame["n"] == 602
