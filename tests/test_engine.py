@@ -687,3 +687,42 @@ def test_cpu_cores_split_gives_the_reference_weights(cores, smoothing):
     expect.train()
     assert expect.min_margin() > 1e-4
     np.testing.assert_allclose(som.weights, expect.weights, atol=1e-4)
+
+
+def test_two_threads_can_build_and_train_at_once():
+    """A Som trains (capturing graphs) on one thread while another builds Soms and uploads to them: Warp records
+    every launch on the device during a capture, so without the engine's lock the other thread's work lands in
+    (or breaks) the capture."""
+    import threading
+
+    faces = torus_quads(8, 6)
+    points = torus_points(8, 6).astype(np.float32)
+    topo = Topology.from_faces(faces)
+    controls = np.array([[2.0, 1.0, 0.5], [-1.5, 0.5, 1.0]], np.float32)
+    trainer = Som(topo, points, controls, iterations=50, device="cpu")
+    errors: list[BaseException] = []
+    stop = threading.Event()
+
+    def train():
+        try:
+            for i in range(200):
+                trainer.set_controls(controls + np.float32(0.01 * (i % 7)))  # new controls: graphs recaptured
+                trainer.step(3)
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+        finally:
+            stop.set()
+
+    thread = threading.Thread(target=train)
+    thread.start()
+    built = 0
+    try:
+        while not stop.is_set() and built < 200:
+            other = Som(Topology.from_faces(faces), points, controls, iterations=10, device="cpu")
+            other.set_weights(points * np.float32(1.01))
+            other.step(2)
+            built += 1
+    finally:
+        thread.join()
+    assert not errors, errors
+    assert built > 0

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import functools
+import threading
+
 import warp as wp
 
 from . import kernels
@@ -33,3 +36,20 @@ def resolve(device: str | None) -> str:
 def block_threads(device: str) -> int:
     """Threads per block of the tiled kernels: Warp runs a CPU block as one thread."""
     return 1 if device == "cpu" else int(kernels.CUDA_BLOCK)
+
+
+#: Warp records every launch made on a device while a graph of that device is being captured, whichever thread
+#: makes it. All of the engine's Warp work takes this lock, so a capture holds only its own launches and several
+#: threads (a session training while another loads a mesh, two sessions in one process) stay apart.
+warp_lock = threading.RLock()
+
+
+def warp_exclusive(method):
+    """Run `method` holding `warp_lock`."""
+
+    @functools.wraps(method)
+    def locked(*args, **kwargs):
+        with warp_lock:
+            return method(*args, **kwargs)
+
+    return locked

@@ -10,7 +10,7 @@ import numpy as np
 import warp as wp
 
 from . import checks
-from .device import resolve
+from .device import resolve, warp_exclusive
 from .kernels import CUDA_BLOCK, assign_slots, barrier, cycle_kernels, sched_yield_address
 from .schedule import learning_table
 from .topology import MAX_DENSE_NEURONS, RowSearch, Topology
@@ -42,6 +42,7 @@ class Som:
     Both give the same weights.
     """
 
+    @warp_exclusive
     def __init__(
         self,
         topology: Topology,
@@ -174,6 +175,7 @@ class Som:
         return self._iterations
 
     @iterations.setter
+    @warp_exclusive
     def iterations(self, value: int) -> None:
         old, self._iterations = self._iterations, checks.integer("iterations", value, 1)
         try:
@@ -188,6 +190,7 @@ class Som:
         return self._l_start
 
     @l_start.setter
+    @warp_exclusive
     def l_start(self, value: float) -> None:
         self._l_start = checks.real("l_start", value, 0.0, 1.0, low_open=True)
         self._build_table()
@@ -198,6 +201,7 @@ class Som:
         return self._l_end
 
     @l_end.setter
+    @warp_exclusive
     def l_end(self, value: float) -> None:
         self._l_end = checks.real("l_end", value, 0.0, 1.0, low_open=True)
         self._build_table()
@@ -209,6 +213,7 @@ class Som:
         return self._smoothing
 
     @smoothing.setter
+    @warp_exclusive
     def smoothing(self, value: float) -> None:
         self._smoothing = checks.real("smoothing", value, 0.0, 1.0)
         self._graphs.clear()
@@ -218,6 +223,7 @@ class Som:
         return self._smooth_dims
 
     @smooth_dims.setter
+    @warp_exclusive
     def smooth_dims(self, value) -> None:
         self._smooth_dims = self._check_smooth_dims(value)
         self._mask.assign(self._mask_of(self._smooth_dims)[None, :])
@@ -227,6 +233,7 @@ class Som:
         return self._metric.copy()
 
     @metric_weights.setter
+    @warp_exclusive
     def metric_weights(self, value) -> None:
         self._metric = self._check_metric(value)
         self._m.assign(self._metric[None, :])
@@ -238,6 +245,7 @@ class Som:
         return self._mirror
 
     @mirror.setter
+    @warp_exclusive
     def mirror(self, value) -> None:
         mirror = checks.dims("mirror", value, self.n_dims)
         self._check_controls(self._controls, mirror)
@@ -260,6 +268,7 @@ class Som:
         return np.concatenate([self._controls, copies])
 
     @property
+    @warp_exclusive
     def weights(self) -> np.ndarray:
         """(N, n) float32 host copy of the current weights."""
         return self._w.numpy().reshape(self.n_neurons, self.n_dims).copy()
@@ -278,12 +287,14 @@ class Som:
         return self._table_host.copy()
 
     # -- intents ------------------------------------------------------------------------------------------
+    @warp_exclusive
     def set_controls(self, controls) -> None:
         """New controls (any count k); the schedule restarts at s = 0 from the latest weights."""
         self._controls = self._check_controls(controls, self._mirror)
         self._upload_controls()
         self._restart()
 
+    @warp_exclusive
     def set_weights(self, weights) -> None:
         """Replace the current weights (same shape); the schedule restarts at s = 0."""
         w = checks.finite_array("weights", weights, 2)
@@ -292,17 +303,20 @@ class Som:
         self._w.assign(w)
         self._restart()
 
+    @warp_exclusive
     def reset(self) -> None:
         """Back to the start weights and s = 0; the controls stay."""
         self._w.assign(self._start)
         self._restart()
 
+    @warp_exclusive
     def winners(self) -> np.ndarray:
         """(k_eff,) the nearest neuron (metric-weighted) of each effective control for the current weights."""
         self._find_winners_now()
         return self._current_winners()
 
     # -- training -----------------------------------------------------------------------------------------
+    @warp_exclusive
     def step(self, n: int = 1) -> int:
         """Run up to n cycles (stopping at S); returns how many ran."""
         n = checks.integer("n", n, 0)
@@ -318,6 +332,7 @@ class Som:
         """Run the rest of the schedule (to s = S); returns the cycles run."""
         return self.step(self._iterations - self._s)
 
+    @warp_exclusive
     def synchronize(self) -> None:
         wp.synchronize_device(self.device)
 

@@ -12,7 +12,7 @@ import numpy as np
 import warp as wp
 
 from . import checks, kernels
-from .device import resolve
+from .device import resolve, warp_exclusive
 
 #: The dense distance table holds at most 2^16 neurons (the paper's cap: 8 GiB of uint16).
 MAX_DENSE_NEURONS = 65536
@@ -92,6 +92,7 @@ class Topology:
             self.distance_table(None)
         return self._d_max
 
+    @warp_exclusive
     def diameter(self, device: str | None = None) -> int:
         """d_max without the dense table: exact, by the iFUB method (Crescenzi et al. 2013) over each connected
         component. A few BFS sweeps on the CPU settle most meshes; a highly symmetric one (a torus) can need a
@@ -104,6 +105,7 @@ class Topology:
         """(N, N) uint16 BFS hop counts, 0 on the diagonal, 65535 between separate components."""
         return self.distance_table(None).numpy()
 
+    @warp_exclusive
     def distance_table(self, device: str | None) -> wp.array:
         """The dense table as a Warp array on `device`, computed there once (one BFS per neuron) and cached."""
         device = resolve(device)
@@ -171,6 +173,7 @@ class RowSearch:
         """Level by level (CUDA) when its `levels` launches cost less than a thread walking the whole graph."""
         return self.device != "cpu" and levels * _LEVEL_COST <= self._cost
 
+    @warp_exclusive
     def run(self, sources, slots, rows: wp.array, levels: int, far: bool = False) -> np.ndarray | None:
         """rows[slots[i]] = hops to the nearest of sources[i] (a sequence of vertices), -1 where none is reachable.
         levels bounds the depth of every search (d_max will do). far=True returns each row's largest distance."""
