@@ -79,7 +79,7 @@ def time_cupy(som: Som, repeats: int) -> tuple[float, float]:
         hops = d[u]  # (k, N) uint16
         rate_row = table[s]
         cp.take(rate_row, cp.minimum(hops, table.shape[1] - 1).astype(cp.int32), out=rows)
-        rows[hops == unreachable] = 0.0
+        cp.copyto(rows, cp.float32(0.0), where=hops == unreachable)  # no boolean indexing: it syncs with the host
         for i in range(len(VECTORS)):
             w[...] += rows[i][:, None] * (c[i] - w)
         s[...] += 1
