@@ -221,7 +221,7 @@ class NumpySom:
 # ----------------------------------------------------------------------------------------------------------------
 # Cases
 # ----------------------------------------------------------------------------------------------------------------
-def _big_som(device: str, cycles: int) -> tuple[Som, Topology]:
+def _big_som(device: str, cycles: int, cpu_cores: int | None = None) -> tuple[Som, Topology]:
     """A 256 x 256 open quad grid in the plane z = 0, spanning [-1, 1]^2, pulled by 18 controls (9 mirrored)."""
     side = BIG_SIDE
     idx = np.arange(side * side, dtype=np.int64).reshape(side, side)
@@ -234,14 +234,14 @@ def _big_som(device: str, cycles: int) -> tuple[Som, Topology]:
         [-0.05, 0.20, 0.60], [0.95, 0.05, -0.30], [-0.95, 0.10, 0.25], [0.30, 0.85, 0.45],
     ], np.float32)  # 9 controls mirrored across y = 0: 18, as in the paper's car
     topo = Topology.from_faces(quads, side * side)
-    return Som(topo, weights, controls, iterations=cycles, mirror=(1,), device=device), topo
+    return Som(topo, weights, controls, iterations=cycles, mirror=(1,), device=device, cpu_cores=cpu_cores), topo
 
 
-def _make(case: str, device: str, cycles: int) -> tuple[Som, Topology]:
+def _make(case: str, device: str, cycles: int, cpu_cores: int | None = None) -> tuple[Som, Topology]:
     if case == "big":
-        return _big_som(device, cycles)
+        return _big_som(device, cycles, cpu_cores)
     preset = get_preset("car" if case == "car" else "space-grid")
-    som = preset.make_som(device)
+    som = preset.make_som(device, cpu_cores=cpu_cores)
     if case == "space-grid":
         som.smoothing = 0.0
     elif case == "space-grid-smooth" and som.smoothing <= 0.0:
@@ -423,11 +423,12 @@ def device_name(device: str) -> str:
     return f"{platform.processor() or platform.machine()} ({os.cpu_count()} cores)"
 
 
-def run_case(case: str, device: str, cycles: int, repeats: int = 3, baseline: bool = True) -> CaseResult:
+def run_case(case: str, device: str, cycles: int, repeats: int = 3, baseline: bool = True,
+             cpu_cores: int | None = None) -> CaseResult:
     if case not in CASES:
         raise ValueError(f"bench: unknown case {case!r}; cases: {', '.join(CASES)}")
     t = time.perf_counter()
-    som, topo = _make(case, device, cycles)
+    som, topo = _make(case, device, cycles, cpu_cores)
     _sync(som.device)
     build = time.perf_counter() - t
     start = som.weights
@@ -499,7 +500,8 @@ def meta(device: str) -> dict:
 
 
 def run(device: str | None = "auto", cases=None, cycles: int | None = None, repeats: int = 3,
-        baseline: bool = True, json_path: str | None = None, out=print) -> list[CaseResult]:
+        baseline: bool = True, json_path: str | None = None, out=print, cpu_cores: int | None = None
+        ) -> list[CaseResult]:
     """Run the cases, print the report with `out`, optionally write JSON; returns the results."""
     dev = resolve(device)
     on_gpu = dev.startswith("cuda")
@@ -517,11 +519,12 @@ def run(device: str | None = "auto", cases=None, cycles: int | None = None, repe
     info = meta(dev)
     out(f"somwidget bench: {info['device_name']} [{dev}], warp {info['warp']}, numpy {info['numpy']}, "
         f"python {info['python']}, {info['date']}")
-    out(f"cycles {cycles}, frames of step({FRAME_STEP}), median of {repeats} repeats; "
+    cores = "" if dev != "cpu" else f"CPU cores {cpu_cores or 'chosen by the engine'}; "
+    out(f"{cores}cycles {cycles}, frames of step({FRAME_STEP}), median of {repeats} repeats; "
         "ratio = numpy us/cycle / engine us/cycle; readback = som.weights after a frame")
     results = []
     for case in cases:
-        res = run_case(case, dev, cycles, repeats, baseline)
+        res = run_case(case, dev, cycles, repeats, baseline, cpu_cores)
         results.append(res)
         out(f"  {case}: build {res.build_s:.2f} s; warm-up: first step(1) {res.first_step_s * 1e3:.1f} ms (kernel "
             f"load or compile, graph capture), first train() {res.first_train_s * 1e3:.1f} ms (capture + run)")

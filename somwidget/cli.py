@@ -83,6 +83,8 @@ def _build_parser() -> argparse.ArgumentParser:
         help="timed repetitions of each measurement; the median is reported (default: %(default)s)",
     )
     bench.add_argument("--json", metavar="FILE", help="also write the results as JSON to FILE")
+    bench.add_argument("--cpu-cores", type=int, metavar="N", help="on the CPU, split each cycle over N cores "
+                       "(default: the engine chooses: one for small meshes)")
     bench.add_argument("--no-baseline", action="store_true",
                        help="skip the numpy baseline (the ratio columns then read n/a)")
     return parser
@@ -116,6 +118,7 @@ def _bench(args: argparse.Namespace) -> int:
         repeats=args.repeats,
         baseline=not args.no_baseline,
         json_path=args.json,
+        cpu_cores=args.cpu_cores,
     )
     return 0 if results else 1
 

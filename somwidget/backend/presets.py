@@ -176,13 +176,14 @@ class Preset:
         """The controls the engine trains on: originals, then their mirrored copies (if `mirror`)."""
         return effective_controls(self.controls, self.mirror)
 
-    def make_som(self, device=None):
-        """A fresh `Som` with this preset's topology, start weights, controls and settings."""
+    def make_som(self, device=None, **engine_options):
+        """A fresh `Som` with this preset's topology, start weights, controls and settings; `engine_options` go to
+        `Som` as they are (cpu_cores, distances, cache_rows)."""
         from .som import Som
 
         return Som(self.topology, self.weights, self.controls, iterations=self.iterations, l_start=self.l_start,
                    l_end=self.l_end, smoothing=self.smoothing, smooth_dims=self.smooth_dims,
-                   metric_weights=self.metric_weights, mirror=self.mirror, device=device)
+                   metric_weights=self.metric_weights, mirror=self.mirror, device=device, **engine_options)
 
 
 def effective_controls(controls, mirror=()) -> np.ndarray:
