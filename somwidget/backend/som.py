@@ -106,7 +106,10 @@ class Som:
         self._mask = wp.array(self._mask_of(self._smooth_dims)[None, :], dtype=vec, device=dev)
         self._keys = wp.full((3, MAX_CONTROLS), _KEY_NONE, dtype=wp.uint64, device=dev)
         # CUDA: two cycle counters that the kernels pass on (ping-pong); CPU: one counter per core
-        self._cycle = [wp.zeros(1, dtype=wp.int32, device=dev) for _ in range(64 if dev == "cpu" else 2)]
+        # one array, a 64-byte line per counter (no false sharing between cores), filled in one go on a restart
+        counters = 64 if dev == "cpu" else 2
+        self._counters = wp.zeros(counters * 16, dtype=wp.int32, device=dev)
+        self._cycle = [self._counters[i * 16: i * 16 + 1] for i in range(counters)]
         self._meet = wp.zeros(1, dtype=wp.int64, device=dev)
         self._meet_failed = wp.zeros(1, dtype=wp.int32, device=dev)
         self._graphs: dict[tuple, object] = {}
@@ -374,8 +377,7 @@ class Som:
         self._winners_valid = False
 
     def _set_cycle(self) -> None:
-        for arr in self._cycle:
-            arr.fill_(self._s)
+        self._counters.fill_(self._s)
 
     def _find_winners_now(self) -> None:
         if self._winners_valid:
