@@ -7,6 +7,10 @@ from collections.abc import Iterable
 
 import numpy as np
 
+#: Largest magnitude a weight or control may have: a sum of 32 squared differences of such values stays finite in
+#: float32 (max 3.4e38), so the winner search never compares infinities.
+MAX_MAGNITUDE = 1e18
+
 
 def finite_array(name: str, value, ndim: int, dtype=np.float32) -> np.ndarray:
     """`value` as a C-contiguous array of `dtype` with `ndim` dimensions and only finite entries."""
@@ -25,10 +29,10 @@ def finite_array(name: str, value, ndim: int, dtype=np.float32) -> np.ndarray:
     if bad.any():
         where = tuple(int(i) for i in np.argwhere(bad)[0])
         raise ValueError(f"{name}: entries must be finite; found {arr64[where]} at index {where}")
-    limit = float(np.finfo(dtype).max) if np.issubdtype(dtype, np.floating) else math.inf
-    if np.abs(arr64).max(initial=0.0) > limit / 1e6:
-        bound = f"|x| <= {limit / 1e6:.3g}"
-        raise ValueError(f"{name}: values must stay well inside the {np.dtype(dtype).name} range ({bound})")
+    limit = MAX_MAGNITUDE if np.issubdtype(dtype, np.floating) else math.inf
+    if np.abs(arr64).max(initial=0.0) > limit:
+        raise ValueError(f"{name}: values must satisfy |x| <= {limit:.0e}, so that squared distances stay finite in "
+                         f"float32; found {np.abs(arr64).max():.3g}")
     return np.ascontiguousarray(arr64.astype(dtype))
 
 

@@ -7,7 +7,6 @@ import threading
 
 import warp as wp
 
-from . import kernels
 
 wp.config.log_level = wp.LOG_WARNING  # no start-up banner; warnings still show
 
@@ -32,10 +31,6 @@ def resolve(device: str | None) -> str:
         return device
     raise ValueError(f"device: expected None, 'auto', 'cpu', 'cuda' or 'cuda:N', got {device!r}")
 
-
-def block_threads(device: str) -> int:
-    """Threads per block of the tiled kernels: Warp runs a CPU block as one thread."""
-    return 1 if device == "cpu" else int(kernels.CUDA_BLOCK)
 
 
 #: Warp records every launch made on a device while a graph of that device is being captured, whichever thread

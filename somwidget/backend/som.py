@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import os
 from collections import OrderedDict
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import warp as wp
+from numpy.typing import ArrayLike
 
 from . import checks
 from .device import resolve, warp_exclusive
@@ -18,10 +20,11 @@ from .topology import MAX_DENSE_NEURONS, RowSearch, Topology
 MAX_DIMS = 32
 MAX_CONTROLS = 256  # counts the effective list: originals plus mirrored copies
 _KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
+#: Cycles in the longest captured graph; runs are split into powers of two.
 _LONGEST_GRAPH = 512
 _YIELD = sched_yield_address()
-#: neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each)
-_PAIRS_PER_EXTRA_CORE = 1 << 18  # cycles in the longest captured graph; runs are split into powers of two
+#: Neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each).
+_PAIRS_PER_EXTRA_CORE = 1 << 18
 #: Distance rows mode: the cache's default size in bytes (int32 rows of N), at least 2 x MAX_CONTROLS rows.
 _CACHE_BYTES = 1 << 30
 _CACHE_MOST_ROWS = 4096
@@ -46,15 +49,15 @@ class Som:
     def __init__(
         self,
         topology: Topology,
-        weights,
-        controls,
+        weights: ArrayLike,
+        controls: ArrayLike,
         iterations: int = 1000,
         l_start: float = 0.25,
         l_end: float = 0.03,
         smoothing: float = 0.0,
-        smooth_dims=None,
-        metric_weights=None,
-        mirror=(),
+        smooth_dims: Sequence[int] | None = None,
+        metric_weights: ArrayLike | None = None,
+        mirror: Sequence[int] = (),
         device: str | None = None,
         *,
         cpu_cores: int | None = None,
@@ -97,8 +100,8 @@ class Som:
         self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=dev)
         neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
         self._neighbors = wp.array(neighbors, dtype=wp.int32, device=dev)
-        self._k = cycle_kernels(self.n_dims)
-        vec = self._k.vec
+        self._kernels = cycle_kernels(self.n_dims)
+        vec = self._kernels.vec
         self._w = wp.array(start, dtype=vec, device=dev)
         self._w_moved = wp.empty_like(self._w)
         self._c = wp.zeros(MAX_CONTROLS, dtype=vec, device=dev)
@@ -227,7 +230,7 @@ class Som:
 
     @smooth_dims.setter
     @warp_exclusive
-    def smooth_dims(self, value) -> None:
+    def smooth_dims(self, value: Sequence[int] | None) -> None:
         self._smooth_dims = self._check_smooth_dims(value)
         self._mask.assign(self._mask_of(self._smooth_dims)[None, :])
 
@@ -237,7 +240,7 @@ class Som:
 
     @metric_weights.setter
     @warp_exclusive
-    def metric_weights(self, value) -> None:
+    def metric_weights(self, value: ArrayLike) -> None:
         self._metric = self._check_metric(value)
         self._m.assign(self._metric[None, :])
         self._winners_valid = False
@@ -249,7 +252,7 @@ class Som:
 
     @mirror.setter
     @warp_exclusive
-    def mirror(self, value) -> None:
+    def mirror(self, value: Sequence[int]) -> None:
         mirror = checks.dims("mirror", value, self.n_dims)
         self._check_controls(self._controls, mirror)
         self._mirror = mirror
@@ -291,14 +294,14 @@ class Som:
 
     # -- intents ------------------------------------------------------------------------------------------
     @warp_exclusive
-    def set_controls(self, controls) -> None:
+    def set_controls(self, controls: ArrayLike) -> None:
         """New controls (any count k); the schedule restarts at s = 0 from the latest weights."""
         self._controls = self._check_controls(controls, self._mirror)
         self._upload_controls()
         self._restart()
 
     @warp_exclusive
-    def set_weights(self, weights) -> None:
+    def set_weights(self, weights: ArrayLike) -> None:
         """Replace the current weights (same shape); the schedule restarts at s = 0."""
         w = checks.finite_array("weights", weights, 2)
         if w.shape != (self.n_neurons, self.n_dims):
@@ -392,11 +395,11 @@ class Som:
 
     def _launch_find(self) -> None:
         if self.device == "cpu":
-            wp.launch(self._k.find_part, dim=1, device="cpu", inputs=[self._w, self._c, self._k_eff, self._m,
+            wp.launch(self._kernels.find_part, dim=1, device="cpu", inputs=[self._w, self._c, self._k_eff, self._m,
                                                                      self._keys, self._cycle[0], 0, 1, 0])
             return
         self._keys.fill_(_KEY_NONE)
-        wp.launch_tiled(self._k.find_winners, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=self.device,
+        wp.launch_tiled(self._kernels.find_winners, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=self.device,
                         inputs=[self._w, self._c, self._k_eff, self._m, self._keys, self._cycle[0]])
 
     def _run(self, cycles: int) -> None:
@@ -446,7 +449,7 @@ class Som:
 
     def _record_cpu(self, core: int, cycles: int, fresh: bool, smoothing: bool) -> None:
         """One core's share: move and smooth its neurons, find the winners of its controls, meet between phases."""
-        k, cores, (lo, hi), counter = self._k, self._cores, self._ranges[core], self._cycle[core]
+        kern, cores, (lo, hi), counter = self._kernels, self._cores, self._ranges[core], self._cycle[core]
 
         def meet():
             if cores > 1:
@@ -454,18 +457,18 @@ class Som:
 
         find = [self._w, self._c, self._k_eff, self._m, self._keys, counter, core, cores]
         if fresh:
-            wp.launch(k.find_part, dim=1, device="cpu", inputs=[*find, 0])
+            wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 0])
             meet()
         moved = self._w_moved if smoothing else self._w
         for _ in range(cycles):
-            wp.launch(k.move_part, dim=1, device="cpu", inputs=[self._w, moved, self._c, self._k_eff, self._table,
+            wp.launch(kern.move_part, dim=1, device="cpu", inputs=[self._w, moved, self._c, self._k_eff, self._table,
                                                                 self._distances, self._keys, counter, lo, hi])
             meet()
             if smoothing:
-                wp.launch(k.smooth_part, dim=1, device="cpu", inputs=[moved, self._w, self._offsets, self._neighbors,
+                wp.launch(kern.smooth_part, dim=1, device="cpu", inputs=[moved, self._w, self._offsets, self._neighbors,
                                                                       self._mask, self._smoothing, lo, hi])
                 meet()
-            wp.launch(k.find_part, dim=1, device="cpu", inputs=[*find, 1])
+            wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 1])
             meet()
 
     def _record_cuda(self, cycles: int, fresh: bool, parity: int, smoothing: bool) -> None:
@@ -477,14 +480,14 @@ class Som:
         for _ in range(cycles):
             c_in, c_out = self._cycle[p], self._cycle[1 - p]
             if smoothing:
-                wp.launch_tiled(self._k.move, dim=blocks, block_dim=threads, device=dev,
+                wp.launch_tiled(self._kernels.move, dim=blocks, block_dim=threads, device=dev,
                                 inputs=[self._w, self._w_moved, self._c, self._k_eff, self._m, self._table,
                                         self._distances, self._keys, c_in, c_out, 0])
-                wp.launch_tiled(self._k.smooth, dim=blocks, block_dim=threads, device=dev,
+                wp.launch_tiled(self._kernels.smooth, dim=blocks, block_dim=threads, device=dev,
                                 inputs=[self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
                                         self._smoothing, self._c, self._k_eff, self._m, self._keys, c_out, c_in])
             else:
-                wp.launch_tiled(self._k.move, dim=blocks, block_dim=threads, device=dev,
+                wp.launch_tiled(self._kernels.move, dim=blocks, block_dim=threads, device=dev,
                                 inputs=[self._w, self._w, self._c, self._k_eff, self._m, self._table,
                                         self._distances, self._keys, c_in, c_out, 1])
                 p = 1 - p
@@ -537,31 +540,31 @@ class Som:
                 lo, seen = c, set()
             seen.add(u)
         parts.append((lo, len(winners)))
-        k, dev, cache = self._k, self.device, self._cache
+        kern, dev, cache = self._kernels, self.device, self._cache
         moved = self._w_moved if smoothing else self._w
         source = self._w
         c_in, c_out = self._cycle[0], self._cycle[1]
         for i, (lo, hi) in enumerate(parts):
             cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), self._d_max)
             if dev == "cpu":
-                wp.launch(k.move_part_rows, dim=1, device=dev,
+                wp.launch(kern.move_part_rows, dim=1, device=dev,
                           inputs=[source, moved, self._c, lo, hi, self._table, cache.rows, cache.slot_of, self._keys,
                                   c_in, 0, self.n_neurons, self._stalled])
             else:
                 find_next = int(not smoothing and i == len(parts) - 1)
-                wp.launch_tiled(k.move_rows, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
+                wp.launch_tiled(kern.move_rows, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
                                 inputs=[source, moved, self._c, lo, hi, self._k_eff, self._m, self._table, cache.rows,
                                         cache.slot_of, self._keys, c_in, c_out, find_next, self._stalled])
             source = moved
         if dev == "cpu":
             if smoothing:
-                wp.launch(k.smooth_part_rows, dim=1, device=dev,
+                wp.launch(kern.smooth_part_rows, dim=1, device=dev,
                           inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing, 0,
                                   self.n_neurons, self._stalled])
-            wp.launch(k.find_part_rows, dim=1, device=dev,
+            wp.launch(kern.find_part_rows, dim=1, device=dev,
                       inputs=[self._w, self._c, self._k_eff, self._m, self._keys, c_in, 0, 1, self._stalled])
         elif smoothing:
-            wp.launch_tiled(k.smooth_rows, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
+            wp.launch_tiled(kern.smooth_rows, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
                             inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing,
                                     self._c, self._k_eff, self._m, self._keys, c_out, c_in, self._stalled])
         self._s += 1
@@ -570,7 +573,7 @@ class Som:
 
     def _record_cpu_rows(self, core: int, cycles: int, smoothing: bool) -> None:
         """`_record_cpu` reading distance rows (the winners of the first cycle are known)."""
-        k, cores, (lo, hi), counter = self._k, self._cores, self._ranges[core], self._cycle[core]
+        kern, cores, (lo, hi), counter = self._kernels, self._cores, self._ranges[core], self._cycle[core]
         rows, slot_of, stalled = self._cache.rows, self._cache.slot_of, self._stalled
 
         def meet():
@@ -579,16 +582,16 @@ class Som:
 
         moved = self._w_moved if smoothing else self._w
         for _ in range(cycles):
-            wp.launch(k.move_part_rows, dim=1, device="cpu",
+            wp.launch(kern.move_part_rows, dim=1, device="cpu",
                       inputs=[self._w, moved, self._c, 0, self._k_eff, self._table, rows, slot_of, self._keys, counter,
                               lo, hi, stalled])
             meet()
             if smoothing:
-                wp.launch(k.smooth_part_rows, dim=1, device="cpu",
+                wp.launch(kern.smooth_part_rows, dim=1, device="cpu",
                           inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing, lo, hi,
                                   stalled])
                 meet()
-            wp.launch(k.find_part_rows, dim=1, device="cpu",
+            wp.launch(kern.find_part_rows, dim=1, device="cpu",
                       inputs=[self._w, self._c, self._k_eff, self._m, self._keys, counter, core, cores, stalled])
             meet()
 
@@ -600,14 +603,14 @@ class Som:
         for _ in range(cycles):
             c_in, c_out = self._cycle[p], self._cycle[1 - p]
             if smoothing:
-                wp.launch_tiled(self._k.move_rows, dim=blocks, block_dim=threads, device=dev,
+                wp.launch_tiled(self._kernels.move_rows, dim=blocks, block_dim=threads, device=dev,
                                 inputs=[self._w, self._w_moved, self._c, 0, k, k, self._m, self._table, rows, slot_of,
                                         self._keys, c_in, c_out, 0, stalled])
-                wp.launch_tiled(self._k.smooth_rows, dim=blocks, block_dim=threads, device=dev,
+                wp.launch_tiled(self._kernels.smooth_rows, dim=blocks, block_dim=threads, device=dev,
                                 inputs=[self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
                                         self._smoothing, self._c, k, self._m, self._keys, c_out, c_in, stalled])
             else:
-                wp.launch_tiled(self._k.move_rows, dim=blocks, block_dim=threads, device=dev,
+                wp.launch_tiled(self._kernels.move_rows, dim=blocks, block_dim=threads, device=dev,
                                 inputs=[self._w, self._w, self._c, 0, k, k, self._m, self._table, rows, slot_of,
                                         self._keys, c_in, c_out, 1, stalled])
                 p = 1 - p
