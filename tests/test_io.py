@@ -371,3 +371,18 @@ def test_load_session_errors(tmp_path):
         with pytest.raises(ValueError, match=problem) as info:
             io.load_session(path)
         assert name in str(info.value), info.value
+
+
+def test_load_session_refuses_a_member_that_would_unpack_too_large(tmp_path):
+    """A small archive whose member inflates to hundreds of MB is refused before anything is decompressed."""
+    import io as byte_io
+
+
+    bomb = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as archive:
+        buf = byte_io.BytesIO()
+        np.save(buf, np.zeros(100_000_000, np.uint8))
+        archive.writestr("weights.npy", buf.getvalue())
+    assert bomb.stat().st_size < 1_000_000
+    with pytest.raises(ValueError, match="bomb.npz.*unpacks to"):
+        io.load_session(bomb)

@@ -226,3 +226,88 @@ def test_path_distances(n):
     idx = np.arange(n)
     np.testing.assert_array_equal(D, np.abs(idx[:, None] - idx[None, :]))
     assert topo.d_max == n - 1
+
+
+# ------------------------------------------------------------------------------------- the two dense builds
+def _build_graphs() -> dict[str, Topology]:
+    """Meshes and edge cases for comparing the builds: lattice, torus, mixed faces, disconnected components,
+    isolated vertices, a single vertex, a path, a star (one wide level) and random graphs."""
+    path = np.stack([np.arange(59), np.arange(1, 60)], axis=1)
+    out = {
+        "lattice": Topology.from_edges(lattice_edges(4, 4, 3)[0], 48),
+        "torus": Topology.from_faces(torus_quads(9, 7)),
+        "mixed": Topology.from_faces(mixed_faces()),
+        "two_components": Topology.from_faces(np.concatenate([grid_quads(3, 3), grid_quads(4, 2, offset=9)])),
+        "isolated": Topology.from_faces([[0, 1, 2]], n_vertices=6),
+        "single": Topology.from_edges(np.zeros((0, 2), dtype=np.int64), 1),
+        "no_edges": Topology.from_edges(np.zeros((0, 2), dtype=np.int64), 5),
+        "path": Topology.from_edges(path, 60),
+        "star": Topology.from_edges(np.stack([np.zeros(40, np.int64), np.arange(1, 41)], axis=1), 41),
+    }
+    rng = np.random.default_rng(3)
+    for i in range(4):
+        n = int(rng.integers(2, 90))
+        out[f"random{i}"] = Topology.from_edges(rng.integers(0, n, size=(int(rng.integers(0, 2 * n)), 2)), n)
+    return out
+
+
+BUILD_GRAPHS = _build_graphs()
+
+
+def _fresh(topo: Topology) -> Topology:
+    return Topology(topo.n_vertices, topo.edges, topo.faces)
+
+
+def _block_build(topo: Topology, threads: int, blocks: int | None, fibers: bool) -> tuple[np.ndarray, int]:
+    """The "block" build (CUDA's) on the CPU: one thread a block, or `threads` cooperative fibers a block with
+    Warp's CPU blocks (the barriers then really separate the levels)."""
+    import warp as wp
+
+    topo = _fresh(topo)
+    saved = wp.config.enable_cpu_blocks
+    wp.config.enable_cpu_blocks = fibers
+    try:
+        table = topo._bfs_table("cpu", "block", threads=threads, blocks=blocks).numpy()
+    finally:
+        wp.config.enable_cpu_blocks = saved
+    return table, topo.d_max
+
+
+@pytest.mark.parametrize("name", sorted(BUILD_GRAPHS))
+def test_block_build_equals_thread_build(name):
+    """The level-synchronous build that CUDA uses gives the table and d_max of the thread-per-source build, with
+    one thread or several (fibers) per block and fewer blocks than sources (each block then takes several)."""
+    topo = BUILD_GRAPHS[name]
+    old = _fresh(topo)
+    expect = old._bfs_table("cpu", "thread").numpy()
+    np.testing.assert_array_equal(expect, bfs_distances(topo.n_vertices, topo.edges))
+    for threads, blocks, fibers in [(1, None, False), (1, 1, False), (8, 3, True), (32, None, True)]:
+        table, d_max = _block_build(topo, threads, blocks, fibers)
+        np.testing.assert_array_equal(table, expect, err_msg=f"threads {threads}, blocks {blocks}")
+        assert d_max == old.d_max
+
+
+def test_block_threads_follow_level_width():
+    """Threads per search: the power of two at or above N / levels (from one sweep), within _BLOCK_THREADS."""
+    from somwidget.backend.topology import _BLOCK_THREADS
+
+    lo, hi = _BLOCK_THREADS
+    assert _fresh(BUILD_GRAPHS["path"])._block_threads() == lo  # 60 vertices over 60 levels
+    cube = Topology.from_edges(lattice_edges(10, 10, 10)[0], 1000)  # 1,000 vertices over 28 levels: 35.7 a level
+    assert _fresh(cube)._block_threads() == 64
+    star = Topology.from_edges(np.stack([np.zeros(600, np.int64), np.arange(1, 601)], axis=1), 601)
+    assert _fresh(star)._block_threads() == hi
+
+
+def test_block_build_overflow_raises(monkeypatch):
+    """A finite distance reaching the cap is an error in the block build too (the real cap, 65535, needs a path of
+    65,536 vertices; here the cap is lowered to the path's length)."""
+    from somwidget.backend import topology as topology_module
+
+    n = 30
+    path = Topology.from_edges(np.stack([np.arange(n - 1), np.arange(1, n)], axis=1), n)
+    monkeypatch.setattr(topology_module, "UNREACHABLE", n)  # d_max n - 1: below the cap
+    assert _fresh(path)._bfs_table("cpu", "block", threads=1) is not None
+    monkeypatch.setattr(topology_module, "UNREACHABLE", n - 1)  # d_max n - 1: reaches it
+    with pytest.raises(ValueError, match="path too long for the dense table"):
+        _fresh(path)._bfs_table("cpu", "block", threads=1)

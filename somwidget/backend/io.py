@@ -273,12 +273,33 @@ def save_session(path, state: dict) -> None:
         raise
 
 
-def load_session(path) -> dict:
-    """Read a session written by `save_session`; ValueError naming the file and the missing or bad key."""
+def _check_archive_sizes(p: Path, label: str, max_vertices: int) -> None:
+    """Refuse an archive whose members would unpack beyond what a session of `max_vertices` vertices needs."""
+    import zipfile
+
+    # the largest member: (N, 32) weights at 8 bytes a value (256 B a vertex), or face indices (~100 B a vertex)
+    limit = max(512 * max_vertices, 1 << 20)
+    try:
+        with zipfile.ZipFile(p) as archive:
+            for info in archive.infolist():
+                if info.file_size > limit:
+                    raise ValueError(f"{label}: member {info.filename!r} unpacks to {info.file_size:,} bytes, more "
+                                     f"than a session of at most {max_vertices:,} vertices holds ({limit:,})")
+    except zipfile.BadZipFile:
+        return  # not a zip: np.load below reports what it is
+
+
+def load_session(path, *, max_vertices: int = MAX_VERTICES) -> dict:
+    """Read a session written by `save_session`; ValueError naming the file and the missing or bad key.
+
+    The archive's members are size-checked before they are read, so a small file cannot unpack into gigabytes,
+    and a topology of more than `max_vertices` vertices is refused before anything is built.
+    """
     label = str(path)
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"{label}: no such session file")
+    _check_archive_sizes(p, label, max_vertices)
     try:
         z = np.load(p, allow_pickle=False)
         if not isinstance(z, np.lib.npyio.NpzFile):
@@ -315,8 +336,8 @@ def load_session(path) -> dict:
                          f"(1 to {SESSION_FORMAT_VERSION}); it may come from a newer somwidget")
 
     n_vertices = scalar("n_vertices", "i")
-    if n_vertices < 1:
-        raise ValueError(f"{label}: key 'n_vertices': expected at least 1, got {n_vertices}")
+    if not 1 <= n_vertices <= max_vertices:
+        raise ValueError(f"{label}: key 'n_vertices': expected 1 to {max_vertices:,} vertices, got {n_vertices:,}")
     kind = scalar("topology_kind", "s")
     try:
         if kind == "faces":

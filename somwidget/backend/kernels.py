@@ -128,6 +128,71 @@ def bfs_rows(
     eccentricity[b] = far
 
 
+# A barrier of the threads of a block: __syncthreads() on CUDA; on the CPU nothing (a block is one thread) or, with
+# wp.config.enable_cpu_blocks, a switch between the block's cooperative fibers.
+@wp.func_native("WP_TILE_SYNC();")
+def sync_block(): ...
+
+
+@wp.kernel(enable_backward=False, module="unique")
+def bfs_blocks(
+    offsets: wp.array(dtype=wp.int32),
+    neighbors: wp.array(dtype=wp.int32),
+    table: wp.array2d(dtype=wp.uint16),
+    hops: wp.array2d(dtype=wp.int32),
+    queue: wp.array2d(dtype=wp.int32),
+    size: wp.array2d(dtype=wp.int32),
+    eccentricity: wp.array(dtype=wp.int32),
+):
+    """The dense table by a block of threads per search, level by level with a barrier between levels (CUDA).
+
+    Block b searches from the sources b, b + B, b + 2 B, ... (B = hops.shape[0] blocks) and writes each whole row
+    table[src] once: hop counts, 65535 where unreachable. Its scratch: hops[b] (int32, -1 = not reached; -1 again
+    on return) and queue[b], whose level-L segment its threads share out, appending the vertices of level L + 1
+    (counted in size[b, (L + 1) % 3]). eccentricity[src]: the largest finite distance (>= 65535: it overflowed).
+    On the CPU a block is one thread (or cooperative fibers with wp.config.enable_cpu_blocks); blocks past B idle.
+    """
+    i = wp.tid()
+    threads = wp.block_dim()
+    b = i // threads
+    t = i - b * threads
+    blocks = hops.shape[0]
+    n = table.shape[1]
+    if b < blocks:
+        for src in range(b, table.shape[0], blocks):
+            if t == 0:
+                hops[b, src] = 0
+                queue[b, 0] = src
+                size[b, 1] = 0
+            sync_block()
+            level = int(0)
+            start = int(0)
+            width = int(1)
+            while width > 0:
+                nxt = (level + 1) % 3
+                end = start + width
+                for k in range(start + t, end, threads):
+                    u = queue[b, k]
+                    for e in range(offsets[u], offsets[u + 1]):
+                        w = neighbors[e]
+                        if hops[b, w] < 0:
+                            if wp.atomic_cas(hops, b, w, -1, level + 1) == -1:
+                                queue[b, end + wp.atomic_add(size, b, nxt, 1)] = w
+                if t == 0:
+                    size[b, (level + 2) % 3] = 0  # the count of level + 2; nobody reads it any more (3 slots)
+                sync_block()
+                start = end
+                width = size[b, nxt]
+                level += 1
+            if t == 0:
+                eccentricity[src] = level - 1
+            for v in range(t, n, threads):  # the row, written once and in order; the scratch back to -1
+                d = hops[b, v]
+                table[src, v] = wp.where(d >= 0, wp.uint16(wp.min(d, 65535)), UNREACHABLE)
+                hops[b, v] = -1
+            sync_block()
+
+
 # -- distance rows past the dense table: int32 hop counts, -1 = unreachable ------------------------------------
 @wp.kernel(enable_backward=False)
 def bfs_wide(
