@@ -377,7 +377,6 @@ def test_load_session_refuses_a_member_that_would_unpack_too_large(tmp_path):
     """A small archive whose member inflates to hundreds of MB is refused before anything is decompressed."""
     import io as byte_io
 
-
     bomb = tmp_path / "bomb.npz"
     with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as archive:
         buf = byte_io.BytesIO()

@@ -299,3 +299,13 @@ def test_grid_distances_refused_past_dense_cap():
     assert re.search(r"65[,_ ]?53[67]", msg), msg  # names the cap (or the size asked for)
     # says what to do instead: the engine's on-demand distance rows (or another way around the dense table)
     assert re.search(r"(?i)on[- ]demand|row|instead|use ", msg), msg
+
+
+@pytest.mark.parametrize("build", [
+    lambda: Topology.from_faces([[0, 1, 2**40]]),
+    lambda: Topology.from_edges([[0, 1]], 10**12),
+])
+def test_absurd_vertex_counts_are_refused_before_allocating(build):
+    """A stray huge index must give a ValueError naming the limit, not a MemoryError from an 8 TiB array."""
+    with pytest.raises(ValueError, match="134"):
+        build()

@@ -14,6 +14,8 @@ import warp as wp
 from . import checks, kernels
 from .device import resolve, warp_exclusive
 
+#: Vertices a topology may have (int32 CSR indices; rows mode trains meshes of millions of vertices).
+MAX_VERTICES = 1 << 27
 #: The dense distance table holds at most 2^16 neurons (the paper's cap: 8 GiB of uint16).
 MAX_DENSE_NEURONS = 65536
 UNREACHABLE = 65535
@@ -376,8 +378,11 @@ def _vertex_count(flat: np.ndarray, n_vertices: int | None, name: str) -> int:
     if n_vertices is None:
         if not flat.size:
             raise ValueError(f"{name}: no vertex index given; pass n_vertices")
+        if flat.max() >= MAX_VERTICES:
+            raise ValueError(f"{name}: vertex index {int(flat.max()):,} is beyond the {MAX_VERTICES:,} vertices a "
+                             "topology may have")
         return int(flat.max()) + 1
-    n = checks.integer("n_vertices", n_vertices, 1)
+    n = checks.integer("n_vertices", n_vertices, 1, MAX_VERTICES)
     if flat.size and flat.max() >= n:
         raise ValueError(f"{name}: vertex index {int(flat.max())} is out of range for n_vertices={n}")
     return n
