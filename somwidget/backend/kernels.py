@@ -12,13 +12,14 @@ Keys live in three rotating buffers indexed by s % 3: cycle s reads buffer s, fi
 of the next cycle and clears buffer s + 2, so a whole run replays from a captured graph with no host work.
 
 Past the dense table (distance rows mode) the same cycle reads int32 distance rows that the host keeps for recent
-winners; a cycle whose winner has no row stalls (see the `*_rows` kernels), and BFS kernels compute rows on demand.
+winners; a cycle whose winner has no row stalls (see `cycle_kernels`), and BFS kernels compute rows on demand.
 """
 
 
 import ctypes
 import functools
 from types import SimpleNamespace
+from typing import Any
 
 import warp as wp
 
@@ -354,9 +355,86 @@ def assign_slots(slot_of: wp.array(dtype=wp.int32), neurons: wp.array(dtype=wp.i
     slot_of[neurons[i]] = slots[i]
 
 
+# -- D[u_c, v] and the rate L[s, D[u_c, v]], by where the distances live ---------------------------------------
+# The cycle kernels are generic in their `distances` argument, with one overload per source: the dense table
+# (uint16, 65535 = unreachable) or distance rows past it (int32, -1 = unreachable), the rows a host-side cache keeps
+# for recent winners, found through slot_of (the row of each neuron, -1 = none). These functions are overloaded
+# (Warp picks by the type of `distances`), so the dense kernels compile without the rows' lookups and stall checks.
+@wp.func
+def winner_row(distances: wp.array2d(dtype=wp.uint16), slot_of: wp.array(dtype=wp.int32),
+               keys: wp.array2d(dtype=wp.uint64), buf: int, c: int) -> int:
+    """The row of `distances` that holds D[u_c, .]: the winner's own row of the dense table."""
+    return wp.int32(keys[buf, c] & INDEX_MASK)
+
+
+@wp.func
+def winner_row(distances: wp.array2d(dtype=wp.int32), slot_of: wp.array(dtype=wp.int32),  # noqa: F811 (overload)
+               keys: wp.array2d(dtype=wp.uint64), buf: int, c: int) -> int:
+    """The cache row holding the distances from control c's winner, -1 when it has none."""
+    return slot_of[wp.int32(keys[buf, c] & INDEX_MASK)]
+
+
+@wp.func
+def row_missing(distances: wp.array2d(dtype=wp.uint16), row: int) -> int:
+    """The dense table has every row: never missing."""
+    return 0
+
+
+@wp.func
+def row_missing(distances: wp.array2d(dtype=wp.int32), row: int) -> int:  # noqa: F811 (overload)
+    """1 for a winner without a cached row (row -1: the cycle must stall), else 0."""
+    return wp.where(row < 0, 1, 0)
+
+
+@wp.func
+def rate_at(table: wp.array2d(dtype=wp.float32), s: int, distances: wp.array2d(dtype=wp.uint16), row: int,
+            v: int) -> wp.float32:
+    """L[s, D[u_c, v]] with D[u_c, .] = distances[row], and 0 for unreachable neurons (65535)."""
+    d = distances[row, v]
+    return wp.where(d != UNREACHABLE, table[s, wp.min(wp.int32(d), table.shape[1] - 1)], wp.float32(0.0))
+
+
+@wp.func
+def rate_at(table: wp.array2d(dtype=wp.float32), s: int, distances: wp.array2d(dtype=wp.int32),  # noqa: F811
+            row: int, v: int) -> wp.float32:
+    """L[s, D[u_c, v]] with D[u_c, .] = distances[row], and 0 for unreachable neurons (-1); a missing row
+    (-1) reads row 0, whose rate the stalled cycle never applies."""
+    d = distances[wp.max(row, 0), v]
+    return wp.where(d >= 0, table[s, wp.clamp(d, 0, table.shape[1] - 1)], wp.float32(0.0))
+
+
+@wp.func
+def rows_missing(distances: wp.array2d(dtype=wp.uint16), slot_of: wp.array(dtype=wp.int32),
+                 keys: wp.array2d(dtype=wp.uint64), buf: int, c_lo: int, c_hi: int) -> int:
+    """The dense table has every row: never missing."""
+    return 0
+
+
+@wp.func
+def rows_missing(distances: wp.array2d(dtype=wp.int32), slot_of: wp.array(dtype=wp.int32),  # noqa: F811 (overload)
+                 keys: wp.array2d(dtype=wp.uint64), buf: int, c_lo: int, c_hi: int) -> int:
+    """1 when a winner of the controls c_lo .. c_hi - 1 has no cached row (the cycle must stall), else 0."""
+    missing = int(0)
+    for c in range(c_lo, c_hi):
+        missing = wp.max(missing, row_missing(distances, winner_row(distances, slot_of, keys, buf, c)))
+    return missing
+
+
+#: The two sources of distances a cycle kernel is compiled for (see `winner_row`).
+DISTANCE_SOURCES = (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32))
+
+
 @functools.cache
 def cycle_kernels(n_dims: int) -> SimpleNamespace:
-    """The cycle's kernels for weights with n_dims features (each compiled once, on first use per device)."""
+    """The cycle's kernels for weights with n_dims features (each compiled once, on first use per device).
+
+    `move` and `move_part` are generic in `distances` (the dense table or distance rows, see `winner_row`); each
+    source has its own overload. In distance rows mode a cycle whose winners lack a row stalls: the move sets
+    stalled[0] and leaves everything as it was, the later kernels of the graph see the flag and do nothing, and
+    the host computes the missing rows and replays from that cycle. A cycle moves by controls c_lo .. c_hi - 1,
+    so a cache smaller than the winner count can still run it in parts (each neuron applies the controls in
+    order). The dense path passes slot_of and stalled too (a zero flag that nothing sets; slot_of unread).
+    """
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     rate8 = wp.types.vector(length=8, dtype=wp.float32)
     options = {"max_unroll": 32}
@@ -368,9 +446,21 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         return wp.dot(wp.cw_mul(diff, metric), diff)
 
     @wp.func
-    def rate_of(table: wp.array2d(dtype=wp.float32), s: int, d: wp.uint16) -> wp.float32:
-        """L[s, d], and 0 for unreachable neurons."""
-        return wp.where(d != UNREACHABLE, table[s, wp.min(wp.int32(d), table.shape[1] - 1)], wp.float32(0.0))
+    def smoothed(
+        weights: wp.array(dtype=vec), v: int, offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32),
+        pull: vec,
+    ) -> vec:
+        """One Jacobi step of uniform Laplacian smoothing: W_v + lambda (mean of W over v's neighbours - W_v) on the
+        masked dims (pull = lambda * mask), from the pre-smoothing weights; a neuron without neighbours stays."""
+        w = weights[v]
+        lo = offsets[v]
+        hi = offsets[v + 1]
+        if hi > lo:
+            total = vec()
+            for e in range(lo, hi):
+                total += weights[neighbors[e]]
+            w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
+        return w
 
     # -- CUDA: a thread per neuron, a block of 32 ----------------------------------------------------------
     @wp.func
@@ -403,6 +493,30 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
             if weights.shape[0] <= CHECK_BEFORE_ATOMIC or key < keys[buf, c]:
                 wp.atomic_min(keys, buf, c, key)
 
+    @wp.func
+    def end_cycle(
+        weights: wp.array(dtype=vec),
+        controls: wp.array(dtype=vec),
+        n_controls: int,
+        metric: wp.array(dtype=vec),
+        keys: wp.array2d(dtype=wp.uint64),
+        s: int,
+        cycle_out: wp.array(dtype=wp.int32),
+        find_next: int,
+        block: int,
+        lane: int,
+    ):
+        """With find_next: step 1 of cycle s + 1 from the new weights, the keys of cycle s + 2 cleared and the
+        counter advanced; without, the counter passed on unchanged (a later kernel of the cycle ends it)."""
+        if find_next != 0:
+            find_winners_of_block(weights, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
+        if block == 0 and lane == 0:
+            if find_next != 0:
+                clear_keys(keys, (s + 2) % 3, n_controls)
+                cycle_out[0] = s + 1
+            else:
+                cycle_out[0] = s
+
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def find_winners(
         weights: wp.array(dtype=vec),
@@ -421,16 +535,21 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         weights_in: wp.array(dtype=vec),
         weights_out: wp.array(dtype=vec),
         controls: wp.array(dtype=vec),
+        c_lo: int,
+        c_hi: int,
         n_controls: int,
         metric: wp.array(dtype=vec),
         table: wp.array2d(dtype=wp.float32),
-        distances: wp.array2d(dtype=wp.uint16),
+        distances: Any,
+        slot_of: wp.array(dtype=wp.int32),
         keys: wp.array2d(dtype=wp.uint64),
         cycle_in: wp.array(dtype=wp.int32),
         cycle_out: wp.array(dtype=wp.int32),
         find_next: int,
+        stalled: wp.array(dtype=wp.int32),
     ):
-        """Step 2 of cycle s: W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v) for the controls in list order.
+        """Step 2 of cycle s: W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v) for the controls c_lo .. c_hi - 1 in list
+        order (all n_controls but for a cycle run in parts); stalls on a missing distance row.
 
         The row stays in registers; rates are gathered eight controls at a time so their loads overlap. With
         find_next (no smoothing) the kernel then finds the winners of cycle s + 1 and advances the counter.
@@ -439,42 +558,26 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         s = cycle_in[0]
         buf = s % 3
         v = block * CUDA_BLOCK + lane
-        if v < weights_in.shape[0]:
-            w = weights_in[v]
-            for c0 in range(0, n_controls, 8):
-                rates = rate8()
-                for g in range(8):  # unrolled: eight independent key -> distance -> rate chains
-                    c = wp.min(c0 + g, n_controls - 1)
-                    r = rate_of(table, s, distances[wp.int32(keys[buf, c] & INDEX_MASK), v])
-                    rates[g] = wp.where(c0 + g < n_controls, r, wp.float32(0.0))
-                for g in range(8):
-                    w = w + rates[g] * (controls[c0 + g] - w)
-            weights_out[v] = w
-        if find_next != 0:
-            find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
-        if block == 0 and lane == 0:
-            if find_next != 0:
-                clear_keys(keys, (s + 2) % 3, n_controls)
-                cycle_out[0] = s + 1
-            else:
-                cycle_out[0] = s
-
-    @wp.func
-    def smoothed(
-        weights: wp.array(dtype=vec), v: int, offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32),
-        pull: vec,
-    ) -> vec:
-        """One Jacobi step of uniform Laplacian smoothing: W_v + lambda (mean of W over v's neighbours - W_v) on the
-        masked dims (pull = lambda * mask), from the pre-smoothing weights; a neuron without neighbours stays."""
-        w = weights[v]
-        lo = offsets[v]
-        hi = offsets[v + 1]
-        if hi > lo:
-            total = vec()
-            for e in range(lo, hi):
-                total += weights[neighbors[e]]
-            w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
-        return w
+        u = wp.min(v, weights_in.shape[0] - 1)  # every thread looks up every row: all find the same miss
+        w = weights_in[u]
+        missing = int(0)  # stays 0 with the dense table (row_missing), a constant the compiler folds
+        for c0 in range(c_lo, c_hi, 8):
+            rates = rate8()
+            for g in range(8):  # unrolled: eight independent key -> (slot ->) distance -> rate chains
+                c = wp.min(c0 + g, c_hi - 1)
+                row = winner_row(distances, slot_of, keys, buf, c)
+                missing = wp.max(missing, row_missing(distances, row))
+                r = rate_at(table, s, distances, row, u)
+                rates[g] = wp.where(c0 + g < c_hi, r, wp.float32(0.0))
+            for g in range(8):
+                w = w + rates[g] * (controls[wp.min(c0 + g, c_hi - 1)] - w)
+        if missing == 0:
+            if v < weights_in.shape[0]:
+                weights_out[v] = w
+            end_cycle(weights_out, controls, n_controls, metric, keys, s, cycle_out, find_next, block, lane)
+        elif block == 0 and lane == 0:
+            stalled[0] = 1
+            cycle_out[0] = s
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def smooth(
@@ -490,17 +593,19 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         keys: wp.array2d(dtype=wp.uint64),
         cycle_in: wp.array(dtype=wp.int32),
         cycle_out: wp.array(dtype=wp.int32),
+        stalled: wp.array(dtype=wp.int32),
     ):
-        """Step 3 of cycle s (smoothing, see `smoothed`), then the winners of cycle s + 1 and the counter advance."""
+        """Step 3 of cycle s (smoothing, see `smoothed`), then the winners of cycle s + 1 and the counter advance;
+        skipped (the counter passed on) when the cycle stalled."""
         block, lane = wp.tid()
         s = cycle_in[0]
-        v = block * CUDA_BLOCK + lane
-        if v < weights_in.shape[0]:
-            weights_out[v] = smoothed(weights_in, v, offsets, neighbors, strength * mask[0])
-        find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
-        if block == 0 and lane == 0:
-            clear_keys(keys, (s + 2) % 3, n_controls)
-            cycle_out[0] = s + 1
+        if stalled[0] == 0:
+            v = block * CUDA_BLOCK + lane
+            if v < weights_in.shape[0]:
+                weights_out[v] = smoothed(weights_in, v, offsets, neighbors, strength * mask[0])
+            end_cycle(weights_out, controls, n_controls, metric, keys, s, cycle_out, 1, block, lane)
+        elif block == 0 and lane == 0:
+            cycle_out[0] = s
 
     # -- CPU: each core runs one launch over its share ------------------------------------------------------
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
@@ -508,25 +613,32 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         weights_in: wp.array(dtype=vec),
         weights_out: wp.array(dtype=vec),
         controls: wp.array(dtype=vec),
-        n_controls: int,
+        c_lo: int,
+        c_hi: int,
         table: wp.array2d(dtype=wp.float32),
-        distances: wp.array2d(dtype=wp.uint16),
+        distances: Any,
+        slot_of: wp.array(dtype=wp.int32),
         keys: wp.array2d(dtype=wp.uint64),
         cycle: wp.array(dtype=wp.int32),
         lo: int,
         hi: int,
+        stalled: wp.array(dtype=wp.int32),
     ):
-        """Step 2 of cycle s for neurons lo..hi-1, control-major so each distance row is read in order."""
+        """Step 2 of cycle s for neurons lo..hi-1 and controls c_lo .. c_hi - 1, control-major so each distance
+        row is read in order; stalls on a missing distance row."""
         s = cycle[0]
         buf = s % 3
-        for v in range(lo, hi):
-            weights_out[v] = weights_in[v]
-        for c in range(n_controls):
-            target = controls[c]
-            u = wp.int32(keys[buf, c] & INDEX_MASK)
+        if rows_missing(distances, slot_of, keys, buf, c_lo, c_hi) != 0:  # every core finds the same
+            stalled[0] = 1
+        else:
             for v in range(lo, hi):
-                w = weights_out[v]
-                weights_out[v] = w + rate_of(table, s, distances[u, v]) * (target - w)
+                weights_out[v] = weights_in[v]
+            for c in range(c_lo, c_hi):
+                target = controls[c]
+                row = winner_row(distances, slot_of, keys, buf, c)
+                for v in range(lo, hi):
+                    w = weights_out[v]
+                    weights_out[v] = w + rate_at(table, s, distances, row, v) * (target - w)
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def smooth_part(
@@ -538,11 +650,13 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         strength: wp.float32,
         lo: int,
         hi: int,
+        stalled: wp.array(dtype=wp.int32),
     ):
-        """Step 3 for neurons lo..hi-1."""
-        pull = strength * mask[0]
-        for v in range(lo, hi):
-            weights_out[v] = smoothed(weights_in, v, offsets, neighbors, pull)
+        """Step 3 for neurons lo..hi-1, skipped when the cycle stalled."""
+        if stalled[0] == 0:
+            pull = strength * mask[0]
+            for v in range(lo, hi):
+                weights_out[v] = smoothed(weights_in, v, offsets, neighbors, pull)
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def find_part(
@@ -555,194 +669,14 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         first: int,
         step: int,
         ahead: int,
+        stalled: wp.array(dtype=wp.int32),
     ):
         """Step 1 for controls first, first + step, ...: winners over all neurons into keys[(s + ahead) % 3];
-        with ahead = 1 this is the next cycle's search and the core's counter advances."""
-        s = cycle[0]
-        buf = (s + ahead) % 3
-        m = metric[0]
-        for c in range(first, n_controls, step):
-            target = controls[c]
-            best = FLOAT_MAX
-            best_v = int(0)
-            for v in range(weights.shape[0]):
-                dist = distance(target, weights[v], m)
-                nearer = dist < best  # strict: the lowest index wins a tie
-                best = wp.where(nearer, dist, best)
-                best_v = wp.where(nearer, v, best_v)
-            keys[buf, c] = winner_key(best, best_v)
-        cycle[0] = s + ahead
-
-    # -- distance rows (past the dense table) ----------------------------------------------------------------
-    # The same cycle with D[u_c, v] read from rows[slot_of[u_c], v] (int32, -1 = unreachable), the rows a host-side
-    # cache keeps for recent winners. A cycle whose winners lack a row stalls: the move sets stalled[0] and leaves
-    # everything as it was, the later kernels of the graph see the flag (or the same miss) and do nothing, and the
-    # host computes the missing rows and replays from that cycle. A cycle moves by controls c_lo .. c_hi - 1, so a
-    # cache smaller than the winner count can still run it in parts (each neuron applies the controls in order).
-    @wp.func
-    def wide_rate(table: wp.array2d(dtype=wp.float32), s: int, d: wp.int32) -> wp.float32:
-        """L[s, d], and 0 for unreachable neurons (d = -1)."""
-        return wp.where(d >= 0, table[s, wp.clamp(d, 0, table.shape[1] - 1)], wp.float32(0.0))
-
-    @wp.func
-    def row_of(keys: wp.array2d(dtype=wp.uint64), buf: int, c: int, slot_of: wp.array(dtype=wp.int32)) -> int:
-        """The cache row holding the distances from control c's winner, -1 when it has none."""
-        return slot_of[wp.int32(keys[buf, c] & INDEX_MASK)]
-
-    @wp.func
-    def rows_missing(keys: wp.array2d(dtype=wp.uint64), buf: int, c_lo: int, c_hi: int,
-                     slot_of: wp.array(dtype=wp.int32)) -> int:
-        missing = int(0)
-        for c in range(c_lo, c_hi):
-            missing = wp.where(row_of(keys, buf, c, slot_of) < 0, 1, missing)
-        return missing
-
-    @wp.kernel(enable_backward=False, module="unique", module_options=options)
-    def move_rows(
-        weights_in: wp.array(dtype=vec),
-        weights_out: wp.array(dtype=vec),
-        controls: wp.array(dtype=vec),
-        c_lo: int,
-        c_hi: int,
-        n_controls: int,
-        metric: wp.array(dtype=vec),
-        table: wp.array2d(dtype=wp.float32),
-        rows: wp.array2d(dtype=wp.int32),
-        slot_of: wp.array(dtype=wp.int32),
-        keys: wp.array2d(dtype=wp.uint64),
-        cycle_in: wp.array(dtype=wp.int32),
-        cycle_out: wp.array(dtype=wp.int32),
-        find_next: int,
-        stalled: wp.array(dtype=wp.int32),
-    ):
-        """`move` (CUDA) reading distance rows, for controls c_lo .. c_hi - 1; stalls on a missing row."""
-        block, lane = wp.tid()
-        s = cycle_in[0]
-        buf = s % 3
-        v = block * CUDA_BLOCK + lane
-        u = wp.min(v, weights_in.shape[0] - 1)  # every thread looks up every row: all find the same miss
-        w = weights_in[u]
-        missing = int(0)
-        for c0 in range(c_lo, c_hi, 8):
-            rates = rate8()
-            for g in range(8):  # unrolled: eight independent key -> row -> distance -> rate chains
-                c = wp.min(c0 + g, c_hi - 1)
-                slot = row_of(keys, buf, c, slot_of)
-                missing = wp.where(slot < 0, 1, missing)
-                r = wide_rate(table, s, rows[wp.max(slot, 0), u])
-                rates[g] = wp.where(c0 + g < c_hi, r, wp.float32(0.0))
-            for g in range(8):
-                w = w + rates[g] * (controls[wp.min(c0 + g, c_hi - 1)] - w)
-        if missing == 0:
-            if v < weights_in.shape[0]:
-                weights_out[v] = w
-            if find_next != 0:
-                find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
-            if block == 0 and lane == 0:
-                if find_next != 0:
-                    clear_keys(keys, (s + 2) % 3, n_controls)
-                    cycle_out[0] = s + 1
-                else:
-                    cycle_out[0] = s
-        elif block == 0 and lane == 0:
-            stalled[0] = 1
-            cycle_out[0] = s
-
-    @wp.kernel(enable_backward=False, module="unique", module_options=options)
-    def smooth_rows(
-        weights_in: wp.array(dtype=vec),
-        weights_out: wp.array(dtype=vec),
-        offsets: wp.array(dtype=wp.int32),
-        neighbors: wp.array(dtype=wp.int32),
-        mask: wp.array(dtype=vec),
-        strength: wp.float32,
-        controls: wp.array(dtype=vec),
-        n_controls: int,
-        metric: wp.array(dtype=vec),
-        keys: wp.array2d(dtype=wp.uint64),
-        cycle_in: wp.array(dtype=wp.int32),
-        cycle_out: wp.array(dtype=wp.int32),
-        stalled: wp.array(dtype=wp.int32),
-    ):
-        """`smooth` (CUDA), skipped when the cycle stalled."""
-        block, lane = wp.tid()
-        s = cycle_in[0]
-        if stalled[0] == 0:
-            v = block * CUDA_BLOCK + lane
-            if v < weights_in.shape[0]:
-                weights_out[v] = smoothed(weights_in, v, offsets, neighbors, strength * mask[0])
-            find_winners_of_block(weights_out, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
-            if block == 0 and lane == 0:
-                clear_keys(keys, (s + 2) % 3, n_controls)
-                cycle_out[0] = s + 1
-        elif block == 0 and lane == 0:
-            cycle_out[0] = s
-
-    @wp.kernel(enable_backward=False, module="unique", module_options=options)
-    def move_part_rows(
-        weights_in: wp.array(dtype=vec),
-        weights_out: wp.array(dtype=vec),
-        controls: wp.array(dtype=vec),
-        c_lo: int,
-        c_hi: int,
-        table: wp.array2d(dtype=wp.float32),
-        rows: wp.array2d(dtype=wp.int32),
-        slot_of: wp.array(dtype=wp.int32),
-        keys: wp.array2d(dtype=wp.uint64),
-        cycle: wp.array(dtype=wp.int32),
-        lo: int,
-        hi: int,
-        stalled: wp.array(dtype=wp.int32),
-    ):
-        """`move_part` (CPU) reading distance rows, for controls c_lo .. c_hi - 1; stalls on a missing row."""
-        s = cycle[0]
-        buf = s % 3
-        if rows_missing(keys, buf, c_lo, c_hi, slot_of) != 0:  # every core finds the same
-            stalled[0] = 1
-        else:
-            for v in range(lo, hi):
-                weights_out[v] = weights_in[v]
-            for c in range(c_lo, c_hi):
-                target = controls[c]
-                slot = row_of(keys, buf, c, slot_of)
-                for v in range(lo, hi):
-                    w = weights_out[v]
-                    weights_out[v] = w + wide_rate(table, s, rows[slot, v]) * (target - w)
-
-    @wp.kernel(enable_backward=False, module="unique", module_options=options)
-    def smooth_part_rows(
-        weights_in: wp.array(dtype=vec),
-        weights_out: wp.array(dtype=vec),
-        offsets: wp.array(dtype=wp.int32),
-        neighbors: wp.array(dtype=wp.int32),
-        mask: wp.array(dtype=vec),
-        strength: wp.float32,
-        lo: int,
-        hi: int,
-        stalled: wp.array(dtype=wp.int32),
-    ):
-        """`smooth_part`, skipped when the cycle stalled."""
-        if stalled[0] == 0:
-            pull = strength * mask[0]
-            for v in range(lo, hi):
-                weights_out[v] = smoothed(weights_in, v, offsets, neighbors, pull)
-
-    @wp.kernel(enable_backward=False, module="unique", module_options=options)
-    def find_part_rows(
-        weights: wp.array(dtype=vec),
-        controls: wp.array(dtype=vec),
-        n_controls: int,
-        metric: wp.array(dtype=vec),
-        keys: wp.array2d(dtype=wp.uint64),
-        cycle: wp.array(dtype=wp.int32),
-        first: int,
-        step: int,
-        stalled: wp.array(dtype=wp.int32),
-    ):
-        """`find_part` of the next cycle, skipped (the counter stays) when the cycle stalled."""
+        with ahead = 1 this is the next cycle's search and the core's counter advances. Skipped (the counter
+        stays) when the cycle stalled."""
         if stalled[0] == 0:
             s = cycle[0]
-            buf = (s + 1) % 3
+            buf = (s + ahead) % 3
             m = metric[0]
             for c in range(first, n_controls, step):
                 target = controls[c]
@@ -754,9 +688,11 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
                     best = wp.where(nearer, dist, best)
                     best_v = wp.where(nearer, v, best_v)
                 keys[buf, c] = winner_key(best, best_v)
-            cycle[0] = s + 1
+            cycle[0] = s + ahead
+
+    for source in DISTANCE_SOURCES:
+        wp.overload(move, {"distances": source})
+        wp.overload(move_part, {"distances": source})
 
     return SimpleNamespace(vec=vec, find_winners=find_winners, move=move, smooth=smooth, move_part=move_part,
-                           smooth_part=smooth_part, find_part=find_part, move_rows=move_rows, smooth_rows=smooth_rows,
-                           move_part_rows=move_part_rows, smooth_part_rows=smooth_part_rows,
-                           find_part_rows=find_part_rows)
+                           smooth_part=smooth_part, find_part=find_part)

@@ -92,11 +92,14 @@ class Som:
         self._rows_mode = self._check_distances(distances)
         size = None if cache_rows is None else checks.integer("cache_rows", cache_rows, 1)
         self._cache: _RowCache | None = None
+        # the cycle kernels read D[u_c, v] from the dense table or from the cache's rows (through slot_of)
         if self._rows_mode:
             self._cache = _RowCache(topology, dev, size)
-            self._stalled = wp.zeros(1, dtype=wp.int32, device=dev)
+            self._distances, self._slot_of = self._cache.rows, self._cache.slot_of
         else:
             self._distances = topology.distance_table(dev)
+            self._slot_of = wp.full(1, -1, dtype=wp.int32, device=dev)  # unread: the dense table has every row
+        self._stalled = wp.zeros(1, dtype=wp.int32, device=dev)  # set only by a distance-rows cycle that stalls
         self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=dev)
         neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
         self._neighbors = wp.array(neighbors, dtype=wp.int32, device=dev)
@@ -396,7 +399,8 @@ class Som:
     def _launch_find(self) -> None:
         if self.device == "cpu":
             wp.launch(self._kernels.find_part, dim=1, device="cpu", inputs=[self._w, self._c, self._k_eff, self._m,
-                                                                     self._keys, self._cycle[0], 0, 1, 0])
+                                                                     self._keys, self._cycle[0], 0, 1, 0,
+                                                                     self._stalled])
             return
         self._keys.fill_(_KEY_NONE)
         wp.launch_tiled(self._kernels.find_winners, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=self.device,
@@ -448,8 +452,10 @@ class Som:
             raise RuntimeError("Som: a CPU core did not reach the cycle barrier (was a worker thread stopped?)")
 
     def _record_cpu(self, core: int, cycles: int, fresh: bool, smoothing: bool) -> None:
-        """One core's share: move and smooth its neurons, find the winners of its controls, meet between phases."""
+        """One core's share: move and smooth its neurons, find the winners of its controls, meet between phases.
+        Without `fresh` the winners of the first cycle are known (always so in distance rows mode)."""
         kern, cores, (lo, hi), counter = self._kernels, self._cores, self._ranges[core], self._cycle[core]
+        stalled = self._stalled
 
         def meet():
             if cores > 1:
@@ -457,39 +463,39 @@ class Som:
 
         find = [self._w, self._c, self._k_eff, self._m, self._keys, counter, core, cores]
         if fresh:
-            wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 0])
+            wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 0, stalled])
             meet()
         moved = self._w_moved if smoothing else self._w
         for _ in range(cycles):
-            wp.launch(kern.move_part, dim=1, device="cpu", inputs=[self._w, moved, self._c, self._k_eff, self._table,
-                                                                self._distances, self._keys, counter, lo, hi])
+            wp.launch(kern.move_part, dim=1, device="cpu",
+                      inputs=[self._w, moved, self._c, 0, self._k_eff, self._table, self._distances, self._slot_of,
+                              self._keys, counter, lo, hi, stalled])
             meet()
             if smoothing:
                 wp.launch(kern.smooth_part, dim=1, device="cpu", inputs=[moved, self._w, self._offsets, self._neighbors,
-                                                                      self._mask, self._smoothing, lo, hi])
+                                                                      self._mask, self._smoothing, lo, hi, stalled])
                 meet()
-            wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 1])
+            wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 1, stalled])
             meet()
 
     def _record_cuda(self, cycles: int, fresh: bool, parity: int, smoothing: bool) -> None:
-        """A kernel a cycle (move + next winners), or two with smoothing (move; smooth + next winners)."""
-        dev, blocks, threads = self.device, [self._blocks], int(CUDA_BLOCK)
+        """A kernel a cycle (move + next winners), or two with smoothing (move; smooth + next winners). Without
+        `fresh` the winners of the first cycle are known (always so in distance rows mode)."""
+        dev, blocks, threads, k = self.device, [self._blocks], int(CUDA_BLOCK), self._k_eff
         if fresh:
             self._launch_find()
         p = parity
         for _ in range(cycles):
             c_in, c_out = self._cycle[p], self._cycle[1 - p]
+            moved = self._w_moved if smoothing else self._w
+            wp.launch_tiled(self._kernels.move, dim=blocks, block_dim=threads, device=dev,
+                            inputs=[self._w, moved, self._c, 0, k, k, self._m, self._table, self._distances,
+                                    self._slot_of, self._keys, c_in, c_out, int(not smoothing), self._stalled])
             if smoothing:
-                wp.launch_tiled(self._kernels.move, dim=blocks, block_dim=threads, device=dev,
-                                inputs=[self._w, self._w_moved, self._c, self._k_eff, self._m, self._table,
-                                        self._distances, self._keys, c_in, c_out, 0])
                 wp.launch_tiled(self._kernels.smooth, dim=blocks, block_dim=threads, device=dev,
                                 inputs=[self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
-                                        self._smoothing, self._c, self._k_eff, self._m, self._keys, c_out, c_in])
+                                        self._smoothing, self._c, k, self._m, self._keys, c_out, c_in, self._stalled])
             else:
-                wp.launch_tiled(self._kernels.move, dim=blocks, block_dim=threads, device=dev,
-                                inputs=[self._w, self._w, self._c, self._k_eff, self._m, self._table,
-                                        self._distances, self._keys, c_in, c_out, 1])
                 p = 1 - p
 
     # -- distance rows mode -------------------------------------------------------------------------------
@@ -511,12 +517,12 @@ class Som:
             chunk = min(self._cache.span, 1 << (left.bit_length() - 1))
             if self.device == "cpu":
                 self._replay_cpu([self._graph(("rows", chunk, smoothing, core),
-                                              lambda core=core: self._record_cpu_rows(core, chunk, smoothing))
+                                              lambda core=core: self._record_cpu(core, chunk, False, smoothing))
                                   for core in range(self._cores)])
                 reached = int(self._cycle[0].numpy()[0])
             else:  # every graph starts from counter 0 (one graph per length), which then gets the last one's count
                 wp.capture_launch(self._graph(("rows", chunk, smoothing),
-                                              lambda: self._record_cuda_rows(chunk, 0, smoothing)))
+                                              lambda: self._record_cuda(chunk, False, 0, smoothing)))
                 last = 0 if smoothing else chunk % 2
                 reached = int(self._cycle[last].numpy()[0])
                 if last:
@@ -547,73 +553,30 @@ class Som:
         for i, (lo, hi) in enumerate(parts):
             cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), self._d_max)
             if dev == "cpu":
-                wp.launch(kern.move_part_rows, dim=1, device=dev,
-                          inputs=[source, moved, self._c, lo, hi, self._table, cache.rows, cache.slot_of, self._keys,
-                                  c_in, 0, self.n_neurons, self._stalled])
+                wp.launch(kern.move_part, dim=1, device=dev,
+                          inputs=[source, moved, self._c, lo, hi, self._table, self._distances, self._slot_of,
+                                  self._keys, c_in, 0, self.n_neurons, self._stalled])
             else:
                 find_next = int(not smoothing and i == len(parts) - 1)
-                wp.launch_tiled(kern.move_rows, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
-                                inputs=[source, moved, self._c, lo, hi, self._k_eff, self._m, self._table, cache.rows,
-                                        cache.slot_of, self._keys, c_in, c_out, find_next, self._stalled])
+                wp.launch_tiled(kern.move, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
+                                inputs=[source, moved, self._c, lo, hi, self._k_eff, self._m, self._table,
+                                        self._distances, self._slot_of, self._keys, c_in, c_out, find_next,
+                                        self._stalled])
             source = moved
         if dev == "cpu":
             if smoothing:
-                wp.launch(kern.smooth_part_rows, dim=1, device=dev,
+                wp.launch(kern.smooth_part, dim=1, device=dev,
                           inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing, 0,
                                   self.n_neurons, self._stalled])
-            wp.launch(kern.find_part_rows, dim=1, device=dev,
-                      inputs=[self._w, self._c, self._k_eff, self._m, self._keys, c_in, 0, 1, self._stalled])
+            wp.launch(kern.find_part, dim=1, device=dev,
+                      inputs=[self._w, self._c, self._k_eff, self._m, self._keys, c_in, 0, 1, 1, self._stalled])
         elif smoothing:
-            wp.launch_tiled(kern.smooth_rows, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
+            wp.launch_tiled(kern.smooth, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
                             inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing,
                                     self._c, self._k_eff, self._m, self._keys, c_out, c_in, self._stalled])
         self._s += 1
         self._set_cycle()
         self._winners_valid = True
-
-    def _record_cpu_rows(self, core: int, cycles: int, smoothing: bool) -> None:
-        """`_record_cpu` reading distance rows (the winners of the first cycle are known)."""
-        kern, cores, (lo, hi), counter = self._kernels, self._cores, self._ranges[core], self._cycle[core]
-        rows, slot_of, stalled = self._cache.rows, self._cache.slot_of, self._stalled
-
-        def meet():
-            if cores > 1:
-                wp.launch(barrier, dim=1, device="cpu", inputs=[self._meet, cores, _YIELD, self._meet_failed])
-
-        moved = self._w_moved if smoothing else self._w
-        for _ in range(cycles):
-            wp.launch(kern.move_part_rows, dim=1, device="cpu",
-                      inputs=[self._w, moved, self._c, 0, self._k_eff, self._table, rows, slot_of, self._keys, counter,
-                              lo, hi, stalled])
-            meet()
-            if smoothing:
-                wp.launch(kern.smooth_part_rows, dim=1, device="cpu",
-                          inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing, lo, hi,
-                                  stalled])
-                meet()
-            wp.launch(kern.find_part_rows, dim=1, device="cpu",
-                      inputs=[self._w, self._c, self._k_eff, self._m, self._keys, counter, core, cores, stalled])
-            meet()
-
-    def _record_cuda_rows(self, cycles: int, parity: int, smoothing: bool) -> None:
-        """`_record_cuda` reading distance rows (the winners of the first cycle are known)."""
-        dev, blocks, threads, k = self.device, [self._blocks], int(CUDA_BLOCK), self._k_eff
-        rows, slot_of, stalled = self._cache.rows, self._cache.slot_of, self._stalled
-        p = parity
-        for _ in range(cycles):
-            c_in, c_out = self._cycle[p], self._cycle[1 - p]
-            if smoothing:
-                wp.launch_tiled(self._kernels.move_rows, dim=blocks, block_dim=threads, device=dev,
-                                inputs=[self._w, self._w_moved, self._c, 0, k, k, self._m, self._table, rows, slot_of,
-                                        self._keys, c_in, c_out, 0, stalled])
-                wp.launch_tiled(self._kernels.smooth_rows, dim=blocks, block_dim=threads, device=dev,
-                                inputs=[self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
-                                        self._smoothing, self._c, k, self._m, self._keys, c_out, c_in, stalled])
-            else:
-                wp.launch_tiled(self._kernels.move_rows, dim=blocks, block_dim=threads, device=dev,
-                                inputs=[self._w, self._w, self._c, 0, k, k, self._m, self._table, rows, slot_of,
-                                        self._keys, c_in, c_out, 1, stalled])
-                p = 1 - p
 
 
 class _RowCache:
