@@ -7,24 +7,18 @@ Needs /usr/bin/chromium, Python Playwright and EGL/Mesa for headless VTK (script
 
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
 import io
-import json
+import itertools
 import os
-import socket
-import subprocess
-import sys
 import tempfile
 import time
-import urllib.request
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import CHROMIUM, CHROMIUM_ARGS, Serve
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-ROOT = Path(__file__).resolve().parents[1]
 VIEWPORT = {"width": 1200, "height": 800}
 
 playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
@@ -32,76 +26,9 @@ if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
     pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Server:
-    """`python -m somwidget.cli serve` on a free loopback port, with its debug route."""
-
-    def __init__(self, *args: str):
-        self.port = _free_port()
-        self.url = f"http://127.0.0.1:{self.port}/"
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-        env.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-        self.log_path = Path(tempfile.mkdtemp(prefix="somwidget-test-")) / "serve.log"
-        self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen([sys.executable, "-m", "somwidget.cli", "serve", "--port", str(self.port),
-                                      "--device", "cpu", *args], cwd=ROOT, env=env, stdout=self.log,
-                                     stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 90
-        while True:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"somwidget serve exited with {self.proc.returncode}")
-            try:
-                self.state()
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    self.stop()
-                    raise RuntimeError("somwidget serve did not come up within 90 s") from None
-                time.sleep(0.25)
-
-    def state(self, positions: bool = False) -> dict:
-        url = self.url + "api/state" + ("?positions=1" if positions else "")
-        with urllib.request.urlopen(url, timeout=10) as r:
-            return json.loads(r.read())
-
-    def wait(self, predicate, timeout: float = 20.0, what: str = "condition") -> dict:
-        deadline = time.monotonic() + timeout
-        while True:
-            st = self.state(positions=True)
-            if predicate(st):
-                return st
-            if time.monotonic() > deadline:
-                raise AssertionError(f"timed out waiting for {what}; last state: {json.dumps(st)[:800]}")
-            time.sleep(0.1)
-
-    def idle(self, timeout: float = 30.0) -> dict:
-        """Wait until training has stopped and the scene shows the latest frame."""
-        def done(st):
-            f = st["session"]["frame"]
-            return (not f["running"] and st["session"]["pending_intents"] == 0
-                    and st["view"]["frame_seq"] == f["seq"])
-        return self.wait(done, timeout, "the session to go idle")
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        self.log.close()
-
-
 @pytest.fixture(scope="module")
 def server():
-    srv = Server()
+    srv = Serve()
     yield srv
     srv.stop()
 
@@ -402,6 +329,44 @@ def test_client_leaving_mid_drag_leaves_the_session_consistent(browser, server):
         page.close()
 
 
+def test_another_tab_closing_leaves_the_drag_alone(browser, server):
+    """Tab A holds a control with the mouse; tab B opens and closes. A's drag goes on (only the tab that pressed
+    gets its button released when it goes), and A's release ends it where A let go."""
+    a = open_page(browser, server)
+    try:
+        st0 = server.idle()
+        i = pick_control(a, st0)
+        start = control_on_screen(a, st0, i)
+        delta = toward_centre(a, start, 90)
+        mouse_drag(a, start, (delta[0] / 2, delta[1] / 2), steps=12, release=False)
+        st = server.state()
+        assert st["view"]["dragging"] == i
+        clients = st["clients"]
+        b = open_page(browser, server)
+        server.wait(lambda s: s["clients"] == clients + 1, what="tab B connected")
+        b.close()
+        server.wait(lambda s: s["clients"] == clients, what="tab B gone")
+        time.sleep(0.3)
+        st = server.state()
+        assert st["view"]["dragging"] == i, "tab B's closing ended tab A's drag"
+        held = np.array(st["session"]["controls"][i][:3])
+        # A goes on dragging: the control still follows A's mouse
+        x, y = start[0] + delta[0] / 2, start[1] + delta[1] / 2
+        for k in range(1, 13):
+            a.mouse.move(x + delta[0] / 2 * k / 12, y + delta[1] / 2 * k / 12)
+            time.sleep(0.03)
+        st = server.wait(lambda s: np.linalg.norm(np.array(s["session"]["controls"][i][:3]) - held) > 0.05,
+                         what="the control to follow A's mouse after B left")
+        assert st["view"]["dragging"] == i
+        a.mouse.up()
+        st1 = server.wait(lambda s: s["view"]["dragging"] is None, what="A's release")
+        assert np.linalg.norm(np.array(st1["session"]["controls"][i][:3]) - np.array(st0["session"]["controls"][i][:3])
+                              ) > 0.2
+        server.idle()
+    finally:
+        a.close()
+
+
 def test_preset_chooser_lines_and_export(browser, server, tmp_path):
     page = open_page(browser, server)
     try:
@@ -450,3 +415,89 @@ def test_preset_chooser_lines_and_export(browser, server, tmp_path):
 def test_server_prints_its_url(server):
     text = server.log_path.read_text()
     assert f"http://127.0.0.1:{server.port}/" in text, text[-2000:]
+
+
+# -- the upload handler, called as trame calls it (the protocol: crafted browser file names) -------------------------
+OCTAHEDRON = (b"v 1 0 0\nv -1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nv 0 0 -1\n"
+              b"f 1 3 5\nf 3 2 5\nf 2 4 5\nf 4 1 5\nf 3 1 6\nf 2 3 6\nf 4 2 6\nf 1 4 6\n")
+_APP_NAMES = itertools.count(1)
+
+
+@pytest.fixture
+def local_app(tmp_path, monkeypatch):
+    """The app (app.build_app) around a paused CPU session in this process, on a trame server that never starts;
+    temporary files go to tmp_path/"tmp" so the test sees what is left behind."""
+    from trame.app import get_server
+
+    from somwidget.frontend.app import build_app
+    from somwidget.frontend.session import Session
+
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    session = Session("car", device="cpu", start=False)
+    app = build_app(session, server=get_server(f"upload-test-{next(_APP_NAMES)}", client_type="vue3"))
+    yield app
+    app.close()
+    session.close()
+
+
+def _upload(app, name, content, field="mesh_upload"):
+    value = {"name": name, "size": len(content), "type": "", "content": content}
+    setattr(app.state, field, value)  # what the browser's file field leaves in trame's state
+    handler = app.upload_mesh if field == "mesh_upload" else app.upload_session
+    # an event loop of its own, on a thread of its own (Playwright's sync API keeps one running in this thread)
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        pool.submit(asyncio.run, handler(value)).result(120)
+
+
+@pytest.mark.parametrize("name, shown", [
+    ("../../escape.obj", "escape.obj"),
+    ("..\\..\\escape.obj", "escape.obj"),
+    ("nul\x00in\nname.obj", "nulinname.obj"),
+    ("x" * 300 + ".obj", None),
+])
+def test_upload_handler_names_the_temporary_file_itself(local_app, tmp_path, name, shown):
+    """The browser's file name picks the suffix and labels messages; it never becomes a path: `..`, separators, NUL
+    and 300-byte names load the mesh, nothing is written outside a temporary folder that is removed, and the field
+    is cleared."""
+    app = local_app
+    _upload(app, name, OCTAHEDRON)
+    assert app.state.error_message == ""
+    preset = app.session.preset
+    assert preset.n_vertices == 6 and preset.name.startswith("mesh:")
+    if shown is not None:
+        assert preset.title == shown and preset.name == "mesh:" + shown[:-4]
+    else:
+        assert preset.title.endswith(".obj") and len(preset.title) <= 80
+    assert app.state.mesh_upload is None
+    assert os.listdir(tmp_path / "tmp") == []  # the temporary folder is gone
+    assert sorted(os.listdir(tmp_path)) == ["tmp"]  # nothing escaped into the parent
+
+
+@pytest.mark.parametrize("name, content, message", [
+    ("..", OCTAHEDRON, "is not a mesh file"),
+    ("no-suffix", OCTAHEDRON, "is not a mesh file"),
+    ("junk.obj", b"\x00\x01 no mesh \xff" * 20, "junk.obj: "),
+    ("empty.obj", b"", "is empty"),
+    ("e" * 300 + "\x00.ply", b"ply\nformat ascii 1.0\nend_header\n", "..."),
+])
+def test_upload_handler_errors_clear_the_field_and_the_temporary_folder(local_app, tmp_path, name, content,
+                                                                         message):
+    app = local_app
+    before = app.session.generation
+    _upload(app, name, content)
+    assert message in app.state.error_message
+    assert str(tmp_path) not in app.state.error_message  # no server path in what the browser sees
+    assert app.state.mesh_upload is None  # the bytes do not stay in trame's state
+    assert app.session.generation == before and app.session.preset.name == "car"
+    assert os.listdir(tmp_path / "tmp") == []
+
+
+def test_session_upload_handler_clears_the_field(local_app, tmp_path):
+    app = local_app
+    _upload(app, "../saved\x00.npz", b"not a zip archive" * 10, field="session_upload")
+    assert app.state.error_message and str(tmp_path) not in app.state.error_message
+    assert "saved.npz" in app.state.error_message
+    assert app.state.session_upload is None and os.listdir(tmp_path / "tmp") == []
+    _upload(app, "empty.npz", b"", field="session_upload")
+    assert "is empty" in app.state.error_message and app.state.session_upload is None

@@ -9,6 +9,8 @@ the panel's iteration and gap follow. The sessions train the real Som on the CPU
 
 from __future__ import annotations
 
+import asyncio
+import functools
 import json
 import os
 import re
@@ -17,30 +19,20 @@ import sys
 import time
 import urllib.request
 
+import aiohttp
+import helpers
 import numpy as np
 import pytest
+from helpers import CHROMIUM, CHROMIUM_ARGS
 
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 pytest.importorskip("ipywidgets")
 
-from somwidget.frontend.notebook import Panel, SomWidget, show  # noqa: E402
+from somwidget.frontend.notebook import NotebookServer, Panel, SomWidget, show  # noqa: E402
 from somwidget.frontend.session import Session  # noqa: E402
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-
-
-def wait_for(predicate, timeout: float = 15.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(0.02)
+wait_for = functools.partial(helpers.wait_for, timeout=15.0, interval=0.02)
 
 
 @pytest.fixture
@@ -188,6 +180,86 @@ def test_show_serves_the_web_app_of_the_same_session(shown):
     shown.server.stop()
     with pytest.raises(OSError):
         _get(f"http://127.0.0.1:{port}/api/state")
+
+
+def test_show_refuses_a_host_beyond_loopback(session):
+    """The notebook's server has no token and no TLS: a host other machines could reach is refused, pointing to
+    `somwidget serve --lan`; an empty host is an error too (not "every interface" by accident)."""
+    for host in ("0.0.0.0", "::", "192.168.1.20", "my-laptop.local"):
+        with pytest.raises(ValueError, match="somwidget serve --lan"):
+            show(session, host=host)
+        with pytest.raises(ValueError, match="somwidget serve --lan"):
+            NotebookServer(session, host=host)
+    with pytest.raises(ValueError, match="empty host"):
+        show(session, host="")
+    assert not session.closed
+
+
+def test_view_server_refuses_other_sites_and_host_names(shown):
+    """The view's server answers only loopback Host names and refuses websockets from pages of other sites; its own
+    pages (the iframe's, see the drag test) get in."""
+    port = shown.server.port
+    status, _ = helpers.request(shown.server.base_url + "api/state", headers={"Host": f"evil.example:{port}"})
+    assert status == 403
+    assert helpers.request(shown.server.base_url + "api/state", headers={"Host": f"localhost:{port}"})[0] == 200
+
+    async def main():
+        async with aiohttp.ClientSession() as cs:
+            for path in ("/ws", "/xr/ws"):
+                with pytest.raises(aiohttp.WSServerHandshakeError) as info:
+                    await cs.ws_connect(f"ws://127.0.0.1:{port}{path}", headers={"Origin": "http://evil.example"})
+                assert info.value.status == 403, path
+            async with cs.ws_connect(f"ws://127.0.0.1:{port}/xr/ws",
+                                     headers={"Origin": f"http://127.0.0.1:{port}"}) as ws:
+                assert json.loads((await ws.receive(timeout=20)).data)["type"] == "topology"
+
+    asyncio.run(main())
+
+
+def test_view_server_behind_a_proxy_keeps_the_origin_check(session, monkeypatch):
+    """Behind jupyter-server-proxy (SOMWIDGET_JUPYTER_URL) the browser's Host is the Jupyter server's: any Host is
+    answered, but a websocket still needs Origin == Host."""
+    monkeypatch.setenv("SOMWIDGET_JUPYTER_URL", "/proxy/{port}/")
+    widget = show(session)
+    try:
+        assert widget.url.startswith("/proxy/")
+        port = widget.server.port
+        hub = {"Host": "hub.example.org"}
+        assert helpers.request(f"http://127.0.0.1:{port}/api/state", headers=hub)[0] == 200
+
+        async def main():
+            async with aiohttp.ClientSession() as cs:
+                with pytest.raises(aiohttp.WSServerHandshakeError) as info:
+                    await cs.ws_connect(f"ws://127.0.0.1:{port}/ws",
+                                        headers={**hub, "Origin": "https://evil.example"})
+                assert info.value.status == 403
+                async with cs.ws_connect(f"ws://127.0.0.1:{port}/xr/ws",
+                                         headers={**hub, "Origin": "https://hub.example.org"}) as ws:
+                    assert json.loads((await ws.receive(timeout=20)).data)["type"] == "topology"
+
+        asyncio.run(main())
+    finally:
+        widget.close()
+
+
+def test_stopping_the_view_detaches_its_app_and_xr_hub(shown):
+    """After the view's server stops, neither its app nor its XR hub hears the session any more, and the frame pump
+    is cancelled."""
+    session, app = shown.session, shown.server.app
+    hub = app.xr
+    assert hub is not None and app._pump_task is not None
+    assert session.wait_idle(30)
+    seq = hub._latest.seq if hub._latest is not None else -1
+    session.move_control(2, session.controls[2, :3] + np.float32([0.0, 0.0, 0.05]))
+    wait_for(lambda: hub._latest is not None and hub._latest.seq > seq, timeout=30,
+             what="the hub to get frames while the server runs")
+    shown.server.stop()
+    assert app._pump_task is None
+    before_hub, before_app = hub._latest, app._latest
+    session.move_control(2, session.controls[2, :3] - np.float32([0.0, 0.0, 0.05]))
+    assert session.wait_idle(30)
+    time.sleep(0.2)
+    assert hub._latest is before_hub and app._latest is before_app
 
 
 def test_show_makes_a_session_from_a_preset_name():

@@ -16,16 +16,13 @@ from __future__ import annotations
 
 import math
 import os
-import time
 
 import numpy as np
 import pytest
+from helpers import CHROMIUM, CHROMIUM_ARGS, wait_for
 
 from somwidget.frontend.xr.server import DIST
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 VIEWPORT = {"width": 480, "height": 360}  # small: SwiftShader renders on the CPU
 
 playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
@@ -34,17 +31,6 @@ if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
 if not (DIST / "emulator.html").is_file():  # pragma: no cover
     pytest.skip("the WebXR client is not built (npm ci && npm run build in somwidget/frontend/xr)",
                 allow_module_level=True)
-
-
-def wait_for(predicate, timeout: float = 20.0, what: str = "condition", interval: float = 0.05):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(interval)
 
 
 @pytest.fixture(scope="module")

@@ -116,6 +116,8 @@ def test_https_with_token_end_to_end(tmp_path):
                 async with cs.get(srv.url) as r:
                     assert r.status == 200
                     assert "Secure" in r.headers.get("Set-Cookie", "") and "HttpOnly" in r.headers["Set-Cookie"]
+                    # named per port: two servers on one machine keep their own tokens
+                    assert r.headers["Set-Cookie"].startswith(f"somwidget_token_{srv.port}=")
                     der = r.connection.transport.get_extra_info("ssl_object").getpeercert(binary_form=True)
                 async with cs.ws_connect(srv.base.replace("https", "wss") + "/xr/ws") as ws:  # the cookie
                     topo = json.loads((await ws.receive(timeout=10)).data)
@@ -129,3 +131,111 @@ def test_https_with_token_end_to_end(tmp_path):
     seen = ":".join(f"{b:02X}" for b in x509.load_der_x509_certificate(der).fingerprint(hashes.SHA256()))
     assert seen == lan.certificate_fingerprint(cfg.cert)
     assert topo["type"] == "topology" and frame["n"] == 602
+
+
+# -- loopback or not; the Host / Origin guard; refusing to serve the LAN without a token --------------------------
+@pytest.mark.parametrize("host, loopback", [
+    (None, True), ("localhost", True), ("LocalHost", True), ("127.0.0.1", True), ("127.1.2.3", True),
+    ("::1", True), ("[::1]", True), (" 127.0.0.1 ", True),
+    ("0.0.0.0", False), ("::", False), ("192.168.1.20", False), ("example.org", False), ("localhost.evil", False),
+])
+def test_is_loopback(host, loopback):
+    assert lan.is_loopback(host) is loopback
+
+
+@pytest.mark.parametrize("host", ["", "   ", "[]"])
+def test_an_empty_host_is_an_error_not_lan_mode(host):
+    with pytest.raises(ValueError, match="empty host.*0.0.0.0"):
+        lan.is_loopback(host)
+    with pytest.raises(ValueError, match="empty host"):
+        lan.prepare_lan(host)
+    from somwidget.frontend.app import run_server
+
+    with pytest.raises(ValueError, match="empty host"):
+        run_server(host=host, device="cpu")
+
+
+def test_no_lan_address_is_said_clearly(tmp_path, monkeypatch):
+    """Without a LAN address, `--lan` (or a wildcard host) refuses instead of printing a 127.x headset URL."""
+    monkeypatch.setattr(lan, "lan_address", lambda: "127.0.1.1")
+    for host in (None, "0.0.0.0"):
+        with pytest.raises(ValueError, match="no LAN address found"):
+            lan.prepare_lan(host, directory=tmp_path)
+    assert lan.prepare_lan("127.0.0.1", directory=tmp_path).host == "127.0.0.1"  # asked for: served as asked
+
+
+def test_cookie_name_is_per_port():
+    assert lan.cookie_name(8080) == "somwidget_token_8080" != lan.cookie_name(8081)
+
+
+def test_xr_server_beyond_loopback_needs_a_token():
+    from somwidget.frontend.session import Session
+
+    with Session("car", device="cpu", start=False) as session:
+        for host in ("0.0.0.0", "192.168.1.20", "example.org"):
+            with pytest.raises(ValueError, match="token"):
+                XRServer(session, host=host)
+        with pytest.raises(ValueError, match="empty host"):
+            XRServer(session, host="")
+        srv = XRServer(session, host="0.0.0.0", token=lan.make_token())  # with a token: allowed (not started)
+        assert srv.host == "0.0.0.0"
+
+
+def test_xr_server_refuses_other_sites_and_host_names():
+    """The standalone XR server: a websocket from another site's page is refused (403), and so is a request whose
+    Host is not a loopback name; its own origin is served."""
+    from somwidget.frontend.session import Session
+
+    with Session("car", device="cpu", paused=True) as session, XRServer(session) as srv:
+        async def main():
+            ws = srv.base.replace("http", "ws") + "/xr/ws"
+            async with aiohttp.ClientSession() as cs:
+                with pytest.raises(aiohttp.WSServerHandshakeError) as info:
+                    await cs.ws_connect(ws, headers={"Origin": "http://evil.example"})
+                assert info.value.status == 403
+                for path in ("/xr/", "/xr/status"):
+                    async with cs.get(srv.base + path, headers={"Host": "evil.example"}) as r:
+                        assert r.status == 403, path
+                    async with cs.get(srv.base + path, headers={"Host": f"localhost:{srv.port}"}) as r:
+                        assert r.status == 200, path
+                async with cs.ws_connect(ws, headers={"Origin": srv.base}) as conn:
+                    assert json.loads((await conn.receive(timeout=10)).data)["type"] == "topology"
+
+        asyncio.run(main())
+
+
+class _Request:
+    """What request_guard's checks read from an aiohttp request."""
+
+    def __init__(self, headers, scheme="http", method="GET"):
+        self.headers, self.scheme, self.method = headers, scheme, method
+
+
+@pytest.mark.parametrize("headers, scheme, ok", [
+    ({"Host": "127.0.0.1:8080", "Origin": "http://127.0.0.1:8080"}, "http", True),
+    ({"Host": "localhost", "Origin": "http://localhost:80"}, "http", True),
+    ({"Host": "[::1]:9000", "Origin": "http://[::1]:9000"}, "http", True),
+    ({"Host": "192.168.1.20:8080", "Origin": "https://192.168.1.20:8080"}, "https", True),
+    ({"Host": "192.168.1.20", "Origin": "https://192.168.1.20"}, "https", True),
+    ({"Host": "127.0.0.1:8080"}, "http", True),  # no Origin: not a page of another site
+    # behind a TLS-terminating proxy (JupyterHub + jupyter-server-proxy): the browser's Host, no port
+    ({"Host": "hub.example.org", "Origin": "https://hub.example.org"}, "http", True),
+    ({"Host": "hub.example.org", "Origin": "https://hub.example.org:8443"}, "http", False),
+    ({"Host": "hub.example.org", "Origin": "https://evil.example"}, "http", False),
+    ({"Host": "127.0.0.1:8080", "Origin": "http://evil.example"}, "http", False),
+    ({"Host": "127.0.0.1:8080", "Origin": "http://127.0.0.1:8081"}, "http", False),
+    ({"Host": "127.0.0.1:8080", "Origin": "null"}, "http", False),
+    ({"Host": "127.0.0.1:8080", "Origin": "file://"}, "http", False),
+    ({"Origin": "http://127.0.0.1:8080"}, "http", False),
+])
+def test_origin_allowed(headers, scheme, ok):
+    assert lan.origin_allowed(_Request(headers, scheme)) is ok
+
+
+@pytest.mark.parametrize("host, ok", [
+    ("127.0.0.1:8080", True), ("localhost", True), ("LOCALHOST:1", True), ("[::1]:8080", True), (None, True),
+    ("evil.example", False), ("evil.example:8080", False), ("localhost.evil.example", False),
+    ("user@127.0.0.1:8080", False), ("127.0.0.1:8080/x", False), ("[::2]:80", False), ("", False),
+])
+def test_host_allowed(host, ok):
+    assert lan.host_allowed(_Request({} if host is None else {"Host": host})) is ok

@@ -11,99 +11,18 @@ import asyncio
 import json
 import os
 import re
-import socket
-import ssl
-import subprocess
-import sys
-import tempfile
 import time
-import urllib.error
-import urllib.request
-from pathlib import Path
 
 import aiohttp
 import numpy as np
 import pytest
+from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, insecure_context
 
 from somwidget.frontend.xr import protocol
 from somwidget.frontend.xr.server import DIST
 
-ROOT = Path(__file__).resolve().parents[1]
-CHROMIUM = "/usr/bin/chromium"
 NOT_WIRED = ("`somwidget serve` does not serve /xr/: app.py must call somwidget.frontend.xr.attach(wslink_server, "
              "session, token=...) from ctrl.on_server_bind (see the XR helper's report)")
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _insecure() -> ssl.SSLContext:
-    ctx = ssl.create_default_context()
-    ctx.check_hostname = False
-    ctx.verify_mode = ssl.CERT_NONE
-    return ctx
-
-
-class Serve:
-    """`python -m somwidget.cli serve ...` on a free loopback port."""
-
-    def __init__(self, *args: str, env: dict | None = None, scheme: str = "http"):
-        self.port = _free_port()
-        self.base = f"{scheme}://127.0.0.1:{self.port}"
-        full_env = dict(os.environ)
-        full_env["PYTHONPATH"] = os.pathsep.join([str(ROOT), full_env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-        full_env.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-        full_env.update(env or {})
-        self.log_path = Path(tempfile.mkdtemp(prefix="somwidget-xr-serve-")) / "serve.log"
-        self.log = open(self.log_path, "w")
-        self.proc = subprocess.Popen([sys.executable, "-m", "somwidget.cli", "serve", "--port", str(self.port),
-                                      "--device", "cpu", *args], cwd=ROOT, env=full_env, stdout=self.log,
-                                     stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 120
-        while True:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"somwidget serve exited with {self.proc.returncode}:\n{self.output()[-3000:]}")
-            try:
-                with socket.create_connection(("127.0.0.1", self.port), timeout=1):
-                    pass
-                if "somwidget" in self.output():  # the announcement: the server is ready
-                    break
-            except OSError:
-                pass
-            if time.monotonic() > deadline:
-                self.stop()
-                raise RuntimeError("somwidget serve did not come up within 120 s")
-            time.sleep(0.25)
-
-    def output(self) -> str:
-        self.log.flush()
-        return self.log_path.read_text(errors="replace")
-
-    def get(self, path: str, token: str | None = None):
-        url = self.base + path + (("&" if "?" in path else "?") + f"token={token}" if token else "")
-        try:
-            with urllib.request.urlopen(url, timeout=20, context=_insecure()) as r:
-                return r.status, r.read()
-        except urllib.error.HTTPError as exc:
-            return exc.code, exc.read()
-
-    def state(self, token: str | None = None) -> dict:
-        status, body = self.get("/api/state", token)
-        assert status == 200, (status, body[:200])
-        return json.loads(body)
-
-    def stop(self):
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        self.log.close()
 
 
 @pytest.fixture(scope="module")
@@ -147,7 +66,7 @@ def test_headset_grab_moves_the_desktop_apps_control(serve):
     start = np.array(serve.state()["session"]["controls"])
     index = 5
     with playwright_sync.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=xb.CHROMIUM_ARGS, headless=True)
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
         try:
             page = xb.open_page(browser, serve.base + "/xr/emulator.html")
             xb.enter_ar(page)
@@ -180,7 +99,7 @@ def test_headset_grab_moves_the_desktop_apps_control(serve):
 def test_serve_lan_https_token(tmp_path):
     """`serve --lan`: HTTPS with the certificate made in the data dir, the token printed in the URL with a QR code,
     403 for every page and socket without it."""
-    s = Serve("--lan", "--host", "127.0.0.1", env={"SOMWIDGET_DATA_DIR": str(tmp_path)}, scheme="https")
+    s = Serve("--lan", "--host", "127.0.0.1", env={"SOMWIDGET_DATA_DIR": str(tmp_path)})
     try:
         out = s.output()
         urls = re.findall(r"https://127\.0\.0\.1:\d+/\S*\?token=([A-Za-z0-9_-]+)", out)
@@ -197,10 +116,15 @@ def test_serve_lan_https_token(tmp_path):
 
         async def main():
             wss = s.base.replace("https", "wss")
-            async with aiohttp.ClientSession(connector=aiohttp.TCPConnector(ssl=_insecure())) as cs:
+            async with aiohttp.ClientSession(connector=aiohttp.TCPConnector(ssl=insecure_context())) as cs:
                 for path in ("/xr/ws", "/ws"):
                     with pytest.raises(aiohttp.WSServerHandshakeError) as info:
                         await cs.ws_connect(wss + path)
+                    assert info.value.status == 403
+                    # the token does not let a page of another site in
+                    with pytest.raises(aiohttp.WSServerHandshakeError) as info:
+                        await cs.ws_connect(wss + path, params={"token": token},
+                                            headers={"Origin": "https://evil.example"})
                     assert info.value.status == 403
                 async with cs.ws_connect(wss + "/xr/ws", params={"token": token}) as ws:
                     topo = json.loads((await ws.receive(timeout=20)).data)
@@ -211,3 +135,49 @@ def test_serve_lan_https_token(tmp_path):
         assert topo["type"] == "topology" and frame["n"] == topo["n_vertices"]
     finally:
         s.stop()
+
+
+def test_serve_refuses_other_sites_and_other_host_names(serve):
+    """On loopback: a websocket opened by a page of another site (its Origin) is refused on trame's /ws and on
+    /xr/ws, and a request whose Host is not a loopback name (DNS rebinding) is refused on every route; the server's
+    own origin, and localhost / [::1] spellings of it, are served."""
+    port = serve.port
+    for path in ("/api/state", "/", "/index.html", "/xr/", "/xr/status"):
+        status, body = serve.get(path, headers={"Host": "evil.example"})
+        assert status == 403 and b"localhost" in body, path
+        assert serve.get(path, headers={"Host": f"evil.example:{port}"})[0] == 403, path
+    assert serve.get("/api/state", headers={"Host": f"rebind.127.0.0.1.nip.io:{port}"})[0] == 403
+    for host in (f"127.0.0.1:{port}", f"localhost:{port}", f"[::1]:{port}", "localhost"):
+        assert serve.get("/api/state", headers={"Host": host})[0] == 200, host
+
+    async def main():
+        ws_base = serve.base.replace("http", "ws")
+        async with aiohttp.ClientSession() as cs:
+            for path in ("/ws", "/xr/ws"):
+                for origin in ("http://evil.example", f"http://evil.example:{port}", "null",
+                               f"http://127.0.0.1:{port + 1}", f"https://localhost:{port}"):
+                    with pytest.raises(aiohttp.WSServerHandshakeError) as info:
+                        await cs.ws_connect(ws_base + path, headers={"Origin": origin})
+                    assert info.value.status == 403, (path, origin)
+                with pytest.raises(aiohttp.WSServerHandshakeError) as info:
+                    await cs.ws_connect(ws_base + path, headers={"Host": "evil.example"})
+                assert info.value.status == 403
+            # the page's own origin (what the app's tab and the XR page send) is let in
+            async with cs.ws_connect(ws_base + "/xr/ws", headers={"Origin": f"http://127.0.0.1:{port}"}) as ws:
+                assert json.loads((await ws.receive(timeout=20)).data)["type"] == "topology"
+            async with cs.ws_connect(ws_base + "/ws", headers={"Origin": f"http://127.0.0.1:{port}"}) as ws:
+                assert not ws.closed
+            async with cs.post(serve.base + "/api/state", headers={"Origin": "http://evil.example"}) as r:
+                assert r.status == 403  # state-changing methods are checked too
+
+    asyncio.run(main())
+    assert serve.state()["session"]["preset"] == "car"
+
+
+def test_serve_refuses_an_empty_host(capsys):
+    """`--host ""` is an error (it used to mean LAN mode on this machine's LAN address, silently)."""
+    from somwidget.cli import main
+
+    assert main(["serve", "--host", "", "--device", "cpu"]) == 2
+    err = capsys.readouterr().err
+    assert "empty host" in err and "0.0.0.0" in err

@@ -10,12 +10,15 @@ VTK work happens on the event loop's thread.
 
 A read-only JSON route, GET /api/state, reports the session, the scene and the connected clients (for tests,
 benchmarks and scripts); add ?positions=1 for every node's position.
+
+Every bind gets `lan.request_guard`: websockets (trame's /ws, /xr/ws) from pages of other sites are refused, and a
+loopback-bound server answers only loopback Host names (no DNS rebinding). Beyond loopback, `run_server` adds HTTPS
+and the access token (lan.py).
 """
 
 from __future__ import annotations
 
 import asyncio
-import ipaddress
 import logging
 import math
 import os
@@ -23,6 +26,7 @@ import sys
 import tempfile
 import threading
 import time
+import unicodedata
 from pathlib import Path
 
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
@@ -36,6 +40,7 @@ from trame_pyvista import PyVistaRemoteView  # noqa: E402
 from wslink.websocket import LinkProtocol  # noqa: E402
 
 from ..backend import presets as _presets  # noqa: E402
+from . import lan as _lan  # noqa: E402
 from .session import DEFAULT_MAX_VERTICES, Frame, Session, hex_colour  # noqa: E402
 from .view import SceneView, control_colours  # noqa: E402
 from .xr import attach as attach_xr  # noqa: E402
@@ -63,6 +68,10 @@ PRESET_LABELS = {
     "torus": "Torus",
 }
 MIME = {"obj": "text/plain", "ply": "application/octet-stream", "glb": "model/gltf-binary"}
+#: Mesh files the upload field takes (by the suffix of the browser's file name).
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+#: Longest file name shown back in messages and preset titles.
+MAX_SHOWN_NAME = 80
 
 
 def _fmt(x: float, digits: int = 3) -> str:
@@ -89,6 +98,12 @@ class SomApp:
     def __init__(self, session: Session, server=None, title: str = "somwidget"):
         self.session = session
         self.xr_token: str | None = None  # the LAN access token, when served beyond loopback
+        # on a loopback bind, answer only loopback Host names (False behind a proxy that forwards the browser's Host)
+        self.check_host = True
+        self.xr = None  # the XR hub, once the server is bound
+        self._web_app = None  # the wslink server (for the client behind the current RPC)
+        self._press_client: str | None = None  # the client whose mouse button is down in the view
+        self._observed_app = None
         self.server = server if server is not None else get_server("somwidget", client_type="vue3")
         self.server.client_type = "vue3"
         self.state, self.ctrl = self.server.state, self.server.controller
@@ -116,8 +131,11 @@ class SomApp:
         session.add_listener(self._on_frame)
 
     def close(self) -> None:
-        """Detach from the session and free the render window (call on the server's thread, after it stopped)."""
+        """Detach from the session (the app and its XR hub) and free the render window (call on the server's
+        thread, after it stopped)."""
         self.session.remove_listener(self._on_frame)
+        if self.xr is not None:
+            self.xr.detach()
         if self._pump_task is not None:
             self._pump_task.cancel()
             self._pump_task = None
@@ -138,16 +156,47 @@ class SomApp:
         self.clients.add(str(client_id))
 
     def _client_closed(self, client_id) -> None:
-        self.clients.discard(str(client_id))
+        client_id = str(client_id)
+        self.clients.discard(client_id)
         # a tab closed with the mouse button down leaves the button "pressed" in VTK's web application (it
         # compares each event's buttons with the last ones) and the widget grabbed: release both, so the
-        # session keeps the last position and the next tab starts clean
+        # session keeps the last position and the next tab starts clean. Only for the tab that pressed: another
+        # tab's drag goes on.
+        owner = self._press_client
+        if owner is not None and owner != client_id:
+            return
         try:
             if self.scene.dragging is not None or self._button_down():
                 self._release_button()
             self.scene.cancel_drag()
         except Exception:  # pragma: no cover - never let a closing socket break the server
             log.exception("releasing the mouse failed")
+        finally:
+            self._press_client = None
+
+    def _active_client(self) -> str | None:
+        """The client whose RPC the server is handling now (wslink records it before each call)."""
+        web_app = self._web_app
+        cid = getattr(web_app, "last_active_client_id", None) if web_app is not None else None
+        return None if cid is None else str(cid)
+
+    def _watch_presses(self) -> None:
+        """Note which client pressed a mouse button in the view: VTK's web application fires StartInteractionEvent
+        on a client's first "down" and EndInteractionEvent on its "up", inside that client's RPC."""
+        handler = self._mouse_handler()
+        vtk_app = getattr(handler, "app", None) if handler is not None else None
+        if vtk_app is None or vtk_app is self._observed_app:
+            return
+        self._observed_app = vtk_app
+
+        def pressed(*_):
+            self._press_client = self._active_client()
+
+        def released(*_):
+            self._press_client = None
+
+        vtk_app.AddObserver("StartInteractionEvent", pressed)
+        vtk_app.AddObserver("EndInteractionEvent", released)
 
     def _mouse_handler(self):
         protocol = self.server.protocol
@@ -377,8 +426,14 @@ class SomApp:
             return
         await self._replace(lambda: self.session.load_preset(name))
 
-    async def _replace(self, fn) -> bool:
-        """Run a slow session replacement off the event loop; errors go to the panel."""
+    async def _replace(self, fn, scrub: dict[str, str] | None = None) -> bool:
+        """Run a slow session replacement off the event loop; errors go to the panel (with each key of `scrub`, a
+        temporary path, replaced by its value, the name the person knows)."""
+        def shown(message: str) -> str:
+            for old, new in (scrub or {}).items():
+                message = message.replace(old, new)
+            return message
+
         with self.state:
             self.state.busy = True
         try:
@@ -387,28 +442,51 @@ class SomApp:
             self.state.error_message = ""
         except (ValueError, OSError) as exc:
             ok = False
-            self.state.error_message = str(exc)
+            self.state.error_message = shown(str(exc))
         except Exception as exc:  # keep the server up whatever a file does to a reader
             log.exception("loading failed")
             ok = False
-            self.state.error_message = f"could not load: {type(exc).__name__}: {exc}"
+            self.state.error_message = shown(f"could not load: {type(exc).__name__}: {exc}")
         with self.state:
             self.state.busy = False
             self.state.preset_name = self.session.preset.name
         return ok
 
     @staticmethod
-    def _file_of(value):
-        """trame's file dict (or the first of a list) -> (name, bytes) or raise ValueError."""
+    def _shown_name(raw) -> str:
+        """The browser's file name made safe to show: its last path part, without control characters, at most
+        MAX_SHOWN_NAME characters (keeping the suffix). Never used as a path."""
+        name = str(raw or "").replace("\\", "/").rsplit("/", 1)[-1]
+        name = "".join(ch for ch in name if unicodedata.category(ch)[0] != "C").strip()
+        if len(name) > MAX_SHOWN_NAME:
+            stem, dot, suffix = name.rpartition(".")
+            if dot and stem and len(suffix) <= 8:
+                name = name[:MAX_SHOWN_NAME - len(suffix) - 4] + "..." + dot + suffix
+            else:
+                name = name[:MAX_SHOWN_NAME - 3] + "..."
+        return name or "upload"
+
+    @staticmethod
+    def _suffix(name: str) -> str:
+        stem, dot, suffix = name.rpartition(".")
+        return "." + suffix.lower() if dot and stem else ""
+
+    @classmethod
+    def _file_of(cls, value):
+        """trame's file dict (or the first of a list) -> (name to show, bytes), None for no file, or ValueError."""
         if isinstance(value, list):
             value = value[0] if value else None
         if not value:
             return None
         if not isinstance(value, dict):
             raise ValueError("upload: unexpected data from the browser")
-        size = int(value.get("size") or 0)
+        name = cls._shown_name(value.get("name"))
+        try:
+            size = int(value.get("size") or 0)
+        except (TypeError, ValueError):
+            raise ValueError("upload: unexpected data from the browser") from None
         if size > MAX_UPLOAD_BYTES:
-            raise ValueError(f"upload: {value.get('name')!r} is {size / 1e6:.1f} MB; the limit is "
+            raise ValueError(f"upload: {name!r} is {size / 1e6:.1f} MB; the limit is "
                              f"{MAX_UPLOAD_BYTES / 1e6:.0f} MB")
         content = value.get("content")
         if isinstance(content, list):
@@ -416,60 +494,74 @@ class SomApp:
         if isinstance(content, str):
             content = content.encode("latin-1")
         if not content:
-            raise ValueError(f"upload: {value.get('name')!r} is empty")
+            raise ValueError(f"upload: {name!r} is empty")
+        if not isinstance(content, (bytes, bytearray, memoryview)):
+            raise ValueError("upload: unexpected data from the browser")
         if len(content) > MAX_UPLOAD_BYTES:
             raise ValueError(f"upload: file is larger than {MAX_UPLOAD_BYTES / 1e6:.0f} MB")
-        name = os.path.basename(str(value.get("name") or "upload")) or "upload"
         return name, bytes(content)
 
+    def _load_mesh(self, path: Path, name: str) -> None:
+        """Session.load_mesh for an uploaded file saved as `path`, named after the browser's file `name`."""
+        from ..backend import io as sw_io
+
+        preset = sw_io.load_mesh(path, max_vertices=self.session.max_vertices)
+        stem = name[: -len(self._suffix(name))] if self._suffix(name) else name
+        preset.name = f"mesh:{stem or 'upload'}"  # never mistaken for a built-in preset of the same name
+        preset.title = name
+        preset.description = preset.description.replace(path.name, name)
+        self.session.load_preset(preset)
+
     async def upload_mesh(self, value) -> None:
+        """A mesh file from the upload field becomes the clay. The bytes are written as "upload<suffix>" in a fresh
+        temporary folder (the browser's file name only picks the suffix and labels messages), which is removed
+        afterwards; the field (and the bytes in trame's state) is cleared whatever happens."""
         try:
             got = self._file_of(value)
-        except ValueError as exc:
+            if got is None:
+                return
+            name, content = got
+            suffix = self._suffix(name)
+            if suffix not in MESH_SUFFIXES:
+                self._error(f"upload: {name!r} is not a mesh file this app reads; use "
+                            f"{', '.join(x[1:].upper() for x in MESH_SUFFIXES)}")
+                return
+            with tempfile.TemporaryDirectory(prefix="somwidget-upload-") as folder:
+                path = Path(folder) / f"upload{suffix}"
+                path.write_bytes(content)
+                ok = await self._replace(lambda: self._load_mesh(path, name), scrub={str(path): name})
+            if ok:
+                preset = self.session.preset
+                self._remember_upload(preset)
+                with self.state:
+                    self.state.preset_items = self._preset_items()
+                    self.state.preset_name = preset.name
+                    self.state.info_message = f"loaded {name}: {preset.n_vertices} vertices"
+        except (ValueError, OSError) as exc:
             self._error(str(exc))
-            got = None
-        if got is None:
-            return
-        name, content = got
-        folder = tempfile.mkdtemp(prefix="somwidget-upload-")
-        path = Path(folder) / name
-        path.write_bytes(content)
-        try:
-            ok = await self._replace(lambda: self.session.load_mesh(path))
         finally:
-            path.unlink(missing_ok=True)
-            os.rmdir(folder)
-        if ok:
-            preset = self.session.preset
-            self._remember_upload(preset)
             with self.state:
-                self.state.preset_items = self._preset_items()
-                self.state.preset_name = preset.name
-                self.state.info_message = f"loaded {name}: {preset.n_vertices} vertices"
-        with self.state:
-            self.state.mesh_upload = None
+                self.state.mesh_upload = None
 
     async def upload_session(self, value) -> None:
+        """A saved session (.npz) from the upload field replaces the session; the same care as upload_mesh."""
         try:
             got = self._file_of(value)
-        except ValueError as exc:
+            if got is None:
+                return
+            name, content = got
+            with tempfile.TemporaryDirectory(prefix="somwidget-session-") as folder:
+                path = Path(folder) / "upload.npz"
+                path.write_bytes(content)
+                ok = await self._replace(lambda: self.session.load(path), scrub={str(path): name})
+            if ok:
+                with self.state:
+                    self.state.info_message = f"session {name} loaded"
+        except (ValueError, OSError) as exc:
             self._error(str(exc))
-            got = None
-        if got is None:
-            return
-        name, content = got
-        fd, tmp = tempfile.mkstemp(prefix="somwidget-session-", suffix=".npz")
-        with os.fdopen(fd, "wb") as f:
-            f.write(content)
-        try:
-            ok = await self._replace(lambda: self.session.load(tmp))
         finally:
-            os.remove(tmp)
-        if ok:
             with self.state:
-                self.state.info_message = f"session {name} loaded"
-        with self.state:
-            self.state.session_upload = None
+                self.state.session_upload = None
 
     def export_mesh(self, fmt) -> bytes | None:
         fmt = str(fmt).lower()
@@ -541,8 +633,19 @@ class SomApp:
         loop = asyncio.get_event_loop()
         if self._pump_task is None:
             self._pump_task = loop.create_task(self._pump())
+        try:
+            self._watch_presses()
+        except Exception:  # pragma: no cover - the drag bookkeeping must not stop the server
+            log.exception("watching mouse presses failed")
 
     def _bind_routes(self, wslink_server) -> None:
+        self._web_app = wslink_server
+        bound = getattr(wslink_server, "config", {}).get("host")
+        try:
+            loopback = _lan.is_loopback(bound)
+        except ValueError:  # an empty host: every interface
+            loopback = False
+        wslink_server.app.middlewares.append(_lan.request_guard(check_host=self.check_host and loopback))
         wslink_server.app.router.add_get("/api/state", self._api_state)
         self.xr = attach_xr(wslink_server, self.session, token=self.xr_token)
 
@@ -675,15 +778,6 @@ class SomApp:
                           disabled=("busy",))
 
 
-def _is_loopback(host: str | None) -> bool:
-    if host in (None, "", "localhost"):
-        return host is None or host == "localhost"
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:  # a host name
-        return False
-
-
 def build_app(session: Session, server=None, title: str = "somwidget") -> SomApp:
     """The trame app for `session` on `server` (a fresh vue3 trame server by default)."""
     return SomApp(session, server=server, title=title)
@@ -694,13 +788,21 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
     """Serve the app until interrupted: `somwidget serve`.
 
     preset: a preset name (default "car", case study 2); mesh: a mesh file to start from instead (io.load_mesh);
-    host: interface to listen on (loopback by default); port: 0 picks a free one; device: "auto", "cpu", "cuda" or
-    "cuda:N" for the training. lan: serve on this machine's LAN address. Any address beyond loopback is served
-    over HTTPS (a self-signed certificate, made once and reused) with an access token on every route, and the
-    URL, certificate fingerprint and a QR code for a headset are printed.
+    host: interface to listen on (loopback by default; "0.0.0.0" every interface; "" is refused); port: 0 picks a
+    free one (the printed URL has it); device: "auto", "cpu", "cuda" or "cuda:N" for the training (the CLI's --device
+    takes auto, cpu or cuda). lan: serve on
+    this machine's LAN address. Any address beyond loopback is served over HTTPS (a self-signed certificate, made
+    once and reused) with an access token on every route, and the URL, certificate fingerprint and a QR code for a
+    headset are printed.
     """
     if preset is not None and mesh is not None:
         raise ValueError("give either a preset or a mesh, not both")
+    host = _lan.normalise_host(host)  # ValueError for "": say 0.0.0.0 for every interface
+    lan_cfg = None
+    if lan or not _lan.is_loopback(host):  # beyond loopback: HTTPS and a token, always
+        lan_cfg = _lan.prepare_lan(host)  # host None: this machine's LAN address (ValueError when it has none)
+        host = lan_cfg.bind
+    host = host or "127.0.0.1"
     start = preset or "car"
     if mesh is not None:
         from ..backend import io as sw_io
@@ -709,15 +811,9 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
         start.name = f"mesh:{start.name}"
     session = Session(start, device=device, start=False)
     app = build_app(session)
-    lan_cfg = None
-    if lan or not _is_loopback(host):
-        from . import lan as _lan
-
-        lan_cfg = _lan.prepare_lan(host)  # host None: this machine's LAN address
-        host = lan_cfg.bind
+    if lan_cfg is not None:
         app.xr_token = lan_cfg.token
         app.ctrl.on_server_bind.add(lambda wslink_server: _lan.apply_lan(wslink_server, lan_cfg))
-    host = host or "127.0.0.1"
     session.start()
 
     def announce(**_):
@@ -739,4 +835,8 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
         raise ValueError(f"cannot serve on {host}:{port}: {exc.strerror or exc}") from None
     finally:
         sys.argv = argv
+        try:
+            app.close()
+        except Exception:  # pragma: no cover - closing must not hide the real error
+            log.exception("closing the app failed")
         session.close()

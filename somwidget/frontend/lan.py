@@ -12,8 +12,14 @@ $SOMWIDGET_DATA_DIR) and are reused while they are valid and name the address be
 accepted the certificate once keeps accepting it.
 
 The token travels in the URL (?token=...). A request that shows it (query, cookie or `Authorization: Bearer`)
-gets a cookie, so the page's own scripts, images and websockets need not repeat it; any other request is refused
-with 403. The token is compared in constant time.
+gets a cookie (named per port, `somwidget_token_<port>`, since browsers share cookies between the ports of a host),
+so the page's own scripts, images and websockets need not repeat it; any other request is refused with 403. The
+token is compared in constant time.
+
+Every server, loopback or not, also gets `request_guard`: a websocket (or any request that is not GET / HEAD /
+OPTIONS) whose Origin names another site is refused, and a loopback-bound server answers only requests whose Host
+names a loopback host (localhost, 127.x.x.x, [::1]), which stops DNS rebinding. `is_loopback(host)` decides which
+binds are loopback: anything else is served the LAN way (HTTPS and a token).
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ import io
 import ipaddress
 import logging
 import os
+import re
 import secrets
 import socket
 import ssl
@@ -33,6 +40,7 @@ from urllib.parse import quote
 
 log = logging.getLogger(__name__)
 
+#: Prefix of the token cookie's name; the full name adds the port (`cookie_name`).
 COOKIE = "somwidget_token"
 CERT_FILE = "somwidget-cert.pem"
 KEY_FILE = "somwidget-key.pem"
@@ -42,6 +50,128 @@ CERT_DAYS = 820
 RENEW_DAYS = 7
 REFUSED = ("somwidget: this server needs its access token. Open the URL that `somwidget serve --lan` printed "
            "(it ends in ?token=...), or scan its QR code.\n")
+REFUSED_HOST = ("somwidget: this server listens on this machine only and answers only to the host names localhost, "
+                "127.0.0.1 and [::1]; open it as http://127.0.0.1:<port>/.\n")
+REFUSED_ORIGIN = "somwidget: refused a websocket or a request from a page of another site (its Origin).\n"
+_HOST_RE = re.compile(r"^(?:\[([0-9a-f:.]+)\]|([a-z0-9._-]+))(?::(\d{1,5}))?$")
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Which hosts are loopback; the Host / Origin guard
+# --------------------------------------------------------------------------------------------------------------
+def normalise_host(host: str | None) -> str | None:
+    """`host` without surrounding blanks or IPv6 brackets; None stays None (the loopback default). An empty host
+    is refused: it would mean "every interface" to a socket but reads like "nothing"; say 0.0.0.0 for that."""
+    if host is None:
+        return None
+    h = str(host).strip()
+    if h.startswith("[") and h.endswith("]"):
+        h = h[1:-1].strip()
+    if not h:
+        raise ValueError("empty host: give 127.0.0.1 (this machine only, the default), 0.0.0.0 (every interface, "
+                         "served over HTTPS with an access token) or one address of this machine")
+    return h
+
+
+def is_loopback(host: str | None) -> bool:
+    """True when a server bound to `host` is reachable from this machine only: None (the default, 127.0.0.1),
+    "localhost" and the loopback addresses (127.0.0.0/8, ::1). False for anything else, wildcards (0.0.0.0, ::)
+    included. ValueError for an empty host (normalise_host)."""
+    h = normalise_host(host)
+    if h is None or h.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(h).is_loopback
+    except ValueError:  # a host name: it may resolve to anything
+        return False
+
+
+def _split_host(value: str) -> tuple[str, int | None] | None:
+    """("host", port or None when not given) from a Host header value, or None when it is not a plain
+    host[:port]."""
+    m = _HOST_RE.match(value.strip().lower())
+    if m is None:
+        return None
+    return (m.group(1) or m.group(2)), (int(m.group(3)) if m.group(3) else None)
+
+
+def _host_is_loopback_name(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _default_port(scheme: str) -> int:
+    return 443 if scheme in ("https", "wss") else 80
+
+
+def host_allowed(request) -> bool:
+    """The request's Host names a loopback host (localhost, 127.x.x.x, [::1]; any port). A request without a Host
+    header (not a browser: HTTP/1.0 tools) passes."""
+    value = request.headers.get("Host")
+    if value is None:
+        return True
+    parsed = _split_host(value)
+    return parsed is not None and _host_is_loopback_name(parsed[0])
+
+
+def origin_allowed(request) -> bool:
+    """No Origin header (not sent by a browser page of another site), or an Origin whose host:port is the request's
+    Host: the page that opens the websocket was served by this server. A Host without a port (a browser on a
+    default port, possibly through a TLS-terminating proxy such as JupyterHub's) matches an Origin on that host at
+    its scheme's default port."""
+    origin = request.headers.get("Origin")
+    if origin is None:
+        return True
+    from yarl import URL
+
+    try:
+        o = URL(origin.strip())
+    except ValueError:
+        return False
+    if o.scheme not in ("http", "https") or not o.host:
+        return False  # "null" (sandboxed frames, file: pages) and other schemes
+    value = request.headers.get("Host")
+    here = _split_host(value) if value is not None else None
+    if here is None:
+        return False
+    origin_host = o.host.lower().strip("[]")
+    origin_port = o.port if o.port is not None else _default_port(o.scheme)
+    if here[1] is None:
+        return here[0] == origin_host and origin_port == _default_port(o.scheme)
+    return here == (origin_host, origin_port)
+
+
+def _needs_origin_check(request) -> bool:
+    return (request.headers.get("Upgrade", "").lower() == "websocket"
+            or request.method not in ("GET", "HEAD", "OPTIONS"))
+
+
+def request_guard(check_host: bool = True):
+    """An aiohttp middleware for every somwidget server. Websocket upgrades and state-changing requests (not GET /
+    HEAD / OPTIONS) must come without an Origin or from this server's own origin (Origin host:port == Host): a page
+    of another site cannot open the session's websockets. With `check_host` (for a loopback-bound server) every
+    request's Host must name a loopback host, so a DNS-rebound name cannot reach the server either. Refusals are
+    403. A server behind a reverse proxy that forwards the browser's Host (jupyter-server-proxy) passes
+    check_host=False and keeps the Origin check."""
+    from aiohttp import web
+
+    @web.middleware
+    async def guard(request, handler):
+        if check_host and not host_allowed(request):
+            log.info("refused %s %s: Host %r is not a loopback host", request.method, request.path,
+                     request.headers.get("Host"))
+            return web.Response(status=403, text=REFUSED_HOST, headers={"Cache-Control": "no-store"})
+        if _needs_origin_check(request) and not origin_allowed(request):
+            log.info("refused %s %s: Origin %r is not this server (Host %r)", request.method, request.path,
+                     request.headers.get("Origin"), request.headers.get("Host"))
+            return web.Response(status=403, text=REFUSED_ORIGIN, headers={"Cache-Control": "no-store"})
+        return await handler(request)
+
+    return guard
 
 
 def data_dir() -> Path:
@@ -55,7 +185,7 @@ def data_dir() -> Path:
 
 def lan_address() -> str:
     """This machine's address on the LAN: the source address of the default route (no packet is sent), falling
-    back to the host name's address and then 127.0.0.1."""
+    back to the host name's address and then 127.0.0.1 (so a loopback address means: no LAN address found)."""
     for target in ("192.0.2.1", "10.255.255.255"):  # TEST-NET-1: never routed, only used to pick the interface
         try:
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -185,6 +315,19 @@ def make_token(nbytes: int = 18) -> str:
     return secrets.token_urlsafe(nbytes)
 
 
+def cookie_name(port) -> str:
+    """The token cookie's name for a server on `port` (browsers share cookies between the ports of one host, so
+    two servers on one machine need two names)."""
+    return f"{COOKIE}_{int(port)}" if port else COOKIE
+
+
+def _request_port(request) -> int | None:
+    try:
+        return request.url.port
+    except ValueError:  # a Host header yarl cannot read
+        return None
+
+
 def presented_token(request) -> tuple[str | None, str]:
     """(the token a request carries, where: "query" | "header" | "cookie" | "")."""
     q = request.query.get("token")
@@ -193,10 +336,22 @@ def presented_token(request) -> tuple[str | None, str]:
     auth = request.headers.get("Authorization", "")
     if auth.lower().startswith("bearer "):
         return auth[7:].strip(), "header"
-    c = request.cookies.get(COOKIE)
+    c = request.cookies.get(cookie_name(_request_port(request)))
     if c:
         return c, "cookie"
     return None, ""
+
+
+def set_token_cookie(request, response, token: str | None):
+    """Give `response` the token cookie when the request brought the token in its URL or a header (so the page's
+    own requests and websockets need not repeat it). Returns the response."""
+    from aiohttp import web
+
+    if (token and presented_token(request)[1] in ("query", "header") and isinstance(response, web.StreamResponse)
+            and not response.prepared):
+        response.set_cookie(cookie_name(_request_port(request)), token, httponly=True, samesite="Strict",
+                            secure=request.secure, path="/")
+    return response
 
 
 def token_ok(request, token: str | None) -> bool:
@@ -227,10 +382,7 @@ def token_middleware(token: str):
             log.info("refused %s %s from %s: no valid token", request.method, request.path, request.remote)
             return forbidden()
         response = await handler(request)
-        _, where = presented_token(request)
-        if where in ("query", "header") and isinstance(response, web.StreamResponse) and not response.prepared:
-            response.set_cookie(COOKIE, token, httponly=True, samesite="Strict", secure=request.secure, path="/")
-        return response
+        return set_token_cookie(request, response, token)
 
     return check_token
 
@@ -274,9 +426,16 @@ class LanConfig:
 
 def prepare_lan(host: str | None = None, directory=None, token: str | None = None) -> LanConfig:
     """The LAN address (or `host`), a certificate for it (made on first use, then reused) and a fresh token.
-    A wildcard host (0.0.0.0, ::) is bound as given while URLs and the certificate name the LAN address."""
+    A wildcard host (0.0.0.0, ::) is bound as given while URLs and the certificate name the LAN address. When
+    `host` is None or a wildcard and this machine has no LAN address (only loopback), ValueError: a headset could
+    not open the URL."""
+    host = normalise_host(host)
     bind = host or ""
     shown = lan_address() if not host or host in ("0.0.0.0", "::") else host
+    if shown != host and is_loopback(shown):
+        raise ValueError(f"no LAN address found (this machine's only address is {shown}, loopback), so a headset "
+                         "could not reach the server: connect to the network the headset is on, or give --host "
+                         "with an address of this machine that the headset can reach")
     cert, key = make_certificate(directory, hosts=[shown])
     return LanConfig(host=shown, cert=cert, key=key, token=token or make_token(), bind=bind or shown)
 
@@ -307,4 +466,5 @@ def announcement(config: LanConfig, port: int, qr: bool = True) -> str:
 
 __all__ = ["COOKIE", "LanConfig", "data_dir", "lan_address", "make_certificate", "certificate_fingerprint",
            "ssl_context", "make_token", "token_ok", "presented_token", "token_middleware", "forbidden", "lan_url",
-           "qr_text", "prepare_lan", "apply_lan", "announcement"]
+           "qr_text", "prepare_lan", "apply_lan", "announcement", "cookie_name", "set_token_cookie",
+           "normalise_host", "is_loopback", "host_allowed", "origin_allowed", "request_guard"]

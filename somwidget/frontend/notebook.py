@@ -343,9 +343,23 @@ class NotebookServer:
     Everything trame and VTK do happens on that thread's event loop; the kernel's thread only starts and stops it.
     Besides the app's page (`app_url`), a template with the view alone (`view_url`, `?ui=notebook_view`) is what
     the notebook's iframe shows.
+
+    `host` must be a loopback address (ValueError otherwise): the notebook's server has no access token and no TLS.
+    For a headset or another machine, serve the session with `somwidget serve --lan`; for a remote Jupyter server,
+    go through jupyter-server-proxy (see `base_url`). Like `somwidget serve`, it answers only loopback Host names,
+    except behind such a proxy (SOMWIDGET_JUPYTER_URL or JupyterHub), which forwards the browser's Host; websockets
+    from pages of other sites are refused either way (lan.request_guard).
     """
 
     def __init__(self, session: Session, host: str = "127.0.0.1", port: int = 0, timeout: float = START_TIMEOUT):
+        from . import lan
+
+        host = lan.normalise_host(host) or "127.0.0.1"
+        if not lan.is_loopback(host):
+            raise ValueError(f"the notebook's view serves on loopback only (got host {host!r}): it has no access "
+                             "token and no HTTPS. To reach the session from another machine or a headset, run "
+                             "`somwidget serve --lan` (HTTPS, a token and a QR code); for a remote Jupyter server "
+                             "use jupyter-server-proxy (SOMWIDGET_JUPYTER_URL)")
         self.session = session
         self.host = host
         self.name = f"somwidget-notebook-{next(_NAMES)}"
@@ -377,6 +391,7 @@ class NotebookServer:
             self._loop = loop
             server = get_server(self.name, client_type="vue3")
             app = build_app(self.session, server=server, title="somwidget")
+            app.check_host = not behind_proxy()  # a proxy forwards the browser's Host (the Jupyter server's)
             with VAppLayout(server, template_name=VIEW_TEMPLATE, fill_height=True) as layout:
                 layout.root.style = "height: 100vh; overflow: hidden"
                 PyVistaRemoteView(app.scene.plotter, interactive_ratio=1, still_ratio=1, interactive_quality=80,
@@ -399,10 +414,17 @@ class NotebookServer:
         finally:
             self._ready.set()
             try:
-                self.session.remove_listener(app._on_frame)
-                app.scene.plotter.close()  # the render window belongs to this thread
+                app.close()  # off the session (app and XR hub), the frame pump cancelled, the render window freed
             except Exception:
                 log.exception("closing the notebook view failed")
+            try:
+                pending = [t for t in asyncio.all_tasks(loop) if not t.done()]
+                for task in pending:
+                    task.cancel()
+                if pending:
+                    loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
+            except Exception:
+                log.exception("cancelling the notebook view's tasks failed")
             loop.close()
 
     def _on_ready(self, **_) -> None:
@@ -440,6 +462,12 @@ class NotebookServer:
             except Exception:
                 log.exception("stopping the notebook view server failed")
         self._thread.join(timeout)
+
+
+def behind_proxy() -> bool:
+    """True when the notebook's views go through a proxy (SOMWIDGET_JUPYTER_URL or JupyterHub's), not straight to
+    the loopback port."""
+    return bool(os.environ.get("SOMWIDGET_JUPYTER_URL") or os.environ.get("JUPYTERHUB_SERVICE_PREFIX"))
 
 
 def base_url(port: int, host: str = "127.0.0.1") -> str:
@@ -547,7 +575,8 @@ def show(what="car", *, device: str | None = "auto", paused: bool = False, view:
     paused:   a new session starts paused (press Train)
     view:     False: the panel alone (no server, no iframe)
     full_app: show the whole web app (its own panel too) instead of the view alone
-    host, port: where the view's server listens (loopback and a free port by default)
+    host, port: where the view's server listens (loopback and a free port by default; a host beyond loopback is
+              refused with ValueError: use `somwidget serve --lan` to reach a session from another machine)
     height:   of the view in pixels
 
     Returns the widget (an ipywidgets HBox: put it last in the cell, or `display()` it); `.session` is the

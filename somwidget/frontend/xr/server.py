@@ -105,10 +105,7 @@ class XRHub:
         return lan.token_ok(request, self.token)
 
     def _cookie(self, request, response):
-        if self.token is not None and lan.presented_token(request)[1] in ("query", "header"):
-            response.set_cookie(lan.COOKIE, self.token, httponly=True, samesite="Strict", secure=request.secure,
-                                path="/")
-        return response
+        return lan.set_token_cookie(request, response, self.token)
 
     async def _redirect(self, request):
         if not self._allowed(request):

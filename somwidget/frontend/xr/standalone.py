@@ -17,10 +17,22 @@ from .server import attach
 
 class XRServer:
     """Serve `session`'s XR page on host:port from a daemon thread. `token`: require it (lan.token_middleware);
-    `ssl_context`: serve HTTPS."""
+    `ssl_context`: serve HTTPS.
+
+    A host beyond loopback (a LAN address, 0.0.0.0) needs a token (ValueError without one), and a headset needs
+    `ssl_context` too (WebXR wants a secure context): `lan.prepare_lan(host)` makes both. Every request passes
+    `lan.request_guard`: websockets from pages of other sites are refused, and on loopback only loopback Host
+    names are answered."""
 
     def __init__(self, session, host: str = "127.0.0.1", port: int = 0, token: str | None = None, ssl_context=None,
                  dist=None):
+        from .. import lan
+
+        host = lan.normalise_host(host) or "127.0.0.1"
+        if not lan.is_loopback(host) and not token:
+            raise ValueError(f"XRServer: host {host!r} is reachable from other machines; give a token (and an "
+                             "ssl_context for a headset): cfg = lan.prepare_lan(host); XRServer(session, host, "
+                             "token=cfg.token, ssl_context=cfg.ssl_context())")
         self.session = session
         self.host = host
         self.port = port
@@ -73,7 +85,9 @@ class XRServer:
     async def _start(self) -> None:
         from .. import lan
 
-        middlewares = [lan.token_middleware(self.token)] if self.token else []
+        middlewares = [lan.request_guard(check_host=lan.is_loopback(self.host))]
+        if self.token:
+            middlewares.append(lan.token_middleware(self.token))
         app = web.Application(middlewares=middlewares)
         self.hub = attach(app, self.session, token=self.token, dist=self.dist)
         self._runner = web.AppRunner(app, handle_signals=False)

@@ -1,0 +1,135 @@
+"""Helpers shared by the server and browser tests: Chromium's flags, polling, and `somwidget serve` in a subprocess.
+
+`Serve(*args)` runs `python -m somwidget.cli serve --port 0 --device cpu *args` and reads the port the server picked
+from the line it prints once it listens (`somwidget serving ... at http://127.0.0.1:PORT/`, or with --lan
+`desktop: https://HOST:PORT/?token=...`), so no port is guessed and raced for.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import ssl
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+#: What `somwidget serve` prints once it listens: loopback (first) or --lan (the desktop URL).
+ANNOUNCED = re.compile(r"somwidget serving .* at (http)://(\S+?):(\d+)/|desktop: (https)://(\S+?):(\d+)/")
+
+
+def wait_for(predicate, timeout: float = 20.0, what: str = "condition", interval: float = 0.05):
+    """Poll `predicate` until it returns something true (returned) or `timeout` seconds pass (AssertionError)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+        time.sleep(interval)
+
+
+def insecure_context() -> ssl.SSLContext:
+    """A client TLS context that accepts the server's self-signed certificate (tests compare fingerprints)."""
+    ctx = ssl.create_default_context()
+    ctx.check_hostname = False
+    ctx.verify_mode = ssl.CERT_NONE
+    return ctx
+
+
+def request(url: str, headers: dict | None = None, timeout: float = 20.0) -> tuple[int, bytes]:
+    """GET `url` (any certificate accepted): (status, body), also for error statuses."""
+    req = urllib.request.Request(url, headers=headers or {})
+    try:
+        with urllib.request.urlopen(req, timeout=timeout, context=insecure_context()) as r:
+            return r.status, r.read()
+    except urllib.error.HTTPError as exc:
+        return exc.code, exc.read()
+
+
+class Serve:
+    """`python -m somwidget.cli serve --port 0 --device cpu *args`, on the port it announces.
+
+    `base` is scheme://127.0.0.1:port (no trailing slash), `url` the same with "/"; `state()` reads the read-only
+    debug route GET /api/state."""
+
+    def __init__(self, *args: str, env: dict | None = None, timeout: float = 120.0):
+        full_env = dict(os.environ)
+        full_env["PYTHONPATH"] = os.pathsep.join([str(ROOT), full_env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+        full_env.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+        full_env.update(env or {})
+        self.log_path = Path(tempfile.mkdtemp(prefix="somwidget-serve-")) / "serve.log"
+        self.log = open(self.log_path, "w")
+        self.proc = subprocess.Popen([sys.executable, "-m", "somwidget.cli", "serve", "--port", "0", "--device", "cpu",
+                                      *args], cwd=ROOT, env=full_env, stdout=self.log, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + timeout
+        while True:
+            m = ANNOUNCED.search(self.output())
+            if m:
+                break
+            if self.proc.poll() is not None:
+                self.log.close()
+                raise RuntimeError(f"somwidget serve exited with {self.proc.returncode}:\n{self.output()[-3000:]}")
+            if time.monotonic() > deadline:
+                self.stop()
+                raise RuntimeError(f"somwidget serve did not come up within {timeout:g} s:\n{self.output()[-3000:]}")
+            time.sleep(0.2)
+        scheme, _host, port = (m.group(1), m.group(2), m.group(3)) if m.group(1) else (m.group(4), m.group(5),
+                                                                                         m.group(6))
+        self.scheme, self.port = scheme, int(port)
+        self.base = f"{scheme}://127.0.0.1:{self.port}"
+        self.url = self.base + "/"
+
+    def output(self) -> str:
+        if not self.log.closed:
+            self.log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def get(self, path: str, token: str | None = None, headers: dict | None = None) -> tuple[int, bytes]:
+        url = self.base + path + (("&" if "?" in path else "?") + f"token={token}" if token else "")
+        return request(url, headers)
+
+    def state(self, positions: bool = False, token: str | None = None) -> dict:
+        status, body = self.get("/api/state" + ("?positions=1" if positions else ""), token)
+        assert status == 200, (status, body[:200])
+        return json.loads(body)
+
+    def wait(self, predicate, timeout: float = 20.0, what: str = "condition") -> dict:
+        """Poll the state (with positions) until `predicate(state)` holds; returns that state."""
+        deadline = time.monotonic() + timeout
+        while True:
+            st = self.state(positions=True)
+            if predicate(st):
+                return st
+            if time.monotonic() > deadline:
+                raise AssertionError(f"timed out waiting for {what}; last state: {json.dumps(st)[:800]}")
+            time.sleep(0.1)
+
+    def idle(self, timeout: float = 30.0) -> dict:
+        """Wait until training has stopped and the scene shows the latest frame."""
+        def done(st):
+            f = st["session"]["frame"]
+            return (not f["running"] and st["session"]["pending_intents"] == 0
+                    and st["view"]["frame_seq"] == f["seq"])
+        return self.wait(done, timeout, "the session to go idle")
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+        if not self.log.closed:
+            self.log.close()
