@@ -6,9 +6,14 @@ Heavy imports (warp, trame, pyvista) happen inside the subcommands, so ``somwidg
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
-DEVICES = ("auto", "cpu", "cuda")
+def device_name(text: str) -> str:
+    """--device: auto, cpu, cuda or cuda:N."""
+    if text in ("auto", "cpu", "cuda") or re.fullmatch(r"cuda:\d+", text):
+        return text
+    raise argparse.ArgumentTypeError(f"expected auto, cpu, cuda or cuda:N, got {text!r}")
 
 
 def _build_parser() -> argparse.ArgumentParser:
@@ -42,7 +47,8 @@ def _build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--port", type=int, default=8080, help="port to listen on (default: %(default)s)")
     serve.add_argument(
         "--device",
-        choices=DEVICES,
+        type=device_name,
+        metavar="{auto,cpu,cuda,cuda:N}",
         default="auto",
         help="where the map trains: auto = the GPU when there is one, else the CPU (default: %(default)s)",
     )
@@ -58,7 +64,8 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument(
         "--device",
-        choices=DEVICES,
+        type=device_name,
+        metavar="{auto,cpu,cuda,cuda:N}",
         default="auto",
         help="device for the engine: auto = the GPU when there is one, else the CPU (default: %(default)s)",
     )
