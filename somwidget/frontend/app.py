@@ -789,8 +789,7 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
 
     preset: a preset name (default "car", case study 2); mesh: a mesh file to start from instead (io.load_mesh);
     host: interface to listen on (loopback by default; "0.0.0.0" every interface; "" is refused); port: 0 picks a
-    free one (the printed URL has it); device: "auto", "cpu", "cuda" or "cuda:N" for the training (the CLI's --device
-    takes auto, cpu or cuda). lan: serve on
+    free one (the printed URL has it); device: "auto", "cpu", "cuda" or "cuda:N" for the training. lan: serve on
     this machine's LAN address. Any address beyond loopback is served over HTTPS (a self-signed certificate, made
     once and reused) with an access token on every route, and the URL, certificate fingerprint and a QR code for a
     headset are printed.
