@@ -249,7 +249,7 @@ def test_fuzz_bad_messages_are_refused_and_harmless(srv, session):
     assert session.parameters == params and session.paused and session.error is None
     assert np.isfinite(session.frame.positions).all() and session.frame.seq >= seq
     session.set_controls(controls)  # back as it was for the other tests
-    session.wait_applied()
+    assert session.wait_applied(30)
 
 
 def test_flood_of_bad_messages_closes_only_that_socket(srv, session, monkeypatch):
@@ -308,7 +308,7 @@ def test_two_clients_share_the_session_and_grabs(srv, session):
     run(main())
     assert not srv.hub.grabs
     session.set_controls(start)
-    session.wait_applied()
+    assert session.wait_applied(30)
 
 
 def test_train_pause_reset_intents(srv, session):

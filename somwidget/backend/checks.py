@@ -89,3 +89,23 @@ def dims(name: str, value: Iterable | None, n_dims: int) -> tuple[int, ...]:
             raise ValueError(f"{name}: dimension {int(d)} is outside the {n_dims} feature dimensions (0..{n_dims - 1})")
         out.append(int(d))
     return tuple(sorted(set(out)))
+
+
+def integer_text(name: str, value, minimum: int, maximum: int | None = None) -> int:
+    """`integer`, also taking a whole number written as text ("600", " 1e3 "), as a form field sends it."""
+    if isinstance(value, str):
+        try:
+            value = float(value.strip())
+        except ValueError:
+            raise ValueError(f"{name}: expected an integer, got {value!r}") from None
+    return integer(name, value, minimum, maximum)
+
+
+def finite_vector(name: str, value, length: int, bound: float | None = None) -> np.ndarray:
+    """`value` as a float32 vector of `length` finite entries (`finite_array`), each with |x| <= bound if given."""
+    arr = finite_array(name, value, 1, np.float64)
+    if arr.shape[0] != length:
+        raise ValueError(f"{name}: expected {length} numbers, got {arr.shape[0]}")
+    if bound is not None and np.abs(arr).max(initial=0.0) > bound:
+        raise ValueError(f"{name}: values must lie within +-{bound:g}, got {arr.tolist()}")
+    return arr.astype(np.float32)

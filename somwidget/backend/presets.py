@@ -9,6 +9,7 @@ Every preset is deterministic (no randomness) and holds float32 arrays. `PRESETS
 
 from __future__ import annotations
 
+import colorsys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -337,6 +338,38 @@ def colours_of(weights_or_controls, layout: FeatureLayout) -> np.ndarray:
 def positions_of(weights, layout: FeatureLayout) -> np.ndarray:
     """(N, 3) float32 x, y, z of each node."""
     return np.ascontiguousarray(np.asarray(weights, np.float32)[:, list(layout.position)])
+
+
+def rgb_to_colour_dims(rgb, layout: FeatureLayout) -> np.ndarray:
+    """The inverse of `colours_of` for one colour: RGB in [0, 1] -> the values of the layout's colour dims."""
+    rgb = checks.finite_vector("colour", rgb, 3).astype(np.float64)
+    if (rgb < 0).any() or (rgb > 1).any():
+        raise ValueError(f"colour: RGB values must lie in [0, 1], got {rgb.tolist()}")
+    space = layout.colour_space
+    if space == "none":
+        raise ValueError("colour: this preset's features have no colour dimensions")
+    h, s, _v = colorsys.rgb_to_hsv(*rgb)
+    if space == "hue":
+        return np.float32([h])
+    if space == "hs":
+        return np.float32([h, s])
+    return rgb.astype(np.float32)  # "rgb"
+
+
+def parse_hex_colour(text: str) -> np.ndarray:
+    """'#rrggbb' (or '#rrggbbaa', alpha ignored) -> RGB float32 in [0, 1]; ValueError otherwise."""
+    if not isinstance(text, str):
+        raise ValueError(f"colour: expected '#rrggbb', got {text!r}")
+    t = text.strip().lstrip("#")
+    if len(t) not in (6, 8) or any(c not in "0123456789abcdefABCDEF" for c in t):
+        raise ValueError(f"colour: expected '#rrggbb', got {text!r}")
+    return np.float32([int(t[i:i + 2], 16) / 255.0 for i in (0, 2, 4)])
+
+
+def hex_colour(rgb) -> str:
+    """RGB in [0, 1] (clipped) -> '#rrggbb'."""
+    r, g, b = (int(round(float(np.clip(c, 0.0, 1.0)) * 255)) for c in rgb[:3])
+    return f"#{r:02x}{g:02x}{b:02x}"
 
 
 def line_display_mesh(weights, topology: Topology, layout: FeatureLayout) -> tuple[np.ndarray, np.ndarray]:

@@ -21,9 +21,8 @@ This module must not import trame, pyvista or any other UI package.
 
 from __future__ import annotations
 
-import colorsys
+import dataclasses
 import logging
-import math
 import threading
 import time
 from collections.abc import Callable
@@ -31,13 +30,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..backend import checks
 from ..backend import presets as _presets
 from ..backend.presets import FeatureLayout, Preset
+# The colour helpers live with the layouts; importable from here for the views that already do.
+from ..backend.presets import hex_colour, parse_hex_colour, rgb_to_colour_dims  # noqa: F401
+from ..backend.som import _MAX_TABLE_ENTRIES
 
 log = logging.getLogger(__name__)
 
 #: Bounds the session puts on parameters coming from a view (the engine has its own, wider checks).
 MAX_ITERATIONS = 1_000_000
+#: The engine's cap on its learning table, S x (d_max + 1) float32 entries (2 GiB): backend/som.py, _build_table.
+#: A mesh with a long grid diameter allows fewer than MAX_ITERATIONS cycles (`Session.max_iterations`).
+MAX_TABLE_ENTRIES = _MAX_TABLE_ENTRIES
 #: The engine's limit on effective controls (originals plus mirrored copies).
 MAX_CONTROLS = _presets.MAX_CONTROLS
 #: Largest mesh a session accepts by default: the dense distance table is N^2 uint16 (16384 -> 512 MiB).
@@ -69,6 +75,8 @@ class Frame:
     preset:             the Preset (topology, layout, display) this frame belongs to: draw with these, not with
                         the session's current ones, which may already be the next generation's
     time:               time.monotonic() when the frame was made
+    applied:            how many intents the training thread had handled (applied, or refused with an error)
+                        when the frame was made; intents are numbered from 1 as they are queued
     """
 
     seq: int
@@ -91,6 +99,7 @@ class Frame:
     gaps: np.ndarray
     preset: Preset | None = None
     time: float = field(default_factory=time.monotonic)
+    applied: int = 0
 
     @property
     def layout(self) -> FeatureLayout:
@@ -124,57 +133,11 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 def _finite_vector(name: str, value, length: int) -> np.ndarray:
     """A float32 vector of `length` finite values within +-MAX_ABS_VALUE, or ValueError."""
-    if isinstance(value, (str, bytes)):
-        raise ValueError(f"{name}: expected {length} numbers, got {value!r}")
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected {length} numbers, got {value!r}") from None
-    if arr.ndim != 1 or arr.shape[0] != length:
-        raise ValueError(f"{name}: expected {length} numbers, got shape {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name}: values must be finite, got {arr.tolist()}")
-    if np.abs(arr).max(initial=0.0) > MAX_ABS_VALUE:
-        raise ValueError(f"{name}: values must lie within +-{MAX_ABS_VALUE:g}, got {arr.tolist()}")
-    return arr.astype(np.float32)
-
-
-def _check_int(name: str, value, low: int, high: int) -> int:
-    if isinstance(value, bool):
-        raise ValueError(f"{name}: expected an integer, got {value!r}")
-    if isinstance(value, str):
-        try:
-            value = float(value.strip())
-        except ValueError:
-            raise ValueError(f"{name}: expected an integer, got {value!r}") from None
-    if isinstance(value, (float, np.floating)):
-        if not math.isfinite(value) or not float(value).is_integer():
-            raise ValueError(f"{name}: expected an integer, got {value!r}")
-        value = int(value)
-    if not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name}: expected an integer, got {value!r}")
-    value = int(value)
-    if not low <= value <= high:
-        raise ValueError(f"{name}: expected an integer in [{low}, {high}], got {value}")
-    return value
-
-
-def _check_real(name: str, value, low: float, high: float, low_open: bool = False) -> float:
-    if isinstance(value, bool):
-        raise ValueError(f"{name}: expected a number, got {value!r}")
-    try:
-        x = float(value.strip() if isinstance(value, str) else value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected a number, got {value!r}") from None
-    if not math.isfinite(x):
-        raise ValueError(f"{name}: expected a finite number, got {value!r}")
-    if not ((low < x) if low_open else (low <= x)) or x > high:
-        interval = f"{'(' if low_open else '['}{low:g}, {high:g}]"
-        raise ValueError(f"{name}: expected a value in {interval}, got {x:g}")
-    return x
+    return checks.finite_vector(name, value, length, MAX_ABS_VALUE)
 
 
 def _check_bool(name: str, value) -> bool:
+    """A checkbox's value: a bool, 0 / 1, or its text ("true", "off"...)."""
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     if isinstance(value, (int, np.integer)) and int(value) in (0, 1):
@@ -204,37 +167,6 @@ def default_mirror(preset: Preset) -> tuple[int, ...]:
     return tuple(sorted(dims))
 
 
-def rgb_to_colour_dims(rgb, layout: FeatureLayout) -> np.ndarray:
-    """The inverse of presets.colours_of for one colour: RGB in [0, 1] -> the layout's colour dims values."""
-    rgb = _finite_vector("colour", rgb, 3).astype(np.float64)
-    if (rgb < 0).any() or (rgb > 1).any():
-        raise ValueError(f"colour: RGB values must lie in [0, 1], got {rgb.tolist()}")
-    space = layout.colour_space
-    if space == "none":
-        raise ValueError("colour: this preset's features have no colour dimensions")
-    h, s, _v = colorsys.rgb_to_hsv(*rgb)
-    if space == "hue":
-        return np.float32([h])
-    if space == "hs":
-        return np.float32([h, s])
-    return rgb.astype(np.float32)  # "rgb"
-
-
-def parse_hex_colour(text: str) -> np.ndarray:
-    """'#rrggbb' (or '#rrggbbaa', alpha ignored) -> RGB float32 in [0, 1]; ValueError otherwise."""
-    if not isinstance(text, str):
-        raise ValueError(f"colour: expected '#rrggbb', got {text!r}")
-    t = text.strip().lstrip("#")
-    if len(t) not in (6, 8) or any(c not in "0123456789abcdefABCDEF" for c in t):
-        raise ValueError(f"colour: expected '#rrggbb', got {text!r}")
-    return np.float32([int(t[i:i + 2], 16) / 255.0 for i in (0, 2, 4)])
-
-
-def hex_colour(rgb) -> str:
-    r, g, b = (int(round(float(np.clip(c, 0.0, 1.0)) * 255)) for c in rgb[:3])
-    return f"#{r:02x}{g:02x}{b:02x}"
-
-
 class Session:
     """A live modelling session: one Som, its controls and a background training thread.
 
@@ -249,16 +181,19 @@ class Session:
     def __init__(self, preset: str | Preset | None = "car", device: str | None = "auto", frame_rate: float = 30.0,
                  step_fraction: float = 0.6, start: bool = True, paused: bool = False,
                  max_vertices: int = DEFAULT_MAX_VERTICES):
-        self.frame_rate = _check_real("frame_rate", frame_rate, 0.0, 1000.0, low_open=True)
-        self.step_fraction = _check_real("step_fraction", step_fraction, 0.0, 1.0, low_open=True)
-        self.max_vertices = _check_int("max_vertices", max_vertices, 1, 65536)
+        self.frame_rate = checks.real("frame_rate", frame_rate, 0.0, 1000.0, low_open=True)
+        self.step_fraction = checks.real("step_fraction", step_fraction, 0.0, 1.0, low_open=True)
+        self.max_vertices = checks.integer_text("max_vertices", max_vertices, 1, 65536)
         self.device = "auto" if device is None else device
         self._lock = threading.RLock()  # the session's own state: controls, parameters, op queue
         self._wake = threading.Condition(self._lock)
         self._som_lock = threading.Lock()  # the Som: held by the training thread while it steps
         self._listeners: list[FrameListener] = []
-        self._ops: list[tuple[str, object]] = []
+        self._ops: list[tuple[str, object, int]] = []  # (kind, payload, number of the intent)
+        self._enqueued = 0  # intents queued so far; each op carries its number
+        self._applied = 0  # intents the training thread has handled (Frame.applied)
         self._thread: threading.Thread | None = None
+        self._thread_error: str | None = None  # set if the training thread ever stops on an error
         self._closed = False
         self._paused = bool(paused)
         self._seq = 0
@@ -339,6 +274,17 @@ class Session:
         return self._closed
 
     def _run(self) -> None:
+        try:
+            self._loop()
+        except BaseException as exc:  # a bug in the session itself: never die silently
+            log.exception("the session's training thread stopped")
+            with self._wake:
+                self._thread_error = f"training thread stopped: {type(exc).__name__}: {exc}"
+                self._paused = True
+                self._busy = False
+                self._wake.notify_all()
+
+    def _loop(self) -> None:
         while True:
             with self._wake:
                 while not self._closed and not self._ops and not self._should_step():
@@ -349,17 +295,9 @@ class Session:
                     self._busy = False
                     self._wake.notify_all()
                     return
-                ops, self._ops = self._ops, []
                 self._busy = True
             t0 = time.monotonic()
-            try:
-                self._apply_and_step(ops)
-            except Exception as exc:  # keep the thread alive; views show the error
-                log.exception("training step failed")
-                with self._lock:
-                    self._error = f"training failed: {exc}"
-                    self._paused = True
-                self._publish(self._make_frame(0))
+            self._cycle()
             # pace: a frame every 1 / frame_rate seconds while training; wake early for a new intent
             with self._wake:
                 if self._should_step() and not self._ops and not self._closed:
@@ -371,11 +309,30 @@ class Session:
         # caller holds self._lock; _som is only swapped under both locks
         return not self._paused and self._som.iteration < self._som.iterations
 
-    def _apply_and_step(self, ops) -> None:
+    def _stopped(self) -> bool:
+        """The training thread will handle no more intents: closed, never started, or stopped on an error."""
+        t = self._thread
+        return self._closed or t is None or self._thread_error is not None or not t.is_alive()
+
+    def _cycle(self) -> None:
+        """One turn of the training thread: apply the queued intents, step, publish a frame. Never raises."""
+        try:
+            frame = self._apply_and_step()
+        except Exception as exc:  # keep the thread alive; views show the error
+            log.exception("training step failed")
+            frame = self._error_frame(f"training failed: {exc}")
+        if frame is not None:
+            self._publish(frame)
+
+    def _apply_and_step(self) -> Frame:
         with self._som_lock:
+            with self._lock:  # taken under the Som lock: a load_preset in between cannot strand these ops
+                ops, self._ops = self._ops, []
+                if ops:  # handled from here on, whatever happens: every later frame is made after them
+                    self._applied = max(self._applied, ops[-1][2])
             som = self._som
-            for kind, payload in ops:
-                self._apply(som, kind, payload)
+            for i, op in enumerate(ops):
+                self._apply_op(som, op, ops[i + 1:])
             cycles = 0
             with self._lock:
                 paused = self._paused
@@ -391,8 +348,55 @@ class Session:
                 dt = time.perf_counter() - t
                 if cycles > 0:
                     self._tune(dt / cycles)
-            frame = self._make_frame(cycles)
-        self._publish(frame)
+            return self._make_frame(cycles)
+
+    def _error_frame(self, message: str) -> Frame | None:
+        """After a failed step: pause, show `message`, and return a frame to publish. Never raises."""
+        try:
+            with self._lock:
+                self._error = message
+                self._paused = True
+            try:
+                with self._som_lock:
+                    return self._make_frame(0)
+            except Exception:
+                log.exception("could not make a frame after the error")
+            with self._lock:  # the last frame again, marked paused, with the intents handled since
+                self._seq += 1
+                return dataclasses.replace(self._frame, seq=self._seq, applied=self._applied, running=False,
+                                           paused=True, step_cycles=0, time=time.monotonic())
+        except Exception:  # pragma: no cover - nothing above should fail
+            log.exception("could not publish the error")
+            return None
+
+    def _apply_op(self, som, op: tuple[str, object, int], later) -> None:
+        """Apply one intent to the Som. If the engine refuses it, put the session's own view of that parameter
+        (or of the controls) back to what the Som holds, unless a later intent sets it again; record the error
+        and carry on with the other intents."""
+        kind, payload, _number = op
+        try:
+            self._apply(som, kind, payload)
+        except Exception as exc:
+            log.warning("intent %s refused by the engine: %s", kind, exc)
+            with self._lock:
+                pending = {k for k, _, _ in later} | {k for k, _, _ in self._ops}
+                try:
+                    if kind not in pending:
+                        self._roll_back(som, kind)
+                except Exception:  # pragma: no cover - the Som's getters do not fail
+                    log.exception("could not roll back %s", kind)
+                self._error = f"the engine refused {kind}: {exc}"
+
+    def _roll_back(self, som, kind: str) -> None:
+        # caller holds self._lock
+        if kind == "controls":
+            self._controls = np.array(som.controls, dtype=np.float32)
+        elif kind in ("iterations", "l_start", "l_end", "smoothing"):
+            self._params[kind] = type(self._params[kind])(getattr(som, kind))
+        elif kind == "mirror":
+            self._params["symmetry"] = bool(som.mirror)
+        elif kind == "metric_weights":
+            self._params["metric_weights"] = [float(x) for x in som.metric_weights]
 
     def _tune(self, per_cycle: float) -> None:
         per_cycle = max(per_cycle, 1e-7)
@@ -433,10 +437,12 @@ class Session:
         # caller holds self._lock
         if self._closed:
             raise RuntimeError("session is closed")
+        self._enqueued += 1
+        op = (kind, payload, self._enqueued)
         if kind == "controls" and self._ops and self._ops[-1][0] == "controls":
-            self._ops[-1] = (kind, payload)  # several moves within one frame: only the latest counts
+            self._ops[-1] = op  # several moves within one frame: only the latest counts
         else:
-            self._ops.append((kind, payload))
+            self._ops.append(op)
         self._busy = True
         self._wake.notify_all()
 
@@ -455,6 +461,7 @@ class Session:
             self._seq += 1
             seq = self._seq
             paused = self._paused
+            applied = self._applied
         s, S = int(som.iteration), int(som.iterations)
         return Frame(
             seq=seq, generation=self._generation, iteration=s, iterations=S, running=(not paused and s < S),
@@ -463,7 +470,7 @@ class Session:
             control_colours=_readonly(_presets.colours_of(controls, layout)), effective_controls=_readonly(eff),
             effective_colours=_readonly(_presets.colours_of(eff, layout)), control_positions=_readonly(cpos),
             effective_positions=_readonly(epos), cycle_time=float(self._cycle_time), step_cycles=int(cycles),
-            gaps=_readonly(gaps), preset=self._preset)
+            gaps=_readonly(gaps), preset=self._preset, applied=applied)
 
     @staticmethod
     def _gaps(nodes: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -477,13 +484,16 @@ class Session:
         return out
 
     def _publish(self, frame: Frame) -> None:
-        with self._lock:
+        with self._wake:
+            if self._frame is not None and frame.seq < self._frame.seq:
+                return  # made before a load_preset / restore installed a newer frame: stale
             self._frame = frame
             self._frames_published += 1
             self._frame_times.append(frame.time)
             if len(self._frame_times) > 60:
                 del self._frame_times[:-60]
             listeners = list(self._listeners)
+            self._wake.notify_all()
         for cb in listeners:
             try:
                 cb(frame)
@@ -525,29 +535,39 @@ class Session:
         return (len(times) - 1) / max(times[-1] - times[0], 1e-9)
 
     def wait_idle(self, timeout: float = 10.0) -> bool:
-        """Block until every queued intent is applied and training has stopped (s = S or paused)."""
+        """Block until every queued intent is applied and training has stopped (s = S or paused).
+
+        False at the timeout, and at once if the training thread has stopped on an error (see `error`)."""
         deadline = time.monotonic() + timeout
         with self._wake:
-            while self._ops or self._busy or (self._thread is not None and self._should_step()):
-                if self._thread is None or self._closed:
+            while True:
+                t = self._thread
+                if self._thread_error is not None or (t is not None and not self._closed and not t.is_alive()):
+                    return False
+                if not (self._ops or self._busy or (t is not None and self._should_step())):
+                    return True
+                if t is None or self._closed:
                     return not self._ops
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False
                 self._wake.wait(min(left, 0.05))
-        return True
 
     def wait_applied(self, timeout: float = 10.0) -> bool:
-        """Block until every intent queued so far has reached the Som and a frame shows it."""
+        """Block until every intent queued so far has reached the Som and a published frame shows it (`frame` then
+        has it). An intent the engine refused counts as handled: `error` says why. False at the timeout, and at
+        once if the training thread is not running (never started, closed, or stopped on an error)."""
         deadline = time.monotonic() + timeout
-        with self._lock:
-            target = self._seq + 1 if (self._ops or self._busy) else self._seq
-        while time.monotonic() < deadline:
-            with self._lock:
-                if not self._ops and self._seq >= target:
-                    return True
-            time.sleep(0.005)
-        return False
+        with self._wake:
+            target = self._enqueued
+            while self._frame.applied < target:
+                if self._stopped():
+                    return False
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._wake.wait(min(left, 0.05))
+        return True
 
     # -- read-only state ------------------------------------------------------------------------------------------
     @property
@@ -599,7 +619,8 @@ class Session:
 
     @property
     def error(self) -> str | None:
-        return self._error
+        """The latest failure (a refused intent, a failed step), or why the training thread stopped."""
+        return self._thread_error or self._error
 
     def state(self, positions: bool = False) -> dict:
         """A JSON-friendly summary (for debug routes and tests); `positions` adds every node's x, y, z."""
@@ -621,7 +642,7 @@ class Session:
                 "controls": frame.controls.tolist(), "effective_controls": frame.effective_controls.tolist(),
                 "gaps": frame.gaps.tolist(), "centroid": frame.positions.mean(axis=0).tolist(),
             },
-            "frames_per_second": self.frames_per_second, "error": self._error,
+            "frames_per_second": self.frames_per_second, "error": self.error,
         }
         if positions:
             out["frame"]["positions"] = frame.positions.tolist()
@@ -655,22 +676,12 @@ class Session:
             self._controls = controls
             self._enqueue("controls", controls.copy())
 
-    def set_control(self, index: int, values) -> None:
-        """Replace all n features of control `index`."""
-        with self._lock:
-            i = _check_index("control", index, self._controls.shape[0])
-            v = _finite_vector(f"control {i}", values, self._layout.n_dims)
-            controls = self._controls.copy()
-            controls[i] = v
-            self._controls = controls
-            self._enqueue("controls", controls.copy())
-
     def set_control_feature(self, index: int, dim: int, value) -> None:
         """Set one feature dim of control `index`."""
         with self._lock:
             i = _check_index("control", index, self._controls.shape[0])
-            d = _check_int("feature dimension", dim, 0, self._layout.n_dims - 1)
-            x = _check_real(f"control {i} {self._layout.names[d]}", value, -MAX_ABS_VALUE, MAX_ABS_VALUE)
+            d = checks.integer_text("feature dimension", dim, 0, self._layout.n_dims - 1)
+            x = checks.real(f"control {i} {self._layout.names[d]}", value, -MAX_ABS_VALUE, MAX_ABS_VALUE)
             controls = self._controls.copy()
             controls[i, d] = x
             self._controls = controls
@@ -678,19 +689,14 @@ class Session:
 
     def set_controls(self, controls) -> None:
         """Replace every control: (k, n) finite values, 1 <= k (counting mirrored copies <= 256)."""
-        n = self._layout.n_dims
-        try:
-            arr = np.asarray(controls, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError("controls: expected a (k, n) array of numbers") from None
-        if arr.ndim != 2 or arr.shape[1] != n:
-            raise ValueError(f"controls: expected shape (k, {n}), got {arr.shape}")
-        if not np.isfinite(arr).all():
-            raise ValueError("controls: values must be finite (no NaN or inf)")
+        arr = checks.finite_array("controls", controls, 2, np.float64)
         if np.abs(arr).max(initial=0.0) > MAX_ABS_VALUE:
             raise ValueError(f"controls: values must lie within +-{MAX_ABS_VALUE:g}")
         arr = arr.astype(np.float32)
         with self._lock:
+            n = self._layout.n_dims
+            if arr.shape[1] != n:
+                raise ValueError(f"controls: expected shape (k, {n}), got {arr.shape}")
             self._check_controls(arr)
             self._controls = arr.copy()
             self._enqueue("controls", arr)
@@ -746,28 +752,42 @@ class Session:
             raise ValueError(f"unknown parameter {name!r}; known: {', '.join(PARAMETERS)}")
         setters[name](value)
 
+    @property
+    def max_iterations(self) -> int:
+        """The largest S this mesh allows: MAX_ITERATIONS, or fewer where the engine's learning table
+        S x (d_max + 1) would pass MAX_TABLE_ENTRIES (a mesh with a long grid diameter)."""
+        with self._lock:
+            d_max = int(self._preset.topology.d_max)  # the Som's own d_max: sessions keep the dense table
+        return min(MAX_ITERATIONS, MAX_TABLE_ENTRIES // (d_max + 1))
+
     def set_iterations(self, value) -> None:
         """S: cycles in a run. Restarts the schedule from the latest weights."""
-        s = _check_int("S (iterations)", value, 1, MAX_ITERATIONS)
+        s = checks.integer_text("S (iterations)", value, 1, MAX_ITERATIONS)
         with self._lock:
+            limit = self.max_iterations
+            if s > limit:
+                d_max = int(self._preset.topology.d_max)
+                raise ValueError(f"S (iterations): {s} is more than this mesh allows: at most {limit}, since the "
+                                 f"learning table S x (d_max + 1) = {s} x {d_max + 1} may hold at most "
+                                 f"{MAX_TABLE_ENTRIES} entries")
             self._params["iterations"] = s
             self._enqueue("iterations", s)
 
     def set_l_start(self, value) -> None:
-        x = _check_real("l_start", value, 0.0, 1.0, low_open=True)
+        x = checks.real("l_start", value, 0.0, 1.0, low_open=True)
         with self._lock:
             self._params["l_start"] = x
             self._enqueue("l_start", x)
 
     def set_l_end(self, value) -> None:
-        x = _check_real("l_end", value, 0.0, 1.0, low_open=True)
+        x = checks.real("l_end", value, 0.0, 1.0, low_open=True)
         with self._lock:
             self._params["l_end"] = x
             self._enqueue("l_end", x)
 
     def set_learning_rates(self, l_start, l_end) -> None:
-        a = _check_real("l_start", l_start, 0.0, 1.0, low_open=True)
-        b = _check_real("l_end", l_end, 0.0, 1.0, low_open=True)
+        a = checks.real("l_start", l_start, 0.0, 1.0, low_open=True)
+        b = checks.real("l_end", l_end, 0.0, 1.0, low_open=True)
         with self._lock:
             self._params["l_start"], self._params["l_end"] = a, b
             self._enqueue("l_start", a)
@@ -775,7 +795,7 @@ class Session:
 
     def set_smoothing(self, value) -> None:
         """lambda of one Laplacian step per cycle, in [0, 1]; 0 is off."""
-        x = _check_real("smoothing", value, 0.0, 1.0)
+        x = checks.real("smoothing", value, 0.0, 1.0)
         with self._lock:
             self._params["smoothing"] = x
             self._enqueue("smoothing", x)
@@ -790,21 +810,20 @@ class Session:
 
     def set_metric_weights(self, value) -> None:
         """One weight >= 0 per feature dim (at least one positive) for the winner search."""
-        n = self._layout.n_dims
-        m = _finite_vector("metric_weights", value, n)
-        if (m < 0).any():
-            raise ValueError(f"metric_weights: weights must be >= 0, got {m.tolist()}")
-        if not (m > 0).any():
-            raise ValueError("metric_weights: at least one weight must be positive")
         with self._lock:
+            m = _finite_vector("metric_weights", value, self._layout.n_dims)
+            if (m < 0).any():
+                raise ValueError(f"metric_weights: weights must be >= 0, got {m.tolist()}")
+            if not (m > 0).any():
+                raise ValueError("metric_weights: at least one weight must be positive")
             self._params["metric_weights"] = [float(x) for x in m]
             self._enqueue("metric_weights", m)
 
     def set_metric_weight(self, dim: int, value) -> None:
         with self._lock:
-            d = _check_int("feature dimension", dim, 0, self._layout.n_dims - 1)
+            d = checks.integer_text("feature dimension", dim, 0, self._layout.n_dims - 1)
             m = list(self._params["metric_weights"])
-            m[d] = _check_real(f"metric weight of {self._layout.names[d]}", value, 0.0, MAX_ABS_VALUE)
+            m[d] = checks.real(f"metric weight of {self._layout.names[d]}", value, 0.0, MAX_ABS_VALUE)
             self.set_metric_weights(m)
 
     # -- intents: run control ------------------------------------------------------------------------------
@@ -842,6 +861,7 @@ class Session:
             if self._closed:
                 raise RuntimeError("session is closed")
             self._ops.clear()
+            self._applied = self._enqueued  # the cleared intents belonged to the old mesh: handled
             self._install(built)
             self._error = None
             self._frame = self._make_frame(0)  # `frame` matches `preset` at once; listeners get the next one
@@ -919,6 +939,7 @@ class Session:
         built[1].set_weights(weights)
         with self._som_lock, self._lock:
             self._ops.clear()
+            self._applied = self._enqueued  # the cleared intents belonged to the old mesh: handled
             self._install(built)
             self._error = None
             self._frame = self._make_frame(0)  # `frame` matches `preset` at once; listeners get the next one
