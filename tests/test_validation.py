@@ -176,7 +176,9 @@ def test_rates_outside_unit_interval(name, value):
 
 @pytest.mark.parametrize("name", ["l_start", "l_end"])
 def test_rate_one_accepted(name):
-    _som(**{name: 1.0})
+    som = _som(**{name: 1.0})
+    assert getattr(som, name) == 1.0
+    assert som.step(2) == 2 and np.isfinite(som.weights).all()
 
 
 @pytest.mark.parametrize("value", [-0.1, 1.5, NAN, INF])
@@ -187,7 +189,9 @@ def test_smoothing_outside_unit_interval(value):
 
 @pytest.mark.parametrize("value", [0.0, 1.0])
 def test_smoothing_bounds_accepted(value):
-    _som(smoothing=value)
+    som = _som(smoothing=value)
+    assert som.smoothing == value
+    assert som.step(2) == 2 and np.isfinite(som.weights).all()
 
 
 def test_setters_validate():

@@ -57,10 +57,13 @@ def test_data_dir_and_prepare(tmp_path, monkeypatch):
     assert lan.data_dir() == tmp_path / "xdg" / "somwidget"
 
 
-def test_lan_address_is_an_ip():
-    import ipaddress
+def test_lan_address_belongs_to_this_machine():
+    """The address is one of this machine's own: a socket can bind to it (a foreign address would refuse)."""
+    import socket
 
-    ipaddress.ip_address(lan.lan_address())
+    addr = lan.lan_address()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((addr, 0))
 
 
 def test_tokens_are_fresh_and_url_safe():
