@@ -315,6 +315,19 @@ def hsv_to_rgb(h, s, v) -> np.ndarray:
     return np.clip(np.stack([r, g, b], axis=-1), 0.0, 1.0).astype(np.float32)
 
 
+#: Control colours for layouts without colour dims (the nodes are all grey there, the controls need not be).
+CONTROL_PALETTE = np.array([[0.90, 0.30, 0.25], [0.25, 0.55, 0.90], [0.30, 0.75, 0.35], [0.95, 0.70, 0.20],
+                            [0.65, 0.40, 0.85], [0.20, 0.75, 0.75], [0.90, 0.45, 0.70], [0.55, 0.55, 0.25]],
+                           np.float32)
+
+
+def palette_colours(k: int, k_eff: int) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 3) and (k_eff, 3) float32 display colours of k controls and their k_eff effective copies (copy j takes
+    control j mod k's colour) from `CONTROL_PALETTE`, for layouts without colour dims."""
+    own = CONTROL_PALETTE[np.arange(k) % len(CONTROL_PALETTE)]
+    return own, own[np.arange(k_eff) % max(k, 1)]
+
+
 def colours_of(weights_or_controls, layout: FeatureLayout) -> np.ndarray:
     """(M, 3) float32 RGB in [0, 1] from the colour dims of weights or controls (M, n); a single row (n,) is taken
     as M = 1. "hue": HSV(h mod 1, 1, 1); "hs": HSV(h mod 1, clip(s), 1); "rgb": clipped; "none": NEUTRAL_GREY."""
@@ -541,6 +554,16 @@ PRESETS: dict[str, Callable[[], Preset]] = {
     "grid": grid_preset,
     "sphere": sphere_preset,
     "torus": torus_preset,
+}
+#: The presets' names in menus (the web app's preset list, the notebook panel's dropdown); unknown names show as is.
+PRESET_LABELS: dict[str, str] = {
+    "space-grid": "Case study 1: space grid (16^3 lattice)",
+    "car": "Case study 2: car (602 nodes, colours)",
+    "lines": "Case study 3: lines (8-D nodes)",
+    "lattice": "Lattice 8^3",
+    "grid": "Open grid 32 x 32",
+    "sphere": "Sphere",
+    "torus": "Torus",
 }
 
 

@@ -58,15 +58,6 @@ ANIMATION_QUALITY = 85
 PANEL_HZ = 8
 #: Keep the image stream running this long after the last change (s).
 LINGER = 0.6
-PRESET_LABELS = {
-    "space-grid": "Case study 1: space grid (16^3 lattice)",
-    "car": "Case study 2: car (602 nodes, colours)",
-    "lines": "Case study 3: lines (8-D nodes)",
-    "lattice": "Lattice 8^3",
-    "grid": "Open grid 32 x 32",
-    "sphere": "Sphere",
-    "torus": "Torus",
-}
 MIME = {"obj": "text/plain", "ply": "application/octet-stream", "glb": "model/gltf-binary"}
 #: Mesh files the upload field takes (by the suffix of the browser's file name).
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -273,7 +264,7 @@ class SomApp:
 
     # -- state -------------------------------------------------------------------------------------------------------
     def _preset_items(self) -> list[dict]:
-        items = [{"title": PRESET_LABELS.get(name, name), "value": name} for name in _presets.PRESETS]
+        items = [{"title": _presets.PRESET_LABELS.get(name, name), "value": name} for name in _presets.PRESETS]
         return items + self._extra_presets
 
     def _init_state(self) -> None:

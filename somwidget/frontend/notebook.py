@@ -53,15 +53,9 @@ _BLOCK = '<div style="line-height:1.35">{}</div>'
 #: Seconds to wait for a notebook server to come up.
 START_TIMEOUT = 60.0
 
-_PRESET_LABELS = {
-    "space-grid": "Case study 1: space grid",
-    "car": "Case study 2: car (colours)",
-    "lines": "Case study 3: lines (8-D)",
-    "lattice": "Lattice 8^3",
-    "grid": "Open grid 32 x 32",
-    "sphere": "Sphere",
-    "torus": "Torus",
-}
+#: The dropdown's preset names: the web app's, shorter for the case studies (the panel is narrow).
+_PRESET_LABELS = {**_presets.PRESET_LABELS, "space-grid": "Case study 1: space grid",
+                  "car": "Case study 2: car (colours)", "lines": "Case study 3: lines (8-D)"}
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -311,13 +305,12 @@ def _set(widget, value) -> None:
 
 
 def _controls_table(frame: Frame, has_colour: bool) -> str:
-    from .view import PALETTE  # the web view's colours for controls of colourless layouts
-
     k = frame.n_controls
+    own = frame.control_colours if has_colour else _presets.palette_colours(k, k)[0]  # the web view's colours
     gaps = frame.gaps
     rows = []
     for i in range(k):
-        rgb = frame.control_colours[i] if has_colour else PALETTE[i % len(PALETTE)]
+        rgb = own[i]
         g = [float(gaps[i])] if i < len(gaps) else []
         if len(gaps) >= 2 * k:
             g.append(float(gaps[k + i]))

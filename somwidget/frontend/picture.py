@@ -25,7 +25,7 @@ from ..backend import presets as _presets  # noqa: E402
 from ..backend.presets import FeatureLayout, Preset  # noqa: E402
 from ..backend.topology import Topology  # noqa: E402
 
-from .view import BACKGROUND, PALETTE  # noqa: E402  (the app's colours, so pictures match the live view)
+from .view import BACKGROUND, cell_array  # noqa: E402  (the app's background, so pictures match the live view)
 
 #: Named camera directions (from the centre towards the camera) and up vectors.
 CAMERAS = {
@@ -100,20 +100,10 @@ def picture_of(what, *, weights=None, layout: FeatureLayout | None = None, displ
     return pic
 
 
-def _cells(faces) -> np.ndarray:
-    """pyvista's flat cell array [k, i0, ..., ik-1, ...] for faces of any sizes."""
-    if isinstance(faces, np.ndarray) and faces.ndim == 2:
-        f = np.asarray(faces, np.int64)
-        return np.hstack([np.full((len(f), 1), f.shape[1], np.int64), f]).ravel()
-    return np.concatenate([np.concatenate([[len(f)], np.asarray(f, np.int64).ravel()]) for f in faces])
-
-
 def _control_colours(pic: Picture) -> tuple[np.ndarray, np.ndarray]:
-    k, k_eff = len(pic.controls), len(pic.effective_controls)
     if pic.layout.colour_space != "none":
         return _presets.colours_of(pic.controls, pic.layout), _presets.colours_of(pic.effective_controls, pic.layout)
-    own = PALETTE[np.arange(k) % len(PALETTE)]
-    return own, own[np.arange(k_eff) % max(k, 1)]
+    return _presets.palette_colours(len(pic.controls), len(pic.effective_controls))
 
 
 def render(what, path=None, *, weights=None, layout: FeatureLayout | None = None, display: str | None = None,
@@ -145,7 +135,7 @@ def render(what, path=None, *, weights=None, layout: FeatureLayout | None = None
             pts, quads = _presets.line_display_mesh(pic.weights, pic.topology, pic.layout)
             n = len(positions)
             both = np.concatenate([rgb, rgb])
-            sheet = pv.PolyData(pts, faces=_cells(quads))
+            sheet = pv.PolyData(pts, faces=cell_array(quads))
             sheet.point_data["rgb"] = both
             pl.add_mesh(sheet, scalars="rgb", rgb=True, opacity=0.8)
             segs = np.hstack([np.full((n, 1), 2), np.arange(n)[:, None], np.arange(n, 2 * n)[:, None]]).ravel()
@@ -164,7 +154,7 @@ def render(what, path=None, *, weights=None, layout: FeatureLayout | None = None
                 pl.add_mesh(net, scalars="rgb", rgb=True, line_width=1, opacity=0.5)
             shown = positions
         else:
-            surface = pv.PolyData(positions, faces=_cells(pic.topology.faces))
+            surface = pv.PolyData(positions, faces=cell_array(pic.topology.faces))
             surface.point_data["rgb"] = rgb
             pl.add_mesh(surface, scalars="rgb", rgb=True, show_edges=edges, edge_color=(0.35, 0.35, 0.4),
                         line_width=0.5)

@@ -25,7 +25,7 @@ BACKGROUND = (0.97, 0.97, 0.98)
 SELECTED = (1.0, 1.0, 1.0)
 
 
-def _cell_array(faces) -> np.ndarray:
+def cell_array(faces) -> np.ndarray:
     """pyvista's flat cell array [k, i0, ..., ik-1, ...] from faces of any size (list or (F, k) array)."""
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
         f = np.asarray(faces, np.int64)
@@ -37,18 +37,12 @@ def _cell_array(faces) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0, np.int64)
 
 
-#: Control colours for layouts without colour dims (the nodes are all grey there, the controls need not be).
-PALETTE = np.array([[0.90, 0.30, 0.25], [0.25, 0.55, 0.90], [0.30, 0.75, 0.35], [0.95, 0.70, 0.20],
-                    [0.65, 0.40, 0.85], [0.20, 0.75, 0.75], [0.90, 0.45, 0.70], [0.55, 0.55, 0.25]], np.float32)
-
-
 def control_colours(frame: Frame, has_colour: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(k, 3) and (k_eff, 3) display colours of the controls and their mirrored copies."""
+    """(k, 3) and (k_eff, 3) display colours of the controls and their mirrored copies (the palette of
+    `presets.palette_colours` when the layout has no colour dims)."""
     if has_colour:
         return np.asarray(frame.control_colours), np.asarray(frame.effective_colours)
-    k, k_eff = frame.n_controls, len(frame.effective_controls)
-    own = PALETTE[np.arange(k) % len(PALETTE)]
-    return own, own[np.arange(k_eff) % max(k, 1)]
+    return _presets.palette_colours(frame.n_controls, len(frame.effective_controls))
 
 
 def _rgb8(colours: np.ndarray) -> np.ndarray:
@@ -97,7 +91,7 @@ class SceneView:
             # one dataset, two actors: the quads between neighbouring lines, and the lines drawn over them
             # the quads between neighbouring lines, and the lines drawn over them (each actor has its own
             # dataset; `apply` updates both. Names: pyvista drops "clay-*" actors when "clay" is added)
-            mesh = pv.PolyData(pts, faces=_cell_array(quads))
+            mesh = pv.PolyData(pts, faces=cell_array(quads))
             mesh.point_data["rgb"] = np.concatenate([colours, colours])
             pl.add_mesh(mesh, scalars="rgb", rgb=True, opacity=0.8, show_edges=False, name="clay",
                         render=False)
@@ -119,7 +113,7 @@ class SceneView:
                             render=False)
                 extra = [edges_mesh]
         else:
-            mesh = pv.PolyData(positions, faces=_cell_array(topo.faces))
+            mesh = pv.PolyData(positions, faces=cell_array(topo.faces))
             mesh.point_data["rgb"] = colours
             pl.add_mesh(mesh, scalars="rgb", rgb=True, show_edges=True, edge_color=(0.35, 0.35, 0.4),
                         line_width=0.5, smooth_shading=False, name="clay", render=False)

@@ -71,6 +71,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...backend import io as _io
 from ...backend import presets as _presets
 
 PROTOCOL_VERSION = 1
@@ -82,9 +83,6 @@ FLAG_RUNNING, FLAG_PAUSED, FLAG_MIRRORED = 1, 2, 4
 MAX_MESSAGE_BYTES = 2048
 #: Largest |coordinate| a move may carry (model units; the presets span a few units, meshes are normalised).
 MAX_COORDINATE = 1e4
-#: Control colours for layouts without colour dims (the same palette as the desktop view).
-PALETTE = np.array([[0.90, 0.30, 0.25], [0.25, 0.55, 0.90], [0.30, 0.75, 0.35], [0.95, 0.70, 0.20],
-                    [0.65, 0.40, 0.85], [0.20, 0.75, 0.75], [0.90, 0.45, 0.70], [0.55, 0.55, 0.25]], np.float32)
 
 INTENT_FIELDS = {
     "grab": ({"index"}, set()),
@@ -186,26 +184,6 @@ def error_message(message: str, intent: str | None = None) -> str:
 
 
 # -- topology ----------------------------------------------------------------------------------------------------
-def _triangulate(faces) -> np.ndarray:
-    """Fan-triangulate faces of any size -> (T, 3) int64."""
-    if faces is None:
-        return np.zeros((0, 3), np.int64)
-    if isinstance(faces, np.ndarray) and faces.ndim == 2:
-        groups = [np.asarray(faces, np.int64)]
-    else:
-        by_size: dict[int, list] = {}
-        for f in faces:
-            f = np.asarray(f, np.int64).ravel()
-            if len(f) >= 3:
-                by_size.setdefault(len(f), []).append(f)
-        groups = [np.stack(v) for v in by_size.values()]
-    tris = []
-    for g in groups:
-        for j in range(1, g.shape[1] - 1):
-            tris.append(np.stack([g[:, 0], g[:, j], g[:, j + 1]], axis=1))
-    return np.concatenate(tris) if tris else np.zeros((0, 3), np.int64)
-
-
 def display_of(session) -> dict:
     """The display geometry of the session's current preset: triangles, segments, points flag, n_vertices."""
     preset = session.preset
@@ -218,7 +196,7 @@ def display_of(session) -> dict:
         segments = np.stack([np.arange(n), np.arange(n) + n], axis=1)
         return {"display": "lines", "n_vertices": 2 * n, "triangles": tris, "segments": segments, "points": False}
     if display == "surface" and topo.faces:
-        return {"display": "surface", "n_vertices": n, "triangles": _triangulate(topo.faces), "segments": edges,
+        return {"display": "surface", "n_vertices": n, "triangles": _io.triangulate(topo.faces), "segments": edges,
                 "points": False}
     return {"display": "points", "n_vertices": n, "triangles": np.zeros((0, 3), np.int64), "segments": edges,
             "points": True}
@@ -237,9 +215,7 @@ def control_colours(frame, has_colour: bool) -> np.ndarray:
     """(k_eff, 3) display colours of the effective controls (the palette when the layout has no colour dims)."""
     if has_colour:
         return np.asarray(frame.effective_colours, np.float32)
-    k, k_eff = frame.n_controls, len(frame.effective_controls)
-    own = PALETTE[np.arange(k) % len(PALETTE)]
-    return own[np.arange(k_eff) % max(k, 1)]
+    return _presets.palette_colours(frame.n_controls, len(frame.effective_controls))[1]
 
 
 def mirror_axes(session) -> list[bool]:
