@@ -559,22 +559,17 @@ class SomApp:
         if fmt not in MIME:
             self._error(f"export: unknown format {fmt!r}; use obj, ply or glb")
             return None
-        fd, tmp = tempfile.mkstemp(prefix="somwidget-export-", suffix="." + fmt)
-        os.close(fd)
-        try:
-            self.session.export_mesh(tmp)
-            return Path(tmp).read_bytes()
-        except (ValueError, OSError) as exc:
-            self._error(str(exc))
-            return None
-        finally:
-            os.remove(tmp)
+        return self._written_bytes(self.session.export_mesh, "." + fmt)
 
     def save_session(self) -> bytes | None:
-        fd, tmp = tempfile.mkstemp(prefix="somwidget-save-", suffix=".npz")
+        return self._written_bytes(self.session.save, ".npz")
+
+    def _written_bytes(self, write, suffix: str) -> bytes | None:
+        """What `write(path)` puts in a temporary file with `suffix`, for a download; errors go to the panel."""
+        fd, tmp = tempfile.mkstemp(prefix="somwidget-", suffix=suffix)
         os.close(fd)
         try:
-            self.session.save(tmp)
+            write(tmp)
             return Path(tmp).read_bytes()
         except (ValueError, OSError) as exc:
             self._error(str(exc))
