@@ -4,7 +4,8 @@ Run from the repo root: `PYTHONPATH=. python3 benchmarks/bench_rows.py [check] [
 
 check: rows mode against dense mode on cuda:0 (and against the CPU) on small meshes, with the default cache, a
        cache smaller than the winners, smoothing and mirroring; then both modes timed on a 128 x 128 grid.
-bfs:   one distance row and 18 rows on 512 x 512 and 1000 x 1000 grids: level-synchronous vs a thread per row.
+bfs:   one distance row and 18 rows on 512 x 512 and 1000 x 1000 grids: a block per row, a launch per level, a thread
+       per row.
 big:   a 1000 x 1000 grid (1,000,000 vertices), 9 controls mirrored (18), S = 1000 in rows mode: us/cycle with
        cache misses amortised (cold cache), the app's step(10) frames, how often winners change, us/cycle without
        misses (a cache holding a whole run), and the cost of one miss (1, 4 and 18 new rows).
@@ -20,7 +21,6 @@ import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
 from somwidget import Som, Topology  # noqa: E402
-from somwidget.backend import topology as topo_mod  # noqa: E402
 from somwidget.backend.topology import RowSearch  # noqa: E402
 
 DEV = os.environ.get("DEV", "cuda:0")
@@ -115,17 +115,17 @@ def bfs():
         rows = wp.empty((search.batch, topo.n_vertices), dtype=wp.int32, device=DEV)
         rng = np.random.default_rng(0)
         print(f"grid {side}^2: build {t_build:.2f} s, diameter {d_max} in {t_d * 1e3:.0f} ms, batch {search.batch}, "
-              f"level_sync {search.level_sync(d_max)}", flush=True)
-        original = topo_mod._LEVEL_COST
-        for label in ("level-sync", "thread/row"):
-            topo_mod._LEVEL_COST = 0 if label == "level-sync" else 10**9
+              f"method {search.method(d_max)}", flush=True)
+        chosen = search.method
+        for label in ("block", "levels", "thread"):
+            search.method = lambda levels, label=label: label
             search.run([[0]], [0], rows, d_max)  # compile, capture
             sync()
             for k in (1, 18):
                 src = [[int(v)] for v in rng.integers(0, topo.n_vertices, k)]
                 dt, _ = timed(lambda src=src: search.run(src, list(range(len(src))), rows, d_max))
                 print(f"  {label}: {k} rows {dt * 1e3:.2f} ms", flush=True)
-            topo_mod._LEVEL_COST = original
+        search.method = chosen
         # check one row against the Manhattan distance
         search.run([[side * (side // 2) + 7]], [0], rows, d_max)
         jj, ii = np.divmod(np.arange(side * side), side)
@@ -149,10 +149,10 @@ def big():
     t_som, som = timed(make)
     cache = som._cache
     print(f"{SIDE}^2 grid: build {t_build:.2f} s, d_max {d_max} in {t_d:.2f} s, Som {t_som:.2f} s, cache {cache.size} "
-          f"rows, search {'levels' if cache._search.level_sync(d_max) else 'thread/row'}", flush=True)
+          f"rows, search {cache._search.method(d_max)}", flush=True)
     dt, _ = timed(som.train)
     print(f"  cold train (S=1000): {dt:.2f} s = {dt / 1000 * 1e6:.1f} us/cycle with misses amortised; rows "
-          f"searched {cache.computed}, stalls {cache.stalls}", flush=True)
+          f"searched {cache.computed} (+{cache.prefetched} neighbours ahead), stalls {cache.stalls}", flush=True)
     # the app: step(10) and a weights copy per frame, from a reset (the cache keeps the last rows)
     som.reset()
     c0, s0 = cache.computed, cache.stalls
@@ -180,20 +180,21 @@ def big():
           f"{np.mean(np.array(new) > 0):.2f}; hops moved mean {drift.mean():.2f}, <= 1 hop {np.mean(drift <= 1):.2f}",
           flush=True)
     # without misses: a cache that holds a whole run's rows, run again from reset
-    som = make(S=200, cache_rows=3000)
+    som = make(S=200, cache_rows=8000)
     cache = som._cache
     som.train()
     som.reset()
     c0, s0 = cache.computed, cache.stalls
     dt, _ = timed(som.train)
-    print(f"  no misses (S=200, cache 3000 rows, second run): {dt / 200 * 1e6:.1f} us/cycle; rows searched "
+    print(f"  no misses (S=200, cache 8000 rows, second run): {dt / 200 * 1e6:.1f} us/cycle; rows searched "
           f"{cache.computed - c0}, stalls {cache.stalls - s0}", flush=True)
     # one miss: rows for neurons not cached
     fresh = [v for v in rng.integers(0, topo.n_vertices, 64).tolist() if v not in cache._lru]
     for k in (1, 4, 18):
         dt, _ = timed(lambda k=k: cache.fetch(fresh[:k], d_max))
         fresh = fresh[k:]
-        print(f"  miss cost: {k} new rows {dt * 1e3:.2f} ms", flush=True)
+        print(f"  miss cost: {k} new rows (and their neighbours, {cache.prefetched} so far) {dt * 1e3:.2f} ms",
+              flush=True)
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ from reference import (
     alpha,
     bfs_distances,
     d_max_of,
+    edges_from_edges,
     edges_from_faces,
     grid_quads,
     lattice_edges,
@@ -28,7 +29,7 @@ from reference import (
 from test_engine import MIN_MARGIN, _assert_matches, _case, _scale
 
 from somwidget import Som, Topology
-from somwidget.backend.topology import MAX_DENSE_NEURONS
+from somwidget.backend.topology import MAX_DENSE_NEURONS, RowSearch
 
 
 def _fresh(topo: Topology) -> Topology:
@@ -74,6 +75,44 @@ def _graphs() -> dict[str, tuple[int, np.ndarray]]:
 
 
 GRAPHS = _graphs()
+
+
+@pytest.mark.parametrize("name", ["two_components", "grid_and_ring", "path", "isolated_vertices", "random3"])
+def test_row_search_methods_match_reference(device, name):
+    """Every way a batch of rows is searched (a thread per row; on CUDA also a block per row and a launch per level)
+    gives the reference's hop counts from single and multiple sources, and the largest distance per row. On the CPU
+    the block-per-row kernel runs with one thread a block."""
+    import warp as wp
+
+    from somwidget.backend import kernels
+
+    n, edges = GRAPHS[name]
+    topo = Topology.from_edges(edges, n)
+    ref = bfs_distances(n, edges_from_edges(edges)).astype(np.int64)
+    ref[ref == 65535] = -1
+    rng = np.random.default_rng(3)
+    sources = [[0], [n - 1], rng.choice(n, size=min(3, n), replace=False).tolist(), [n // 2]]
+    expected = np.stack([np.where((ref[s] >= 0).any(0), np.where(ref[s] >= 0, ref[s], 1 << 30).min(0), -1)
+                         for s in sources])
+    search = RowSearch(topo, device)
+    methods = ["thread"] if device == "cpu" else ["thread", "block", "levels"]
+    for method in methods:
+        search.method = lambda levels, method=method: method
+        rows = wp.full((len(sources) + 1, n), 7, dtype=wp.int32, device=device)
+        slots = [2, 0, 4, 1]
+        far = search.run(sources, slots, rows, max(topo.d_max, 1), far=True)
+        np.testing.assert_array_equal(rows.numpy()[slots], expected, err_msg=method)
+        np.testing.assert_array_equal(far, expected.max(1), err_msg=method)
+    if device == "cpu":
+        search.method = lambda levels: "thread"
+        b = search._buffer()
+        rows = wp.full((len(sources) + 1, n), 7, dtype=wp.int32, device=device)
+        search.run(sources, [2, 0, 4, 1], rows, n)  # fills the batch's buffers
+        wp.launch(kernels.bfs_row_blocks, dim=len(sources), device="cpu",
+                  inputs=[search._offsets, search._neighbors, b["sources"], b["first"], b["slots"], rows, b["queue"],
+                          b["size"], b["far"]])
+        np.testing.assert_array_equal(rows.numpy()[[2, 0, 4, 1]], expected)
+        np.testing.assert_array_equal(b["far"].numpy()[: len(sources)], expected.max(1))
 
 
 @pytest.mark.parametrize("name", sorted(GRAPHS))
@@ -166,6 +205,7 @@ def test_rows_stall_and_cache_paths_run(device):
         assert cache.computed >= len(set(som.winners().tolist()))
         if size is None:
             assert cache.stalls >= 1  # winners moved during the run: a graph stopped and went on
+            assert (cache.prefetched > 0) == (device != "cpu")  # on CUDA the winners' neighbours come along
         else:
             assert cache.computed > cache.size  # rows were evicted and searched again
 

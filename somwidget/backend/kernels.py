@@ -238,6 +238,76 @@ def bfs_wide(
     far[b] = deepest
 
 
+ids8 = wp.types.vector(length=8, dtype=wp.int32)
+
+
+@wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 8})
+def bfs_row_blocks(
+    offsets: wp.array(dtype=wp.int32),
+    neighbors: wp.array(dtype=wp.int32),
+    sources: wp.array(dtype=wp.int32),
+    first: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.int32),
+    rows: wp.array2d(dtype=wp.int32),
+    queue: wp.array2d(dtype=wp.int32),
+    size: wp.array2d(dtype=wp.int32),
+    far: wp.array(dtype=wp.int32),
+):
+    """A block of threads per row (CUDA): block b searches from the sources first[b] .. first[b + 1] - 1 into
+    rows[slots[b]] (the hops to the nearest of them, -1 where none is reachable), level by level with a barrier
+    between levels, all in one launch. Its threads share out each level's segment of queue[b] and append the next
+    level (counted in size[(L + 1) % 3, b]). far[b]: the largest distance found."""
+    i = wp.tid()
+    threads = wp.block_dim()
+    b = i // threads
+    t = i - b * threads
+    slot = slots[b]
+    for v in range(t, rows.shape[1], threads):
+        rows[slot, v] = -1
+    sync_block()
+    if t == 0:
+        tail = int(0)
+        for j in range(first[b], first[b + 1]):
+            src = sources[j]
+            if rows[slot, src] < 0:
+                rows[slot, src] = 0
+                queue[b, tail] = src
+                tail += 1
+        size[0, b] = tail
+        size[1, b] = 0
+        size[2, b] = 0
+    sync_block()
+    level = int(0)
+    start = int(0)
+    width = size[0, b]
+    while width > 0:
+        nxt = (level + 1) % 3
+        end = start + width
+        for k in range(start + t, end, threads):
+            u = queue[b, k]
+            lo = offsets[u]
+            hi = offsets[u + 1]
+            for e0 in range(lo, hi, 8):  # eight edges at a time: their loads overlap, only the unvisited take a CAS
+                near = ids8()
+                hops = ids8()
+                for g in range(8):
+                    near[g] = neighbors[wp.min(e0 + g, hi - 1)]
+                for g in range(8):
+                    hops[g] = rows[slot, near[g]]
+                for g in range(8):
+                    if e0 + g < hi and hops[g] < 0:
+                        if wp.atomic_cas(rows, slot, near[g], -1, level + 1) == -1:
+                            queue[b, end + wp.atomic_add(size, nxt, b, 1)] = near[g]
+        if t == 0:
+            size[(level + 2) % 3, b] = 0  # the count of level + 2; nobody reads it any more (3 slots)
+        sync_block()
+        start = end
+        width = size[nxt, b]
+        level += 1
+    if t == 0:
+        far[b] = level - 1
+
+
 @wp.kernel(enable_backward=False)
 def bfs_clear(rows: wp.array2d(dtype=wp.int32), slots: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32)):
     """Level-synchronous search, step 0: rows[slots[b]] = -1 for the count[0] rows of the batch."""

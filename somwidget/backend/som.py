@@ -592,9 +592,11 @@ class _RowCache:
         self.rows = wp.empty((self.size, n), dtype=wp.int32, device=device)
         self.slot_of = wp.full(n, -1, dtype=wp.int32, device=device)
         self._search = RowSearch(topology, device)
+        self._offsets, self._neighbors = topology.offsets, topology.neighbors
         self._lru: OrderedDict[int, int] = OrderedDict()  # neuron -> row, least recently used first
         self._free = list(range(self.size - 1, -1, -1))
-        self.computed = 0  # rows searched so far
+        self.computed = 0  # rows searched so far for winners
+        self.prefetched = 0  # rows searched ahead for their neighbours
         self.stalls = 0  # graphs that stopped on a missing row
         self.span = _LONGEST_GRAPH  # cycles in the next graph: fewer while winners keep lacking rows
 
@@ -608,6 +610,8 @@ class _RowCache:
                 missing.append(u)
         if not missing:
             return
+        asked = len(missing)
+        missing = self._neighbours_of(missing, neurons) + missing  # least recent first: asked-for rows stay longest
         slots, evicted = [], []
         for u in missing:  # the neurons asked for are the most recent: the oldest row is never one of them
             if self._free:
@@ -622,7 +626,22 @@ class _RowCache:
         values = wp.array(np.array([-1] * len(evicted) + slots, dtype=np.int32), device=self.device)
         wp.launch(assign_slots, dim=len(neurons_changed), device=self.device,
                   inputs=[self.slot_of, neurons_changed, values])
-        self.computed += len(missing)
+        self.computed += asked
+        self.prefetched += len(missing) - asked
+
+    def _neighbours_of(self, missing: list[int], neurons: list[int]) -> list[int]:
+        """On CUDA, the uncached neighbours of the winners lacking rows, as many as the batch has room for and at most
+        a sixteenth of the cache (so that rows still in use stay): a winner moves one hop or less in most cycles, and
+        a block per row searches them alongside at little extra time."""
+        room = min(self._search.batch - len(missing), self.size // 16, self.size - len(neurons) - len(missing))
+        if self.device == "cpu" or room <= 0:
+            return []
+        extra: dict[int, None] = {}
+        for u in missing:
+            for w in self._neighbors[self._offsets[u]: self._offsets[u + 1]].tolist():
+                if w not in self._lru and w not in extra and w not in missing:
+                    extra[w] = None
+        return list(extra)[:room]
 
 
 def _cpu_cores(n_neurons: int, n_controls: int) -> int:

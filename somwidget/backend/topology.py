@@ -29,7 +29,11 @@ _BLOCK_SCRATCH_BYTES = 2 << 30
 _QUEUE_BYTES = {"cpu": 64 << 20, "cuda": 512 << 20}
 #: Threads per row of a level-synchronous search on CUDA; they share out each level's vertices.
 _LEVEL_THREADS = 1024
-#: A level launch costs about as much as a thread visiting this many vertices and edges (see RowSearch.level_sync);
+#: Threads of a block-per-row search on CUDA, and the widest mean level (vertices / levels) it takes: a block per row
+#: runs every level in one launch, so it wins wherever levels are narrow enough for one SM (see RowSearch.method).
+_ROW_BLOCK_THREADS = 512
+_ROW_BLOCK_WIDEST = 16 * _ROW_BLOCK_THREADS
+#: A level launch costs about as much as a thread visiting this many vertices and edges (see RowSearch.method);
 #: on an H200, 1M-vertex grid: a level 7 us, a thread 0.17 us per vertex or edge.
 _LEVEL_COST = 40
 #: iFUB rounds (one search per component each) run on the CPU before batches move to a CUDA device.
@@ -202,9 +206,15 @@ class RowSearch:
         self._buffers: dict[str, wp.array] | None = None
         self._graphs: dict[tuple, object] = {}
 
-    def level_sync(self, levels: int) -> bool:
-        """Level by level (CUDA) when its `levels` launches cost less than a thread walking the whole graph."""
-        return self.device != "cpu" and levels * _LEVEL_COST <= self._cost
+    def method(self, levels: int) -> str:
+        """How a batch of rows is searched: on the CPU a thread per row ("thread"); on CUDA a block per row running
+        every level in one launch ("block") where the mean level is narrow, else a launch per level shared by all
+        rows ("levels"), or a thread per row where those `levels` launches cost more than walking the graph."""
+        if self.device == "cpu":
+            return "thread"
+        if self.n <= _ROW_BLOCK_WIDEST * (levels + 1):
+            return "block"
+        return "levels" if levels * _LEVEL_COST <= self._cost else "thread"
 
     @warp_exclusive
     def run(self, sources, slots, rows: wp.array, levels: int, far: bool = False) -> np.ndarray | None:
@@ -223,7 +233,12 @@ class RowSearch:
         b["sources"][: len(flat)].assign(flat)
         b["first"][: count + 1].assign(first)
         b["slots"][:count].assign(np.asarray(slots, dtype=np.int32))
-        if self.level_sync(levels):
+        method = self.method(levels)
+        if method == "block":
+            wp.launch(kernels.bfs_row_blocks, dim=count * _ROW_BLOCK_THREADS, block_dim=_ROW_BLOCK_THREADS,
+                      device=self.device, inputs=[self._offsets, self._neighbors, b["sources"], b["first"], b["slots"],
+                                                  rows, b["queue"], b["size"], b["far"]])
+        elif method == "levels":
             b["count"].fill_(count)
             key = (levels, rows.ptr)
             graph = self._graphs.get(key)
