@@ -189,9 +189,9 @@ class Topology:
 
 class RowSearch:
     """Distance rows on demand: BFS hop counts (int32, -1 = unreachable) from given sources into rows of a device
-    array. On the CPU one search per row (a thread, O(N + E)). On CUDA the rows of a batch go level by level, the
-    threads sharing out each level (a captured graph of `levels` launches), or, for long thin graphs whose many
-    levels would cost more than that, one thread per row."""
+    array. On the CPU one search per row (a thread, O(N + E)). On CUDA a block per row, all levels in one launch;
+    for graphs whose levels are too wide for one SM, the rows of a batch go level by level (a captured graph of
+    `levels` launches), or one thread per row where those launches would cost more (see `method`)."""
 
     def __init__(self, topology: Topology, device: str):
         self.device = device
