@@ -198,6 +198,21 @@ def bfs_blocks(
 
 
 # -- distance rows past the dense table: int32 hop counts, -1 = unreachable ------------------------------------
+@wp.func
+def seed_row(sources: wp.array(dtype=wp.int32), first: wp.array(dtype=wp.int32), b: int, slot: int,
+             rows: wp.array2d(dtype=wp.int32), queue: wp.array2d(dtype=wp.int32)) -> int:
+    """Row b's sources first[b] .. first[b + 1] - 1 at distance 0 in rows[slot] and at the head of queue[b]; returns
+    how many (a source listed twice counts once)."""
+    tail = int(0)
+    for j in range(first[b], first[b + 1]):
+        src = sources[j]
+        if rows[slot, src] < 0:
+            rows[slot, src] = 0
+            queue[b, tail] = src
+            tail += 1
+    return tail
+
+
 @wp.kernel(enable_backward=False)
 def bfs_wide(
     offsets: wp.array(dtype=wp.int32),
@@ -215,13 +230,7 @@ def bfs_wide(
     slot = slots[b]
     for v in range(rows.shape[1]):
         rows[slot, v] = -1
-    tail = int(0)
-    for j in range(first[b], first[b + 1]):
-        src = sources[j]
-        if rows[slot, src] < 0:
-            rows[slot, src] = 0
-            queue[b, tail] = src
-            tail += 1
+    tail = seed_row(sources, first, b, slot, rows, queue)
     head = int(0)
     deepest = int(0)
     while head < tail:
@@ -266,13 +275,7 @@ def bfs_row_blocks(
         rows[slot, v] = -1
     sync_block()
     if t == 0:
-        tail = int(0)
-        for j in range(first[b], first[b + 1]):
-            src = sources[j]
-            if rows[slot, src] < 0:
-                rows[slot, src] = 0
-                queue[b, tail] = src
-                tail += 1
+        tail = seed_row(sources, first, b, slot, rows, queue)
         size[0, b] = tail
         size[1, b] = 0
         size[2, b] = 0
@@ -332,13 +335,7 @@ def bfs_seed(
     b = wp.tid()
     if b < count[0]:
         slot = slots[b]
-        tail = int(0)
-        for j in range(first[b], first[b + 1]):
-            src = sources[j]
-            if rows[slot, src] < 0:
-                rows[slot, src] = 0
-                queue[b, tail] = src
-                tail += 1
+        tail = seed_row(sources, first, b, slot, rows, queue)
         base[0, b] = 0
         size[0, b] = tail
         size[1, b] = 0
