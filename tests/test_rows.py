@@ -104,7 +104,6 @@ def test_row_search_methods_match_reference(device, name):
         np.testing.assert_array_equal(rows.numpy()[slots], expected, err_msg=method)
         np.testing.assert_array_equal(far, expected.max(1), err_msg=method)
     if device == "cpu":
-        search.method = lambda levels: "thread"
         b = search._buffer()
         rows = wp.full((len(sources) + 1, n), 7, dtype=wp.int32, device=device)
         search.run(sources, [2, 0, 4, 1], rows, n)  # fills the batch's buffers

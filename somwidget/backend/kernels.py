@@ -138,6 +138,56 @@ def bfs_rows(
 def sync_block(): ...
 
 
+ids8 = wp.types.vector(length=8, dtype=wp.int32)
+
+
+@wp.func
+def expand_vertex(offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32),
+                  hops: wp.array2d(dtype=wp.int32), row: int, u: int, level: int, queue: wp.array2d(dtype=wp.int32),
+                  b: int, end: int, size: wp.array2d(dtype=wp.int32)) -> int:
+    """One step of a level-synchronous search: u's unvisited neighbours (hops[row, w] == -1) get level + 1 and are
+    appended to queue[b] past `end`, counted in size[b, (level + 1) % 3]; returns how many this thread appended.
+    Eight edges at a time: their loads overlap, and only the unvisited take a compare-and-swap."""
+    added = int(0)
+    lo = offsets[u]
+    hi = offsets[u + 1]
+    for e0 in range(lo, hi, 8):
+        near = ids8()
+        seen = ids8()
+        for g in range(8):
+            near[g] = neighbors[wp.min(e0 + g, hi - 1)]
+        for g in range(8):
+            seen[g] = hops[row, near[g]]
+        for g in range(8):
+            if e0 + g < hi and seen[g] < 0:
+                if wp.atomic_cas(hops, row, near[g], -1, level + 1) == -1:
+                    queue[b, end + wp.atomic_add(size, b, (level + 1) % 3, 1)] = near[g]
+                    added += 1
+    return added
+
+
+@wp.func
+def search_levels(offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32),
+                  hops: wp.array2d(dtype=wp.int32), row: int, queue: wp.array2d(dtype=wp.int32), b: int,
+                  size: wp.array2d(dtype=wp.int32), width: int, t: int, threads: int) -> int:
+    """A breadth-first search by the `threads` threads of a block (t: this one), level by level with a block barrier
+    between levels, into hops[row] (-1 = not reached), from the `width` sources at the head of queue[b] (at 0 in
+    hops, size[b, 1] zeroed). Returns the largest distance found."""
+    level = int(0)
+    start = int(0)
+    while width > 0:
+        end = start + width
+        for k in range(start + t, end, threads):
+            expand_vertex(offsets, neighbors, hops, row, queue[b, k], level, queue, b, end, size)
+        if t == 0:
+            size[b, (level + 2) % 3] = 0  # the count of level + 2; nobody reads it any more (3 slots)
+        sync_block()
+        start = end
+        width = size[b, (level + 1) % 3]
+        level += 1
+    return level - 1
+
+
 @wp.kernel(enable_backward=False, module="unique")
 def bfs_blocks(
     offsets: wp.array(dtype=wp.int32),
@@ -169,27 +219,9 @@ def bfs_blocks(
                 queue[b, 0] = src
                 size[b, 1] = 0
             sync_block()
-            level = int(0)
-            start = int(0)
-            width = int(1)
-            while width > 0:
-                nxt = (level + 1) % 3
-                end = start + width
-                for k in range(start + t, end, threads):
-                    u = queue[b, k]
-                    for e in range(offsets[u], offsets[u + 1]):
-                        w = neighbors[e]
-                        if hops[b, w] < 0:
-                            if wp.atomic_cas(hops, b, w, -1, level + 1) == -1:
-                                queue[b, end + wp.atomic_add(size, b, nxt, 1)] = w
-                if t == 0:
-                    size[b, (level + 2) % 3] = 0  # the count of level + 2; nobody reads it any more (3 slots)
-                sync_block()
-                start = end
-                width = size[b, nxt]
-                level += 1
+            deepest = search_levels(offsets, neighbors, hops, b, queue, b, size, 1, t, threads)
             if t == 0:
-                eccentricity[src] = level - 1
+                eccentricity[src] = deepest
             for v in range(t, n, threads):  # the row, written once and in order; the scratch back to -1
                 d = hops[b, v]
                 table[src, v] = wp.where(d >= 0, wp.uint16(wp.min(d, 65535)), UNREACHABLE)
@@ -247,10 +279,7 @@ def bfs_wide(
     far[b] = deepest
 
 
-ids8 = wp.types.vector(length=8, dtype=wp.int32)
-
-
-@wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 8})
+@wp.kernel(enable_backward=False, module="unique")
 def bfs_row_blocks(
     offsets: wp.array(dtype=wp.int32),
     neighbors: wp.array(dtype=wp.int32),
@@ -265,7 +294,7 @@ def bfs_row_blocks(
     """A block of threads per row (CUDA): block b searches from the sources first[b] .. first[b + 1] - 1 into
     rows[slots[b]] (the hops to the nearest of them, -1 where none is reachable), level by level with a barrier
     between levels, all in one launch. Its threads share out each level's segment of queue[b] and append the next
-    level (counted in size[(L + 1) % 3, b]). far[b]: the largest distance found."""
+    level (counted in size[b, (L + 1) % 3]). far[b]: the largest distance found."""
     i = wp.tid()
     threads = wp.block_dim()
     b = i // threads
@@ -275,40 +304,13 @@ def bfs_row_blocks(
         rows[slot, v] = -1
     sync_block()
     if t == 0:
-        tail = seed_row(sources, first, b, slot, rows, queue)
-        size[0, b] = tail
-        size[1, b] = 0
-        size[2, b] = 0
+        size[b, 0] = seed_row(sources, first, b, slot, rows, queue)
+        size[b, 1] = 0
+        size[b, 2] = 0
     sync_block()
-    level = int(0)
-    start = int(0)
-    width = size[0, b]
-    while width > 0:
-        nxt = (level + 1) % 3
-        end = start + width
-        for k in range(start + t, end, threads):
-            u = queue[b, k]
-            lo = offsets[u]
-            hi = offsets[u + 1]
-            for e0 in range(lo, hi, 8):  # eight edges at a time: their loads overlap, only the unvisited take a CAS
-                near = ids8()
-                hops = ids8()
-                for g in range(8):
-                    near[g] = neighbors[wp.min(e0 + g, hi - 1)]
-                for g in range(8):
-                    hops[g] = rows[slot, near[g]]
-                for g in range(8):
-                    if e0 + g < hi and hops[g] < 0:
-                        if wp.atomic_cas(rows, slot, near[g], -1, level + 1) == -1:
-                            queue[b, end + wp.atomic_add(size, nxt, b, 1)] = near[g]
-        if t == 0:
-            size[(level + 2) % 3, b] = 0  # the count of level + 2; nobody reads it any more (3 slots)
-        sync_block()
-        start = end
-        width = size[nxt, b]
-        level += 1
+    deepest = search_levels(offsets, neighbors, rows, slot, queue, b, size, size[b, 0], t, threads)
     if t == 0:
-        far[b] = level - 1
+        far[b] = deepest
 
 
 @wp.kernel(enable_backward=False)
@@ -335,11 +337,10 @@ def bfs_seed(
     b = wp.tid()
     if b < count[0]:
         slot = slots[b]
-        tail = seed_row(sources, first, b, slot, rows, queue)
         base[0, b] = 0
-        size[0, b] = tail
-        size[1, b] = 0
-        size[2, b] = 0
+        size[b, 0] = seed_row(sources, first, b, slot, rows, queue)
+        size[b, 1] = 0
+        size[b, 2] = 0
         far[b] = 0
 
 
@@ -362,21 +363,15 @@ def bfs_level(
     b, t = wp.tid()
     if b < count[0]:
         now = level % 3
-        nxt = (level + 1) % 3
         slot = slots[b]
         start = base[now, b]
-        end = start + size[now, b]
+        end = start + size[b, now]
         for i in range(start + t, end, threads):
-            u = queue[b, i]
-            for e in range(offsets[u], offsets[u + 1]):
-                w = neighbors[e]
-                if rows[slot, w] < 0:
-                    if wp.atomic_cas(rows, slot, w, -1, level + 1) == -1:
-                        queue[b, end + wp.atomic_add(size, nxt, b, 1)] = w
-                        far[b] = level + 1
+            if expand_vertex(offsets, neighbors, rows, slot, queue[b, i], level, queue, b, end, size) > 0:
+                far[b] = level + 1
         if t == 0:
-            base[nxt, b] = end
-            size[(level + 2) % 3, b] = 0
+            base[(level + 1) % 3, b] = end
+            size[b, (level + 2) % 3] = 0
 
 
 @wp.kernel(enable_backward=False)

@@ -633,7 +633,7 @@ class _RowCache:
         """On CUDA, the uncached neighbours of the winners lacking rows, as many as the batch has room for and at most
         a sixteenth of the cache (so that rows still in use stay): a winner moves one hop or less in most cycles, and
         a block per row searches them alongside at little extra time."""
-        room = min(self._search.batch - len(missing), self.size // 16, self.size - len(neurons) - len(missing))
+        room = min(self._search.batch - len(missing), self.size // 16, self.size - len(neurons))
         if self.device == "cpu" or room <= 0:
             return []
         extra: dict[int, None] = {}

@@ -274,7 +274,7 @@ class RowSearch:
                 "count": wp.zeros(1, dtype=wp.int32, device=dev),
                 "queue": wp.empty((k, self.n), dtype=wp.int32, device=dev),
                 "base": wp.zeros((3, k), dtype=wp.int32, device=dev),
-                "size": wp.zeros((3, k), dtype=wp.int32, device=dev),
+                "size": wp.zeros((k, 3), dtype=wp.int32, device=dev),
                 "far": wp.zeros(k, dtype=wp.int32, device=dev),
             }
         return self._buffers
