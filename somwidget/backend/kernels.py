@@ -2,9 +2,10 @@
 
 The cycle kernels are specialised per feature count n (a row of weights is a Warp vector of length n) and come in
 two decompositions of the same cycle. On CUDA a thread per neuron moves it, a thread per control scans each block
-of 32 neurons for the winners, and the whole cycle is one kernel (two with smoothing). On the CPU, where Warp
-runs a launch on one thread, each core replays its own graph: the neurons are split between the cores for the
-move and smoothing, the controls for the winner search, with a spinning barrier between the phases.
+of 32 neurons (their new weights shared in the block) for the winners, and the whole cycle is one kernel (two with
+smoothing). On the CPU, where Warp runs a launch on one thread, each core replays its own graph: the neurons are
+split between the cores for the move and smoothing, the controls for the winner search, with a spinning barrier
+between the phases.
 
 Winner keys pack (distance bits << 32 | neuron index) into one uint64: distances are non-negative floats, whose
 bit patterns order like the values, so the smallest key is the nearest neuron with the lowest index on a tie.
@@ -27,7 +28,8 @@ UNREACHABLE = wp.constant(wp.uint16(65535))
 KEY_NONE = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
 INDEX_MASK = wp.constant(wp.uint64(0xFFFFFFFF))
 FLOAT_MAX = wp.constant(wp.float32(3.4028234663852886e38))
-#: Threads per block on CUDA: a thread per control scans the block's neurons for the winner search.
+#: Threads per block on CUDA, a whole warp or more (the winner search shares the block's weights through a tile):
+#: a thread per control scans the block's neurons.
 CUDA_BLOCK = wp.constant(32)
 #: Above this many neurons a block reads the current winner key before its atomic min (measured on an H200: the
 #: 65,536-neuron cycle 14.4 -> 10.6 us; the extra read made the 602-neuron car slower, 5.8 -> 7.8 us).
@@ -527,7 +529,8 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
     # -- CUDA: a thread per neuron, a block of 32 ----------------------------------------------------------
     @wp.func
     def find_winners_of_block(
-        weights: wp.array(dtype=vec),
+        w: vec,
+        n_neurons: int,
         controls: wp.array(dtype=vec),
         n_controls: int,
         metric: vec,
@@ -536,28 +539,29 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         block: int,
         lane: int,
     ):
-        """Step 1: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2; a thread per control scans the block's neurons,
-        then one atomic min per control and block."""
-        wp.tile_sum(wp.tile(0))  # barrier: the block's neurons were just written by its other threads
+        """Step 1: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2. Each thread brings its neuron's weights w (a thread
+        past the mesh, those of the last neuron); a thread per control scans the block's neurons from shared
+        memory, then one atomic min per control and block."""
+        block_w = wp.tile(w, preserve_type=True)  # read here, in shared memory: a global round trip costs far more
         lo = block * CUDA_BLOCK
         for c in range(lane, n_controls, CUDA_BLOCK):
             target = controls[c]
             best = FLOAT_MAX
             best_v = lo
-            for i in range(CUDA_BLOCK):  # unrolled: the loads overlap
-                v = wp.min(lo + i, weights.shape[0] - 1)
-                dist = distance(target, weights[v], metric)
+            for i in range(CUDA_BLOCK):  # unrolled: the reads overlap
+                dist = distance(target, block_w[i], metric)
                 nearer = dist < best  # strict: the lowest index wins a tie
                 best = wp.where(nearer, dist, best)
-                best_v = wp.where(nearer, v, best_v)
+                best_v = wp.where(nearer, wp.min(lo + i, n_neurons - 1), best_v)
             key = winner_key(best, best_v)
             # keys only fall: on a big mesh most blocks see a better key already and skip the contended atomic
-            if weights.shape[0] <= CHECK_BEFORE_ATOMIC or key < keys[buf, c]:
+            if n_neurons <= CHECK_BEFORE_ATOMIC or key < keys[buf, c]:
                 wp.atomic_min(keys, buf, c, key)
 
     @wp.func
     def end_cycle(
-        weights: wp.array(dtype=vec),
+        w: vec,
+        n_neurons: int,
         controls: wp.array(dtype=vec),
         n_controls: int,
         metric: wp.array(dtype=vec),
@@ -568,10 +572,10 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         block: int,
         lane: int,
     ):
-        """With find_next: step 1 of cycle s + 1 from the new weights, the keys of cycle s + 2 cleared and the
+        """With find_next: step 1 of cycle s + 1 from the new weights w, the keys of cycle s + 2 cleared and the
         counter advanced; without, the counter passed on unchanged (a later kernel of the cycle ends it)."""
         if find_next != 0:
-            find_winners_of_block(weights, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
+            find_winners_of_block(w, n_neurons, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
         if block == 0 and lane == 0:
             if find_next != 0:
                 clear_keys(keys, (s + 2) % 3, n_controls)
@@ -590,7 +594,8 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
     ):
         """Winners of cycle s = cycle[0] from the current weights into keys[s % 3] (cleared beforehand)."""
         block, lane = wp.tid()
-        find_winners_of_block(weights, controls, n_controls, metric[0], keys, cycle[0] % 3, block, lane)
+        w = weights[wp.min(block * CUDA_BLOCK + lane, weights.shape[0] - 1)]
+        find_winners_of_block(w, weights.shape[0], controls, n_controls, metric[0], keys, cycle[0] % 3, block, lane)
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def move(
@@ -636,7 +641,7 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         if missing == 0:
             if v < weights_in.shape[0]:
                 weights_out[v] = w
-            end_cycle(weights_out, controls, n_controls, metric, keys, s, cycle_out, find_next, block, lane)
+            end_cycle(w, weights_in.shape[0], controls, n_controls, metric, keys, s, cycle_out, find_next, block, lane)
         elif block == 0 and lane == 0:
             stalled[0] = 1
             cycle_out[0] = s
@@ -663,9 +668,10 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         s = cycle_in[0]
         if stalled[0] == 0:
             v = block * CUDA_BLOCK + lane
+            w = smoothed(weights_in, wp.min(v, weights_in.shape[0] - 1), offsets, neighbors, strength * mask[0])
             if v < weights_in.shape[0]:
-                weights_out[v] = smoothed(weights_in, v, offsets, neighbors, strength * mask[0])
-            end_cycle(weights_out, controls, n_controls, metric, keys, s, cycle_out, 1, block, lane)
+                weights_out[v] = w
+            end_cycle(w, weights_in.shape[0], controls, n_controls, metric, keys, s, cycle_out, 1, block, lane)
         elif block == 0 and lane == 0:
             cycle_out[0] = s
 
