@@ -4,8 +4,8 @@ Run from the repo root: `PYTHONPATH=. python3 benchmarks/bench_rows.py [check] [
 
 check: rows mode against dense mode on cuda:0 (and against the CPU) on small meshes, with the default cache, a
        cache smaller than the winners, smoothing and mirroring; then both modes timed on a 128 x 128 grid.
-bfs:   one distance row and 18 rows on 512 x 512 and 1000 x 1000 grids: a block per row, a launch per level, a thread
-       per row.
+bfs:   one distance row, 18 and 128 rows on 512 x 512 and 1000 x 1000 grids: a block per row with its visited set and
+       frontier in shared memory, a block per row without, a launch per level, a thread per row.
 big:   a 1000 x 1000 grid (1,000,000 vertices), 9 controls mirrored (18), S = 1000 in rows mode: us/cycle with
        cache misses amortised (cold cache), the app's step(10) frames, how often winners change, us/cycle without
        misses (a cache holding a whole run), and the cost of one miss (1, 4 and 18 new rows).
@@ -21,6 +21,7 @@ import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
 from somwidget import Som, Topology  # noqa: E402
+from somwidget.backend import som as som_module  # noqa: E402
 from somwidget.backend.topology import RowSearch  # noqa: E402
 
 DEV = os.environ.get("DEV", "cuda:0")
@@ -117,11 +118,11 @@ def bfs():
         print(f"grid {side}^2: build {t_build:.2f} s, diameter {d_max} in {t_d * 1e3:.0f} ms, batch {search.batch}, "
               f"method {search.method(d_max)}", flush=True)
         chosen = search.method
-        for label in ("block", "levels", "thread"):
+        for label in ("shared", "block", "levels", "thread"):
             search.method = lambda levels, label=label: label
             search.run([[0]], [0], rows, d_max)  # compile, capture
             sync()
-            for k in (1, 18):
+            for k in ((1, 18, 128) if label in ("shared", "block") else (1, 18)):
                 src = [[int(v)] for v in rng.integers(0, topo.n_vertices, k)]
                 dt, _ = timed(lambda src=src: search.run(src, list(range(len(src))), rows, d_max))
                 print(f"  {label}: {k} rows {dt * 1e3:.2f} ms", flush=True)
@@ -152,7 +153,7 @@ def big():
           f"rows, search {cache._search.method(d_max)}", flush=True)
     dt, _ = timed(som.train)
     print(f"  cold train (S=1000): {dt:.2f} s = {dt / 1000 * 1e6:.1f} us/cycle with misses amortised; rows "
-          f"searched {cache.computed} (+{cache.prefetched} neighbours ahead), stalls {cache.stalls}", flush=True)
+          f"searched {cache.computed} (+{cache.prefetched} around the winners), stalls {cache.stalls}", flush=True)
     # the app: step(10) and a weights copy per frame, from a reset (the cache keeps the last rows)
     som.reset()
     c0, s0 = cache.computed, cache.stalls
@@ -179,13 +180,15 @@ def big():
     print(f"  winners per cycle (first 100): new distinct winners mean {np.mean(new):.2f}, cycles with one or more "
           f"{np.mean(np.array(new) > 0):.2f}; hops moved mean {drift.mean():.2f}, <= 1 hop {np.mean(drift <= 1):.2f}",
           flush=True)
-    # without misses: a cache that holds a whole run's rows, run again from reset
+    # without misses: a cache that holds a whole run's winner rows (none searched ahead), run again from reset
+    rings, som_module._PREFETCH_RINGS = som_module._PREFETCH_RINGS, 0
     som = make(S=200, cache_rows=8000)
     cache = som._cache
     som.train()
     som.reset()
     c0, s0 = cache.computed, cache.stalls
     dt, _ = timed(som.train)
+    som_module._PREFETCH_RINGS = rings
     print(f"  no misses (S=200, cache 8000 rows, second run): {dt / 200 * 1e6:.1f} us/cycle; rows searched "
           f"{cache.computed - c0}, stalls {cache.stalls - s0}", flush=True)
     # one miss: rows for neurons not cached
@@ -193,7 +196,7 @@ def big():
     for k in (1, 4, 18):
         dt, _ = timed(lambda k=k: cache.fetch(fresh[:k], d_max))
         fresh = fresh[k:]
-        print(f"  miss cost: {k} new rows (and their neighbours, {cache.prefetched} so far) {dt * 1e3:.2f} ms",
+        print(f"  miss cost: {k} new rows (and rows around them, {cache.prefetched} so far) {dt * 1e3:.2f} ms",
               flush=True)
 
 

@@ -66,6 +66,10 @@ def _graphs() -> dict[str, tuple[int, np.ndarray]]:
         "ring": (101, _ring(101)),
         "path": (64, np.stack([np.arange(63), np.arange(1, 64)], axis=1)),
         "grid_and_ring": (85, np.concatenate([edges_from_faces(grid_quads(10, 6)), 60 + _ring(25)])),
+        # a hub of degree 41 (past the eight neighbours a row search reads at once) on a path, and a loose piece
+        "hub_on_path": (70, np.concatenate([np.stack([np.zeros(40, int), np.arange(1, 41)], axis=1),
+                                            np.stack([np.arange(40, 64), np.arange(41, 65)], axis=1),
+                                            [[66, 67], [67, 68]]])),
     }
     rng = np.random.default_rng(11)
     for i in range(12):
@@ -77,11 +81,14 @@ def _graphs() -> dict[str, tuple[int, np.ndarray]]:
 GRAPHS = _graphs()
 
 
-@pytest.mark.parametrize("name", ["two_components", "grid_and_ring", "path", "isolated_vertices", "random3"])
+@pytest.mark.parametrize("name", ["two_components", "grid_and_ring", "path", "isolated_vertices", "random3",
+                                  "hub_on_path"])
 def test_row_search_methods_match_reference(device, name):
-    """Every way a batch of rows is searched (a thread per row; on CUDA also a block per row and a launch per level)
-    gives the reference's hop counts from single and multiple sources, and the largest distance per row. On the CPU
-    the block-per-row kernel runs with one thread a block."""
+    """Every way a batch of rows is searched (a thread per row; on CUDA also a block per row, its visited set and
+    frontier in shared memory or not, and a launch per level) gives the reference's hop counts from single and
+    multiple sources, and the largest distance per row. The shared-memory search also runs with a frontier of two
+    vertices, so wider levels spill to global memory. On the CPU the block-per-row kernel runs with one thread a
+    block."""
     import warp as wp
 
     from somwidget.backend import kernels
@@ -95,9 +102,11 @@ def test_row_search_methods_match_reference(device, name):
     expected = np.stack([np.where((ref[s] >= 0).any(0), np.where(ref[s] >= 0, ref[s], 1 << 30).min(0), -1)
                          for s in sources])
     search = RowSearch(topo, device)
-    methods = ["thread"] if device == "cpu" else ["thread", "block", "levels"]
+    methods = ["thread"] if device == "cpu" else ["thread", "block", "levels", "shared", "shared, spilling"]
     for method in methods:
-        search.method = lambda levels, method=method: method
+        if method == "shared, spilling":
+            search._shared = (search._shared[0], 2)
+        search.method = lambda levels, method=method: method.split(",")[0]
         rows = wp.full((len(sources) + 1, n), 7, dtype=wp.int32, device=device)
         slots = [2, 0, 4, 1]
         far = search.run(sources, slots, rows, max(topo.d_max, 1), far=True)

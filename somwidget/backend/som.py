@@ -25,9 +25,12 @@ _LONGEST_GRAPH = 512
 _YIELD = sched_yield_address()
 #: Neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each).
 _PAIRS_PER_EXTRA_CORE = 1 << 18
-#: Distance rows mode: the cache's default size in bytes (int32 rows of N), at least 2 x MAX_CONTROLS rows.
-_CACHE_BYTES = 1 << 30
+#: Distance rows mode: the cache's default size in bytes (int32 rows of N), at least 2 x MAX_CONTROLS rows: on the
+#: CPU 1 GiB, on a GPU a sixteenth of its memory up to 8 GiB.
+_CACHE_BYTES = {"cpu": 1 << 30, "cuda": 8 << 30}
 _CACHE_MOST_ROWS = 4096
+#: Distance rows mode on CUDA: rings of neurons around the winners whose rows a search brings along (see _around).
+_PREFETCH_RINGS = 8
 #: Learning table entries (S x (d_max + 1) float32) a Som may hold: 2 GiB.
 _MAX_TABLE_ENTRIES = 1 << 29
 
@@ -586,7 +589,9 @@ class _RowCache:
     def __init__(self, topology: Topology, device: str, size: int | None):
         n = topology.n_vertices
         if size is None:
-            size = max(2 * MAX_CONTROLS, min(_CACHE_MOST_ROWS, _CACHE_BYTES // (4 * n)))
+            budget = _CACHE_BYTES["cpu"] if device == "cpu" else min(_CACHE_BYTES["cuda"],
+                                                                     wp.get_device(device).total_memory // 16)
+            size = max(2 * MAX_CONTROLS, min(_CACHE_MOST_ROWS, budget // (4 * n)))
         self.size = min(size, n)
         self.device = device
         self.rows = wp.empty((self.size, n), dtype=wp.int32, device=device)
@@ -611,7 +616,7 @@ class _RowCache:
         if not missing:
             return
         asked = len(missing)
-        missing = self._neighbours_of(missing, neurons) + missing  # least recent first: asked-for rows stay longest
+        missing = self._around(missing, neurons) + missing  # least recent first: asked-for rows stay longest
         slots, evicted = [], []
         for u in missing:  # the neurons asked for are the most recent: the oldest row is never one of them
             if self._free:
@@ -629,19 +634,31 @@ class _RowCache:
         self.computed += asked
         self.prefetched += len(missing) - asked
 
-    def _neighbours_of(self, missing: list[int], neurons: list[int]) -> list[int]:
-        """On CUDA, the uncached neighbours of the winners lacking rows, as many as the batch has room for and at most
-        a sixteenth of the cache (so that rows still in use stay): a winner moves one hop or less in most cycles, and
-        a block per row searches them alongside at little extra time."""
-        room = min(self._search.batch - len(missing), self.size // 16, self.size - len(neurons))
+    def _around(self, missing: list[int], neurons: list[int]) -> list[int]:
+        """On CUDA, uncached neurons around the winners, ring by ring (one hop from each winner, those lacking rows
+        first, then two hops...), as many as the search runs alongside the missing rows at little extra time and
+        at most a sixteenth of the cache (so that rows still in use stay). A winner moves one hop or less in most
+        cycles and keeps drifting the same way, so rows searched ahead spare later searches."""
+        room = min(self._search.alongside - len(missing), self.size // 16, self.size - len(neurons))
         if self.device == "cpu" or room <= 0:
             return []
-        extra: dict[int, None] = {}
-        for u in missing:
-            for w in self._neighbors[self._offsets[u]: self._offsets[u + 1]].tolist():
-                if w not in self._lru and w not in extra and w not in missing:
-                    extra[w] = None
-        return list(extra)[:room]
+        centres = missing + [u for u in neurons if u not in missing]
+        taken = dict.fromkeys(centres)
+        rings = [[u] for u in centres]
+        extra: list[int] = []
+        for _ in range(_PREFETCH_RINGS):
+            if len(extra) >= room or not any(rings):
+                break
+            for i, ring in enumerate(rings):
+                following = []
+                for u in ring:
+                    for w in self._neighbors[self._offsets[u]: self._offsets[u + 1]].tolist():
+                        if w not in taken:
+                            taken[w] = None
+                            following.append(w)
+                rings[i] = following
+                extra += [w for w in following if w not in self._lru]
+        return extra[:room][::-1]  # the farthest least recent
 
 
 def _cpu_cores(n_neurons: int, n_controls: int) -> int:

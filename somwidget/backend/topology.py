@@ -33,6 +33,11 @@ _LEVEL_THREADS = 1024
 #: runs every level in one launch, so it wins wherever levels are narrow enough for one SM (see RowSearch.method).
 _ROW_BLOCK_THREADS = 512
 _ROW_BLOCK_WIDEST = 16 * _ROW_BLOCK_THREADS
+#: The shared-memory row search: threads per block, and vertices of a level kept in shared memory (most, and the
+#: least worth it; a wider level spills the rest to global memory).
+_SHARED_THREADS = 512
+_SHARED_FRONTIER_MOST = 8192
+_SHARED_FRONTIER_LEAST = 1024
 #: A level launch costs about as much as a thread visiting this many vertices and edges (see RowSearch.method);
 #: on an H200, 1M-vertex grid: a level 7 us, a thread 0.17 us per vertex or edge.
 _LEVEL_COST = 40
@@ -189,7 +194,8 @@ class Topology:
 
 class RowSearch:
     """Distance rows on demand: BFS hop counts (int32, -1 = unreachable) from given sources into rows of a device
-    array. On the CPU one search per row (a thread, O(N + E)). On CUDA a block per row, all levels in one launch;
+    array. On the CPU one search per row (a thread, O(N + E)). On CUDA a block per row, all levels in one launch,
+    with its visited set and frontier in shared memory where they fit (up to about 1.8 million vertices on an H200);
     for graphs whose levels are too wide for one SM, the rows of a batch go level by level (a captured graph of
     `levels` launches), or one thread per row where those launches would cost more (see `method`)."""
 
@@ -203,17 +209,28 @@ class RowSearch:
         budget = _QUEUE_BYTES["cpu" if device == "cpu" else "cuda"]
         #: rows per launch (the queue holds a row of N int32 per search)
         self.batch = int(max(1, min(256, budget // (4 * n))))
+        self._shared = _shared_plan(n, device)
+        #: rows a batch searches in about the time of one: those that run at once on the device
+        self.alongside = self.batch if device == "cpu" else min(self.batch, _rows_at_once(self._shared, device))
+        if self._shared is not None:  # each vertex's first eight neighbours in one row, padded with -1
+            degree = np.diff(topology.offsets)
+            k = np.arange(len(topology.neighbors)) - np.repeat(topology.offsets[:-1], degree)
+            first8 = k < 8
+            ell = np.full((n, 8), -1, np.int32)
+            ell[np.repeat(np.arange(n), degree)[first8], k[first8]] = topology.neighbors[first8]
+            self._ell = wp.array(ell, dtype=wp.int32, device=device)
         self._buffers: dict[str, wp.array] | None = None
         self._graphs: dict[tuple, object] = {}
 
     def method(self, levels: int) -> str:
         """How a batch of rows is searched: on the CPU a thread per row ("thread"); on CUDA a block per row running
-        every level in one launch ("block") where the mean level is narrow, else a launch per level shared by all
-        rows ("levels"), or a thread per row where those `levels` launches cost more than walking the graph."""
+        every level in one launch where the mean level is narrow, its visited bitmap and frontier in shared memory
+        ("shared") or, past what shared memory holds, in global memory ("block"); else a launch per level shared by
+        all rows ("levels"), or a thread per row where those `levels` launches cost more than walking the graph."""
         if self.device == "cpu":
             return "thread"
         if self.n <= _ROW_BLOCK_WIDEST * (levels + 1):
-            return "block"
+            return "block" if self._shared is None else "shared"
         return "levels" if levels * _LEVEL_COST <= self._cost else "thread"
 
     @warp_exclusive
@@ -234,7 +251,13 @@ class RowSearch:
         b["first"][: count + 1].assign(first)
         b["slots"][:count].assign(np.asarray(slots, dtype=np.int32))
         method = self.method(levels)
-        if method == "block":
+        if method == "shared":
+            words, cap = self._shared
+            kernel = kernels.shared_row_search(words, cap, _SHARED_THREADS)
+            wp.launch_tiled(kernel, dim=[count], block_dim=_SHARED_THREADS, device=self.device,
+                            inputs=[self._ell, self._offsets, self._neighbors, b["sources"], b["first"], b["slots"],
+                                    rows, b["queue"], b["far"]])
+        elif method == "block":
             wp.launch(kernels.bfs_row_blocks, dim=count * _ROW_BLOCK_THREADS, block_dim=_ROW_BLOCK_THREADS,
                       device=self.device, inputs=[self._offsets, self._neighbors, b["sources"], b["first"], b["slots"],
                                                   rows, b["queue"], b["size"], b["far"]])
@@ -278,6 +301,26 @@ class RowSearch:
                 "far": wp.zeros(k, dtype=wp.int32, device=dev),
             }
         return self._buffers
+
+
+def _shared_plan(n: int, device: str) -> tuple[int, int] | None:
+    """(bitmap words, frontier capacity) of the shared-memory row search for n vertices on a CUDA device, or None
+    where the visited bitmap and two frontiers of _SHARED_FRONTIER_LEAST vertices do not fit a block's shared
+    memory (or on the CPU). Bitmap words come in steps of 256, so meshes of similar size share a kernel."""
+    if device == "cpu":
+        return None
+    words = -(-n // 8192) * 256
+    room = wp.get_device(device).max_shared_memory_per_block // 4 - words - 3
+    cap = min(_SHARED_FRONTIER_MOST, room // 2)
+    return (words, cap) if cap >= _SHARED_FRONTIER_LEAST else None
+
+
+def _rows_at_once(plan: tuple[int, int] | None, device: str) -> int:
+    """Row searches that run at once on a CUDA device: a block each, as many blocks per multiprocessor as their
+    shared memory allows (the shared-memory search) or 4 (the others)."""
+    d = wp.get_device(device)
+    per_sm = 4 if plan is None else max(1, d.max_shared_memory_per_block // (4 * (plan[0] + 2 * plan[1] + 3)))
+    return d.sm_count * per_sm
 
 
 def _block_count(n: int, threads: int, device: str) -> int:
