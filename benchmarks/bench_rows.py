@@ -158,14 +158,20 @@ def big():
     som.reset()
     c0, s0 = cache.computed, cache.stalls
 
+    each = []
+
     def frames():
         for _ in range(30):
+            t = time.perf_counter()
             som.step(10)
             som.weights
+            each.append(time.perf_counter() - t)
 
     dt, _ = timed(frames)
-    print(f"  app frames from reset, step(10) + weights copy: {dt / 30 * 1e3:.1f} ms/frame; rows searched "
-          f"{cache.computed - c0}, stalls {cache.stalls - s0}", flush=True)
+    each = np.array(each) * 1e3
+    print(f"  app frames from reset, step(10) + weights copy: {dt / 30 * 1e3:.1f} ms/frame (median "
+          f"{np.median(each):.1f}, 90th percentile {np.percentile(each, 90):.1f}, slowest {each.max():.1f}); "
+          f"rows searched {cache.computed - c0}, stalls {cache.stalls - s0}", flush=True)
     # how far do the winners move from one cycle to the next? (hops on the grid)
     jj, ii = np.divmod(np.arange(topo.n_vertices), SIDE)
     som.reset()

@@ -44,7 +44,8 @@ class Som:
 
     distances: "dense" reads D[u, v] from the topology's dense N x N table (N <= 65,536); "rows" computes the
     distance rows of the current winners on demand and keeps the `cache_rows` most recently used on the device
-    (None: as many as fit in 1 GiB, at least 512 and at most 4096); None picks dense up to 65,536 neurons, else rows.
+    (None: as many as fit in 1 GiB on the CPU, on a GPU in a sixteenth of its memory up to 8 GiB; at least 512 and at
+    most 4096); None picks dense up to 65,536 neurons, else rows.
     Both give the same weights.
     """
 
