@@ -317,9 +317,12 @@ def _shared_plan(n: int, device: str) -> tuple[int, int] | None:
 
 def _rows_at_once(plan: tuple[int, int] | None, device: str) -> int:
     """Row searches that run at once on a CUDA device: a block each, as many blocks per multiprocessor as their
-    shared memory allows (the shared-memory search) or 4 (the others)."""
+    shared memory allows (the shared-memory search) or its 2,048 threads (the global one)."""
     d = wp.get_device(device)
-    per_sm = 4 if plan is None else max(1, d.max_shared_memory_per_block // (4 * (plan[0] + 2 * plan[1] + 3)))
+    if plan is None:
+        per_sm = 2048 // _ROW_BLOCK_THREADS
+    else:
+        per_sm = max(1, d.max_shared_memory_per_block // (4 * (plan[0] + 2 * plan[1] + 3)))
     return d.sm_count * per_sm
 
 
