@@ -51,6 +51,18 @@ def clear_keys(keys: wp.array2d(dtype=wp.uint64), buf: int, n_controls: int):
         keys[buf, c] = KEY_NONE
 
 
+@wp.func
+def pass_counter(keys: wp.array2d(dtype=wp.uint64), s: int, n_controls: int, cycle_out: wp.array(dtype=wp.int32),
+                 find_next: int):
+    """End of cycle s by one thread: with find_next the keys of cycle s + 2 cleared and the counter advanced to
+    s + 1; without, the counter passed on unchanged (a later kernel of the cycle ends it)."""
+    if find_next != 0:
+        clear_keys(keys, (s + 2) % 3, n_controls)
+        cycle_out[0] = s + 1
+    else:
+        cycle_out[0] = s
+
+
 @wp.func_native("""
 #if defined(__CUDA_ARCH__)
 return 0;
@@ -138,6 +150,13 @@ def bfs_rows(
 # wp.config.enable_cpu_blocks, a switch between the block's cooperative fibers.
 @wp.func_native("WP_TILE_SYNC();")
 def sync_block(): ...
+
+
+# Programmatic dependent launch (see dependent_launch.py): a kernel so launched may start before the one before it
+# ends; it waits here before reading what that kernel writes. A no-op for an ordinary launch, and on the CPU.
+@wp.func_native("#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900\n"
+                'asm volatile("griddepcontrol.wait;" ::: "memory");\n#endif\n')
+def wait_for_previous_grid(): ...
 
 
 ids8 = wp.types.vector(length=8, dtype=wp.int32)
@@ -338,6 +357,41 @@ def shared_get(word: int) -> int: ...
 
 @wp.func_native("#if defined(__CUDA_ARCH__)\n" + _SHARED + "((int*)dynamic_smem_base)[word] = value;\n#endif\n")
 def shared_set(word: int, value: int): ...
+
+
+@wp.func_native("#if defined(__CUDA_ARCH__)\n" + _SHARED + "((float*)dynamic_smem_base)[word] = value;\n#endif\n")
+def shared_set_float(word: int, value: wp.float32): ...
+
+
+@wp.func_native("#if defined(__CUDA_ARCH__)\n" + _SHARED
+                + "return ((float*)dynamic_smem_base)[word];\n#else\nreturn 0.0f;\n#endif\n")
+def shared_get_float(word: int) -> wp.float32: ...
+
+
+@wp.func_native("#if defined(__CUDA_ARCH__)\nreturn __syncthreads_or(value);\n#else\nreturn value;\n#endif\n")
+def sync_block_any(value: int) -> int:
+    """A block barrier that also returns whether any thread passed a non-zero value."""
+    ...
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+#if __CUDA_ARCH__ >= 800
+unsigned int least = __reduce_min_sync(0xffffffffu, bits);
+#else
+unsigned int least = bits;
+for (int offset = 16; offset > 0; offset >>= 1) least = min(least, __shfl_xor_sync(0xffffffffu, least, offset));
+#endif
+unsigned int lane = __ffs(__ballot_sync(0xffffffffu, bits == least)) - 1;
+return ((unsigned long long)least << 32) | (unsigned long long)(first + (int)lane);
+#else
+return 0;
+#endif
+""")
+def warp_least_key(bits: wp.uint32, first: int) -> wp.uint64:
+    """The smallest winner key of a warp whose lane i holds the distance bits of neuron first + i: the lowest
+    lane among equal distances, so the lowest index (lanes past the mesh repeat its last neuron). CUDA only."""
+    ...
 
 
 @wp.func_native("""
@@ -646,8 +700,9 @@ DISTANCE_SOURCES = (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32))
 
 
 @functools.cache
-def cycle_kernels(n_dims: int) -> SimpleNamespace:
-    """The cycle's kernels for weights with n_dims features (each compiled once, on first use per device).
+def cycle_kernels(n_dims: int, gather: int = 8) -> SimpleNamespace:
+    """The cycle's kernels for weights with n_dims features (each compiled once, on first use per device); `move`
+    looks up the rates of `gather` controls at once (a multiple of 8 up to 32).
 
     `move` and `move_part` are generic in `distances` (the dense table or distance rows, see `winner_row`); each
     source has its own overload. In distance rows mode a cycle whose winners lack a row stalls: the move sets
@@ -657,7 +712,7 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
     order). The dense path passes slot_of and stalled too (a zero flag that nothing sets; slot_of unread).
     """
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
-    rate8 = wp.types.vector(length=8, dtype=wp.float32)
+    gathered = wp.types.vector(length=gather, dtype=wp.float32)
     options = {"max_unroll": 32}
 
     @wp.func
@@ -734,11 +789,7 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         if find_next != 0:
             find_winners_of_block(w, n_neurons, controls, n_controls, metric[0], keys, (s + 1) % 3, block, lane)
         if block == 0 and lane == 0:
-            if find_next != 0:
-                clear_keys(keys, (s + 2) % 3, n_controls)
-                cycle_out[0] = s + 1
-            else:
-                cycle_out[0] = s
+            pass_counter(keys, s, n_controls, cycle_out, find_next)
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def find_winners(
@@ -750,6 +801,7 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         cycle: wp.array(dtype=wp.int32),
     ):
         """Winners of cycle s = cycle[0] from the current weights into keys[s % 3] (cleared beforehand)."""
+        wait_for_previous_grid()
         block, lane = wp.tid()
         w = weights[wp.min(block * CUDA_BLOCK + lane, weights.shape[0] - 1)]
         find_winners_of_block(w, weights.shape[0], controls, n_controls, metric[0], keys, cycle[0] % 3, block, lane)
@@ -775,9 +827,12 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         """Step 2 of cycle s: W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v) for the controls c_lo .. c_hi - 1 in list
         order (all n_controls but for a cycle run in parts); stalls on a missing distance row.
 
-        The row stays in registers; rates are gathered eight controls at a time so their loads overlap. With
-        find_next (no smoothing) the kernel then finds the winners of cycle s + 1 and advances the counter.
+        The row stays in registers; rates are gathered `gather` controls at a time so their loads overlap (past
+        c_hi they are 0 and change nothing). With find_next (no smoothing) the kernel then finds the winners of
+        cycle s + 1 and advances the counter. Launched dependent (see dependent_launch.py), it waits for the
+        kernel before it first.
         """
+        wait_for_previous_grid()
         block, lane = wp.tid()
         s = cycle_in[0]
         buf = s % 3
@@ -785,15 +840,15 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         u = wp.min(v, weights_in.shape[0] - 1)  # every thread looks up every row: all find the same miss
         w = weights_in[u]
         missing = int(0)  # stays 0 with the dense table (row_missing), a constant the compiler folds
-        for c0 in range(c_lo, c_hi, 8):
-            rates = rate8()
-            for g in range(8):  # unrolled: eight independent key -> (slot ->) distance -> rate chains
+        for c0 in range(c_lo, c_hi, gather):
+            rates = gathered()
+            for g in range(gather):  # unrolled: independent key -> (slot ->) distance -> rate chains
                 c = wp.min(c0 + g, c_hi - 1)
                 row = winner_row(distances, slot_of, keys, buf, c)
                 missing = wp.max(missing, row_missing(distances, row))
                 r = rate_at(table, s, distances, row, u)
                 rates[g] = wp.where(c0 + g < c_hi, r, wp.float32(0.0))
-            for g in range(8):
+            for g in range(gather):
                 w = w + rates[g] * (controls[wp.min(c0 + g, c_hi - 1)] - w)
         if missing == 0:
             if v < weights_in.shape[0]:
@@ -821,6 +876,7 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
     ):
         """Step 3 of cycle s (smoothing, see `smoothed`), then the winners of cycle s + 1 and the counter advance;
         skipped (the counter passed on) when the cycle stalled."""
+        wait_for_previous_grid()
         block, lane = wp.tid()
         s = cycle_in[0]
         if stalled[0] == 0:
@@ -919,5 +975,77 @@ def cycle_kernels(n_dims: int) -> SimpleNamespace:
         wp.overload(move, {"distances": source})
         wp.overload(move_part, {"distances": source})
 
-    return SimpleNamespace(vec=vec, find_winners=find_winners, move=move, smooth=smooth, move_part=move_part,
-                           smooth_part=smooth_part, find_part=find_part)
+    return SimpleNamespace(vec=vec, distance=distance, find_winners=find_winners, move=move, smooth=smooth,
+                           move_part=move_part, smooth_part=smooth_part, find_part=find_part)
+
+
+@functools.cache
+def spread_cycle_kernel(n_dims: int, warps: int) -> wp.Kernel:
+    """The cycle kernel of small meshes with at most `warps` controls a cycle (CUDA): a block of `warps` warps per
+    32 neurons, the controls spread over the warps, so the latency-bound steps of a cycle run side by side rather
+    than one after another in one warp. Same arguments and results as `cycle_kernels(n_dims).move`, bit for bit,
+    for c_hi - c_lo <= warps.
+
+    Step 2, W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v): warp g looks up the rate of control c_lo + g for the block's
+    32 neurons into shared memory; after a barrier every warp applies the rates in list order to its own copy of
+    the 32 neurons. Step 1 of cycle s + 1 (with find_next): warp g finds the nearest of the block's new weights to
+    controls g, g + warps, ... with one warp-wide minimum each and publishes it with one atomic min.
+    """
+    ks = cycle_kernels(n_dims)
+    vec, distance = ks.vec, ks.distance
+    threads = 32 * warps
+
+    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
+    def move_spread(
+        weights_in: wp.array(dtype=vec),
+        weights_out: wp.array(dtype=vec),
+        controls: wp.array(dtype=vec),
+        c_lo: int,
+        c_hi: int,
+        n_controls: int,
+        metric: wp.array(dtype=vec),
+        table: wp.array2d(dtype=wp.float32),
+        distances: Any,
+        slot_of: wp.array(dtype=wp.int32),
+        keys: wp.array2d(dtype=wp.uint64),
+        cycle_in: wp.array(dtype=wp.int32),
+        cycle_out: wp.array(dtype=wp.int32),
+        find_next: int,
+        stalled: wp.array(dtype=wp.int32),
+    ):
+        wait_for_previous_grid()
+        block, t = wp.tid()
+        rates = wp.tile_zeros(shape=(threads,), dtype=wp.float32, storage="shared")  # noqa: F841 (read by word)
+        g = t // 32
+        lane = t % 32
+        s = cycle_in[0]
+        buf = s % 3
+        first = block * 32
+        n = weights_in.shape[0]
+        u = wp.min(first + lane, n - 1)
+        w = weights_in[u]
+        row = winner_row(distances, slot_of, keys, buf, wp.min(c_lo + g, c_hi - 1))
+        r = rate_at(table, s, distances, row, u)
+        shared_set_float(t, wp.where(c_lo + g < c_hi, r, wp.float32(0.0)))
+        missing = sync_block_any(row_missing(distances, row))
+        for j in range(warps):  # unrolled; controls past c_hi have rate 0 and leave w as it is
+            w = w + shared_get_float(j * 32 + lane) * (controls[wp.min(c_lo + j, c_hi - 1)] - w)
+        if missing == 0:
+            if g == 0 and first + lane < n:
+                weights_out[first + lane] = w
+            if find_next != 0:
+                m = metric[0]
+                nxt = (s + 1) % 3
+                for c in range(g, n_controls, warps):
+                    key = warp_least_key(float_bits(distance(controls[c], w, m)), first)
+                    if lane == 0:
+                        wp.atomic_min(keys, nxt, c, key)
+            if block == 0 and t == 0:
+                pass_counter(keys, s, n_controls, cycle_out, find_next)
+        elif block == 0 and t == 0:
+            stalled[0] = 1
+            cycle_out[0] = s
+
+    for source in DISTANCE_SOURCES:
+        wp.overload(move_spread, {"distances": source})
+    return move_spread

@@ -11,9 +11,9 @@ import numpy as np
 import warp as wp
 from numpy.typing import ArrayLike
 
-from . import checks
+from . import checks, dependent_launch
 from .device import resolve, warp_exclusive
-from .kernels import CUDA_BLOCK, assign_slots, barrier, cycle_kernels, sched_yield_address
+from .kernels import CUDA_BLOCK, assign_slots, barrier, cycle_kernels, sched_yield_address, spread_cycle_kernel
 from .schedule import learning_table
 from .topology import MAX_DENSE_NEURONS, RowSearch, Topology
 
@@ -22,6 +22,11 @@ MAX_CONTROLS = 256  # counts the effective list: originals plus mirrored copies
 _KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
 #: Cycles in the longest captured graph; runs are split into powers of two.
 _LONGEST_GRAPH = 512
+#: Meshes up to this many neurons have latency-bound cycles on CUDA (a block per 32 neurons leaves most of the GPU
+#: idle): their move kernel looks up the rates of all controls at once (up to 32), and with at most _SPREAD_WARPS
+#: controls and no smoothing a block spreads the controls over that many warps (measured on an H200, BENCHMARKS.md).
+SMALL_MESH = 16384
+_SPREAD_WARPS = 8
 _YIELD = sched_yield_address()
 #: Neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each).
 _PAIRS_PER_EXTRA_CORE = 1 << 18
@@ -122,7 +127,8 @@ class Som:
         self._cycle = [self._counters[i * 16: i * 16 + 1] for i in range(counters)]
         self._meet = wp.zeros(1, dtype=wp.int64, device=dev)
         self._meet_failed = wp.zeros(1, dtype=wp.int32, device=dev)
-        self._graphs: dict[tuple, object] = {}
+        self._graphs: dict[tuple, tuple] = {}  # key -> (graph, the packed arguments of its dependent launches)
+        self._launch_records: list = []
         self._table = None
         self._build_table()
         self._upload_controls()
@@ -431,12 +437,13 @@ class Som:
         self._winners_valid = True
 
     def _graph(self, key: tuple, record) -> object:
-        graph = self._graphs.get(key)
-        if graph is None:
+        held = self._graphs.get(key)
+        if held is None:
+            self._launch_records = []
             with wp.ScopedCapture(device=self.device) as capture:
                 record()
-            graph = self._graphs[key] = capture.graph
-        return graph
+            held = self._graphs[key] = (capture.graph, self._launch_records)
+        return held[0]
 
     def _run_cpu(self, cycles: int, fresh: bool, smoothing: bool) -> None:
         graphs = [self._graph((cycles, fresh, smoothing, core), lambda core=core: self._record_cpu(core, cycles, fresh,
@@ -485,20 +492,39 @@ class Som:
     def _record_cuda(self, cycles: int, fresh: bool, parity: int, smoothing: bool) -> None:
         """A kernel a cycle (move + next winners), or two with smoothing (move; smooth + next winners). Without
         `fresh` the winners of the first cycle are known (always so in distance rows mode)."""
-        dev, blocks, threads, k = self.device, [self._blocks], int(CUDA_BLOCK), self._k_eff
+        dev, threads, k = self.device, int(CUDA_BLOCK), self._k_eff
+        dependent = dependent_launch.available(dev)
+        after_kernel = False
+
+        def launch(kernel, inputs, threads=threads):
+            nonlocal after_kernel
+            if dependent and after_kernel:
+                self._launch_records.append(
+                    dependent_launch.launch_tiled_after_kernel(kernel, self._blocks, threads, inputs, dev))
+            else:
+                wp.launch_tiled(kernel, dim=[self._blocks], block_dim=threads, device=dev, inputs=inputs)
+            after_kernel = True
+
+        move, move_threads = self._kernels.move, threads
+        if self.n_neurons <= SMALL_MESH:
+            if k <= _SPREAD_WARPS and not smoothing:
+                move, move_threads = spread_cycle_kernel(self.n_dims, _SPREAD_WARPS), 32 * _SPREAD_WARPS
+            else:
+                move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8))).move
+
         if fresh:
             self._launch_find()
+            after_kernel = True
         p = parity
         for _ in range(cycles):
             c_in, c_out = self._cycle[p], self._cycle[1 - p]
             moved = self._w_moved if smoothing else self._w
-            wp.launch_tiled(self._kernels.move, dim=blocks, block_dim=threads, device=dev,
-                            inputs=[self._w, moved, self._c, 0, k, k, self._m, self._table, self._distances,
-                                    self._slot_of, self._keys, c_in, c_out, int(not smoothing), self._stalled])
+            launch(move, [self._w, moved, self._c, 0, k, k, self._m, self._table, self._distances, self._slot_of,
+                          self._keys, c_in, c_out, int(not smoothing), self._stalled], move_threads)
             if smoothing:
-                wp.launch_tiled(self._kernels.smooth, dim=blocks, block_dim=threads, device=dev,
-                                inputs=[self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
-                                        self._smoothing, self._c, k, self._m, self._keys, c_out, c_in, self._stalled])
+                launch(self._kernels.smooth, [self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
+                                              self._smoothing, self._c, k, self._m, self._keys, c_out, c_in,
+                                              self._stalled])
             else:
                 p = 1 - p
 
