@@ -32,12 +32,19 @@ class _LaunchConfig(ctypes.Structure):
                 ("n_attributes", ctypes.c_uint)]
 
 
+#: The first driver (CUDA 12.3) whose stream capture records dependent launches into graphs.
+_OLDEST_DRIVER = 12030
+
+
 @functools.cache
 def _launch_kernel_ex():
-    """The driver's cuLaunchKernelEx, or None where the driver lacks it."""
+    """The driver's cuLaunchKernelEx, or None where the driver lacks it or is older than _OLDEST_DRIVER."""
     try:
         driver = ctypes.CDLL("nvcuda.dll" if sys.platform == "win32" else "libcuda.so.1")
         launch = driver.cuLaunchKernelEx
+        version = ctypes.c_int(0)
+        if driver.cuDriverGetVersion(ctypes.byref(version)) != 0 or version.value < _OLDEST_DRIVER:
+            return None
     except (OSError, AttributeError):
         return None
     launch.argtypes = [ctypes.POINTER(_LaunchConfig), ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]

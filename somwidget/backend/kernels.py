@@ -3,7 +3,9 @@
 The cycle kernels are specialised per feature count n (a row of weights is a Warp vector of length n) and come in
 two decompositions of the same cycle. On CUDA a thread per neuron moves it, a thread per control scans each block
 of 32 neurons (their new weights shared in the block) for the winners, and the whole cycle is one kernel (two with
-smoothing). On the CPU, where Warp runs a launch on one thread, each core replays its own graph: the neurons are
+smoothing), launched dependent on the one before where the GPU allows (see dependent_launch.py). Small meshes with
+few controls use `spread_cycle_kernel` instead, which spreads the controls over the warps of a block. On the CPU,
+where Warp runs a launch on one thread, each core replays its own graph: the neurons are
 split between the cores for the move and smoothing, the controls for the winner search, with a spinning barrier
 between the phases.
 
