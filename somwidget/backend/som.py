@@ -128,7 +128,6 @@ class Som:
         self._meet = wp.zeros(1, dtype=wp.int64, device=dev)
         self._meet_failed = wp.zeros(1, dtype=wp.int32, device=dev)
         self._graphs: dict[tuple, tuple] = {}  # key -> (graph, the packed arguments of its dependent launches)
-        self._launch_records: list = []
         self._table = None
         self._build_table()
         self._upload_controls()
@@ -439,10 +438,9 @@ class Som:
     def _graph(self, key: tuple, record) -> object:
         held = self._graphs.get(key)
         if held is None:
-            self._launch_records = []
             with wp.ScopedCapture(device=self.device) as capture:
-                record()
-            held = self._graphs[key] = (capture.graph, self._launch_records)
+                records = record()
+            held = self._graphs[key] = (capture.graph, records)
         return held[0]
 
     def _run_cpu(self, cycles: int, fresh: bool, smoothing: bool) -> None:
@@ -489,18 +487,19 @@ class Som:
             wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 1, stalled])
             meet()
 
-    def _record_cuda(self, cycles: int, fresh: bool, parity: int, smoothing: bool) -> None:
+    def _record_cuda(self, cycles: int, fresh: bool, parity: int, smoothing: bool) -> list:
         """A kernel a cycle (move + next winners), or two with smoothing (move; smooth + next winners). Without
-        `fresh` the winners of the first cycle are known (always so in distance rows mode)."""
+        `fresh` the winners of the first cycle are known (always so in distance rows mode). Returns the packed
+        arguments of the dependent launches, which the graph needs as long as it lives."""
         dev, threads, k = self.device, int(CUDA_BLOCK), self._k_eff
         dependent = dependent_launch.available(dev)
         after_kernel = False
+        records = []
 
         def launch(kernel, inputs, threads=threads):
             nonlocal after_kernel
             if dependent and after_kernel:
-                self._launch_records.append(
-                    dependent_launch.launch_tiled_after_kernel(kernel, self._blocks, threads, inputs, dev))
+                records.append(dependent_launch.launch_tiled_after_kernel(kernel, self._blocks, threads, inputs, dev))
             else:
                 wp.launch_tiled(kernel, dim=[self._blocks], block_dim=threads, device=dev, inputs=inputs)
             after_kernel = True
@@ -527,6 +526,7 @@ class Som:
                                               self._stalled])
             else:
                 p = 1 - p
+        return records
 
     # -- distance rows mode -------------------------------------------------------------------------------
     def _run_rows(self, cycles: int) -> None:
