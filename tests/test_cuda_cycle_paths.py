@@ -1,6 +1,6 @@
 """The CUDA cycle's fast paths give the weights of the general path, bit for bit.
 
-On CUDA a small mesh's cycle runs in a kernel that spreads the controls over the warps of a block (at most eight
+On CUDA a small mesh's cycle runs in a kernel that spreads the controls over the warps of a block (at most 32
 controls, no smoothing) or in the general kernel looking up every control's rate at once; and kernels are launched
 dependent (their blocks start while the previous kernel ends) on compute capability 9.0+. The general path is the
 kernel of a warp per 32 neurons, eight rates at a time, launched one after the other: each run here is repeated
@@ -17,6 +17,7 @@ from reference import lattice_edges
 from somwidget import Som, Topology
 from somwidget.backend import dependent_launch
 from somwidget.backend import som as som_module
+from somwidget.backend.kernels import SHARED_TABLE_WORDS
 
 pytestmark = pytest.mark.skipif(not HAS_CUDA, reason="warp reports no CUDA device on this machine")
 
@@ -40,38 +41,64 @@ def _general_path(monkeypatch) -> None:
 
 
 @pytest.mark.parametrize(
-    ("n_dims", "k", "mirror", "smoothing", "distances"),
+    ("n_dims", "k", "mirror", "smoothing", "distances", "spread"),
     [
-        (3, 8, (), 0.0, None),  # spread over eight warps (case study 1's shape)
-        (3, 3, (), 0.0, None),  # spread, most warps past the controls
-        (5, 9, (1,), 0.0, None),  # 18 effective controls: every rate at once (case study 2's shape)
-        (3, 8, (), 0.2, None),  # smoothing: the general kernel, launched dependent
-        (3, 5, (), 0.0, "rows"),  # spread kernel reading distance rows, with stalls on missing rows
+        (3, 8, (), 0.0, None, True),  # eight warps, a control each (case study 1's shape)
+        (3, 3, (), 0.0, None, True),  # three warps
+        (5, 9, (1,), 0.0, None, True),  # 18 effective controls: six warps of three (case study 2's shape)
+        (4, 16, (1,), 0.0, None, True),  # 32: eight warps of four, the most a spread kernel takes
+        (3, 20, (1,), 0.0, None, False),  # 40: the general kernel, every rate at once
+        (3, 8, (), 0.2, None, False),  # smoothing: the general kernel, launched dependent
+        (3, 5, (), 0.0, "rows", True),  # spread kernel reading distance rows, with stalls on missing rows
+        (5, 9, (1,), 0.0, "rows", True),  # the same with 18 controls
     ],
 )
-def test_fast_paths_equal_general_path(monkeypatch, n_dims, k, mirror, smoothing, distances):
+def test_fast_paths_equal_general_path(monkeypatch, n_dims, k, mirror, smoothing, distances, spread):
     rng = np.random.default_rng(k + 10 * n_dims)
     topology, points = _lattice(12, 10, 6)
     weights = np.concatenate([points, rng.uniform(-1, 1, (len(points), n_dims - 3))], axis=1)
     controls = rng.uniform(-1, 1, (k, n_dims))
     kw = dict(iterations=120, smoothing=smoothing, mirror=mirror)
     if distances:
-        kw.update(distances=distances, cache_rows=8)
-    launched = []
-    real_launch = dependent_launch.launch_tiled_after_kernel
-    monkeypatch.setattr(dependent_launch, "launch_tiled_after_kernel",
-                        lambda *a, **kws: launched.append(a[0].key) or real_launch(*a, **kws))
+        kw.update(distances=distances, cache_rows=k * (2 if mirror else 1) + 3)
+    launched = _record_dependent_launches(monkeypatch)
     dependent = dependent_launch.available(DEVICE)  # 9.0+ and a CUDA 12.3+ driver
     fast_som = _trained(topology, weights, controls, **kw)
     fast = fast_som.weights
     if dependent:
         assert launched, "no kernel was launched dependent on a device that allows it"
+        assert any("move_spread" in key for key in launched) == spread, launched
     if distances:
         assert fast_som._cache.stalls >= 1  # a graph stopped on a missing row and went on
     _general_path(monkeypatch)
     general = _trained(topology, weights, controls, **kw).weights
     assert np.array_equal(fast, general), f"largest difference {np.abs(fast - general).max():.3e}"
     assert not np.array_equal(fast, weights)  # the runs moved the mesh
+
+
+def test_spread_kernel_with_a_long_table_row(monkeypatch):
+    """A chain of 1,500 neurons has 1,500 hop counts, more than the spread kernel copies into shared memory: it
+    reads the table from global memory instead."""
+    n = 1500
+    topology = Topology.from_edges(np.stack([np.arange(n - 1), np.arange(1, n)], axis=1), n)
+    rng = np.random.default_rng(3)
+    points = np.stack([np.linspace(-1, 1, n), np.zeros(n), np.zeros(n)], axis=1)
+    controls = rng.uniform(-1, 1, (6, 3))
+    launched = _record_dependent_launches(monkeypatch)
+    som = _trained(topology, points, controls, iterations=80)
+    assert som._table.shape[1] > SHARED_TABLE_WORDS
+    if dependent_launch.available(DEVICE):
+        assert any("move_spread" in key for key in launched), launched
+    _general_path(monkeypatch)
+    assert np.array_equal(som.weights, _trained(topology, points, controls, iterations=80).weights)
+
+
+def _record_dependent_launches(monkeypatch) -> list[str]:
+    launched = []
+    real_launch = dependent_launch.launch_tiled_after_kernel
+    monkeypatch.setattr(dependent_launch, "launch_tiled_after_kernel",
+                        lambda *a, **kws: launched.append(a[0].key) or real_launch(*a, **kws))
+    return launched
 
 
 def test_frames_equal_one_run(monkeypatch):

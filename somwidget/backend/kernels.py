@@ -981,21 +981,94 @@ def cycle_kernels(n_dims: int, gather: int = 8) -> SimpleNamespace:
                            move_part=move_part, smooth_part=smooth_part, find_part=find_part)
 
 
-@functools.cache
-def spread_cycle_kernel(n_dims: int, warps: int) -> wp.Kernel:
-    """The cycle kernel of small meshes with at most `warps` controls a cycle (CUDA): a block of `warps` warps per
-    32 neurons, the controls spread over the warps, so the latency-bound steps of a cycle run side by side rather
-    than one after another in one warp. Same arguments and results as `cycle_kernels(n_dims).move`, bit for bit,
-    for c_hi - c_lo <= warps.
+#: Words of the learning table's row s that a spread cycle kernel copies into shared memory (tables with longer rows
+#: are read from global memory instead).
+SHARED_TABLE_WORDS = 1024
 
-    Step 2, W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v): warp g looks up the rate of control c_lo + g for the block's
-    32 neurons into shared memory; after a barrier every warp applies the rates in list order to its own copy of
-    the 32 neurons. Step 1 of cycle s + 1 (with find_next): warp g finds the nearest of the block's new weights to
-    controls g, g + warps, ... with one warp-wide minimum each and publishes it with one atomic min.
+
+@wp.func_native("#if defined(__CUDA_ARCH__)\nreturn __shfl_sync(0xffffffffu, value, lane);\n"
+                "#else\nreturn value;\n#endif\n")
+def warp_shuffle(value: int, lane: int) -> int:
+    """`value` of lane `lane` of the warp (CUDA; every lane must take part)."""
+    ...
+
+
+@wp.func
+def key_row(distances: wp.array2d(dtype=wp.uint16), slot_of: wp.array(dtype=wp.int32), key: wp.uint64) -> int:
+    """The row of `distances` that holds D[u, .] for the winner u of `key`: u's own row of the dense table."""
+    return wp.int32(key & INDEX_MASK)
+
+
+@wp.func
+def key_row(distances: wp.array2d(dtype=wp.int32), slot_of: wp.array(dtype=wp.int32),  # noqa: F811 (overload)
+            key: wp.uint64) -> int:
+    """The cache row holding the distances from the winner of `key`, -1 when it has none."""
+    return slot_of[wp.int32(key & INDEX_MASK)]
+
+
+@wp.func
+def hops(distances: wp.array2d(dtype=wp.uint16), row: int, v: int) -> int:
+    """D[u, v] from u's row, -1 where v is unreachable."""
+    d = distances[row, v]
+    return wp.where(d != UNREACHABLE, wp.int32(d), -1)
+
+
+@wp.func
+def hops(distances: wp.array2d(dtype=wp.int32), row: int, v: int) -> int:  # noqa: F811 (overload)
+    """D[u, v] from cache row `row`, -1 where v is unreachable; a missing row (-1) reads row 0, whose rate the stalled
+    cycle never applies."""
+    return distances[wp.max(row, 0), v]
+
+
+@wp.func
+def sync_block_missing(distances: wp.array2d(dtype=wp.uint16), row: int) -> int:
+    """A block barrier; the dense table has every row, so none is missing."""
+    sync_block()
+    return 0
+
+
+@wp.func
+def sync_block_missing(distances: wp.array2d(dtype=wp.int32), row: int) -> int:  # noqa: F811 (overload)
+    """A block barrier that also returns 1 when any thread's cache row is missing (-1), else 0."""
+    return sync_block_any(row_missing(distances, row))
+
+
+@functools.cache
+def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bool) -> wp.Kernel:
+    """The cycle kernel of small meshes (CUDA): a block of `warps` warps per 32 neurons, warp g in charge of the
+    controls g, g + warps, ... (`per_warp` of them), so that the latency-bound steps of a cycle run side by side
+    rather than one after another in one warp. Same arguments and results as `cycle_kernels(n_dims).move`, bit for
+    bit, for a whole cycle (c_lo = 0, c_hi = n_controls <= warps * per_warp <= 32). With `shared_table` the rates are
+    read from a copy of the table's row s in shared memory (rows up to SHARED_TABLE_WORDS long).
+
+    Before it waits for the previous kernel the block copies the controls into shared memory (nothing in a run
+    writes them). Then step 2, W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v): lane i of each warp reads control i's
+    winner key (from all three key buffers at once, so the reads do not wait for the counter), the warp looks up
+    its controls' hop counts for the block's 32 neurons, then their rates into shared memory; after a barrier every
+    warp applies all the rates in list order to its own copy of the 32 neurons. Step 1 of cycle s + 1 (with
+    find_next): warp g finds the nearest of the block's new weights to each of its controls with one warp-wide
+    minimum, and its lanes publish them with one atomic min each.
     """
     ks = cycle_kernels(n_dims)
     vec, distance = ks.vec, ks.distance
     threads = 32 * warps
+    slots = warps * per_warp
+    if slots > 32:
+        raise ValueError(f"spread_cycle_kernel: warps x per_warp = {slots} controls, at most 32 (a lane each)")
+    table_words = SHARED_TABLE_WORDS if shared_table else 0
+    # shared memory, in 4-byte words: the rates (32 neurons x slots), the table's row s, the controls
+    table_at = 32 * slots
+    controls_at = table_at + table_words
+    words = controls_at + slots * n_dims
+    hop_counts = wp.types.vector(length=per_warp, dtype=wp.int32)
+
+    @wp.func
+    def staged_control(c: int) -> vec:
+        """Control c, from its copy in shared memory."""
+        cv = vec()
+        for j in range(n_dims):
+            cv[j] = shared_get_float(controls_at + c * n_dims + j)
+        return cv
 
     @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
     def move_spread(
@@ -1015,35 +1088,62 @@ def spread_cycle_kernel(n_dims: int, warps: int) -> wp.Kernel:
         find_next: int,
         stalled: wp.array(dtype=wp.int32),
     ):
-        wait_for_previous_grid()
         block, t = wp.tid()
-        rates = wp.tile_zeros(shape=(threads,), dtype=wp.float32, storage="shared")  # noqa: F841 (read by word)
+        scratch = wp.tile_empty(shape=(words,), dtype=wp.float32, storage="shared")  # noqa: F841 (used by word)
         g = t // 32
         lane = t % 32
+        m = metric[0]
+        for j in range(t, slots * n_dims, threads):
+            shared_set_float(controls_at + j, controls[wp.min(j // n_dims, n_controls - 1)][j % n_dims])
+        wait_for_previous_grid()
         s = cycle_in[0]
+        mine = wp.min(lane, c_hi - 1)
+        key0 = keys[0, mine]
+        key1 = keys[1, mine]
+        key2 = keys[2, mine]
         buf = s % 3
+        row = key_row(distances, slot_of, wp.where(buf == 0, key0, wp.where(buf == 1, key1, key2)))
         first = block * 32
         n = weights_in.shape[0]
         u = wp.min(first + lane, n - 1)
         w = weights_in[u]
-        row = winner_row(distances, slot_of, keys, buf, wp.min(c_lo + g, c_hi - 1))
-        r = rate_at(table, s, distances, row, u)
-        shared_set_float(t, wp.where(c_lo + g < c_hi, r, wp.float32(0.0)))
-        missing = sync_block_any(row_missing(distances, row))
-        for j in range(warps):  # unrolled; controls past c_hi have rate 0 and leave w as it is
-            w = w + shared_get_float(j * 32 + lane) * (controls[wp.min(c_lo + j, c_hi - 1)] - w)
+        hop = hop_counts()
+        for j in range(per_warp):  # unrolled: the reads overlap
+            hop[j] = hops(distances, warp_shuffle(row, wp.min(g + warps * j, c_hi - 1)), u)
+        last = table.shape[1] - 1
+        if wp.static(shared_table):
+            for j in range(t, table.shape[1], threads):
+                shared_set_float(table_at + j, table[s, j])
+        missing = sync_block_missing(distances, row)  # lanes past c_hi repeat its last control
+        for j in range(per_warp):
+            c = g + warps * j
+            d = wp.clamp(hop[j], 0, last)
+            rate = float(0.0)
+            if wp.static(shared_table):
+                rate = shared_get_float(table_at + d)
+            else:
+                rate = table[s, d]
+            shared_set_float(c * 32 + lane, wp.where(hop[j] >= 0 and c < c_hi, rate, wp.float32(0.0)))
+        sync_block()
+        for c in range(slots):  # unrolled; rates past c_hi are 0 and leave w as it is
+            w = w + shared_get_float(c * 32 + lane) * (staged_control(c) - w)
         if missing == 0:
             if g == 0 and first + lane < n:
                 weights_out[first + lane] = w
             if find_next != 0:
-                m = metric[0]
-                nxt = (s + 1) % 3
-                for c in range(g, n_controls, warps):
-                    key = warp_least_key(float_bits(distance(controls[c], w, m)), first)
-                    if lane == 0:
-                        wp.atomic_min(keys, nxt, c, key)
+                best = KEY_NONE
+                for j in range(per_warp):
+                    c = g + warps * j
+                    if c < n_controls:
+                        key = warp_least_key(float_bits(distance(staged_control(c), w, m)), first)
+                        best = wp.where(lane == j, key, best)
+                if lane < per_warp and g + warps * lane < n_controls:
+                    wp.atomic_min(keys, (s + 1) % 3, g + warps * lane, best)
+                if block == 0:
+                    for c in range(t, n_controls, threads):
+                        keys[(s + 2) % 3, c] = KEY_NONE
             if block == 0 and t == 0:
-                pass_counter(keys, s, n_controls, cycle_out, find_next)
+                cycle_out[0] = wp.where(find_next != 0, s + 1, s)
         elif block == 0 and t == 0:
             stalled[0] = 1
             cycle_out[0] = s

@@ -13,7 +13,8 @@ from numpy.typing import ArrayLike
 
 from . import checks, dependent_launch
 from .device import resolve, warp_exclusive
-from .kernels import CUDA_BLOCK, assign_slots, barrier, cycle_kernels, sched_yield_address, spread_cycle_kernel
+from .kernels import (CUDA_BLOCK, SHARED_TABLE_WORDS, assign_slots, barrier, cycle_kernels, sched_yield_address,
+                      spread_cycle_kernel)
 from .schedule import learning_table
 from .topology import MAX_DENSE_NEURONS, RowSearch, Topology
 
@@ -23,10 +24,12 @@ _KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
 #: Cycles in the longest captured graph; runs are split into powers of two.
 _LONGEST_GRAPH = 512
 #: Meshes up to this many neurons have latency-bound cycles on CUDA (a block per 32 neurons leaves most of the GPU
-#: idle): their move kernel looks up the rates of all controls at once (up to 32), and with at most _SPREAD_WARPS
-#: controls and no smoothing a block spreads the controls over that many warps (measured on an H200, BENCHMARKS.md).
+#: idle). Without smoothing and with at most 32 controls a block spreads the controls over up to eight warps
+#: (`spread_cycle_kernel`); otherwise the move kernel looks up the rates of all controls at once, up to 32
+#: (measured on an H200, BENCHMARKS.md).
 SMALL_MESH = 16384
-_SPREAD_WARPS = 8
+_SPREAD_MOST_WARPS = 8
+_SPREAD_MOST_CONTROLS = 32
 _YIELD = sched_yield_address()
 #: Neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each).
 _PAIRS_PER_EXTRA_CORE = 1 << 18
@@ -506,8 +509,11 @@ class Som:
 
         move, move_threads = self._kernels.move, threads
         if self.n_neurons <= SMALL_MESH:
-            if k <= _SPREAD_WARPS and not smoothing:
-                move, move_threads = spread_cycle_kernel(self.n_dims, _SPREAD_WARPS), 32 * _SPREAD_WARPS
+            if k <= _SPREAD_MOST_CONTROLS and not smoothing:
+                per_warp = -(-k // _SPREAD_MOST_WARPS)
+                warps = -(-k // per_warp)
+                move = spread_cycle_kernel(self.n_dims, warps, per_warp, self._table.shape[1] <= SHARED_TABLE_WORDS)
+                move_threads = 32 * warps
             else:
                 move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8))).move
 
