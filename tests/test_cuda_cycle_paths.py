@@ -48,7 +48,8 @@ def _general_path(monkeypatch) -> None:
         (5, 9, (1,), 0.0, None, True),  # 18 effective controls: six warps of three (case study 2's shape)
         (4, 16, (1,), 0.0, None, True),  # 32: eight warps of four, the most a spread kernel takes
         (3, 20, (1,), 0.0, None, False),  # 40: the general kernel, every rate at once
-        (3, 8, (), 0.2, None, False),  # smoothing: the general kernel, launched dependent
+        (3, 8, (), 0.2, None, True),  # smoothing in the same kernel, each block moving its halo too
+        (5, 9, (1,), 0.3, None, True),  # the same with 18 controls, smoothing the position dims only
         (3, 5, (), 0.0, "rows", True),  # spread kernel reading distance rows, with stalls on missing rows
         (5, 9, (1,), 0.0, "rows", True),  # the same with 18 controls
     ],
@@ -67,7 +68,7 @@ def test_fast_paths_equal_general_path(monkeypatch, n_dims, k, mirror, smoothing
     fast = fast_som.weights
     if dependent:
         assert launched, "no kernel was launched dependent on a device that allows it"
-        assert any("move_spread" in key for key in launched) == spread, launched
+        assert any(_spread(key) for key in launched) == spread, launched
     if distances:
         assert fast_som._cache.stalls >= 1  # a graph stopped on a missing row and went on
     _general_path(monkeypatch)
@@ -88,9 +89,42 @@ def test_spread_kernel_with_a_long_table_row(monkeypatch):
     som = _trained(topology, points, controls, iterations=80)
     assert som._table.shape[1] > SHARED_TABLE_WORDS
     if dependent_launch.available(DEVICE):
-        assert any("move_spread" in key for key in launched), launched
+        assert any(_spread(key) for key in launched), launched
     _general_path(monkeypatch)
     assert np.array_equal(som.weights, _trained(topology, points, controls, iterations=80).weights)
+
+
+@pytest.mark.parametrize(
+    ("case", "spread"),
+    [
+        ("paths", True),  # 300 separate 3-vertex paths: halos that wrap around block boundaries, no winner nearby
+        ("hub", False),  # a vertex of 40 neighbours: smoothing in its own kernel
+    ],
+)
+def test_smoothing_in_one_kernel_equals_general_path(monkeypatch, case, spread):
+    if case == "paths":
+        n = 900
+        starts = np.arange(0, n, 3)
+        edges = np.concatenate([np.stack([starts, starts + 1], 1), np.stack([starts + 1, starts + 2], 1)])
+    else:
+        n = 600
+        edges = np.concatenate([np.stack([np.zeros(40, int), np.arange(1, 41)], 1),
+                                np.stack([np.arange(40, n - 1), np.arange(41, n)], 1)])
+    topology = Topology.from_edges(edges, n)
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-1, 1, (n, 3))
+    controls = rng.uniform(-1, 1, (7, 3))
+    launched = _record_dependent_launches(monkeypatch)
+    som = _trained(topology, points, controls, iterations=90, smoothing=0.25)
+    if dependent_launch.available(DEVICE):
+        assert any(_spread(key) for key in launched) == spread, launched
+    _general_path(monkeypatch)
+    general = _trained(topology, points, controls, iterations=90, smoothing=0.25).weights
+    assert np.array_equal(som.weights, general), f"largest difference {np.abs(som.weights - general).max():.3e}"
+
+
+def _spread(kernel_key: str) -> bool:
+    return "move_spread" in kernel_key or "move_smooth_spread" in kernel_key
 
 
 def _record_dependent_launches(monkeypatch) -> list[str]:
@@ -101,13 +135,16 @@ def _record_dependent_launches(monkeypatch) -> list[str]:
     return launched
 
 
-def test_frames_equal_one_run(monkeypatch):
-    """step() in frames replays shorter graphs whose first kernel follows a graph boundary."""
+@pytest.mark.parametrize("smoothing", [0.0, 0.2])
+def test_frames_equal_one_run(monkeypatch, smoothing):
+    """step() in frames replays shorter graphs whose first kernel follows a graph boundary (and, with smoothing in
+    one kernel, graphs of an odd number of cycles, which end with the weights in the other array)."""
     rng = np.random.default_rng(7)
     topology, points = _lattice(16, 16, 4)
     controls = rng.uniform(-1, 1, (8, 3))
-    som = Som(topology, points, controls, iterations=100, device=DEVICE)
+    som = Som(topology, points, controls, iterations=100, smoothing=smoothing, device=DEVICE)
     while som.iteration < som.iterations:
         som.step(7)
     _general_path(monkeypatch)
-    assert np.array_equal(som.weights, _trained(topology, points, controls, iterations=100).weights)
+    one_run = _trained(topology, points, controls, iterations=100, smoothing=smoothing).weights
+    assert np.array_equal(som.weights, one_run)

@@ -1151,3 +1151,147 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
     for source in DISTANCE_SOURCES:
         wp.overload(move_spread, {"distances": source})
     return move_spread
+
+
+@functools.cache
+def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bool, chunks: int,
+                                  width: int) -> wp.Kernel:
+    """A whole cycle with smoothing in one kernel for small meshes (CUDA): `spread_cycle_kernel`'s blocks, each of
+    which also moves its halo (halos.py: `chunks` chunks of 32 neurons, its own first, chunks <= warps; neurons of
+    at most `width` neighbours), so that it can smooth its own neurons without waiting for the other blocks. The
+    weights go from weights_in to weights_out (two arrays: other blocks still read weights_in). Same weights and
+    winners, bit for bit, as the move kernel followed by `cycle_kernels(n_dims).smooth`; dense table only.
+
+    Step 2 as in `spread_cycle_kernel`, for every chunk: warp g looks up the rates of its controls for all chunks,
+    then moves chunk g into shared memory. Step 3: every warp smooths the block's own neurons from the moved weights
+    (the same sums in the same order as `smoothed`). Step 1 of cycle s + 1 from the smoothed weights.
+    """
+    ks = cycle_kernels(n_dims)
+    vec, distance = ks.vec, ks.distance
+    threads = 32 * warps
+    slots = warps * per_warp
+    if slots > 32 or chunks > warps:
+        raise ValueError(f"spread_smoothing_cycle_kernel: {slots} controls (at most 32), {chunks} chunks for "
+                         f"{warps} warps (at most one each)")
+    table_words = SHARED_TABLE_WORDS if shared_table else 0
+    # shared memory, in 4-byte words: the rates (chunks x slots x 32 neurons), the table's row s, the controls, the
+    # moved weights (chunks x 32 neurons)
+    table_at = chunks * slots * 32
+    controls_at = table_at + table_words
+    moved_at = controls_at + slots * n_dims
+    words = moved_at + chunks * 32 * n_dims
+    hop_counts = wp.types.matrix(shape=(chunks, per_warp), dtype=wp.int32)
+    chunk_neurons = wp.types.vector(length=chunks, dtype=wp.int32)
+    near_ones = wp.types.vector(length=width, dtype=wp.int32)
+
+    @wp.func
+    def staged_control(c: int) -> vec:
+        """Control c, from its copy in shared memory."""
+        cv = vec()
+        for j in range(n_dims):
+            cv[j] = shared_get_float(controls_at + c * n_dims + j)
+        return cv
+
+    @wp.func
+    def moved_weight(i: int) -> vec:
+        """The moved weights of the block's i-th listed neuron, from shared memory."""
+        wv = vec()
+        for j in range(n_dims):
+            wv[j] = shared_get_float(moved_at + i * n_dims + j)
+        return wv
+
+    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
+    def move_smooth_spread(
+        weights_in: wp.array(dtype=vec),
+        weights_out: wp.array(dtype=vec),
+        controls: wp.array(dtype=vec),
+        n_controls: int,
+        metric: wp.array(dtype=vec),
+        table: wp.array2d(dtype=wp.float32),
+        distances: wp.array2d(dtype=wp.uint16),
+        keys: wp.array2d(dtype=wp.uint64),
+        cycle_in: wp.array(dtype=wp.int32),
+        cycle_out: wp.array(dtype=wp.int32),
+        listed: wp.array2d(dtype=wp.int32),
+        local: wp.array2d(dtype=wp.int32),
+        offsets: wp.array(dtype=wp.int32),
+        mask: wp.array(dtype=vec),
+        strength: wp.float32,
+    ):
+        block, t = wp.tid()
+        scratch = wp.tile_empty(shape=(words,), dtype=wp.float32, storage="shared")  # noqa: F841 (used by word)
+        g = t // 32
+        lane = t % 32
+        m = metric[0]
+        pull = strength * mask[0]
+        for j in range(t, slots * n_dims, threads):
+            shared_set_float(controls_at + j, controls[wp.min(j // n_dims, n_controls - 1)][j % n_dims])
+        x = chunk_neurons()
+        for ch in range(chunks):
+            x[ch] = listed[block, ch * 32 + lane]
+        first = block * 32
+        n = weights_in.shape[0]
+        u = wp.min(first + lane, n - 1)
+        near = near_ones()
+        for j in range(width):
+            near[j] = local[u, j]
+        count = offsets[u + 1] - offsets[u]
+        wait_for_previous_grid()
+        s = cycle_in[0]
+        mine = wp.min(lane, n_controls - 1)
+        key0 = keys[0, mine]
+        key1 = keys[1, mine]
+        key2 = keys[2, mine]
+        buf = s % 3
+        row = wp.int32(wp.where(buf == 0, key0, wp.where(buf == 1, key1, key2)) & INDEX_MASK)
+        w = weights_in[listed[block, wp.min(g, chunks - 1) * 32 + lane]]  # the chunk this warp moves
+        hop = hop_counts()
+        for ch in range(chunks):  # unrolled: the reads overlap
+            for j in range(per_warp):
+                hop[ch, j] = hops(distances, warp_shuffle(row, wp.min(g + warps * j, n_controls - 1)), x[ch])
+        last = table.shape[1] - 1
+        if wp.static(shared_table):
+            for j in range(t, table.shape[1], threads):
+                shared_set_float(table_at + j, table[s, j])
+        sync_block()
+        for ch in range(chunks):
+            for j in range(per_warp):
+                c = g + warps * j
+                d = wp.clamp(hop[ch, j], 0, last)
+                rate = float(0.0)
+                if wp.static(shared_table):
+                    rate = shared_get_float(table_at + d)
+                else:
+                    rate = table[s, d]
+                shared_set_float((ch * slots + c) * 32 + lane,
+                                 wp.where(hop[ch, j] >= 0 and c < n_controls, rate, wp.float32(0.0)))
+        sync_block()
+        if g < chunks:
+            for c in range(slots):  # unrolled; rates past n_controls are 0 and leave w as it is
+                w = w + shared_get_float((g * slots + c) * 32 + lane) * (staged_control(c) - w)
+            for j in range(n_dims):
+                shared_set_float(moved_at + (g * 32 + lane) * n_dims + j, w[j])
+        sync_block()
+        smooth = moved_weight(lane)
+        if count > 0:
+            total = vec()
+            for j in range(width):  # the neighbours in the topology's order; past the last, + 0 changes nothing
+                total += wp.where(j < count, moved_weight(wp.max(near[j], 0)), vec())
+            smooth = smooth + wp.cw_mul(pull, total / wp.float32(count) - smooth)
+        if g == 0 and first + lane < n:
+            weights_out[first + lane] = smooth
+        best = KEY_NONE
+        for j in range(per_warp):
+            c = g + warps * j
+            if c < n_controls:
+                key = warp_least_key(float_bits(distance(staged_control(c), smooth, m)), first)
+                best = wp.where(lane == j, key, best)
+        if lane < per_warp and g + warps * lane < n_controls:
+            wp.atomic_min(keys, (s + 1) % 3, g + warps * lane, best)
+        if block == 0:
+            for c in range(t, n_controls, threads):
+                keys[(s + 2) % 3, c] = KEY_NONE
+            if t == 0:
+                cycle_out[0] = s + 1
+
+    return move_smooth_spread

@@ -13,8 +13,9 @@ from numpy.typing import ArrayLike
 
 from . import checks, dependent_launch
 from .device import resolve, warp_exclusive
+from .halos import block_halos
 from .kernels import (CUDA_BLOCK, SHARED_TABLE_WORDS, assign_slots, barrier, cycle_kernels, sched_yield_address,
-                      spread_cycle_kernel)
+                      spread_cycle_kernel, spread_smoothing_cycle_kernel)
 from .schedule import learning_table
 from .topology import MAX_DENSE_NEURONS, RowSearch, Topology
 
@@ -24,12 +25,15 @@ _KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
 #: Cycles in the longest captured graph; runs are split into powers of two.
 _LONGEST_GRAPH = 512
 #: Meshes up to this many neurons have latency-bound cycles on CUDA (a block per 32 neurons leaves most of the GPU
-#: idle). Without smoothing and with at most 32 controls a block spreads the controls over up to eight warps
-#: (`spread_cycle_kernel`); otherwise the move kernel looks up the rates of all controls at once, up to 32
-#: (measured on an H200, BENCHMARKS.md).
+#: idle). With at most 32 controls a block spreads the controls over up to eight warps (`spread_cycle_kernel`; with
+#: smoothing, and the dense table, `spread_smoothing_cycle_kernel`, where each block also moves the neighbours of
+#: its neurons that other blocks own: at most _SPREAD_MOST_WARPS chunks of 32, neurons of at most
+#: _SMOOTHING_MOST_NEIGHBOURS neighbours); otherwise the move kernel looks up the rates of all controls at once, up
+#: to 32 (measured on an H200, BENCHMARKS.md).
 SMALL_MESH = 16384
 _SPREAD_MOST_WARPS = 8
 _SPREAD_MOST_CONTROLS = 32
+_SMOOTHING_MOST_NEIGHBOURS = 16
 _YIELD = sched_yield_address()
 #: Neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each).
 _PAIRS_PER_EXTRA_CORE = 1 << 18
@@ -136,6 +140,7 @@ class Som:
         self._upload_controls()
         self._s = 0
         self._parity = 0
+        self._halos: _DeviceHalos | bool | None = None  # found on first use; False where they do not fit
 
     # -- validation ---------------------------------------------------------------------------------------
     def _check_distances(self, distances) -> bool:
@@ -431,10 +436,11 @@ class Som:
             self._run_cpu(cycles, fresh, smoothing)
         else:
             parity = 0 if fresh else self._parity
+            two_kernels = smoothing and self._smoothing_in_one_kernel() is None  # (uploads the halos before capture)
             graph = self._graph((cycles, fresh, parity, smoothing),
                                 lambda: self._record_cuda(cycles, fresh, parity, smoothing))
             wp.capture_launch(graph)
-            self._parity = parity if smoothing else (parity + cycles) % 2
+            self._parity = parity if two_kernels else (parity + cycles) % 2  # a kernel a cycle passes the counter on
         self._s += cycles
         self._winners_valid = True
 
@@ -508,11 +514,12 @@ class Som:
             after_kernel = True
 
         move, move_threads = self._kernels.move, threads
+        shared_table = self._table.shape[1] <= SHARED_TABLE_WORDS
+        halos = self._smoothing_in_one_kernel() if smoothing else None
         if self.n_neurons <= SMALL_MESH:
             if k <= _SPREAD_MOST_CONTROLS and not smoothing:
-                per_warp = -(-k // _SPREAD_MOST_WARPS)
-                warps = -(-k // per_warp)
-                move = spread_cycle_kernel(self.n_dims, warps, per_warp, self._table.shape[1] <= SHARED_TABLE_WORDS)
+                warps, per_warp = _spread_shape(k, 1)
+                move = spread_cycle_kernel(self.n_dims, warps, per_warp, shared_table)
                 move_threads = 32 * warps
             else:
                 move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8))).move
@@ -520,6 +527,19 @@ class Som:
         if fresh:
             self._launch_find()
             after_kernel = True
+        if halos is not None:  # a kernel a cycle from one weights array to the other, then back in self._w
+            warps, per_warp = _spread_shape(k, halos.chunks)
+            kernel = spread_smoothing_cycle_kernel(self.n_dims, warps, per_warp, shared_table, halos.chunks,
+                                                   halos.width)
+            pair = (self._w, self._w_moved)
+            for i in range(cycles):
+                p = (parity + i) % 2
+                launch(kernel, [pair[i % 2], pair[1 - i % 2], self._c, k, self._m, self._table, self._distances,
+                                self._keys, self._cycle[p], self._cycle[1 - p], halos.neurons, halos.local,
+                                self._offsets, self._mask, self._smoothing], 32 * warps)
+            if cycles % 2:
+                wp.copy(self._w, self._w_moved)
+            return records
         p = parity
         for _ in range(cycles):
             c_in, c_out = self._cycle[p], self._cycle[1 - p]
@@ -533,6 +553,19 @@ class Som:
             else:
                 p = 1 - p
         return records
+
+    def _smoothing_in_one_kernel(self) -> _DeviceHalos | None:
+        """The block halos of the one-kernel smoothing cycle on CUDA, None where it does not apply (the CPU,
+        distance rows, a large mesh, more than 32 controls, a halo or a neighbourhood too large). The first call
+        uploads them: it must come before a graph capture, not during one."""
+        if (self.device == "cpu" or self._rows_mode or self.n_neurons > SMALL_MESH
+                or self._k_eff > _SPREAD_MOST_CONTROLS):
+            return None
+        if self._halos is None:
+            found = block_halos(self.topology.offsets, self.topology.neighbors, self.n_neurons)
+            fits = found.chunks <= _SPREAD_MOST_WARPS and found.width <= _SMOOTHING_MOST_NEIGHBOURS
+            self._halos = _DeviceHalos(found, self.device) if fits else False
+        return self._halos or None
 
     # -- distance rows mode -------------------------------------------------------------------------------
     def _run_rows(self, cycles: int) -> None:
@@ -613,6 +646,22 @@ class Som:
         self._s += 1
         self._set_cycle()
         self._winners_valid = True
+
+
+def _spread_shape(controls: int, least_warps: int) -> tuple[int, int]:
+    """(warps, controls a warp) of a spread cycle kernel: at most _SPREAD_MOST_WARPS warps, at least least_warps."""
+    per_warp = -(-controls // _SPREAD_MOST_WARPS)
+    warps = max(-(-controls // per_warp), least_warps)
+    return warps, -(-controls // warps)
+
+
+class _DeviceHalos:
+    """BlockHalos (halos.py) on a device."""
+
+    def __init__(self, halos, device: str):
+        self.chunks, self.width = halos.chunks, halos.width
+        self.neurons = wp.array(halos.neurons, dtype=wp.int32, device=device)
+        self.local = wp.array(halos.local, dtype=wp.int32, device=device)
 
 
 class _RowCache:
