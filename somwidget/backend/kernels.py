@@ -1236,6 +1236,7 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
         for j in range(width):
             near[j] = local[u, j]
         count = offsets[u + 1] - offsets[u]
+        moving = listed[block, wp.min(g, chunks - 1) * 32 + lane]  # the neuron this thread moves
         wait_for_previous_grid()
         s = cycle_in[0]
         mine = wp.min(lane, n_controls - 1)
@@ -1244,7 +1245,7 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
         key2 = keys[2, mine]
         buf = s % 3
         row = wp.int32(wp.where(buf == 0, key0, wp.where(buf == 1, key1, key2)) & INDEX_MASK)
-        w = weights_in[listed[block, wp.min(g, chunks - 1) * 32 + lane]]  # the chunk this warp moves
+        w = weights_in[moving]
         hop = hop_counts()
         for ch in range(chunks):  # unrolled: the reads overlap
             for j in range(per_warp):
