@@ -4,10 +4,10 @@ The cycle kernels are specialised per feature count n (a row of weights is a War
 two decompositions of the same cycle. On CUDA a thread per neuron moves it, a thread per control scans each block
 of 32 neurons (their new weights shared in the block) for the winners, and the whole cycle is one kernel (two with
 smoothing), launched dependent on the one before where the GPU allows (see dependent_launch.py). Small meshes with
-few controls use `spread_cycle_kernel` instead, which spreads the controls over the warps of a block. On the CPU,
-where Warp runs a launch on one thread, each core replays its own graph: the neurons are
-split between the cores for the move and smoothing, the controls for the winner search, with a spinning barrier
-between the phases.
+up to 32 controls use `spread_cycle_kernel` instead, which spreads the controls over the warps of a block, and with
+smoothing `spread_smoothing_cycle_kernel`, which keeps the cycle in one kernel by moving each block's halo too. On
+the CPU, where Warp runs a launch on one thread, each core replays its own graph: the neurons are split between the
+cores for the move and smoothing, the controls for the winner search, with a spinning barrier between the phases.
 
 Winner keys pack (distance bits << 32 | neuron index) into one uint64: distances are non-negative floats, whose
 bit patterns order like the values, so the smallest key is the nearest neuron with the lowest index on a tie.
