@@ -1034,6 +1034,69 @@ def sync_block_missing(distances: wp.array2d(dtype=wp.int32), row: int) -> int: 
 
 
 @functools.cache
+def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int) -> SimpleNamespace:
+    """The steps the spread kernels share: warp g of `warps` is in charge of the controls g, g + warps, ... (at
+    most `per_warp` of them), whose copies sit in shared memory from word `controls_at`."""
+    ks = cycle_kernels(n_dims)
+    vec, distance = ks.vec, ks.distance
+    threads = 32 * warps
+    slots = warps * per_warp
+
+    @wp.func
+    def shared_vec(word: int) -> vec:
+        """n_dims floats from shared memory, from `word` on."""
+        v = vec()
+        for j in range(n_dims):
+            v[j] = shared_get_float(word + j)
+        return v
+
+    @wp.func
+    def stage_controls(controls: wp.array(dtype=vec), n_controls: int, t: int):
+        """Copy the controls into shared memory (slots past the last repeat it)."""
+        for j in range(t, slots * n_dims, threads):
+            shared_set_float(controls_at + j, controls[wp.min(j // n_dims, n_controls - 1)][j % n_dims])
+
+    @wp.func
+    def staged_control(c: int) -> vec:
+        """Control c, from its copy in shared memory."""
+        return shared_vec(controls_at + c * n_dims)
+
+    @wp.func
+    def lane_key(keys: wp.array2d(dtype=wp.uint64), s: int, n_controls: int, lane: int) -> wp.uint64:
+        """Lane i's control's winner key of cycle s (lanes past the last control: the last), read from all three
+        key buffers at once so that the reads need not wait for the counter."""
+        mine = wp.min(lane, n_controls - 1)
+        key0 = keys[0, mine]
+        key1 = keys[1, mine]
+        key2 = keys[2, mine]
+        buf = s % 3
+        return wp.where(buf == 0, key0, wp.where(buf == 1, key1, key2))
+
+    @wp.func
+    def publish_winners(keys: wp.array2d(dtype=wp.uint64), s: int, n_controls: int, w: vec, metric: vec, first: int,
+                        block: int, t: int):
+        """Step 1 of cycle s + 1: warp g's nearest of the block's 32 new weights w (lane i: neuron first + i) to
+        each of its controls, by one warp-wide minimum each, published by its lanes with one atomic min each; block
+        0 clears the keys of cycle s + 2."""
+        g = t // 32
+        lane = t % 32
+        best = KEY_NONE
+        for j in range(per_warp):
+            c = g + warps * j
+            if c < n_controls:
+                key = warp_least_key(float_bits(distance(staged_control(c), w, metric)), first)
+                best = wp.where(lane == j, key, best)
+        if lane < per_warp and g + warps * lane < n_controls:
+            wp.atomic_min(keys, (s + 1) % 3, g + warps * lane, best)
+        if block == 0:
+            for c in range(t, n_controls, threads):
+                keys[(s + 2) % 3, c] = KEY_NONE
+
+    return SimpleNamespace(shared_vec=shared_vec, stage_controls=stage_controls, staged_control=staged_control,
+                           lane_key=lane_key, publish_winners=publish_winners)
+
+
+@functools.cache
 def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bool) -> wp.Kernel:
     """The cycle kernel of small meshes (CUDA): a block of `warps` warps per 32 neurons, warp g in charge of the
     controls g, g + warps, ... (`per_warp` of them), so that the latency-bound steps of a cycle run side by side
@@ -1049,8 +1112,7 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
     find_next): warp g finds the nearest of the block's new weights to each of its controls with one warp-wide
     minimum, and its lanes publish them with one atomic min each.
     """
-    ks = cycle_kernels(n_dims)
-    vec, distance = ks.vec, ks.distance
+    vec = cycle_kernels(n_dims).vec
     threads = 32 * warps
     slots = warps * per_warp
     if slots > 32:
@@ -1061,14 +1123,8 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
     controls_at = table_at + table_words
     words = controls_at + slots * n_dims
     hop_counts = wp.types.vector(length=per_warp, dtype=wp.int32)
-
-    @wp.func
-    def staged_control(c: int) -> vec:
-        """Control c, from its copy in shared memory."""
-        cv = vec()
-        for j in range(n_dims):
-            cv[j] = shared_get_float(controls_at + c * n_dims + j)
-        return cv
+    parts = _spread_parts(n_dims, warps, per_warp, controls_at)
+    staged_control = parts.staged_control
 
     @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
     def move_spread(
@@ -1093,16 +1149,10 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
         g = t // 32
         lane = t % 32
         m = metric[0]
-        for j in range(t, slots * n_dims, threads):
-            shared_set_float(controls_at + j, controls[wp.min(j // n_dims, n_controls - 1)][j % n_dims])
+        parts.stage_controls(controls, n_controls, t)
         wait_for_previous_grid()
         s = cycle_in[0]
-        mine = wp.min(lane, c_hi - 1)
-        key0 = keys[0, mine]
-        key1 = keys[1, mine]
-        key2 = keys[2, mine]
-        buf = s % 3
-        row = key_row(distances, slot_of, wp.where(buf == 0, key0, wp.where(buf == 1, key1, key2)))
+        row = key_row(distances, slot_of, parts.lane_key(keys, s, c_hi, lane))
         first = block * 32
         n = weights_in.shape[0]
         u = wp.min(first + lane, n - 1)
@@ -1131,17 +1181,7 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
             if g == 0 and first + lane < n:
                 weights_out[first + lane] = w
             if find_next != 0:
-                best = KEY_NONE
-                for j in range(per_warp):
-                    c = g + warps * j
-                    if c < n_controls:
-                        key = warp_least_key(float_bits(distance(staged_control(c), w, m)), first)
-                        best = wp.where(lane == j, key, best)
-                if lane < per_warp and g + warps * lane < n_controls:
-                    wp.atomic_min(keys, (s + 1) % 3, g + warps * lane, best)
-                if block == 0:
-                    for c in range(t, n_controls, threads):
-                        keys[(s + 2) % 3, c] = KEY_NONE
+                parts.publish_winners(keys, s, n_controls, w, m, first, block, t)
             if block == 0 and t == 0:
                 cycle_out[0] = wp.where(find_next != 0, s + 1, s)
         elif block == 0 and t == 0:
@@ -1166,8 +1206,7 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
     then moves chunk g into shared memory. Step 3: every warp smooths the block's own neurons from the moved weights
     (the same sums in the same order as `smoothed`). Step 1 of cycle s + 1 from the smoothed weights.
     """
-    ks = cycle_kernels(n_dims)
-    vec, distance = ks.vec, ks.distance
+    vec = cycle_kernels(n_dims).vec
     threads = 32 * warps
     slots = warps * per_warp
     if slots > 32 or chunks > warps:
@@ -1183,22 +1222,13 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
     hop_counts = wp.types.matrix(shape=(chunks, per_warp), dtype=wp.int32)
     chunk_neurons = wp.types.vector(length=chunks, dtype=wp.int32)
     near_ones = wp.types.vector(length=width, dtype=wp.int32)
-
-    @wp.func
-    def staged_control(c: int) -> vec:
-        """Control c, from its copy in shared memory."""
-        cv = vec()
-        for j in range(n_dims):
-            cv[j] = shared_get_float(controls_at + c * n_dims + j)
-        return cv
+    parts = _spread_parts(n_dims, warps, per_warp, controls_at)
+    staged_control, shared_vec = parts.staged_control, parts.shared_vec
 
     @wp.func
     def moved_weight(i: int) -> vec:
         """The moved weights of the block's i-th listed neuron, from shared memory."""
-        wv = vec()
-        for j in range(n_dims):
-            wv[j] = shared_get_float(moved_at + i * n_dims + j)
-        return wv
+        return shared_vec(moved_at + i * n_dims)
 
     @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
     def move_smooth_spread(
@@ -1224,8 +1254,7 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
         lane = t % 32
         m = metric[0]
         pull = strength * mask[0]
-        for j in range(t, slots * n_dims, threads):
-            shared_set_float(controls_at + j, controls[wp.min(j // n_dims, n_controls - 1)][j % n_dims])
+        parts.stage_controls(controls, n_controls, t)
         x = chunk_neurons()
         for ch in range(chunks):
             x[ch] = listed[block, ch * 32 + lane]
@@ -1239,12 +1268,7 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
         moving = listed[block, wp.min(g, chunks - 1) * 32 + lane]  # the neuron this thread moves
         wait_for_previous_grid()
         s = cycle_in[0]
-        mine = wp.min(lane, n_controls - 1)
-        key0 = keys[0, mine]
-        key1 = keys[1, mine]
-        key2 = keys[2, mine]
-        buf = s % 3
-        row = wp.int32(wp.where(buf == 0, key0, wp.where(buf == 1, key1, key2)) & INDEX_MASK)
+        row = wp.int32(parts.lane_key(keys, s, n_controls, lane) & INDEX_MASK)
         w = weights_in[moving]
         hop = hop_counts()
         for ch in range(chunks):  # unrolled: the reads overlap
@@ -1281,18 +1305,8 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
             smooth = smooth + wp.cw_mul(pull, total / wp.float32(count) - smooth)
         if g == 0 and first + lane < n:
             weights_out[first + lane] = smooth
-        best = KEY_NONE
-        for j in range(per_warp):
-            c = g + warps * j
-            if c < n_controls:
-                key = warp_least_key(float_bits(distance(staged_control(c), smooth, m)), first)
-                best = wp.where(lane == j, key, best)
-        if lane < per_warp and g + warps * lane < n_controls:
-            wp.atomic_min(keys, (s + 1) % 3, g + warps * lane, best)
-        if block == 0:
-            for c in range(t, n_controls, threads):
-                keys[(s + 2) % 3, c] = KEY_NONE
-            if t == 0:
-                cycle_out[0] = s + 1
+        parts.publish_winners(keys, s, n_controls, smooth, m, first, block, t)
+        if block == 0 and t == 0:
+            cycle_out[0] = s + 1
 
     return move_smooth_spread
