@@ -140,7 +140,7 @@ class Som:
         self._upload_controls()
         self._s = 0
         self._parity = 0
-        self._halos: _DeviceHalos | bool | None = None  # found on first use; False where they do not fit
+        self._halos = self._block_halos()
 
     # -- validation ---------------------------------------------------------------------------------------
     def _check_distances(self, distances) -> bool:
@@ -436,7 +436,7 @@ class Som:
             self._run_cpu(cycles, fresh, smoothing)
         else:
             parity = 0 if fresh else self._parity
-            two_kernels = smoothing and self._smoothing_in_one_kernel() is None  # (uploads the halos before capture)
+            two_kernels = smoothing and self._smoothing_in_one_kernel() is None
             graph = self._graph((cycles, fresh, parity, smoothing),
                                 lambda: self._record_cuda(cycles, fresh, parity, smoothing))
             wp.capture_launch(graph)
@@ -554,18 +554,19 @@ class Som:
                 p = 1 - p
         return records
 
-    def _smoothing_in_one_kernel(self) -> _DeviceHalos | None:
-        """The block halos of the one-kernel smoothing cycle on CUDA, None where it does not apply (the CPU,
-        distance rows, a large mesh, more than 32 controls, a halo or a neighbourhood too large). The first call
-        uploads them: it must come before a graph capture, not during one."""
-        if (self.device == "cpu" or self._rows_mode or self.n_neurons > SMALL_MESH
-                or self._k_eff > _SPREAD_MOST_CONTROLS):
+    def _block_halos(self) -> _DeviceHalos | None:
+        """The block halos of the one-kernel smoothing cycle on CUDA (dense table, small mesh), uploaded once here,
+        never inside a graph capture; None where it does not apply or they do not fit."""
+        if self.device == "cpu" or self._rows_mode or self.n_neurons > SMALL_MESH:
             return None
-        if self._halos is None:
-            found = block_halos(self.topology.offsets, self.topology.neighbors, self.n_neurons)
-            fits = found.chunks <= _SPREAD_MOST_WARPS and found.width <= _SMOOTHING_MOST_NEIGHBOURS
-            self._halos = _DeviceHalos(found, self.device) if fits else False
-        return self._halos or None
+        found = block_halos(self.topology.offsets, self.topology.neighbors, self.n_neurons)
+        if found.chunks > _SPREAD_MOST_WARPS or found.width > _SMOOTHING_MOST_NEIGHBOURS:
+            return None
+        return _DeviceHalos(found, self.device)
+
+    def _smoothing_in_one_kernel(self) -> _DeviceHalos | None:
+        """The block halos where a smoothing cycle runs as one kernel (at most 32 controls), else None."""
+        return self._halos if self._k_eff <= _SPREAD_MOST_CONTROLS else None
 
     # -- distance rows mode -------------------------------------------------------------------------------
     def _run_rows(self, cycles: int) -> None:
