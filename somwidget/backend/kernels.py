@@ -1,13 +1,14 @@
 """Warp kernels of the SOM engine: BFS grid distances, winner search, move and smoothing.
 
 The cycle kernels are specialised per feature count n (a row of weights is a Warp vector of length n) and come in
-two decompositions of the same cycle. On CUDA a thread per neuron moves it, a thread per control scans each block
-of 32 neurons (their new weights shared in the block) for the winners, and the whole cycle is one kernel (two with
+two decompositions of the same cycle. On CUDA a thread per neuron moves it, a thread per control scans each block of
+32 neurons (their new weights shared in the block) for the winners, and the whole cycle is one kernel (two with
 smoothing), launched dependent on the one before where the GPU allows (see dependent_launch.py). Small meshes with
 up to 32 controls use `spread_cycle_kernel` instead, which spreads the controls over the warps of a block, and with
-smoothing `spread_smoothing_cycle_kernel`, which keeps the cycle in one kernel by moving each block's halo too. On
-the CPU, where Warp runs a launch on one thread, each core replays its own graph: the neurons are split between the
-cores for the move and smoothing, the controls for the winner search, with a spinning barrier between the phases.
+smoothing `spread_smoothing_cycle_kernel`, which keeps the cycle in one kernel by moving each block's halo too;
+these two take raw pointers rather than Warp arrays (fewer bytes of parameters to read at each launch). On the CPU,
+where Warp runs a launch on one thread, each core replays its own graph: the neurons are split between the cores for
+the move and smoothing, the controls for the winner search, with a spinning barrier between the phases.
 
 Winner keys pack (distance bits << 32 | neuron index) into one uint64: distances are non-negative floats, whose
 bit patterns order like the values, so the smallest key is the nearest neuron with the lowest index on a tie.
@@ -1033,6 +1034,26 @@ def sync_block_missing(distances: wp.array2d(dtype=wp.int32), row: int) -> int: 
     return sync_block_any(row_missing(distances, row))
 
 
+@wp.func_native("""
+const char* at = reinterpret_cast<const char*>(keys.data) + (long long)c * keys.strides[1];
+#if defined(__CUDA_ARCH__)
+unsigned long long key0, key1, key2;
+asm volatile("ld.global.u64 %0, [%1];" : "=l"(key0) : "l"(at));
+asm volatile("ld.global.u64 %0, [%1];" : "=l"(key1) : "l"(at + keys.strides[0]));
+asm volatile("ld.global.u64 %0, [%1];" : "=l"(key2) : "l"(at + 2LL * keys.strides[0]));
+const int buf = s % 3;
+return buf == 0 ? key0 : (buf == 1 ? key1 : key2);
+#else
+return *reinterpret_cast<const unsigned long long*>(at + (long long)(s % 3) * keys.strides[0]);
+#endif
+""")
+def key_of_cycle(keys: wp.array2d(dtype=wp.uint64), s: int, c: int) -> wp.uint64:
+    """keys[s % 3, c], the winner key of control c in cycle s. On CUDA all three buffers are read, each by a load
+    the compiler may not make conditional, so that the reads need not wait for s (as plain reads and a select they
+    became a read of one buffer, then of another once s had come: a second round trip to L2, seen in ncu's SASS)."""
+    ...
+
+
 @functools.cache
 def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int) -> SimpleNamespace:
     """The steps the spread kernels share: warp g of `warps` is in charge of the controls g, g + warps, ... (at
@@ -1052,9 +1073,11 @@ def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int) -> S
 
     @wp.func
     def stage_controls(controls: wp.array(dtype=vec), n_controls: int, t: int):
-        """Copy the controls into shared memory (slots past the last repeat it)."""
-        for j in range(t, slots * n_dims, threads):
-            shared_set_float(controls_at + j, controls[wp.min(j // n_dims, n_controls - 1)][j % n_dims])
+        """Copy the controls into shared memory (slots past the last repeat it): thread t copies slot t."""
+        if t < slots:
+            control = controls[wp.min(t, n_controls - 1)]
+            for j in range(n_dims):
+                shared_set_float(controls_at + t * n_dims + j, control[j])
 
     @wp.func
     def staged_control(c: int) -> vec:
@@ -1063,14 +1086,8 @@ def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int) -> S
 
     @wp.func
     def lane_key(keys: wp.array2d(dtype=wp.uint64), s: int, n_controls: int, lane: int) -> wp.uint64:
-        """Lane i's control's winner key of cycle s (lanes past the last control: the last), read from all three
-        key buffers at once so that the reads need not wait for the counter."""
-        mine = wp.min(lane, n_controls - 1)
-        key0 = keys[0, mine]
-        key1 = keys[1, mine]
-        key2 = keys[2, mine]
-        buf = s % 3
-        return wp.where(buf == 0, key0, wp.where(buf == 1, key1, key2))
+        """Lane i's control's winner key of cycle s (lanes past the last control: the last)."""
+        return key_of_cycle(keys, s, wp.min(lane, n_controls - 1))
 
     @wp.func
     def publish_winners(keys: wp.array2d(dtype=wp.uint64), s: int, n_controls: int, w: vec, metric: vec, first: int,
@@ -1096,21 +1113,40 @@ def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int) -> S
                            lane_key=lane_key, publish_winners=publish_winners)
 
 
+# Programmatic dependent launch (see dependent_launch.py): from here on the next kernel in the stream may be launched;
+# it still waits in wait_for_previous_grid until this one has ended and its writes are visible.
+@wp.func_native("#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900\n"
+                'asm volatile("griddepcontrol.launch_dependents;" ::: "memory");\n#endif\n')
+def let_next_grid_launch(): ...
+
+
+def _contiguous(*arrays: wp.array) -> None:
+    for a in arrays:
+        if not a.is_contiguous:
+            raise ValueError(f"spread cycle kernels take contiguous arrays; got one of shape {a.shape} and strides "
+                             f"{a.strides}")
+
+
 @functools.cache
-def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bool) -> wp.Kernel:
+def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bool, rows: bool) -> wp.Kernel:
     """The cycle kernel of small meshes (CUDA): a block of `warps` warps per 32 neurons, warp g in charge of the
     controls g, g + warps, ... (`per_warp` of them), so that the latency-bound steps of a cycle run side by side
-    rather than one after another in one warp. Same arguments and results as `cycle_kernels(n_dims).move`, bit for
-    bit, for a whole cycle (c_lo = 0, c_hi = n_controls <= warps * per_warp <= 32). With `shared_table` the rates are
-    read from a copy of the table's row s in shared memory (rows up to SHARED_TABLE_WORDS long).
+    rather than one after another in one warp. Same results as `cycle_kernels(n_dims).move` with find_next for a whole
+    cycle, bit for bit (n_controls <= warps * per_warp <= 32), from the dense table or (`rows`) distance rows. With
+    `shared_table` the rates are read from a copy of the table's row s in shared memory (rows up to
+    SHARED_TABLE_WORDS long).
+
+    Its parameters are raw pointers and sizes, made by `spread_cycle_inputs`: a kernel's parameters sit in constant
+    memory, which each launch of a graph reads cold, and Warp's array parameters (56 bytes each) take about six times
+    the bytes (H200: case study 1 2.45 -> 2.2 us a cycle, with smoothing 3.13 -> 2.74).
 
     Before it waits for the previous kernel the block copies the controls into shared memory (nothing in a run
     writes them). Then step 2, W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v): lane i of each warp reads control i's
-    winner key (from all three key buffers at once, so the reads do not wait for the counter), the warp looks up
-    its controls' hop counts for the block's 32 neurons, then their rates into shared memory; after a barrier every
-    warp applies all the rates in list order to its own copy of the 32 neurons. Step 1 of cycle s + 1 (with
-    find_next): warp g finds the nearest of the block's new weights to each of its controls with one warp-wide
-    minimum, and its lanes publish them with one atomic min each.
+    winner key, the warp looks up its controls' hop counts for the block's 32 neurons, then their rates into shared
+    memory; after a barrier every warp applies all the rates in list order to its own copy of the 32 neurons. Then
+    it lets the next kernel launch, whose blocks are placed while this one finishes (H200: the car 2.78 -> 2.43 us).
+    Step 1 of cycle s + 1: warp g finds the nearest of the block's new weights to each of its controls with one
+    warp-wide minimum, and its lanes publish them with one atomic min each.
     """
     vec = cycle_kernels(n_dims).vec
     threads = 32 * warps
@@ -1123,48 +1159,46 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
     controls_at = table_at + table_words
     words = controls_at + slots * n_dims
     hop_counts = wp.types.vector(length=per_warp, dtype=wp.int32)
+    hop_type = wp.int32 if rows else wp.uint16
     parts = _spread_parts(n_dims, warps, per_warp, controls_at)
     staged_control = parts.staged_control
 
-    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
-    def move_spread(
+    @wp.func
+    def cycle(
+        block: int,
+        t: int,
         weights_in: wp.array(dtype=vec),
         weights_out: wp.array(dtype=vec),
         controls: wp.array(dtype=vec),
-        c_lo: int,
-        c_hi: int,
         n_controls: int,
         metric: wp.array(dtype=vec),
         table: wp.array2d(dtype=wp.float32),
-        distances: Any,
+        distances: wp.array2d(dtype=hop_type),
         slot_of: wp.array(dtype=wp.int32),
         keys: wp.array2d(dtype=wp.uint64),
         cycle_in: wp.array(dtype=wp.int32),
         cycle_out: wp.array(dtype=wp.int32),
-        find_next: int,
         stalled: wp.array(dtype=wp.int32),
     ):
-        block, t = wp.tid()
-        scratch = wp.tile_empty(shape=(words,), dtype=wp.float32, storage="shared")  # noqa: F841 (used by word)
         g = t // 32
         lane = t % 32
         m = metric[0]
         parts.stage_controls(controls, n_controls, t)
         wait_for_previous_grid()
         s = cycle_in[0]
-        row = key_row(distances, slot_of, parts.lane_key(keys, s, c_hi, lane))
+        row = key_row(distances, slot_of, parts.lane_key(keys, s, n_controls, lane))
         first = block * 32
         n = weights_in.shape[0]
         u = wp.min(first + lane, n - 1)
         w = weights_in[u]
         hop = hop_counts()
         for j in range(per_warp):  # unrolled: the reads overlap
-            hop[j] = hops(distances, warp_shuffle(row, wp.min(g + warps * j, c_hi - 1)), u)
+            hop[j] = hops(distances, warp_shuffle(row, wp.min(g + warps * j, n_controls - 1)), u)
         last = table.shape[1] - 1
         if wp.static(shared_table):
             for j in range(t, table.shape[1], threads):
                 shared_set_float(table_at + j, table[s, j])
-        missing = sync_block_missing(distances, row)  # lanes past c_hi repeat its last control
+        missing = sync_block_missing(distances, row)  # lanes past n_controls repeat its last control
         for j in range(per_warp):
             c = g + warps * j
             d = wp.clamp(hop[j], 0, last)
@@ -1173,24 +1207,67 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
                 rate = shared_get_float(table_at + d)
             else:
                 rate = table[s, d]
-            shared_set_float(c * 32 + lane, wp.where(hop[j] >= 0 and c < c_hi, rate, wp.float32(0.0)))
+            shared_set_float(c * 32 + lane, wp.where(hop[j] >= 0 and c < n_controls, rate, wp.float32(0.0)))
         sync_block()
-        for c in range(slots):  # unrolled; rates past c_hi are 0 and leave w as it is
+        for c in range(slots):  # unrolled; rates past n_controls are 0 and leave w as it is
             w = w + shared_get_float(c * 32 + lane) * (staged_control(c) - w)
+        let_next_grid_launch()
         if missing == 0:
             if g == 0 and first + lane < n:
                 weights_out[first + lane] = w
-            if find_next != 0:
-                parts.publish_winners(keys, s, n_controls, w, m, first, block, t)
+            parts.publish_winners(keys, s, n_controls, w, m, first, block, t)
             if block == 0 and t == 0:
-                cycle_out[0] = wp.where(find_next != 0, s + 1, s)
+                cycle_out[0] = s + 1
         elif block == 0 and t == 0:
             stalled[0] = 1
             cycle_out[0] = s
 
-    for source in DISTANCE_SOURCES:
-        wp.overload(move_spread, {"distances": source})
+    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
+    def move_spread(
+        weights_in: wp.uint64,
+        weights_out: wp.uint64,
+        n: int,
+        controls: wp.uint64,
+        n_controls: int,
+        metric: wp.uint64,
+        table: wp.uint64,
+        table_rows: int,
+        table_columns: int,
+        distances: wp.uint64,
+        distance_rows: int,
+        slot_of: wp.uint64,
+        keys: wp.uint64,
+        key_columns: int,
+        cycle_in: wp.uint64,
+        cycle_out: wp.uint64,
+        stalled: wp.uint64,
+    ):
+        block, t = wp.tid()
+        scratch = wp.tile_empty(shape=(words,), dtype=wp.float32, storage="shared")  # noqa: F841 (used by word)
+        cycle(block, t, wp.array(ptr=weights_in, shape=(n,), dtype=vec),
+              wp.array(ptr=weights_out, shape=(n,), dtype=vec),
+              wp.array(ptr=controls, shape=(n_controls,), dtype=vec), n_controls,
+              wp.array(ptr=metric, shape=(1,), dtype=vec),
+              wp.array(ptr=table, shape=(table_rows, table_columns), dtype=wp.float32),
+              wp.array(ptr=distances, shape=(distance_rows, n), dtype=hop_type),
+              wp.array(ptr=slot_of, shape=(n,), dtype=wp.int32),
+              wp.array(ptr=keys, shape=(3, key_columns), dtype=wp.uint64),
+              wp.array(ptr=cycle_in, shape=(1,), dtype=wp.int32), wp.array(ptr=cycle_out, shape=(1,), dtype=wp.int32),
+              wp.array(ptr=stalled, shape=(1,), dtype=wp.int32))
+
     return move_spread
+
+
+def spread_cycle_inputs(weights_in: wp.array, weights_out: wp.array, controls: wp.array, n_controls: int,
+                        metric: wp.array, table: wp.array, distances: wp.array, slot_of: wp.array, keys: wp.array,
+                        cycle_in: wp.array, cycle_out: wp.array, stalled: wp.array) -> list:
+    """The parameters of `spread_cycle_kernel`'s kernel for these arrays (the move kernel's, less c_lo, c_hi and
+    find_next), which must outlive any graph that captures the launch."""
+    _contiguous(weights_in, weights_out, controls, metric, table, distances, slot_of, keys, cycle_in, cycle_out,
+                stalled)
+    return [weights_in.ptr, weights_out.ptr, weights_in.shape[0], controls.ptr, n_controls, metric.ptr, table.ptr,
+            table.shape[0], table.shape[1], distances.ptr, distances.shape[0], slot_of.ptr, keys.ptr, keys.shape[1],
+            cycle_in.ptr, cycle_out.ptr, stalled.ptr]
 
 
 @functools.cache
@@ -1200,11 +1277,14 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
     which also moves its halo (halos.py: `chunks` chunks of 32 neurons, its own first, chunks <= warps; neurons of
     at most `width` neighbours), so that it can smooth its own neurons without waiting for the other blocks. The
     weights go from weights_in to weights_out (two arrays: other blocks still read weights_in). Same weights and
-    winners, bit for bit, as the move kernel followed by `cycle_kernels(n_dims).smooth`; dense table only.
+    winners, bit for bit, as the move kernel followed by `cycle_kernels(n_dims).smooth`; dense table only. Its
+    parameters are raw pointers and sizes, as `spread_cycle_kernel`'s are (`spread_smoothing_cycle_inputs`).
 
     Step 2 as in `spread_cycle_kernel`, for every chunk: warp g looks up the rates of its controls for all chunks,
     then moves chunk g into shared memory. Step 3: every warp smooths the block's own neurons from the moved weights
-    (the same sums in the same order as `smoothed`). Step 1 of cycle s + 1 from the smoothed weights.
+    (the same sums in the same order as `smoothed`), and lets the next kernel launch (H200: 2.84 -> 2.78 us). Step 1
+    of cycle s + 1 from the smoothed weights. Only the controls, metric and mask are read before the wait: the
+    block's lists read there too made the cycle slower (H200, with Warp array parameters: 3.22 against 3.13 us).
     """
     vec = cycle_kernels(n_dims).vec
     threads = 32 * warps
@@ -1230,8 +1310,10 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
         """The moved weights of the block's i-th listed neuron, from shared memory."""
         return shared_vec(moved_at + i * n_dims)
 
-    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
-    def move_smooth_spread(
+    @wp.func
+    def cycle(
+        block: int,
+        t: int,
         weights_in: wp.array(dtype=vec),
         weights_out: wp.array(dtype=vec),
         controls: wp.array(dtype=vec),
@@ -1248,13 +1330,14 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
         mask: wp.array(dtype=vec),
         strength: wp.float32,
     ):
-        block, t = wp.tid()
-        scratch = wp.tile_empty(shape=(words,), dtype=wp.float32, storage="shared")  # noqa: F841 (used by word)
         g = t // 32
         lane = t % 32
         m = metric[0]
         pull = strength * mask[0]
         parts.stage_controls(controls, n_controls, t)
+        wait_for_previous_grid()
+        s = cycle_in[0]
+        row = wp.int32(parts.lane_key(keys, s, n_controls, lane) & INDEX_MASK)
         x = chunk_neurons()
         for ch in range(chunks):
             x[ch] = listed[block, ch * 32 + lane]
@@ -1265,11 +1348,7 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
         for j in range(width):
             near[j] = local[u, j]
         count = offsets[u + 1] - offsets[u]
-        moving = listed[block, wp.min(g, chunks - 1) * 32 + lane]  # the neuron this thread moves
-        wait_for_previous_grid()
-        s = cycle_in[0]
-        row = wp.int32(parts.lane_key(keys, s, n_controls, lane) & INDEX_MASK)
-        w = weights_in[moving]
+        w = weights_in[listed[block, wp.min(g, chunks - 1) * 32 + lane]]  # the neuron this thread moves
         hop = hop_counts()
         for ch in range(chunks):  # unrolled: the reads overlap
             for j in range(per_warp):
@@ -1303,10 +1382,62 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
             for j in range(width):  # the neighbours in the topology's order; past the last, + 0 changes nothing
                 total += wp.where(j < count, moved_weight(wp.max(near[j], 0)), vec())
             smooth = smooth + wp.cw_mul(pull, total / wp.float32(count) - smooth)
+        let_next_grid_launch()
         if g == 0 and first + lane < n:
             weights_out[first + lane] = smooth
         parts.publish_winners(keys, s, n_controls, smooth, m, first, block, t)
         if block == 0 and t == 0:
             cycle_out[0] = s + 1
 
+    @wp.kernel(enable_backward=False, module="unique", module_options={"max_unroll": 32})
+    def move_smooth_spread(
+        weights_in: wp.uint64,
+        weights_out: wp.uint64,
+        n: int,
+        controls: wp.uint64,
+        n_controls: int,
+        metric: wp.uint64,
+        table: wp.uint64,
+        table_rows: int,
+        table_columns: int,
+        distances: wp.uint64,
+        keys: wp.uint64,
+        key_columns: int,
+        cycle_in: wp.uint64,
+        cycle_out: wp.uint64,
+        listed: wp.uint64,
+        blocks: int,
+        local: wp.uint64,
+        offsets: wp.uint64,
+        mask: wp.uint64,
+        strength: wp.float32,
+    ):
+        block, t = wp.tid()
+        scratch = wp.tile_empty(shape=(words,), dtype=wp.float32, storage="shared")  # noqa: F841 (used by word)
+        cycle(block, t, wp.array(ptr=weights_in, shape=(n,), dtype=vec),
+              wp.array(ptr=weights_out, shape=(n,), dtype=vec),
+              wp.array(ptr=controls, shape=(n_controls,), dtype=vec), n_controls,
+              wp.array(ptr=metric, shape=(1,), dtype=vec),
+              wp.array(ptr=table, shape=(table_rows, table_columns), dtype=wp.float32),
+              wp.array(ptr=distances, shape=(n, n), dtype=wp.uint16),
+              wp.array(ptr=keys, shape=(3, key_columns), dtype=wp.uint64),
+              wp.array(ptr=cycle_in, shape=(1,), dtype=wp.int32), wp.array(ptr=cycle_out, shape=(1,), dtype=wp.int32),
+              wp.array(ptr=listed, shape=(blocks, chunks * 32), dtype=wp.int32),
+              wp.array(ptr=local, shape=(n, width), dtype=wp.int32),
+              wp.array(ptr=offsets, shape=(n + 1,), dtype=wp.int32), wp.array(ptr=mask, shape=(1,), dtype=vec),
+              strength)
+
     return move_smooth_spread
+
+
+def spread_smoothing_cycle_inputs(weights_in: wp.array, weights_out: wp.array, controls: wp.array, n_controls: int,
+                                  metric: wp.array, table: wp.array, distances: wp.array, keys: wp.array,
+                                  cycle_in: wp.array, cycle_out: wp.array, listed: wp.array, local: wp.array,
+                                  offsets: wp.array, mask: wp.array, strength: float) -> list:
+    """The parameters of `spread_smoothing_cycle_kernel`'s kernel for these arrays (listed and local: halos.py's
+    BlockHalos), which must outlive any graph that captures the launch."""
+    _contiguous(weights_in, weights_out, controls, metric, table, distances, keys, cycle_in, cycle_out, listed, local,
+                offsets, mask)
+    return [weights_in.ptr, weights_out.ptr, weights_in.shape[0], controls.ptr, n_controls, metric.ptr, table.ptr,
+            table.shape[0], table.shape[1], distances.ptr, keys.ptr, keys.shape[1], cycle_in.ptr, cycle_out.ptr,
+            listed.ptr, listed.shape[0], local.ptr, offsets.ptr, mask.ptr, strength]

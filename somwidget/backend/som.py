@@ -15,7 +15,8 @@ from . import checks, dependent_launch
 from .device import resolve, warp_exclusive
 from .halos import block_halos
 from .kernels import (CUDA_BLOCK, SHARED_TABLE_WORDS, assign_slots, barrier, cycle_kernels, sched_yield_address,
-                      spread_cycle_kernel, spread_smoothing_cycle_kernel)
+                      spread_cycle_inputs, spread_cycle_kernel, spread_smoothing_cycle_inputs,
+                      spread_smoothing_cycle_kernel)
 from .schedule import learning_table
 from .topology import MAX_DENSE_NEURONS, RowSearch, Topology
 
@@ -513,14 +514,14 @@ class Som:
                 wp.launch_tiled(kernel, dim=[self._blocks], block_dim=threads, device=dev, inputs=inputs)
             after_kernel = True
 
-        move, move_threads = self._kernels.move, threads
+        move, move_threads, spread = self._kernels.move, threads, False
         shared_table = self._table.shape[1] <= SHARED_TABLE_WORDS
         halos = self._smoothing_in_one_kernel() if smoothing else None
         if self.n_neurons <= SMALL_MESH:
             if k <= _SPREAD_MOST_CONTROLS and not smoothing:
                 warps, per_warp = _spread_shape(k, 1)
-                move = spread_cycle_kernel(self.n_dims, warps, per_warp, shared_table)
-                move_threads = 32 * warps
+                move = spread_cycle_kernel(self.n_dims, warps, per_warp, shared_table, self._rows_mode)
+                move_threads, spread = 32 * warps, True
             else:
                 move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8))).move
 
@@ -534,9 +535,10 @@ class Som:
             pair = (self._w, self._w_moved)
             for i in range(cycles):
                 p = (parity + i) % 2
-                launch(kernel, [pair[i % 2], pair[1 - i % 2], self._c, k, self._m, self._table, self._distances,
-                                self._keys, self._cycle[p], self._cycle[1 - p], halos.neurons, halos.local,
-                                self._offsets, self._mask, self._smoothing], 32 * warps)
+                launch(kernel, spread_smoothing_cycle_inputs(
+                    pair[i % 2], pair[1 - i % 2], self._c, k, self._m, self._table, self._distances, self._keys,
+                    self._cycle[p], self._cycle[1 - p], halos.neurons, halos.local, self._offsets, self._mask,
+                    self._smoothing), 32 * warps)
             if cycles % 2:
                 wp.copy(self._w, self._w_moved)
             return records
@@ -544,8 +546,13 @@ class Som:
         for _ in range(cycles):
             c_in, c_out = self._cycle[p], self._cycle[1 - p]
             moved = self._w_moved if smoothing else self._w
-            launch(move, [self._w, moved, self._c, 0, k, k, self._m, self._table, self._distances, self._slot_of,
-                          self._keys, c_in, c_out, int(not smoothing), self._stalled], move_threads)
+            if spread:
+                launch(move, spread_cycle_inputs(self._w, moved, self._c, k, self._m, self._table, self._distances,
+                                                 self._slot_of, self._keys, c_in, c_out, self._stalled),
+                       move_threads)
+            else:
+                launch(move, [self._w, moved, self._c, 0, k, k, self._m, self._table, self._distances,
+                              self._slot_of, self._keys, c_in, c_out, int(not smoothing), self._stalled], move_threads)
             if smoothing:
                 launch(self._kernels.smooth, [self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
                                               self._smoothing, self._c, k, self._m, self._keys, c_out, c_in,
