@@ -1050,7 +1050,7 @@ return *reinterpret_cast<const unsigned long long*>(at + (long long)(s % 3) * ke
 def key_of_cycle(keys: wp.array2d(dtype=wp.uint64), s: int, c: int) -> wp.uint64:
     """keys[s % 3, c], the winner key of control c in cycle s. On CUDA all three buffers are read, each by a load
     the compiler may not make conditional, so that the reads need not wait for s (as plain reads and a select they
-    became a read of one buffer, then of another once s had come: a second round trip to L2, seen in ncu's SASS)."""
+    became a read of one buffer, then of another once s had come, in ncu's SASS; whole runs timed the same)."""
     ...
 
 
