@@ -16,7 +16,6 @@ Environment: DEV (default cuda:0).
 import gc
 import os
 import sys
-import time
 
 import numpy as np
 import warp as wp
@@ -24,6 +23,7 @@ import warp as wp
 wp.config.log_level = wp.LOG_WARNING
 from somwidget import Topology  # noqa: E402
 from somwidget.backend import topology as topo_mod  # noqa: E402
+from device_timing import device_timer  # noqa: E402 (beside this script)
 
 DEV = os.environ.get("DEV", "cuda:0")
 print("warp", wp.__version__, wp.get_device(DEV).name, "SMs", wp.get_device(DEV).sm_count, flush=True)
@@ -36,16 +36,7 @@ def count_mismatches(a: wp.array2d(dtype=wp.uint16), b: wp.array2d(dtype=wp.uint
         wp.atomic_add(per_row, i, 1)
 
 
-def sync():
-    wp.synchronize_device(DEV)
-
-
-def timed(fn):
-    sync()
-    t = time.perf_counter()
-    out = fn()
-    sync()
-    return time.perf_counter() - t, out
+sync, timed = device_timer(DEV)
 
 
 def fresh(topo: Topology) -> Topology:

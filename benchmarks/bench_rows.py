@@ -23,22 +23,14 @@ wp.config.log_level = wp.LOG_WARNING
 from somwidget import Som, Topology  # noqa: E402
 from somwidget.backend import som as som_module  # noqa: E402
 from somwidget.backend.topology import RowSearch  # noqa: E402
+from device_timing import device_timer  # noqa: E402 (beside this script)
 
 DEV = os.environ.get("DEV", "cuda:0")
 SIDE = int(os.environ.get("SIDE", "1000"))
 print("warp", wp.__version__, wp.get_device(DEV).name, flush=True)
 
 
-def sync():
-    wp.synchronize_device(DEV)
-
-
-def timed(fn):
-    sync()
-    t = time.perf_counter()
-    out = fn()
-    sync()
-    return time.perf_counter() - t, out
+sync, timed = device_timer(DEV)
 
 
 def grid(nx, ny):

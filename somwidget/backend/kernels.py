@@ -1055,9 +1055,11 @@ def key_of_cycle(keys: wp.array2d(dtype=wp.uint64), s: int, c: int) -> wp.uint64
 
 
 @functools.cache
-def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int) -> SimpleNamespace:
+def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int, table_at: int) -> SimpleNamespace:
     """The steps the spread kernels share: warp g of `warps` is in charge of the controls g, g + warps, ... (at
-    most `per_warp` of them), whose copies sit in shared memory from word `controls_at`."""
+    most `per_warp` of them), whose copies sit in shared memory from word `controls_at`; the table's row s sits
+    there from word `table_at` (rows up to SHARED_TABLE_WORDS long), or, with table_at < 0, is read from the
+    table."""
     ks = cycle_kernels(n_dims)
     vec, distance = ks.vec, ks.distance
     threads = 32 * warps
@@ -1085,6 +1087,33 @@ def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int) -> S
         return shared_vec(controls_at + c * n_dims)
 
     @wp.func
+    def stage_table_row(table: wp.array2d(dtype=wp.float32), s: int, t: int):
+        """Copy the table's row s into shared memory (nothing without a shared row)."""
+        if wp.static(table_at >= 0):
+            for j in range(t, table.shape[1], threads):
+                shared_set_float(table_at + j, table[s, j])
+
+    @wp.func
+    def stage_rate(table: wp.array2d(dtype=wp.float32), s: int, hop: int, c: int, n_controls: int, word: int):
+        """L[s, D[u_c, v]], control c's rate for a neuron `hop` hops from its winner, into shared word `word`: 0 for an
+        unreachable neuron (hop < 0) and for c past the last control, which then leaves the neuron as it is."""
+        d = wp.clamp(hop, 0, table.shape[1] - 1)
+        rate = float(0.0)
+        if wp.static(table_at >= 0):
+            rate = shared_get_float(table_at + d)
+        else:
+            rate = table[s, d]
+        shared_set_float(word, wp.where(hop >= 0 and c < n_controls, rate, wp.float32(0.0)))
+
+    @wp.func
+    def apply_rates(w: vec, word: int) -> vec:
+        """Step 2 for one neuron: W <- W + rate_c (C_c - W) for every slot in list order, the rates from shared words
+        word, word + 32, ..."""
+        for c in range(slots):  # unrolled
+            w = w + shared_get_float(word + c * 32) * (staged_control(c) - w)
+        return w
+
+    @wp.func
     def lane_key(keys: wp.array2d(dtype=wp.uint64), s: int, n_controls: int, lane: int) -> wp.uint64:
         """Lane i's control's winner key of cycle s (lanes past the last control: the last)."""
         return key_of_cycle(keys, s, wp.min(lane, n_controls - 1))
@@ -1109,7 +1138,8 @@ def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int) -> S
             for c in range(t, n_controls, threads):
                 keys[(s + 2) % 3, c] = KEY_NONE
 
-    return SimpleNamespace(shared_vec=shared_vec, stage_controls=stage_controls, staged_control=staged_control,
+    return SimpleNamespace(shared_vec=shared_vec, stage_controls=stage_controls,
+                           stage_table_row=stage_table_row, stage_rate=stage_rate, apply_rates=apply_rates,
                            lane_key=lane_key, publish_winners=publish_winners)
 
 
@@ -1149,7 +1179,6 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
     warp-wide minimum, and its lanes publish them with one atomic min each.
     """
     vec = cycle_kernels(n_dims).vec
-    threads = 32 * warps
     slots = warps * per_warp
     if slots > 32:
         raise ValueError(f"spread_cycle_kernel: warps x per_warp = {slots} controls, at most 32 (a lane each)")
@@ -1160,8 +1189,7 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
     words = controls_at + slots * n_dims
     hop_counts = wp.types.vector(length=per_warp, dtype=wp.int32)
     hop_type = wp.int32 if rows else wp.uint16
-    parts = _spread_parts(n_dims, warps, per_warp, controls_at)
-    staged_control = parts.staged_control
+    parts = _spread_parts(n_dims, warps, per_warp, controls_at, table_at if shared_table else -1)
 
     @wp.func
     def cycle(
@@ -1194,23 +1222,13 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
         hop = hop_counts()
         for j in range(per_warp):  # unrolled: the reads overlap
             hop[j] = hops(distances, warp_shuffle(row, wp.min(g + warps * j, n_controls - 1)), u)
-        last = table.shape[1] - 1
-        if wp.static(shared_table):
-            for j in range(t, table.shape[1], threads):
-                shared_set_float(table_at + j, table[s, j])
+        parts.stage_table_row(table, s, t)
         missing = sync_block_missing(distances, row)  # lanes past n_controls repeat its last control
         for j in range(per_warp):
             c = g + warps * j
-            d = wp.clamp(hop[j], 0, last)
-            rate = float(0.0)
-            if wp.static(shared_table):
-                rate = shared_get_float(table_at + d)
-            else:
-                rate = table[s, d]
-            shared_set_float(c * 32 + lane, wp.where(hop[j] >= 0 and c < n_controls, rate, wp.float32(0.0)))
+            parts.stage_rate(table, s, hop[j], c, n_controls, c * 32 + lane)
         sync_block()
-        for c in range(slots):  # unrolled; rates past n_controls are 0 and leave w as it is
-            w = w + shared_get_float(c * 32 + lane) * (staged_control(c) - w)
+        w = parts.apply_rates(w, lane)
         let_next_grid_launch()
         if missing == 0:
             if g == 0 and first + lane < n:
@@ -1287,7 +1305,6 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
     block's lists read there too made the cycle slower (H200, with Warp array parameters: 3.22 against 3.13 us).
     """
     vec = cycle_kernels(n_dims).vec
-    threads = 32 * warps
     slots = warps * per_warp
     if slots > 32 or chunks > warps:
         raise ValueError(f"spread_smoothing_cycle_kernel: {slots} controls (at most 32), {chunks} chunks for "
@@ -1302,8 +1319,8 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
     hop_counts = wp.types.matrix(shape=(chunks, per_warp), dtype=wp.int32)
     chunk_neurons = wp.types.vector(length=chunks, dtype=wp.int32)
     near_ones = wp.types.vector(length=width, dtype=wp.int32)
-    parts = _spread_parts(n_dims, warps, per_warp, controls_at)
-    staged_control, shared_vec = parts.staged_control, parts.shared_vec
+    parts = _spread_parts(n_dims, warps, per_warp, controls_at, table_at if shared_table else -1)
+    shared_vec = parts.shared_vec
 
     @wp.func
     def moved_weight(i: int) -> vec:
@@ -1353,26 +1370,15 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
         for ch in range(chunks):  # unrolled: the reads overlap
             for j in range(per_warp):
                 hop[ch, j] = hops(distances, warp_shuffle(row, wp.min(g + warps * j, n_controls - 1)), x[ch])
-        last = table.shape[1] - 1
-        if wp.static(shared_table):
-            for j in range(t, table.shape[1], threads):
-                shared_set_float(table_at + j, table[s, j])
+        parts.stage_table_row(table, s, t)
         sync_block()
         for ch in range(chunks):
             for j in range(per_warp):
                 c = g + warps * j
-                d = wp.clamp(hop[ch, j], 0, last)
-                rate = float(0.0)
-                if wp.static(shared_table):
-                    rate = shared_get_float(table_at + d)
-                else:
-                    rate = table[s, d]
-                shared_set_float((ch * slots + c) * 32 + lane,
-                                 wp.where(hop[ch, j] >= 0 and c < n_controls, rate, wp.float32(0.0)))
+                parts.stage_rate(table, s, hop[ch, j], c, n_controls, (ch * slots + c) * 32 + lane)
         sync_block()
         if g < chunks:
-            for c in range(slots):  # unrolled; rates past n_controls are 0 and leave w as it is
-                w = w + shared_get_float((g * slots + c) * 32 + lane) * (staged_control(c) - w)
+            w = parts.apply_rates(w, g * slots * 32 + lane)
             for j in range(n_dims):
                 shared_set_float(moved_at + (g * 32 + lane) * n_dims + j, w[j])
         sync_block()
