@@ -71,22 +71,26 @@ class NumpySom:
       1. winners u_c = argmin_v sum_j m_j (C_cj - W_vj)^2 for all controls at once, from W before any move
          (np.argmin: the lowest index wins an exact tie);
       2. the controls in list order: W_v <- W_v + h_cv (C_c - W_v) with h_cv = L[s, D[u_c, v]] (0 if unreachable);
+         with `paired` (controls = [originals..., mirrored copies...]) control c and its copy k + c act together at
+         c's place, both rates scaled by 1 / max(1, h_c + h_c');
       3. with smoothing lambda > 0, one Jacobi step of uniform Laplacian smoothing on smooth_dims.
 
-    update="fused" applies step 2 in closed form, the same recurrence unrolled:
-      W <- W * prod_c (1 - h_c) + sum_c h_c * prod_{c' > c} (1 - h_c') * C_c
-    (a running product over the controls and one (n, k) @ (k, N) product instead of 3k passes over W);
-    update="sequential" loops over the controls (k <= 256), three in-place passes each. Neither loops over neurons
+    update="fused" applies step 2 in closed form, the same recurrence unrolled over its units (a control, or a pair
+    with its two scaled rates g):
+      W <- W * prod_u (1 - g_u) + sum_u (sum of g_c C_c over u's controls) * prod_{u' > u} (1 - g_u')
+    (a running product over the units and one (n, k) @ (k, N) product instead of 3k passes over W);
+    update="sequential" loops over the units (k <= 256), a few in-place passes each. Neither loops over neurons
     in Python; they agree to float32 rounding, and "fused" is the faster on every case here.
     The neighbour sums of step 3 use a padded neighbour table (one gather, one sum) when the degrees are even
     enough, else CSR segments (np.add.reduceat).
     """
 
     def __init__(self, distances, offsets, neighbors, weights, controls, table, metric_weights=None,
-                 smoothing: float = 0.0, smooth_dims=None, update: str = "fused"):
+                 smoothing: float = 0.0, smooth_dims=None, update: str = "fused", paired: bool = False):
         if update not in ("fused", "sequential"):
             raise ValueError(f"update: expected 'fused' or 'sequential', got {update!r}")
         self.update = update
+        self.paired = bool(paired)
         self.D = np.ascontiguousarray(distances, dtype=np.uint16)
         start = np.asarray(weights, dtype=np.float32)
         n_neurons, n_dims = start.shape
@@ -99,6 +103,8 @@ class NumpySom:
         self.CT = np.ascontiguousarray(self.C.T)
         self.table = np.ascontiguousarray(table, dtype=np.float32)
         k = self.C.shape[0]
+        if self.paired and k % 2:
+            raise ValueError(f"controls: mirrored pairs need an even count (originals, then copies), got {k}")
         if self.D.shape != (n_neurons, n_neurons):
             raise ValueError(f"distances: expected shape {(n_neurons, n_neurons)}, got {self.D.shape}")
         if self.C.shape[1] != n_dims:
@@ -172,7 +178,9 @@ class NumpySom:
             self._rate[: self._width] = self.table[self.s]
             np.take(self.D, win, axis=0, out=self._rows)
             np.take(self._rate, self._rows, out=h)
-            if self.update == "fused":
+            if self.paired:
+                self._move_pairs(h)
+            elif self.update == "fused":
                 keep, coef = self._keep, self._coef
                 np.subtract(np.float32(1.0), h, out=keep)
                 for c in range(len(keep) - 2, -1, -1):  # keep[c] <- prod_{c' >= c} (1 - h_c')
@@ -192,6 +200,37 @@ class NumpySom:
                 self._smooth()
             self.s += 1
         return n
+
+    def _move_pairs(self, h: np.ndarray) -> None:
+        """Step 2 with mirrored pairs: h (k_eff, N) becomes the scaled rates g, then one unit per pair."""
+        half = len(h) // 2
+        first, second = h[:half], h[half:]
+        scale = np.float32(1.0) / np.maximum(np.float32(1.0), first + second)
+        first *= scale
+        second *= scale
+        WT, pull = self.WT, self._pull
+        if self.update == "fused":
+            keep, coef = self._keep[:half], self._coef
+            np.subtract(np.float32(1.0), first, out=keep)
+            keep -= second
+            for u in range(half - 2, -1, -1):  # keep[u] <- prod_{u' >= u} (1 - g_u')
+                np.multiply(keep[u], keep[u + 1], out=keep[u])
+            np.multiply(first[:-1], keep[1:], out=coef[: half - 1])
+            np.multiply(second[:-1], keep[1:], out=coef[half: 2 * half - 1])
+            coef[half - 1] = first[-1]
+            coef[2 * half - 1] = second[-1]
+            np.matmul(self.CT, coef, out=pull)
+            WT *= keep[0]
+            WT += pull
+        else:
+            other = self._diff[:, 0, :]  # scratch (n, N): the winner search is done for this cycle
+            for u in range(half):
+                np.subtract(self.CT[:, u, None], WT, out=pull)
+                pull *= first[u]
+                np.subtract(self.CT[:, half + u, None], WT, out=other)
+                other *= second[u]
+                pull += other
+                WT += pull
 
     def _smooth(self) -> None:
         lam, mean = np.float32(self.smoothing), self._mean
@@ -350,7 +389,7 @@ def _time_numpy(som: Som, topo: Topology, start: np.ndarray, res: CaseResult, re
     for update in ("fused", "sequential"):
         base = NumpySom(distances, topo.offsets, topo.neighbors, start, som.effective_controls, table,
                         metric_weights=som.metric_weights, smoothing=som.smoothing, smooth_dims=som.smooth_dims,
-                        update=update)
+                        update=update, paired=bool(som.mirror))
         base.step(2)  # warm-up: first touch of the buffers
         times = []
         for _ in range(repeats):

@@ -118,6 +118,11 @@ def learning_table(S: int, d_max: int, l_start: float = 0.25, l_end: float = 0.0
     return alpha(s, S, l_start, l_end) * theta(d, s, S, d_max)
 
 
+def restart_iteration(reach: float, S: int) -> int:
+    """s0 = floor((1 - reach) S), clamped to S - 1: where a local restart begins."""
+    return min(int(np.floor((1.0 - reach) * S)), S - 1)
+
+
 # ----------------------------------------------------------------------------------------------- controls
 def effective_controls(controls, mirror: Sequence[int] = ()) -> np.ndarray:
     """[originals..., mirrored copies...] where each copy has the `mirror` dims negated; no mirror -> originals."""
@@ -184,8 +189,10 @@ class ReferenceSom:
         smooth_dims=None,
         metric_weights=None,
         mirror: Sequence[int] = (),
+        reach: float = 0.08,
     ):
         self.n_vertices = int(n_vertices)
+        self.reach = float(reach)
         self.edges = edges_from_edges(edges)
         self.dist = bfs_distances(self.n_vertices, self.edges)
         self.d_max = d_max_of(self.dist)
@@ -211,7 +218,14 @@ class ReferenceSom:
         self.margins: list[np.ndarray] = []
         self._table()
 
-    # schedule parameters: changing one restarts at s = 0 from the latest weights
+    # schedule parameters: changing one restarts at s0 from the latest weights
+    def _restart(self):
+        self.iteration = restart_iteration(self.reach, self._iterations)
+
+    def restart(self):
+        """A local restart from the latest weights (what a change of smoothing or metric weights does)."""
+        self._restart()
+
     def _table(self):
         self.L = learning_table(self._iterations, self.d_max, self._l_start, self._l_end)
 
@@ -223,7 +237,7 @@ class ReferenceSom:
     def iterations(self, value):
         self._iterations = int(value)
         self._table()
-        self.iteration = 0
+        self._restart()
 
     @property
     def l_start(self):
@@ -233,7 +247,7 @@ class ReferenceSom:
     def l_start(self, value):
         self._l_start = float(value)
         self._table()
-        self.iteration = 0
+        self._restart()
 
     @property
     def l_end(self):
@@ -243,7 +257,7 @@ class ReferenceSom:
     def l_end(self, value):
         self._l_end = float(value)
         self._table()
-        self.iteration = 0
+        self._restart()
 
     @property
     def n_dims(self) -> int:
@@ -265,11 +279,15 @@ class ReferenceSom:
 
     def set_controls(self, controls):
         self.controls = np.array(controls, dtype=np.float64, copy=True)
-        self.iteration = 0
+        self._restart()
 
     def set_weights(self, weights):
         self.W = np.array(weights, dtype=np.float64, copy=True)
-        self.iteration = 0
+        self._restart()
+
+    def restore(self, weights, iteration):
+        self.W = np.array(weights, dtype=np.float64, copy=True)
+        self.iteration = int(iteration)
 
     def reset(self):
         self.W = self.start_weights.copy()
@@ -287,13 +305,24 @@ class ReferenceSom:
         # 1. all winners from W(s) before any move
         self.margins.append(winner_margins(W, C, self.metric_weights))
         win = winners(W, C, self.metric_weights)
-        # 2. every neuron applies the controls in list order
-        for c in range(C.shape[0]):
+        # 2. every neuron applies the controls in list order; with mirroring, control c and its copy k + c act
+        #    together at c's place: both rates from the same W, scaled by 1 / max(1, l1 + l2)
+        def rate(c):
             d = self.dist[win[c]].astype(np.int64)
-            rate = np.zeros(self.n_vertices)
+            out = np.zeros(self.n_vertices)
             reach = d != UNREACHABLE
-            rate[reach] = self.L[s, d[reach]]
-            W += rate[:, None] * (C[c][None, :] - W)
+            out[reach] = self.L[s, d[reach]]
+            return out
+
+        k = self.controls.shape[0]
+        if self.mirror:
+            for c in range(k):
+                l1, l2 = rate(c), rate(k + c)
+                scale = 1.0 / np.maximum(1.0, l1 + l2)
+                W += (l1 * scale)[:, None] * (C[c][None, :] - W) + (l2 * scale)[:, None] * (C[k + c][None, :] - W)
+        else:
+            for c in range(C.shape[0]):
+                W += rate(c)[:, None] * (C[c][None, :] - W)
         # 3. one Jacobi step of uniform Laplacian smoothing on smooth_dims
         lam = self.smoothing
         dims = list(self._smooth_dims())

@@ -254,10 +254,11 @@ def test_topologies_match_reference(device, name, smoothing, seed):
 
 
 # ------------------------------------------------------------------------------------- mirroring
-@pytest.mark.parametrize(("n_dims", "mirror"), [(3, (1,)), (3, (0, 2)), (5, (1, 3))])
-def test_mirror_matches_reference(device, n_dims, mirror):
+@pytest.mark.parametrize(("n_dims", "mirror", "seed"), [(3, (1,), 1), (3, (0, 2), 5), (5, (1, 3), 1)])
+def test_mirror_matches_reference(device, n_dims, mirror, seed):
+    """Mirrored pairs act together (DESIGN.md step 2); seeds whose winners stay well apart over the run."""
     case = _case("torus")
-    rng = np.random.default_rng(1)
+    rng = np.random.default_rng(seed)
     W = np.concatenate([case.points, rng.uniform(0, 1, size=(case.n, n_dims - 3))], axis=1)
     C = _controls(rng, 3, n_dims)
     C[2, list(mirror)] = 0.0  # a control on the mirror plane still gets its (identical) copy
@@ -413,40 +414,83 @@ def test_train_runs_the_rest(device):
 # ------------------------------------------------------------------------------------- restart / reset
 def test_set_controls_restarts_from_latest_weights(device):
     case = _case("torus")
-    rng = np.random.default_rng(40)
+    rng = np.random.default_rng(45)  # winners well apart through the restart
     C1 = _controls(rng, 3, 3)
     C2 = _controls(rng, 5, 3)  # a different count k
-    som, ref = _pair(case, case.points, C1, device, iterations=40, smoothing=0.2, mirror=(1,))
+    som, ref = _pair(case, case.points, C1, device, iterations=40, smoothing=0.2, mirror=(1,), reach=0.5)
     som.step(25)
     ref.step(25)
     before = som.weights
     som.set_controls(_f32(C2))
     ref.set_controls(_f32(C2).astype(np.float64))
-    assert som.iteration == 0
+    assert som.iteration == som.restart_iteration == 20  # floor((1 - 0.5) 40): a local restart
     np.testing.assert_array_equal(som.weights, before)  # the mesh follows, it does not snap back
     np.testing.assert_array_equal(som.controls, _f32(C2))
     assert som.effective_controls.shape == (10, 3)
-    assert som.step(30) == 30
-    ref.step(30)
+    assert som.step(15) == 15
+    ref.step(15)
     _assert_matches(som, ref, _scale(case.points, C1, C2))
-    som.train()  # 10 left of the restarted schedule
+    assert som.train() == 5  # the rest of the restarted schedule
     ref.train()
     assert som.iteration == 40
     _assert_matches(som, ref, _scale(case.points, C1, C2))
+
+
+@pytest.mark.parametrize(("reach", "s0"), [(1.0, 0), (0.5, 20), (0.08, 36), (0.02, 39), (1e-9, 39)])
+def test_restart_iteration_follows_reach(device, reach, s0):
+    """s0 = floor((1 - reach) S), at most S - 1; reach = 1 is the paper's restart at s = 0."""
+    case = _case("mixed")
+    som, _ = _pair(case, case.points, _controls(np.random.default_rng(1), 2, 3), device, iterations=40, reach=reach)
+    som.train()
+    som.set_controls(_f32(_controls(np.random.default_rng(2), 2, 3)))
+    assert som.reach == reach and som.iteration == s0
+    assert som.train() == 40 - s0
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.1, 1.5, float("nan"), "half", None])
+def test_reach_is_checked(device, bad):
+    case = _case("mixed")
+    with pytest.raises(ValueError, match="reach"):
+        _pair(case, case.points, _controls(np.random.default_rng(1), 2, 3), device, reach=bad)
+    som, _ = _pair(case, case.points, _controls(np.random.default_rng(1), 2, 3), device)
+    with pytest.raises(ValueError, match="reach"):
+        som.reach = bad
+    assert som.reach == 0.08
+
+
+def test_restore_puts_weights_and_iteration_back_without_training(device):
+    """A loaded session or an undo: weights and s exactly as saved, and training goes on from there as the
+    uninterrupted run would."""
+    case = _case("torus")
+    C = _controls(np.random.default_rng(3), 3, 3)
+    som, ref = _pair(case, case.points, C, device, iterations=30, smoothing=0.1, mirror=(1,))
+    som.step(12)
+    saved = som.weights
+    som.step(5)
+    som.restore(saved, 12)
+    assert som.iteration == 12
+    np.testing.assert_array_equal(som.weights, saved)
+    som.train()
+    ref.train()
+    _assert_matches(som, ref, _scale(case.points, C))
+    with pytest.raises(ValueError, match="iteration"):
+        som.restore(saved, 31)
+    with pytest.raises(ValueError, match="weights"):
+        som.restore(saved[:-1], 3)
 
 
 def test_set_controls_after_end_restarts(device):
     case = _case("mixed")
     rng = np.random.default_rng(41)
     C = _controls(rng, 2, 3)
-    som, ref = _pair(case, case.points, C, device, iterations=15)
+    som, ref = _pair(case, case.points, C, device, iterations=15, reach=0.6)
     som.train()
     ref.train()
     assert som.step() == 0
     C2 = C + 0.1
     som.set_controls(_f32(C2))
     ref.set_controls(_f32(C2).astype(np.float64))
-    assert som.step(15) == 15
+    assert som.step(15) == 9  # s0 = floor(0.4 x 15) = 6
     ref.step(15)
     _assert_matches(som, ref, _scale(case.points, C2))
 
@@ -461,10 +505,11 @@ def test_reset_restores_start_and_keeps_controls(device):
     som.set_controls(_f32(C2))
     som.step(4)
     som.reset()
-    assert som.iteration == 0
+    assert som.iteration == 0  # the whole schedule, not a local restart
     np.testing.assert_array_equal(som.weights, _f32(case.points))
     np.testing.assert_array_equal(som.controls, _f32(C2))
     ref.set_controls(_f32(C2).astype(np.float64))
+    ref.reset()
     som.train()
     ref.train()
     _assert_matches(som, ref, _scale(case.points, C1, C2))
@@ -493,7 +538,7 @@ def test_set_weights(device):
     som, ref = _pair(case, case.points, C, device, iterations=20)
     som.step(8)
     som.set_weights(_f32(W2))
-    assert som.iteration == 0
+    assert som.iteration == som.restart_iteration == 18
     np.testing.assert_array_equal(som.weights, _f32(W2))
     ref.set_weights(_f32(W2).astype(np.float64))
     som.train()
@@ -511,7 +556,7 @@ def test_schedule_change_restarts(device, attr, value):
     before = som.weights
     setattr(som, attr, value)
     setattr(ref, attr, value)
-    assert som.iteration == 0
+    assert som.iteration == som.restart_iteration == ref.iteration > 0
     assert getattr(som, attr) == pytest.approx(value)
     np.testing.assert_array_equal(som.weights, before)
     som.train()
@@ -550,12 +595,12 @@ def test_other_settings_take_effect(device, attr, value):
     ],
 )
 def test_settings_change_mid_run(device, attr, before, after, seed):
-    """Smoothing, smooth_dims and metric weights are no schedule change: set mid-run they apply from the next
-    cycle on, s runs on (DESIGN restarts only for controls, S, l_start, l_end). Same-sized steps before and
-    after the change also catch a replayed run that kept the old setting."""
+    """Smoothing, smooth_dims and metric weights set mid-run restart locally (DESIGN.md, Restarts): s0 from the
+    latest weights, with the new setting from the first cycle on. Same-sized steps before and after the change
+    also catch a replayed run that kept the old setting."""
     case = _case("torus")
     C = _controls(np.random.default_rng(seed), 3, 3)
-    kw = {"iterations": 30, "smoothing": 0.1, attr: before}
+    kw = {"iterations": 30, "smoothing": 0.1, attr: before, "reach": 0.5}
     som, ref = _pair(case, case.points, C, device, **kw)
     for _ in range(3):
         assert som.step(1) == 1
@@ -565,12 +610,13 @@ def test_settings_change_mid_run(device, attr, before, after, seed):
         assert winners(ref.W, ref.effective_controls, after).tolist() != ref.winners().tolist()
     setattr(som, attr, after)
     setattr(ref, attr, after)
-    assert som.iteration == 7
+    ref.restart()
+    assert som.iteration == 15
     for _ in range(3):
         assert som.step(1) == 1
     som.step(4)
     ref.step(7)
-    assert som.iteration == 14
+    assert som.iteration == 22
     _assert_matches(som, ref, _scale(case.points, C))
 
 

@@ -46,6 +46,15 @@ _CACHE_MOST_ROWS = 4096
 _PREFETCH_RINGS = 8
 #: Learning table entries (S x (d_max + 1) float32) a Som may hold: 2 GiB.
 _MAX_TABLE_ENTRIES = 1 << 29
+#: The neighbourhood radius a restart begins with, as a share of the full radius sigma (DESIGN.md, Restarts). Chosen
+#: by measurement on the car, the space grid and a torus (BENCHMARKS.md, "Local restarts"): the clay follows a moved
+#: control to within 1% of the model's size while the far half of the mesh stays put and nothing collapses.
+DEFAULT_REACH = 0.08
+
+
+def restart_iteration(reach: float, iterations: int) -> int:
+    """s0 = floor((1 - reach) S), at most S - 1: where a local restart begins in the unchanged schedule."""
+    return min(int(np.floor((1.0 - reach) * iterations)), iterations - 1)
 
 
 class Som:
@@ -60,6 +69,11 @@ class Som:
     (None: as many as fit in 1 GiB on the CPU, on a GPU in a sixteenth of its memory up to 8 GiB; at least 512 and at
     most 4096); None picks dense up to 65,536 neurons, else rows.
     Both give the same weights.
+
+    reach (0, 1]: the neighbourhood radius a restart begins with, as a share of the full radius (DESIGN.md,
+    Restarts). Moving controls and changing S, l_start, l_end, smoothing or metric weights restart at
+    s0 = floor((1 - reach) S) from the latest weights (the clay follows locally); `reset()` runs the whole schedule
+    from the start weights; `restore()` puts saved weights and s back without training.
     """
 
     @warp_exclusive
@@ -76,6 +90,7 @@ class Som:
         metric_weights: ArrayLike | None = None,
         mirror: Sequence[int] = (),
         device: str | None = None,
+        reach: float = DEFAULT_REACH,
         *,
         cpu_cores: int | None = None,
         distances: str | None = None,
@@ -96,6 +111,7 @@ class Som:
         self._l_start = checks.real("l_start", l_start, 0.0, 1.0, low_open=True)
         self._l_end = checks.real("l_end", l_end, 0.0, 1.0, low_open=True)
         self._smoothing = checks.real("smoothing", smoothing, 0.0, 1.0)
+        self._reach = checks.real("reach", reach, 0.0, 1.0, low_open=True)
         self._mirror = checks.dims("mirror", mirror, self.n_dims)
         self._smooth_dims = self._check_smooth_dims(smooth_dims)
         self._metric = self._check_metric(metric_weights)
@@ -136,6 +152,7 @@ class Som:
         self._meet = wp.zeros(1, dtype=wp.int64, device=dev)
         self._meet_failed = wp.zeros(1, dtype=wp.int32, device=dev)
         self._graphs: dict[tuple, tuple] = {}  # key -> (graph, the packed arguments of its dependent launches)
+        self._graph_controls: tuple[int, bool] | None = None  # (k_eff, paired) the graphs were recorded for
         self._table = None
         self._build_table()
         self._upload_controls()
@@ -193,8 +210,23 @@ class Som:
     # -- configuration ------------------------------------------------------------------------------------
     @property
     def iteration(self) -> int:
-        """s: cycles run since the last (re)start of the schedule."""
+        """s: the schedule's current cycle (a local restart begins past 0, at `restart_iteration`)."""
         return self._s
+
+    @property
+    def reach(self) -> float:
+        """The neighbourhood radius a restart begins with, as a share of the full radius: s0 = floor((1 - reach) S).
+        1 restarts at s = 0 (the paper's restart). Setting it changes the next restart, not the run under way."""
+        return self._reach
+
+    @reach.setter
+    def reach(self, value: float) -> None:
+        self._reach = checks.real("reach", value, 0.0, 1.0, low_open=True)
+
+    @property
+    def restart_iteration(self) -> int:
+        """s0, where the next local restart begins."""
+        return restart_iteration(self._reach, self._iterations)
 
     @property
     def iterations(self) -> int:
@@ -243,7 +275,8 @@ class Som:
     @warp_exclusive
     def smoothing(self, value: float) -> None:
         self._smoothing = checks.real("smoothing", value, 0.0, 1.0)
-        self._graphs.clear()
+        self._graphs.clear()  # the graphs hold lambda
+        self._restart()
 
     @property
     def smooth_dims(self) -> tuple[int, ...]:
@@ -254,6 +287,7 @@ class Som:
     def smooth_dims(self, value: Sequence[int] | None) -> None:
         self._smooth_dims = self._check_smooth_dims(value)
         self._mask.assign(self._mask_of(self._smooth_dims)[None, :])
+        self._restart()
 
     @property
     def metric_weights(self) -> np.ndarray:
@@ -264,7 +298,7 @@ class Som:
     def metric_weights(self, value: ArrayLike) -> None:
         self._metric = self._check_metric(value)
         self._m.assign(self._metric[None, :])
-        self._winners_valid = False
+        self._restart()
 
     @property
     def mirror(self) -> tuple[int, ...]:
@@ -316,31 +350,50 @@ class Som:
     # -- intents ------------------------------------------------------------------------------------------
     @warp_exclusive
     def set_controls(self, controls: ArrayLike) -> None:
-        """New controls (any count k); the schedule restarts at s = 0 from the latest weights."""
+        """New controls (any count k); the schedule restarts at s0 from the latest weights (local follow)."""
         self._controls = self._check_controls(controls, self._mirror)
         self._upload_controls()
         self._restart()
 
     @warp_exclusive
     def set_weights(self, weights: ArrayLike) -> None:
-        """Replace the current weights (same shape); the schedule restarts at s = 0."""
-        w = checks.finite_array("weights", weights, 2)
-        if w.shape != (self.n_neurons, self.n_dims):
-            raise ValueError(f"weights: expected shape {(self.n_neurons, self.n_dims)}, got {w.shape}")
-        self._w.assign(w)
+        """Replace the current weights (same shape); the schedule restarts at s0 from them."""
+        self._w.assign(self._checked_weights(weights))
+        self._restart()
+
+    @warp_exclusive
+    def restart(self) -> None:
+        """Restart the schedule at s0 from the latest weights, as a control move does."""
         self._restart()
 
     @warp_exclusive
     def reset(self) -> None:
-        """Back to the start weights and s = 0; the controls stay."""
+        """Back to the start weights and s = 0 (the whole schedule); the controls stay."""
         self._w.assign(self._start)
-        self._restart()
+        self._restart(0)
+
+    @warp_exclusive
+    def restore(self, weights: ArrayLike, iteration: int) -> None:
+        """Put saved weights and s back exactly (a loaded session, an undo): nothing trains, nothing restarts."""
+        s = checks.integer("iteration", iteration, 0, self._iterations)
+        self._w.assign(self._checked_weights(weights))
+        self._restart(s)
 
     @warp_exclusive
     def winners(self) -> np.ndarray:
-        """(k_eff,) the nearest neuron (metric-weighted) of each effective control for the current weights."""
+        """(k_eff,) the nearest neuron (metric-weighted) of each effective control for the current weights, in the
+        order of `effective_controls`."""
         self._find_winners_now()
-        return self._current_winners()
+        found = self._current_winners()
+        if not self._mirror:
+            return found
+        return np.concatenate([found[0::2], found[1::2]])
+
+    def _checked_weights(self, weights: ArrayLike) -> np.ndarray:
+        w = checks.finite_array("weights", weights, 2)
+        if w.shape != (self.n_neurons, self.n_dims):
+            raise ValueError(f"weights: expected shape {(self.n_neurons, self.n_dims)}, got {w.shape}")
+        return w
 
     # -- training -----------------------------------------------------------------------------------------
     @warp_exclusive
@@ -375,15 +428,27 @@ class Som:
         self._graphs.clear()
 
     def _upload_controls(self) -> None:
+        """The effective controls into the fixed-size device buffer, so that the captured graphs stay valid while
+        only their values change (a drag); with mirroring in pairs, each original next to its copy (slots 2i and
+        2i + 1), the order in which step 2 applies them."""
         eff = self.effective_controls
+        k = len(self._controls)
+        if self._mirror:
+            eff = np.stack([eff[:k], eff[k:]], axis=1).reshape(-1, self.n_dims)
         self._k_eff = eff.shape[0]
         padded = np.zeros((MAX_CONTROLS, self.n_dims), np.float32)  # fixed size: graphs keep their pointers
         padded[: self._k_eff] = eff
         self._c.assign(padded)
-        self._graphs.clear()
-        if self.device == "cpu":
-            self._plan_cores()
+        if self._graph_controls != (self._k_eff, self._paired):  # the graphs hold the count and the pairing
+            self._graphs.clear()
+            self._graph_controls = (self._k_eff, self._paired)
+            if self.device == "cpu":
+                self._plan_cores()
         self._winners_valid = False
+
+    @property
+    def _paired(self) -> bool:
+        return bool(self._mirror)
 
     def _plan_cores(self) -> None:
         """Split the CPU cycle: neuron ranges for the move and smoothing, a thread per extra core."""
@@ -396,8 +461,9 @@ class Som:
             self._meet.zero_()  # barrier generations count in multiples of the core count
         self._cores = cores
 
-    def _restart(self) -> None:
-        self._s = 0
+    def _restart(self, s: int | None = None) -> None:
+        """Continue the schedule from cycle s (default: s0, a local restart) with the winners found afresh."""
+        self._s = restart_iteration(self._reach, self._iterations) if s is None else s
         self._winners_valid = False
 
     def _set_cycle(self) -> None:
@@ -474,6 +540,7 @@ class Som:
         """One core's share: move and smooth its neurons, find the winners of its controls, meet between phases.
         Without `fresh` the winners of the first cycle are known (always so in distance rows mode)."""
         kern, cores, (lo, hi), counter = self._kernels, self._cores, self._ranges[core], self._cycle[core]
+        move_part = self._movers().move_part
         stalled = self._stalled
 
         def meet():
@@ -486,7 +553,7 @@ class Som:
             meet()
         moved = self._w_moved if smoothing else self._w
         for _ in range(cycles):
-            wp.launch(kern.move_part, dim=1, device="cpu",
+            wp.launch(move_part, dim=1, device="cpu",
                       inputs=[self._w, moved, self._c, 0, self._k_eff, self._table, self._distances, self._slot_of,
                               self._keys, counter, lo, hi, stalled])
             meet()
@@ -514,24 +581,25 @@ class Som:
                 wp.launch_tiled(kernel, dim=[self._blocks], block_dim=threads, device=dev, inputs=inputs)
             after_kernel = True
 
-        move, move_threads, spread = self._kernels.move, threads, False
+        paired = self._paired
+        move, move_threads, spread = self._movers().move, threads, False
         shared_table = self._table.shape[1] <= SHARED_TABLE_WORDS
         halos = self._smoothing_in_one_kernel() if smoothing else None
         if self.n_neurons <= SMALL_MESH:
             if k <= _SPREAD_MOST_CONTROLS and not smoothing:
-                warps, per_warp = _spread_shape(k, 1)
-                move = spread_cycle_kernel(self.n_dims, warps, per_warp, shared_table, self._rows_mode)
+                warps, per_warp = _spread_shape(k, 1, paired)
+                move = spread_cycle_kernel(self.n_dims, warps, per_warp, shared_table, self._rows_mode, paired)
                 move_threads, spread = 32 * warps, True
             else:
-                move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8))).move
+                move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8)), paired).move
 
         if fresh:
             self._launch_find()
             after_kernel = True
         if halos is not None:  # a kernel a cycle from one weights array to the other, then back in self._w
-            warps, per_warp = _spread_shape(k, halos.chunks)
+            warps, per_warp = _spread_shape(k, halos.chunks, paired)
             kernel = spread_smoothing_cycle_kernel(self.n_dims, warps, per_warp, shared_table, halos.chunks,
-                                                   halos.width)
+                                                   halos.width, paired)
             pair = (self._w, self._w_moved)
             for i in range(cycles):
                 p = (parity + i) % 2
@@ -560,6 +628,10 @@ class Som:
             else:
                 p = 1 - p
         return records
+
+    def _movers(self):
+        """The kernels of step 2 for the current controls: pair by pair when mirrored."""
+        return cycle_kernels(self.n_dims, 8, self._paired)
 
     def _block_halos(self) -> _DeviceHalos | None:
         """The block halos of the one-kernel smoothing cycle on CUDA (dense table, small mesh), uploaded once here,
@@ -617,25 +689,28 @@ class Som:
         """One cycle in consecutive runs of controls whose winners fit in the cache (each neuron still applies the
         controls in list order)."""
         parts, lo, seen = [], 0, set()
-        for c, u in enumerate(winners.tolist()):
-            if u not in seen and len(seen) == self._cache.size:
+        unit = 2 if self._paired else 1  # a mirrored pair moves together: never split between parts
+        for c in range(0, len(winners), unit):
+            group = set(winners[c:c + unit].tolist())
+            if len(seen | group) > self._cache.size:
                 parts.append((lo, c))
                 lo, seen = c, set()
-            seen.add(u)
+            seen |= group
         parts.append((lo, len(winners)))
         kern, dev, cache = self._kernels, self.device, self._cache
+        movers = self._movers()
         moved = self._w_moved if smoothing else self._w
         source = self._w
         c_in, c_out = self._cycle[0], self._cycle[1]
         for i, (lo, hi) in enumerate(parts):
             cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), self._d_max)
             if dev == "cpu":
-                wp.launch(kern.move_part, dim=1, device=dev,
+                wp.launch(movers.move_part, dim=1, device=dev,
                           inputs=[source, moved, self._c, lo, hi, self._table, self._distances, self._slot_of,
                                   self._keys, c_in, 0, self.n_neurons, self._stalled])
             else:
                 find_next = int(not smoothing and i == len(parts) - 1)
-                wp.launch_tiled(kern.move, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
+                wp.launch_tiled(movers.move, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
                                 inputs=[source, moved, self._c, lo, hi, self._k_eff, self._m, self._table,
                                         self._distances, self._slot_of, self._keys, c_in, c_out, find_next,
                                         self._stalled])
@@ -656,11 +731,15 @@ class Som:
         self._winners_valid = True
 
 
-def _spread_shape(controls: int, least_warps: int) -> tuple[int, int]:
-    """(warps, controls a warp) of a spread cycle kernel: at most _SPREAD_MOST_WARPS warps, at least least_warps."""
+def _spread_shape(controls: int, least_warps: int, paired: bool = False) -> tuple[int, int]:
+    """(warps, controls a warp) of a spread cycle kernel: at most _SPREAD_MOST_WARPS warps, at least least_warps;
+    with `paired` an even number of slots (warps x per_warp), so that no pair lacks its second slot."""
     per_warp = -(-controls // _SPREAD_MOST_WARPS)
     warps = max(-(-controls // per_warp), least_warps)
-    return warps, -(-controls // warps)
+    per_warp = -(-controls // warps)
+    if paired and (warps * per_warp) % 2:
+        warps += 1  # odd x odd: warps < _SPREAD_MOST_WARPS (8 is even), so one more warp still fits
+    return warps, per_warp
 
 
 class _DeviceHalos:
