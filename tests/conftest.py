@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import sys
+import tempfile
 
 import numpy as np
 import pytest
@@ -16,6 +17,10 @@ import pytest
 _HERE = os.path.dirname(os.path.abspath(__file__))
 if _HERE not in sys.path:
     sys.path.insert(0, _HERE)
+
+# Autosaves, certificates and history spills of every session the tests make (and of the servers they start, which
+# inherit the environment) go to a folder of this run, never to the user's data directory.
+os.environ["SOMWIDGET_DATA_DIR"] = tempfile.mkdtemp(prefix="somwidget-test-data-")
 
 
 def _cuda_device_count() -> int:

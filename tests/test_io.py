@@ -59,12 +59,13 @@ def test_load_mesh_round_trip(tmp_path, ext):
     np.testing.assert_allclose(t["centre"], [3.0, -2.0, 1.0], atol=1e-6)
     assert t["scale"] == pytest.approx(2.0 / 20.0, rel=1e-6)
     assert preset.meta["source"] == str(path)
-    # three or more default controls, 3-D, just outside the mesh
-    assert preset.controls.shape[0] >= 3 and preset.controls.shape[1] == 3
-    outside = (preset.controls > hi + 0.1) | (preset.controls < lo - 0.1)
-    assert outside.any(axis=1).all()
+    # the person's own shape: kept as it is, six 3-D controls on its vertices, spread over it
+    assert not preset.grow
+    assert preset.controls.shape == (6, 3)
     gaps = np.sqrt(((preset.controls[:, None] - preset.weights[None]) ** 2).sum(-1)).min(axis=1)
-    assert (gaps < 0.5).all()  # near the mesh
+    np.testing.assert_array_equal(gaps, 0.0)
+    apart = np.sqrt(((preset.controls[:, None] - preset.controls[None]) ** 2).sum(-1))
+    assert apart[~np.eye(6, dtype=bool)].min() > 0.5  # spread, not bunched (the mesh spans 2)
     som = preset.make_som(device="cpu")
     assert som.step(2) == 2
 
@@ -239,7 +240,7 @@ def assert_states_equal(a: dict, b: dict):
     for key in ("weights", "start_weights", "controls"):
         np.testing.assert_array_equal(a[key], b[key])
         assert b[key].dtype == np.float32
-    for key in ("preset", "display", "iterations", "iteration", "l_start", "l_end", "smoothing", "mirror",
+    for key in ("preset", "display", "iterations", "iteration", "l_start", "l_end", "smoothing", "reach", "mirror",
                 "smooth_dims", "layout"):
         assert a[key] == b[key], key
     if a["metric_weights"] is None:
@@ -264,6 +265,7 @@ def test_session_round_trip(tmp_path, name):
     som.step(7)
     som.set_controls(som.controls + 0.1)
     som.step(3)
+    assert som.iteration == som.restart_iteration + 3
     state = io.session_state(p, som)
     path = tmp_path / "session.somwidget"  # any extension: written as it is, no ".npz" appended
     io.save_session(path, state)
@@ -274,14 +276,19 @@ def test_session_round_trip(tmp_path, name):
         assert all(z[k].dtype != object for k in z.files)
     back = io.load_session(path)
     assert back["format_version"] == io.SESSION_FORMAT_VERSION
-    assert back["iteration"] == 3 and back["preset"] == name
+    assert back["iteration"] == som.iteration and back["preset"] == name and back["reach"] == p.reach
     assert_states_equal(state | {"smooth_dims": tuple(state["smooth_dims"]), "mirror": tuple(state["mirror"])}, back)
-    # a saved session comes back to life: same start, controls and settings; carry on from the saved weights
+    # a saved session comes back to life: same start, controls and settings; carry on exactly from the saved
+    # weights and s, as the saved run would have gone on
     again = io.preset_from_session(back)
     som2 = again.make_som(device="cpu")
-    som2.set_weights(back["weights"])
+    som2.restore(back["weights"], back["iteration"])
     np.testing.assert_array_equal(som2.weights, som.weights)
     np.testing.assert_array_equal(som2.controls, som.controls)
+    assert som2.reach == som.reach and som2.iteration == som.iteration
+    som.train()
+    som2.train()
+    np.testing.assert_array_equal(som2.weights, som.weights)
     # a loaded state saves again unchanged
     io.save_session(tmp_path / "again.npz", back)
     assert_states_equal(back, io.load_session(tmp_path / "again.npz"))

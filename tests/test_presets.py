@@ -75,11 +75,19 @@ def test_every_preset_builds_valid_and_deterministic(name):
     np.testing.assert_array_equal(p.controls, q.controls)
     np.testing.assert_array_equal(p.topology.edges, q.topology.edges)
     assert p.weights is not q.weights
-    # every control sits outside or on the start shape's reach: none coincides with a start vertex
+    # a case study's controls lie beyond its generic start shape, which grows towards them; a general shape is kept
+    # as it is, with its controls on its own nodes, spread over it
     pos = p.weights[:, list(p.layout.position)]
     ctl = p.controls[:, list(p.layout.position)]
     gaps = np.sqrt(((ctl[:, None, :] - pos[None, :, :]) ** 2).sum(-1)).min(axis=1)
-    assert (gaps > 0.05).all()
+    assert p.grow == (name in ("space-grid", "car", "lines"))
+    if p.grow:
+        assert (gaps > 0.05).all()
+    else:
+        np.testing.assert_array_equal(gaps, 0.0)
+        apart = np.sqrt(((ctl[:, None, :] - ctl[None, :, :]) ** 2).sum(-1))
+        size = np.linalg.norm(pos.max(axis=0) - pos.min(axis=0))
+        assert apart[~np.eye(len(ctl), dtype=bool)].min() > 0.2 * size
     # every preset is centred: on y = 0 exactly (bounding box), its centroid at the origin. (The car's bounding box
     # is not centred in x: 25 longitudes put a vertex at the nose but none exactly at the tail.)
     assert pos[:, 1].min() == -pos[:, 1].max()
@@ -119,7 +127,8 @@ def test_space_grid_is_the_papers_lattice():
     assert p.topology.d_max == 45
     assert p.layout.names == ("x", "y", "z") and p.layout.colour_space == "none"
     assert p.controls.shape == (8, 3) and p.mirror == ()
-    assert (p.iterations, p.l_start, p.l_end, p.smoothing) == (1000, 0.3, 0.03, 0.2)
+    assert (p.iterations, p.l_start, p.l_end, p.smoothing) == (1000, 0.3, 0.03, P.SPACE_GRID_SMOOTHING)
+    assert 0 < P.SPACE_GRID_SMOOTHING and p.reach == P.SPACE_GRID_REACH
     assert p.display == "points"
     assert p.weights.min() == -7.5 and p.weights.max() == 7.5
     # spacing 1: every edge joins points one unit apart along one axis

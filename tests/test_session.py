@@ -123,12 +123,12 @@ def test_move_control_restarts_schedule_and_mesh_follows(session):
     np.testing.assert_allclose(after.effective_controls[9 + 2, :3], target * [1, -1, 1])
     d_after = _nearest(after.positions, target)
     assert d_after < 0.5 * d_before
-    # the schedule restarts from the latest weights, not from the start mesh
+    # the schedule restarts locally from the latest weights, not from the start mesh: s0 = floor((1 - reach) S)
     session.pause()
     session.move_control(2, [3.0, 1.0, 0.5])
     assert session.wait_applied(10)
     paused = session.frame
-    assert paused.iteration == 0
+    assert paused.iteration == 940 and session.parameters["reach"] == 0.06
     np.testing.assert_array_equal(paused.weights, after.weights)
 
 
@@ -484,7 +484,8 @@ def test_a_refused_intent_is_rolled_back_and_the_rest_of_its_batch_still_lands(m
 
         monkeypatch.setattr(Som, "smoothing", property(smoothing.fget, refuse))
         target = np.float32([2.5, 0.7, 0.3])
-        with s._som_lock:  # hold the training thread off: the three intents reach it as one batch
+        # hold the training thread off: the three intents of one gesture (one undo step) reach it as one batch
+        with s._som_lock, s.gesture():
             s.set_smoothing(0.3)
             s.move_control(2, target)
             s.set_l_start(0.45)

@@ -139,8 +139,8 @@ def test_set_controls_bad_values():
     assert som.iteration == 3
     np.testing.assert_array_equal(som.weights, before)
     np.testing.assert_array_equal(som.controls, _c())
-    som.set_controls(_c(128))  # 256 effective: accepted
-    assert som.iteration == 0
+    som.set_controls(_c(128))  # 256 effective: accepted, a local restart
+    assert som.iteration == som.restart_iteration
 
 
 def test_set_weights_bad_values():

@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from . import checks
-from .presets import DISPLAYS, XYZ, FeatureLayout, Preset, colours_of, line_display_mesh, positions_of
+from .som import DEFAULT_REACH
+from .presets import DISPLAYS, XYZ, FeatureLayout, Preset, colours_of, controls_on, line_display_mesh, positions_of
 from .topology import Topology
 
 #: The default vertex limit of `load_mesh`: the dense distance table's cap (2^16 neurons).
@@ -22,8 +23,6 @@ MAX_VERTICES = 65536
 EXPORT_FORMATS = ("obj", "ply", "glb")
 #: The session file format this module writes; `load_session` reads this version and older ones.
 SESSION_FORMAT_VERSION = 1
-#: How far (in the normalised units of a loaded mesh, whose longest side is 2) default controls sit outside it.
-CONTROL_PUSH = 0.25
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -40,8 +39,9 @@ def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
     The mesh is normalised: its bounding box is centred on the origin (so it lies centred on y = 0, ready for the
     xz-plane mirror) and scaled so its longest side spans [-1, 1]. `preset.meta["transform"]` holds
     {"centre": (3,) floats, "scale": float} with normalised = (original - centre) * scale; pass it to
-    `export_mesh(..., transform=...)` to write the original frame back. Default controls: four, one beyond each of
-    the extreme vertices along +x, -x, +y and +z, pushed CONTROL_PUSH outward.
+    `export_mesh(..., transform=...)` to write the original frame back. The mesh is the person's own shape
+    (`grow` False: shown as it is, nothing trains until they act), with six controls on its vertices, spread over
+    it (`presets.controls_on`).
     """
     import trimesh
 
@@ -105,17 +105,8 @@ def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
     return Preset(
         name=p.stem or p.name, title=p.name,
         description=f"Loaded from {p.name}: {n} vertices, {len(mesh.faces)} triangles.",
-        topology=topology, weights=points, controls=default_controls(points), layout=XYZ, display="surface",
+        topology=topology, weights=points, controls=controls_on(points), layout=XYZ, display="surface",
         meta={"source": str(p), "transform": {"centre": tuple(float(c) for c in centre), "scale": scale}})
-
-
-def default_controls(points, push: float = CONTROL_PUSH) -> np.ndarray:
-    """Four 3-D controls just outside a point set: beyond its extreme points along +x, -x, +y and +z."""
-    pts = np.asarray(points, np.float64)
-    out = []
-    for d in np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float64):
-        out.append(pts[int(np.argmax(pts @ d))] + push * d)
-    return np.asarray(out, np.float32)
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -207,7 +198,7 @@ SESSION_REQUIRED = ("weights", "start_weights", "controls", "topology", "layout"
 #: Keys a session state may have, with the value used when it is absent.
 SESSION_DEFAULTS = {
     "preset": "", "display": "surface", "iterations": 1000, "l_start": 0.25, "l_end": 0.03, "smoothing": 0.0,
-    "smooth_dims": None, "metric_weights": None, "mirror": (), "iteration": 0,
+    "smooth_dims": None, "metric_weights": None, "mirror": (), "iteration": 0, "reach": DEFAULT_REACH,
 }
 
 
@@ -217,7 +208,7 @@ def save_session(path, state: dict) -> None:
     state keys (load_session returns the same, plus "format_version" and "n_vertices"):
       weights (N, n), start_weights (N, n), controls (k, n): float arrays; topology: a Topology (its faces are kept
       when it has them, else its edges); layout: a FeatureLayout; and optionally preset (str), display (str),
-      iterations, iteration (ints), l_start, l_end, smoothing (floats), smooth_dims (None or dims),
+      iterations, iteration (ints), l_start, l_end, smoothing, reach (floats), smooth_dims (None or dims),
       metric_weights (None or (n,) floats), mirror (dims). `session_state()` builds one from a Preset and a Som.
       n_vertices and format_version may be present (as in a loaded state) and are checked / ignored.
     """
@@ -241,7 +232,7 @@ def save_session(path, state: dict) -> None:
         "edges": np.asarray(topo.edges, np.int64).reshape(-1, 2),
         "iterations": np.int64(clean["iterations"]), "iteration": np.int64(clean["iteration"]),
         "l_start": np.float64(clean["l_start"]), "l_end": np.float64(clean["l_end"]),
-        "smoothing": np.float64(clean["smoothing"]),
+        "smoothing": np.float64(clean["smoothing"]), "reach": np.float64(clean["reach"]),
         "smooth_dims": np.asarray(clean["smooth_dims"] or (), np.int64),
         "smooth_dims_default": np.bool_(clean["smooth_dims"] is None),
         "metric_weights": (np.zeros(0, np.float32) if clean["metric_weights"] is None else clean["metric_weights"]),
@@ -374,6 +365,7 @@ def load_session(path, *, max_vertices: int = MAX_VERTICES) -> dict:
         "topology": topology, "layout": layout,
         "iterations": scalar("iterations", "i"), "iteration": scalar("iteration", "i"),
         "l_start": scalar("l_start", "f"), "l_end": scalar("l_end", "f"), "smoothing": scalar("smoothing", "f"),
+        "reach": scalar("reach", "f") if "reach" in data else DEFAULT_REACH,  # files before reach: the default
         "smooth_dims": None if scalar("smooth_dims_default", "b") else tuple(int(d) for d in ints("smooth_dims")),
         "metric_weights": None if scalar("metric_weights_default", "b") else get("metric_weights"),
         "mirror": tuple(int(d) for d in ints("mirror")),
@@ -418,6 +410,7 @@ def _check_state(state: dict, label: str) -> dict:
     out["l_start"] = checks.real(f"{label}: key 'l_start'", state["l_start"], 0.0, 1.0, low_open=True)
     out["l_end"] = checks.real(f"{label}: key 'l_end'", state["l_end"], 0.0, 1.0, low_open=True)
     out["smoothing"] = checks.real(f"{label}: key 'smoothing'", state["smoothing"], 0.0, 1.0)
+    out["reach"] = checks.real(f"{label}: key 'reach'", state["reach"], 0.0, 1.0, low_open=True)
     out["mirror"] = checks.dims(f"{label}: key 'mirror'", state["mirror"], n)
     if state["smooth_dims"] is not None:
         out["smooth_dims"] = checks.dims(f"{label}: key 'smooth_dims'", state["smooth_dims"], n)
@@ -437,21 +430,22 @@ def session_state(preset: Preset, som=None) -> dict:
         "start_weights": preset.weights, "weights": preset.weights, "controls": preset.controls,
         "iterations": preset.iterations, "iteration": 0, "l_start": preset.l_start, "l_end": preset.l_end,
         "smoothing": preset.smoothing, "smooth_dims": preset.smooth_dims, "metric_weights": preset.metric_weights,
-        "mirror": preset.mirror,
+        "mirror": preset.mirror, "reach": preset.reach,
     }
     if som is not None:
         state.update(weights=som.weights, controls=som.controls, iteration=som.iteration, iterations=som.iterations,
                      l_start=som.l_start, l_end=som.l_end, smoothing=som.smoothing, smooth_dims=som.smooth_dims,
-                     metric_weights=som.metric_weights, mirror=som.mirror)
+                     metric_weights=som.metric_weights, mirror=som.mirror, reach=som.reach)
     return state
 
 
 def preset_from_session(state: dict) -> Preset:
-    """The Preset a session started from (start weights, the session's controls and settings). The session's
-    current weights are state["weights"]: give them to `Som.set_weights` to carry on from where it was saved."""
+    """The Preset a session started from (start weights, the session's controls and settings; a shape kept as it
+    is). The session's current weights and s are state["weights"] and state["iteration"]: give them to
+    `Som.restore` to carry on exactly from where it was saved."""
     return Preset(
         name=state.get("preset") or "session", title=state.get("preset") or "Session", description="A saved session.",
         topology=state["topology"], weights=state["start_weights"], controls=state["controls"],
         layout=state["layout"], iterations=state["iterations"], l_start=state["l_start"], l_end=state["l_end"],
         smoothing=state["smoothing"], mirror=state["mirror"], metric_weights=state["metric_weights"],
-        display=state["display"], smooth_dims=state["smooth_dims"])
+        display=state["display"], smooth_dims=state["smooth_dims"], reach=state.get("reach", DEFAULT_REACH))

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import checks
+from .som import DEFAULT_REACH
 from .topology import Topology
 
 #: Colour spaces and the number of colour dims each one takes.
@@ -110,8 +111,13 @@ XYZ = FeatureLayout(names=("x", "y", "z"), position=(0, 1, 2), colour=(), colour
 class Preset:
     """A start mesh with its feature layout, default controls and training settings.
 
-    Besides the contract's fields: `smooth_dims` (None = the position dims) goes to the Som, and `meta` holds
-    free-form facts such as the source file and normalising transform of a mesh loaded by `io.load_mesh`.
+    Besides the contract's fields: `smooth_dims` (None = the position dims) goes to the Som, `reach` is the Som's
+    (the radius a local restart begins with), and `meta` holds free-form facts such as the source file and
+    normalising transform of a mesh loaded by `io.load_mesh`.
+
+    grow: True for the paper's case studies, which grow a shape from a generic start mesh: a session runs their
+    whole schedule when they are chosen. False for a shape that is the person's own (a general shape, an uploaded
+    mesh): it is shown as it is and nothing trains until the person acts (DESIGN.md, Restarts).
     """
 
     name: str
@@ -129,6 +135,8 @@ class Preset:
     metric_weights: np.ndarray | None = None
     display: str = "surface"
     smooth_dims: tuple[int, ...] | None = None
+    reach: float = DEFAULT_REACH
+    grow: bool = False
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -151,6 +159,8 @@ class Preset:
         self.l_start = checks.real(f"preset {self.name!r}: l_start", self.l_start, 0.0, 1.0, low_open=True)
         self.l_end = checks.real(f"preset {self.name!r}: l_end", self.l_end, 0.0, 1.0, low_open=True)
         self.smoothing = checks.real(f"preset {self.name!r}: smoothing", self.smoothing, 0.0, 1.0)
+        self.reach = checks.real(f"preset {self.name!r}: reach", self.reach, 0.0, 1.0, low_open=True)
+        self.grow = bool(self.grow)
         self.mirror = checks.dims(f"preset {self.name!r}: mirror", self.mirror, n)
         if self.smooth_dims is not None:
             self.smooth_dims = checks.dims(f"preset {self.name!r}: smooth_dims", self.smooth_dims, n)
@@ -178,13 +188,15 @@ class Preset:
         return effective_controls(self.controls, self.mirror)
 
     def make_som(self, device=None, **engine_options):
-        """A fresh `Som` with this preset's topology, start weights, controls and settings; `engine_options` go to
-        `Som` as they are (cpu_cores, distances, cache_rows)."""
+        """A fresh `Som` at s = 0 with this preset's topology, start weights, controls and settings;
+        `engine_options` go to `Som` as they are (cpu_cores, distances, cache_rows). A session shows a preset
+        that does not `grow` as it is: it then puts s at S (`Som.restore`) so that nothing trains."""
         from .som import Som
 
         return Som(self.topology, self.weights, self.controls, iterations=self.iterations, l_start=self.l_start,
                    l_end=self.l_end, smoothing=self.smoothing, smooth_dims=self.smooth_dims,
-                   metric_weights=self.metric_weights, mirror=self.mirror, device=device, **engine_options)
+                   metric_weights=self.metric_weights, mirror=self.mirror, device=device, reach=self.reach,
+                   **engine_options)
 
 
 def effective_controls(controls, mirror=()) -> np.ndarray:
@@ -195,6 +207,27 @@ def effective_controls(controls, mirror=()) -> np.ndarray:
     copy = c.copy()
     copy[:, list(mirror)] *= -1.0
     return np.concatenate([c, copy])
+
+
+def farthest_points(points, k: int) -> np.ndarray:
+    """Indices of k points spread over a point set (farthest-point sampling): the point nearest the centroid first,
+    then each time the point farthest from those taken (the lowest index on a tie). Deterministic."""
+    pts = np.asarray(points, np.float64)
+    k = min(checks.integer("k", k, 1), len(pts))
+    taken = [int(np.argmin(np.linalg.norm(pts - pts.mean(axis=0), axis=1)))]
+    nearest = np.linalg.norm(pts - pts[taken[0]], axis=1)
+    while len(taken) < k:
+        i = int(np.argmax(nearest))
+        taken.append(i)
+        nearest = np.minimum(nearest, np.linalg.norm(pts - pts[i], axis=1))
+    return np.asarray(taken, np.int64)
+
+
+def controls_on(weights, k: int = 6) -> np.ndarray:
+    """k controls sitting on a shape's own nodes, spread over it (farthest-point samples): a shape kept as it is
+    has its controls on it, so that nothing pulls it before the person does."""
+    w = np.asarray(weights, np.float32)
+    return w[farthest_points(w[:, :3], k)].copy()
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -422,6 +455,14 @@ CAR_RADII = (2.0, 0.85, 0.6)
 CAR_LON, CAR_RINGS = 25, 24
 
 
+#: lambda of the space grid's Laplacian step: enough to keep the lattice even without holding it back from the
+#: controls (at 0.2 it stopped 12% of its size short of them, and every restart shrank it further).
+SPACE_GRID_SMOOTHING = 0.02
+#: Its restarts begin a little wider than the default (0.06), so that the smoothed lattice still reaches a moved
+#: control to within 1% of its size (BENCHMARKS.md, Local restarts).
+SPACE_GRID_REACH = 0.08
+
+
 def space_grid() -> Preset:
     """Case study 1: a 16^3 lattice (6-neighbour synapses, d_max 45) pulled by 8 three-dimensional controls."""
     edges, pts = lattice(16, 16, 16, spacing=1.0)
@@ -440,7 +481,8 @@ def space_grid() -> Preset:
         description="Case study 1 of Felbrich et al. 2018: a 16 x 16 x 16 lattice of neurons joined to their six "
                     "neighbours, shaped by 8 controls, with one Laplacian smoothing step per cycle.",
         topology=Topology.from_edges(edges, len(pts)), weights=pts, controls=controls, layout=XYZ,
-        iterations=1000, l_start=0.3, l_end=0.03, smoothing=0.2, display="points")
+        iterations=1000, l_start=0.3, l_end=0.03, smoothing=SPACE_GRID_SMOOTHING, display="points", grow=True,
+        reach=SPACE_GRID_REACH)
 
 
 def _car_start() -> tuple[Topology, np.ndarray]:
@@ -472,7 +514,7 @@ def car() -> Preset:
                     "with 5-D nodes (x, y, z, hue, saturation); 9 controls mirrored across the xz-plane make 18, "
                     "and the body takes on their colours.",
         topology=topo, weights=start, controls=controls, layout=layout,
-        iterations=1000, l_start=0.25, l_end=0.03, mirror=(1,), display="surface")
+        iterations=1000, l_start=0.25, l_end=0.03, mirror=(1,), display="surface", grow=True)
 
 
 def lines() -> Preset:
@@ -505,45 +547,47 @@ def lines() -> Preset:
                     "direction, hue, length), drawn as coloured lines whose neighbours are joined by quads; 8 "
                     "controls mirrored across the xz-plane (root y and direction y) make 16.",
         topology=topo, weights=start, controls=controls, layout=layout,
-        iterations=1000, l_start=0.25, l_end=0.03, mirror=(1, 4), display="lines")
+        iterations=1000, l_start=0.25, l_end=0.03, mirror=(1, 4), display="lines", grow=True)
 
 
+# The general shapes below are kept as they are (grow False): each is shown as built, with controls on its own nodes
+# (controls_on), and trains only when the person moves, adds or removes a control, changes a setting or presses
+# Train. They have no smoothing: a Laplacian step shrinks any curved shape a little at every restart.
 def lattice_preset() -> Preset:
-    """A small 8^3 lattice spanning [-1, 1]^3 with 4 controls and light smoothing (0.05: at 0.2 a lattice this
-    small shrinks to about half its size and stops well short of the controls)."""
+    """A small 8^3 lattice spanning [-1, 1]^3 with 6 controls on its nodes."""
     edges, pts = lattice(8, 8, 8, spacing=2.0 / 7.0)
-    controls = np.array([[1.45, 0.3, 0.5], [-1.4, -0.6, 0.2], [0.2, 1.4, -0.9], [-0.4, -0.2, 1.5]], np.float32)
     return Preset(
-        name="lattice", title="Lattice", description="An 8 x 8 x 8 lattice (6-neighbour synapses) with 4 controls.",
-        topology=Topology.from_edges(edges, len(pts)), weights=pts, controls=controls, layout=XYZ,
-        l_start=0.3, smoothing=0.05, display="points")
+        name="lattice", title="Lattice", description="An 8 x 8 x 8 lattice (6-neighbour synapses) with 6 controls "
+                                                     "on its nodes: drag one to pull the lattice.",
+        topology=Topology.from_edges(edges, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
+        l_start=0.3, display="points")
 
 
 def grid_preset() -> Preset:
-    """An open 32 x 32 sheet in the xy-plane (z = 0), spanning [-1, 1]^2, with 4 controls above and below."""
+    """An open 32 x 32 sheet in the xy-plane (z = 0), spanning [-1, 1]^2, with 6 controls on it."""
     faces, pts = open_grid(32, 32)
-    controls = np.array([[0.35, 0.25, 0.8], [-0.6, -0.5, -0.45], [0.75, -0.65, 0.35], [-0.7, 0.6, 0.55]], np.float32)
     return Preset(
-        name="grid", title="Grid", description="An open 32 x 32 quad sheet lying in the xy-plane, with 4 controls.",
-        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls, layout=XYZ)
+        name="grid", title="Grid", description="An open 32 x 32 quad sheet lying in the xy-plane, with 6 controls on "
+                                               "it: drag one up or down to shape the sheet.",
+        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ)
 
 
 def sphere_preset() -> Preset:
-    """A unit UV sphere (32 longitudes x 15 rings + 2 poles = 482 vertices) with 4 controls outside it."""
+    """A unit UV sphere (32 longitudes x 15 rings + 2 poles = 482 vertices) with 6 controls on it."""
     faces, pts = uv_ellipsoid(32, 15, (1.0, 1.0, 1.0))
-    controls = np.array([[1.5, 0.2, 0.4], [-0.5, -1.3, -0.6], [0.3, 0.6, 1.6], [-0.9, 0.8, -1.1]], np.float32)
     return Preset(
-        name="sphere", title="Sphere", description="A UV sphere of quads and pole triangles, with 4 controls.",
-        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls, layout=XYZ)
+        name="sphere", title="Sphere", description="A UV sphere of quads and pole triangles, with 6 controls on it: "
+                                                   "drag one to push or pull the surface.",
+        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ)
 
 
 def torus_preset() -> Preset:
-    """A closed quad torus (48 x 16 = 768 vertices, R 1, r 0.35) with 4 controls."""
+    """A closed quad torus (48 x 16 = 768 vertices, R 1, r 0.35) with 6 controls on it."""
     faces, pts = torus(48, 16, 1.0, 0.35)
-    controls = np.array([[1.75, 0.3, 0.2], [-0.5, -1.1, 0.9], [0.0, 0.0, -0.8], [-1.2, 0.9, 0.4]], np.float32)
     return Preset(
-        name="torus", title="Torus", description="A periodic quad torus around the z-axis, with 4 controls.",
-        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls, layout=XYZ)
+        name="torus", title="Torus", description="A periodic quad torus around the z-axis, with 6 controls on it: "
+                                                 "drag one to reshape the ring.",
+        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ)
 
 
 PRESETS: dict[str, Callable[[], Preset]] = {

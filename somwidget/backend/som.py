@@ -49,7 +49,7 @@ _MAX_TABLE_ENTRIES = 1 << 29
 #: The neighbourhood radius a restart begins with, as a share of the full radius sigma (DESIGN.md, Restarts). Chosen
 #: by measurement on the car, the space grid and a torus (BENCHMARKS.md, "Local restarts"): the clay follows a moved
 #: control to within 1% of the model's size while the far half of the mesh stays put and nothing collapses.
-DEFAULT_REACH = 0.08
+DEFAULT_REACH = 0.06
 
 
 def restart_iteration(reach: float, iterations: int) -> int:
@@ -67,7 +67,7 @@ class Som:
     distances: "dense" reads D[u, v] from the topology's dense N x N table (N <= 65,536); "rows" computes the
     distance rows of the current winners on demand and keeps the `cache_rows` most recently used on the device
     (None: as many as fit in 1 GiB on the CPU, on a GPU in a sixteenth of its memory up to 8 GiB; at least 512 and at
-    most 4096); None picks dense up to 65,536 neurons, else rows.
+    most 4096; 2 at the least); None picks dense up to 65,536 neurons, else rows.
     Both give the same weights.
 
     reach (0, 1]: the neighbourhood radius a restart begins with, as a share of the full radius (DESIGN.md,
@@ -761,7 +761,7 @@ class _RowCache:
             budget = _CACHE_BYTES["cpu"] if device == "cpu" else min(_CACHE_BYTES["cuda"],
                                                                      wp.get_device(device).total_memory // 16)
             size = max(2 * MAX_CONTROLS, min(_CACHE_MOST_ROWS, budget // (4 * n)))
-        self.size = min(size, n)
+        self.size = min(max(size, 2), n)  # two at least: a mirrored pair's winners move in the same part
         self.device = device
         self.rows = wp.empty((self.size, n), dtype=wp.int32, device=device)
         self.slot_of = wp.full(n, -1, dtype=wp.int32, device=device)

@@ -7,9 +7,9 @@ server over TLS. `somwidget serve --lan` uses the functions here:
     ... ctrl.on_server_bind: apply_lan(wslink_server, cfg)   # TLS on the listening socket + the token check
     print(announcement(cfg, port))              # the URL (with ?token=...) and a QR code for the headset
 
-The certificate and its key live in `data_dir()` (~/.local/share/somwidget, or $XDG_DATA_HOME/somwidget, or
-$SOMWIDGET_DATA_DIR) and are reused while they are valid and name the address being served, so a headset that
-accepted the certificate once keeps accepting it.
+The certificate and its key live in `storage.data_dir()` ($SOMWIDGET_DATA_DIR, else the platform's data directory,
+~/.local/share/somwidget on Linux) and are reused while they are valid and name the address being served, so a
+headset that accepted the certificate once keeps accepting it.
 
 The token travels in the URL (?token=...). A request that shows it (query, cookie or `Authorization: Bearer`)
 gets a cookie (named per port, `somwidget_token_<port>`, since browsers share cookies between the ports of a host),
@@ -37,6 +37,8 @@ import ssl
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import quote
+
+from .storage import data_dir
 
 log = logging.getLogger(__name__)
 
@@ -172,15 +174,6 @@ def request_guard(check_host: bool = True):
         return await handler(request)
 
     return guard
-
-
-def data_dir() -> Path:
-    """Where somwidget keeps its certificate: $SOMWIDGET_DATA_DIR, else $XDG_DATA_HOME/somwidget, else
-    ~/.local/share/somwidget."""
-    if os.environ.get("SOMWIDGET_DATA_DIR"):
-        return Path(os.environ["SOMWIDGET_DATA_DIR"]).expanduser()
-    base = os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share"
-    return Path(base).expanduser() / "somwidget"
 
 
 def lan_address() -> str:

@@ -16,26 +16,45 @@ seconds, publishes a Frame after each step (and after each batch of intents), an
 the next intent. Listeners run on the training thread: they must return quickly (copy what they need, hand the
 frame to their own loop).
 
+Clay rules (DESIGN.md, Restarts): a control move, an added or removed control and a parameter change restart the
+schedule locally (the Som's `reach`); `reset()` runs the whole schedule from the start mesh; a preset that grows (the
+paper's case studies) runs its whole schedule when chosen, any other shape (a general shape, an uploaded mesh) is
+shown as it is until the person acts; undo, redo, a loaded session and a recovered one put everything back exactly
+and train nothing until the next intent.
+
+History: every completed gesture is one undo step (history.py): a drag from `begin_gesture()` to `end_gesture()`,
+and each other intent call (a control added, removed or recoloured, a parameter set, a reset, a preset, a mesh, a
+loaded session); the same parameter set again within PARAMETER_STEP_SECONDS joins its step. Autosave: the latest
+state goes to disk after each step and whenever training settles (storage.py); `Session.recover()` brings back a
+session that did not close cleanly.
+
 This module must not import trame, pyvista or any other UI package.
 """
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import dataclasses
 import logging
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from ..backend import checks
 from ..backend import presets as _presets
+from ..backend.metrics import nearest_distances
 from ..backend.presets import FeatureLayout, Preset
 # The colour helpers live with the layouts; importable from here for the views that already do.
 from ..backend.presets import hex_colour, parse_hex_colour, rgb_to_colour_dims  # noqa: F401
 from ..backend.som import _MAX_TABLE_ENTRIES
+from . import storage
+from .history import History, Step
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +70,23 @@ DEFAULT_MAX_VERTICES = 16384
 #: Largest |value| accepted for a control coordinate or feature.
 MAX_ABS_VALUE = 1e6
 
-PARAMETERS = ("iterations", "l_start", "l_end", "smoothing", "symmetry", "metric_weights")
+PARAMETERS = ("iterations", "l_start", "l_end", "smoothing", "reach", "symmetry", "metric_weights")
+#: Setting the same parameter again within this many seconds joins the previous undo step (a slider's drag).
+PARAMETER_STEP_SECONDS = 1.5
+#: While training, the autosave writes at most this often (it always writes when training settles).
+AUTOSAVE_SECONDS = 2.0
+
+_LIVE: weakref.WeakSet = weakref.WeakSet()
+
+
+@atexit.register
+def _close_live_sessions() -> None:
+    """A process that ends normally closes its sessions cleanly (their autosaves go); a crash leaves them."""
+    for session in list(_LIVE):
+        try:
+            session.close(timeout=2.0)
+        except Exception:  # pragma: no cover - nothing must stop the exit
+            pass
 
 
 @dataclass(frozen=True)
@@ -77,6 +112,8 @@ class Frame:
     time:               time.monotonic() when the frame was made
     applied:            how many intents the training thread had handled (applied, or refused with an error)
                         when the frame was made; intents are numbered from 1 as they are queued
+    held:               nothing trains until the next intent (after an undo, a redo, a loaded or recovered session)
+    history:            (undo steps, redo steps) available
     """
 
     seq: int
@@ -100,6 +137,8 @@ class Frame:
     preset: Preset | None = None
     time: float = field(default_factory=time.monotonic)
     applied: int = 0
+    held: bool = False
+    history: tuple[int, int] = (0, 0)
 
     @property
     def layout(self) -> FeatureLayout:
@@ -176,18 +215,21 @@ class Session:
     step_fraction: share of each frame interval spent in som.step (the rest is left to rendering)
     start:      start the training thread now (else call `start()`)
     paused:     begin paused (no training until `train()`)
+    autosave:   keep the latest state on disk (storage.py) so that `Session.recover()` can bring it back after a
+                crash; False for a session nothing should outlive
     """
 
     def __init__(self, preset: str | Preset | None = "car", device: str | None = "auto", frame_rate: float = 30.0,
                  step_fraction: float = 0.6, start: bool = True, paused: bool = False,
-                 max_vertices: int = DEFAULT_MAX_VERTICES):
+                 max_vertices: int = DEFAULT_MAX_VERTICES, autosave: bool = True):
         self.frame_rate = checks.real("frame_rate", frame_rate, 0.0, 1000.0, low_open=True)
         self.step_fraction = checks.real("step_fraction", step_fraction, 0.0, 1.0, low_open=True)
         self.max_vertices = checks.integer_text("max_vertices", max_vertices, 1, 65536)
         self.device = "auto" if device is None else device
+        self.recovered: dict | None = None  # set by `recover()`: where the state came from and when it was saved
         self._lock = threading.RLock()  # the session's own state: controls, parameters, op queue
         self._wake = threading.Condition(self._lock)
-        self._som_lock = threading.Lock()  # the Som: held by the training thread while it steps
+        self._som_lock = threading.RLock()  # the Som: held by the training thread while it steps
         self._listeners: list[FrameListener] = []
         self._ops: list[tuple[str, object, int]] = []  # (kind, payload, number of the intent)
         self._enqueued = 0  # intents queued so far; each op carries its number
@@ -205,8 +247,18 @@ class Session:
         self._frame_times: list[float] = []
         self._busy = False  # training thread is applying ops / stepping
         self._error: str | None = None
+        self._hold = False  # nothing trains until the next intent (undo, redo, a loaded or recovered session)
+        self._history = History()
+        self._gesture = 0  # 1 while a gesture (a drag) is open: its intents belong to one step
+        self._gesture_step: Step | None = None  # the step the open gesture recorded, once it changed something
+        self._last_step: tuple[str, float] = ("", 0.0)  # kind and time of the latest recorded step
+        self._unsaved = False  # a change the autosave has not written yet
+        self._saved_at = 0.0
         self._install(self._build(preset))
         self._frame = self._make_frame(0)
+        self._autosave = storage.Autosave() if autosave else None
+        _LIVE.add(self)
+        self._unsaved = True
         if start:
             self.start()
 
@@ -225,6 +277,8 @@ class Session:
             raise ValueError(f"preset {preset.name!r} has no controls; at least one is needed")
         device = None if self.device in (None, "auto") else self.device
         som = preset.make_som(device=device)
+        if not preset.grow:  # the person's own shape: shown as it is, nothing trains until they act
+            som.restore(preset.weights, som.iterations)
         return preset, som
 
     def _install(self, built: tuple[Preset, object]) -> None:
@@ -236,7 +290,7 @@ class Session:
         self._mirror_dims = default_mirror(preset)
         self._params = {
             "iterations": int(som.iterations), "l_start": float(som.l_start), "l_end": float(som.l_end),
-            "smoothing": float(som.smoothing), "symmetry": bool(som.mirror),
+            "smoothing": float(som.smoothing), "reach": float(som.reach), "symmetry": bool(som.mirror),
             "metric_weights": [float(x) for x in som.metric_weights],
         }
         self._cycle_time = 0.0
@@ -255,13 +309,20 @@ class Session:
             self._thread.start()
 
     def close(self, timeout: float = 5.0) -> None:
-        """Stop the training thread; the session accepts no more intents."""
+        """Stop the training thread; the session accepts no more intents. A clean close: its autosave goes."""
         with self._wake:
+            already = self._closed
             self._closed = True
             self._wake.notify_all()
         t = self._thread
         if t is not None and t is not threading.current_thread():
             t.join(timeout)
+        if already:
+            return
+        _LIVE.discard(self)
+        if self._autosave is not None:
+            self._autosave.close(clean=True)
+        self._history.close()
 
     def __enter__(self):
         return self
@@ -298,6 +359,7 @@ class Session:
                 self._busy = True
             t0 = time.monotonic()
             self._cycle()
+            self._autosave_if_due()
             # pace: a frame every 1 / frame_rate seconds while training; wake early for a new intent
             with self._wake:
                 if self._should_step() and not self._ops and not self._closed:
@@ -307,7 +369,7 @@ class Session:
 
     def _should_step(self) -> bool:
         # caller holds self._lock; _som is only swapped under both locks
-        return not self._paused and self._som.iteration < self._som.iterations
+        return not self._paused and not self._hold and self._som.iteration < self._som.iterations
 
     def _stopped(self) -> bool:
         """The training thread will handle no more intents: closed, never started, or stopped on an error."""
@@ -324,19 +386,26 @@ class Session:
         if frame is not None:
             self._publish(frame)
 
+    def _drain(self) -> bool:
+        """Apply every queued intent to the Som, in order (caller holds _som_lock); True if there were any."""
+        with self._lock:  # taken under the Som lock: a load_preset in between cannot strand these ops
+            ops, self._ops = self._ops, []
+            if ops:  # handled from here on, whatever happens: every later frame is made after them
+                self._applied = max(self._applied, ops[-1][2])
+                self._unsaved = True
+        som = self._som
+        for i, op in enumerate(ops):
+            self._apply_op(som, op, ops[i + 1:])
+        return bool(ops)
+
     def _apply_and_step(self) -> Frame:
         with self._som_lock:
-            with self._lock:  # taken under the Som lock: a load_preset in between cannot strand these ops
-                ops, self._ops = self._ops, []
-                if ops:  # handled from here on, whatever happens: every later frame is made after them
-                    self._applied = max(self._applied, ops[-1][2])
+            ops = self._drain()
             som = self._som
-            for i, op in enumerate(ops):
-                self._apply_op(som, op, ops[i + 1:])
             cycles = 0
             with self._lock:
-                paused = self._paused
-            if not paused and som.iteration < som.iterations:
+                stepping = self._should_step()
+            if stepping:
                 k = self._cycles_per_step
                 if ops:  # a fresh intent (a drag): a short first step gets the moved clay out sooner
                     k = max(1, k // 4)
@@ -348,6 +417,7 @@ class Session:
                 dt = time.perf_counter() - t
                 if cycles > 0:
                     self._tune(dt / cycles)
+                    self._unsaved = True
             return self._make_frame(cycles)
 
     def _error_frame(self, message: str) -> Frame | None:
@@ -375,6 +445,9 @@ class Session:
         and carry on with the other intents."""
         kind, payload, _number = op
         try:
+            if kind != "publish":
+                with self._lock:
+                    self._hold = False  # the person acted: training goes on
             self._apply(som, kind, payload)
         except Exception as exc:
             log.warning("intent %s refused by the engine: %s", kind, exc)
@@ -391,7 +464,7 @@ class Session:
         # caller holds self._lock
         if kind == "controls":
             self._controls = np.array(som.controls, dtype=np.float32)
-        elif kind in ("iterations", "l_start", "l_end", "smoothing"):
+        elif kind in ("iterations", "l_start", "l_end", "smoothing", "reach"):
             self._params[kind] = type(self._params[kind])(getattr(som, kind))
         elif kind == "mirror":
             self._params["symmetry"] = bool(som.mirror)
@@ -418,6 +491,8 @@ class Session:
             som.l_end = payload
         elif kind == "smoothing":
             som.smoothing = payload
+        elif kind == "reach":
+            som.reach = payload
         elif kind == "mirror":
             som.mirror = payload
         elif kind == "metric_weights":
@@ -427,17 +502,18 @@ class Session:
         elif kind == "weights":
             som.set_weights(payload)
         elif kind == "restart":
-            som.set_controls(som.controls)
+            som.restart()
         elif kind == "publish":
             pass
         else:  # pragma: no cover - programming error
             raise RuntimeError(f"unknown op {kind!r}")
 
-    def _enqueue(self, kind: str, payload=None) -> None:
-        # caller holds self._lock
+    def _enqueue(self, kind: str, payload=None, intent: bool = True) -> None:
+        """Queue an op for the training thread (caller holds self._lock). An intent gets the next number; the
+        session's own ops (intent False: a frame to publish) share the latest one."""
         if self._closed:
             raise RuntimeError("session is closed")
-        self._enqueued += 1
+        self._enqueued += int(intent)
         op = (kind, payload, self._enqueued)
         if kind == "controls" and self._ops and self._ops[-1][0] == "controls":
             self._ops[-1] = op  # several moves within one frame: only the latest counts
@@ -461,27 +537,23 @@ class Session:
             self._seq += 1
             seq = self._seq
             paused = self._paused
+            held = self._hold
             applied = self._applied
+            history = (self._history.undo_count, self._history.redo_count)
         s, S = int(som.iteration), int(som.iterations)
         return Frame(
-            seq=seq, generation=self._generation, iteration=s, iterations=S, running=(not paused and s < S),
+            seq=seq, generation=self._generation, iteration=s, iterations=S,
+            running=(not paused and not held and s < S),
             paused=paused, weights=_readonly(w), positions=_readonly(pos),
             colours=_readonly(_presets.colours_of(w, layout)), controls=_readonly(controls),
             control_colours=_readonly(_presets.colours_of(controls, layout)), effective_controls=_readonly(eff),
             effective_colours=_readonly(_presets.colours_of(eff, layout)), control_positions=_readonly(cpos),
             effective_positions=_readonly(epos), cycle_time=float(self._cycle_time), step_cycles=int(cycles),
-            gaps=_readonly(gaps), preset=self._preset, applied=applied)
+            gaps=_readonly(gaps), preset=self._preset, applied=applied, held=held, history=history)
 
     @staticmethod
     def _gaps(nodes: np.ndarray, points: np.ndarray) -> np.ndarray:
-        if len(points) == 0 or len(nodes) == 0:
-            return np.zeros(len(points), np.float32)
-        out = np.empty(len(points), np.float32)
-        block = max(1, 4_000_000 // max(1, len(nodes)))
-        for i in range(0, len(points), block):
-            d = points[i:i + block, None, :] - nodes[None, :, :]
-            out[i:i + block] = np.sqrt(np.min(np.einsum("kni,kni->kn", d, d), axis=1))
-        return out
+        return nearest_distances(points, nodes).astype(np.float32)
 
     def _publish(self, frame: Frame) -> None:
         with self._wake:
@@ -648,6 +720,212 @@ class Session:
             out["frame"]["positions"] = frame.positions.tolist()
         return out
 
+    # -- history: gestures, undo, redo ----------------------------------------------------------------------------
+    def begin_gesture(self) -> None:
+        """A gesture starts (a drag's press): the intents until `end_gesture()` make one undo step, recorded with
+        the state before the first of them. A gesture left open (a tab closed mid-drag) ends at the next one."""
+        with self._lock:
+            self._gesture = 1
+            self._gesture_step = None
+
+    def end_gesture(self) -> None:
+        """The gesture ends (a drag's release): the step is complete and goes to the autosave."""
+        with self._wake:
+            if not self._gesture:
+                return
+            self._gesture = 0
+            self._unsaved = True
+            self._wake.notify_all()
+
+    @contextlib.contextmanager
+    def gesture(self):
+        """`with session.gesture(): ...`: the intents inside make one undo step."""
+        self.begin_gesture()
+        try:
+            yield self
+        finally:
+            self.end_gesture()
+
+    @contextlib.contextmanager
+    def _step(self, kind: str):
+        """Around one intent: record the state before it as an undo step (unless it belongs to an open gesture that
+        has one, or repeats the same parameter within PARAMETER_STEP_SECONDS); a refused intent takes it back."""
+        with self._lock:
+            last_kind, last_time = self._last_step
+            joins = (self._gesture and self._gesture_step is not None) or (
+                kind.startswith("parameter:") and kind == last_kind
+                and time.monotonic() - last_time < PARAMETER_STEP_SECONDS)
+        step = None if joins else self._record_step()
+        try:
+            yield
+        except BaseException:
+            if step is not None:
+                with self._lock:
+                    self._history.drop_last(step)
+                    if self._gesture and self._gesture_step is step:
+                        self._gesture_step = None
+            raise
+        with self._lock:
+            if step is not None and self._gesture:
+                self._gesture_step = step
+            self._last_step = (kind, time.monotonic())
+            self._unsaved = True
+
+    def _record_step(self) -> Step:
+        """Push the current state (every queued intent applied first) as an undo step."""
+        with self._som_lock:
+            drained = self._drain()
+            with self._lock:
+                step = self._capture()
+                self._history.push(step)
+                if drained:
+                    self._enqueue("publish", intent=False)  # a frame that shows the drained intents
+        return step
+
+    def _capture(self) -> Step:
+        # caller holds _som_lock and _lock, with no intent queued
+        som = self._som
+        params = dict(self._params)
+        params["metric_weights"] = list(params["metric_weights"])
+        return Step(preset=self._preset, controls=self._controls.copy(), parameters=params, weights=som.weights,
+                    iteration=int(som.iteration))
+
+    def undo(self) -> bool:
+        """Go back one step: controls, parameters, weights and s exactly as before it, nothing trains. False if
+        there is no step to undo."""
+        return self._travel(self._history.undo)
+
+    def redo(self) -> bool:
+        """Go forward again after an undo, exactly; False if there is nothing to redo."""
+        return self._travel(self._history.redo)
+
+    def _travel(self, move) -> bool:
+        with self._lock:
+            self._gesture = 0
+        with self._som_lock:
+            self._drain()
+            with self._lock:
+                target = move(self._capture())
+            if target is None:
+                return False
+            self._apply_step(target)
+        with self._lock:
+            self._last_step = ("", 0.0)
+            self._unsaved = True
+            self._enqueue("publish", intent=False)
+        return True
+
+    def _apply_step(self, step: Step) -> None:
+        """Put a recorded state back exactly and hold (caller holds _som_lock, no intent queued)."""
+        if step.preset is not self._preset:
+            built = self._build(step.preset)
+            with self._lock:
+                self._install(built)
+        som = self._som
+        p = step.parameters
+        for name in ("iterations", "l_start", "l_end", "smoothing"):
+            if getattr(som, name) != p[name]:
+                setattr(som, name, p[name])
+        if list(som.metric_weights) != list(p["metric_weights"]):
+            som.metric_weights = np.asarray(p["metric_weights"], np.float32)
+        mirror = tuple(self._mirror_dims) if p["symmetry"] else ()
+        if som.mirror and tuple(som.mirror) != mirror:
+            som.mirror = ()
+        som.set_controls(step.controls)
+        if tuple(som.mirror) != mirror:
+            som.mirror = mirror
+        som.reach = p["reach"]
+        som.restore(step.weights, step.iteration)
+        with self._lock:
+            self._controls = np.array(step.controls, np.float32)
+            self._params = dict(p, metric_weights=list(p["metric_weights"]))
+            self._hold = True
+            self._error = None
+            self._frame = self._make_frame(0)
+
+    @property
+    def history(self) -> tuple[int, int]:
+        """(undo steps, redo steps) available now."""
+        with self._lock:
+            return self._history.undo_count, self._history.redo_count
+
+    # -- autosave and recovery ---------------------------------------------------------------------------------
+    def _autosave_if_due(self) -> None:
+        """Training thread: write the state if something changed since the last save and training has settled (or
+        AUTOSAVE_SECONDS have passed)."""
+        if self._autosave is None:
+            return
+        with self._lock:
+            if not self._unsaved or self._closed:
+                return
+            settled = not self._should_step() and not self._ops
+            if not settled and time.monotonic() - self._saved_at < AUTOSAVE_SECONDS:
+                return
+            self._unsaved = False
+            self._saved_at = time.monotonic()
+        self._submit_autosave()
+
+    def _submit_autosave(self) -> None:
+        from ..backend import io as sw_io
+
+        try:
+            state = self.session_state()
+        except Exception:  # pragma: no cover - a state that cannot be read now is saved at the next change
+            log.exception("autosave: could not read the session's state")
+            return
+        self._autosave.submit(lambda path: sw_io.save_session(path, state))
+
+    @property
+    def autosave_path(self) -> Path | None:
+        """Where this session's latest state is kept while it lives (None without autosave)."""
+        return None if self._autosave is None else self._autosave.path
+
+    def flush_autosave(self, timeout: float = 10.0) -> bool:
+        """Write the current state to the autosave now and wait until it is on disk; False at the timeout or
+        without autosave."""
+        if self._autosave is None:
+            return False
+        with self._lock:
+            self._unsaved = False
+            self._saved_at = time.monotonic()
+        self._submit_autosave()
+        return self._autosave.flush(timeout)
+
+    @classmethod
+    def recover(cls, directory=None, **options) -> Session | None:
+        """The session of the latest exit that did not close cleanly (a crash, a kill), restored exactly as its
+        autosave left it (nothing trains until the next intent); None if there is none. `options` go to Session
+        (device, start...). Its autosave is taken over: it is deleted once the new session has saved its own."""
+        from ..backend import io as sw_io
+
+        start = options.pop("start", True)
+        max_vertices = options.get("max_vertices", DEFAULT_MAX_VERTICES)
+        for path in storage.crashed(directory):
+            try:
+                state = sw_io.load_session(path, max_vertices=max_vertices)
+                saved = path.stat().st_mtime
+            except (ValueError, OSError) as exc:
+                log.warning("autosave %s cannot be read (%s): discarded", path, exc)
+                storage.discard(path)
+                continue
+            session = cls(sw_io.preset_from_session(state), start=False, **options)
+            session._restore_into(state)
+            session.recovered = {"path": str(path), "saved": saved, "preset": state["preset"]}
+            if session._autosave is not None:
+                session.flush_autosave()
+            storage.discard(path)
+            if start:
+                session.start()
+            return session
+        return None
+
+    def _restore_into(self, state: dict) -> None:
+        """Weights and s of a loaded state into the freshly built Som of its preset (which holds the rest), held."""
+        with self._som_lock, self._lock:
+            self._som.restore(np.asarray(state["weights"], np.float32), int(state["iteration"]))
+            self._hold = True
+            self._frame = self._make_frame(0)
+
     # -- intents: controls ----------------------------------------------------------------------------------------
     def _check_controls(self, controls: np.ndarray, symmetry: bool | None = None) -> None:
         if symmetry is None:
@@ -662,7 +940,7 @@ class Session:
     def move_control(self, index: int, position) -> None:
         """Move control `index` to `position`: 3 numbers (x, y, z; the other features stay) or all n features."""
         n = self._layout.n_dims
-        with self._lock:
+        with self._step("controls"), self._lock:
             i = _check_index("control", index, self._controls.shape[0])
             length = len(position) if hasattr(position, "__len__") and not isinstance(position, str) else -1
             if length == n:
@@ -678,7 +956,7 @@ class Session:
 
     def set_control_feature(self, index: int, dim: int, value) -> None:
         """Set one feature dim of control `index`."""
-        with self._lock:
+        with self._step("controls"), self._lock:
             i = _check_index("control", index, self._controls.shape[0])
             d = checks.integer_text("feature dimension", dim, 0, self._layout.n_dims - 1)
             x = checks.real(f"control {i} {self._layout.names[d]}", value, -MAX_ABS_VALUE, MAX_ABS_VALUE)
@@ -693,7 +971,7 @@ class Session:
         if np.abs(arr).max(initial=0.0) > MAX_ABS_VALUE:
             raise ValueError(f"controls: values must lie within +-{MAX_ABS_VALUE:g}")
         arr = arr.astype(np.float32)
-        with self._lock:
+        with self._step("controls"), self._lock:
             n = self._layout.n_dims
             if arr.shape[1] != n:
                 raise ValueError(f"controls: expected shape (k, {n}), got {arr.shape}")
@@ -704,7 +982,7 @@ class Session:
     def set_control_colour(self, index: int, colour) -> None:
         """Set control `index`'s colour dims from an RGB triple in [0, 1] or a '#rrggbb' string."""
         rgb = parse_hex_colour(colour) if isinstance(colour, str) else colour
-        with self._lock:
+        with self._step("colour"), self._lock:
             i = _check_index("control", index, self._controls.shape[0])
             dims = rgb_to_colour_dims(rgb, self._layout)
             controls = self._controls.copy()
@@ -715,7 +993,7 @@ class Session:
     def add_control(self, values=None) -> int:
         """Append a control (all n features; default: next to the last one); returns its index."""
         n = self._layout.n_dims
-        with self._lock:
+        with self._step("add"), self._lock:
             if values is None:
                 base = self._controls[-1].copy()
                 pos = self._frame.positions if self._frame is not None else np.zeros((1, 3), np.float32)
@@ -732,7 +1010,7 @@ class Session:
             return controls.shape[0] - 1
 
     def remove_control(self, index: int) -> None:
-        with self._lock:
+        with self._step("remove"), self._lock:
             i = _check_index("control", index, self._controls.shape[0])
             if self._controls.shape[0] <= 1:
                 raise ValueError("controls: cannot remove the last control")
@@ -742,11 +1020,11 @@ class Session:
 
     # -- intents: parameters -----------------------------------------------------------------------------------
     def set_parameter(self, name: str, value) -> None:
-        """Set one of PARAMETERS: iterations (S), l_start, l_end, smoothing, symmetry, metric_weights."""
+        """Set one of PARAMETERS: iterations (S), l_start, l_end, smoothing, reach, symmetry, metric_weights."""
         setters = {
             "iterations": self.set_iterations, "S": self.set_iterations, "l_start": self.set_l_start,
-            "l_end": self.set_l_end, "smoothing": self.set_smoothing, "symmetry": self.set_symmetry,
-            "metric_weights": self.set_metric_weights,
+            "l_end": self.set_l_end, "smoothing": self.set_smoothing, "reach": self.set_reach,
+            "symmetry": self.set_symmetry, "metric_weights": self.set_metric_weights,
         }
         if name not in setters:
             raise ValueError(f"unknown parameter {name!r}; known: {', '.join(PARAMETERS)}")
@@ -761,9 +1039,9 @@ class Session:
         return min(MAX_ITERATIONS, MAX_TABLE_ENTRIES // (d_max + 1))
 
     def set_iterations(self, value) -> None:
-        """S: cycles in a run. Restarts the schedule from the latest weights."""
+        """S: cycles in a run. Restarts the schedule locally from the latest weights."""
         s = checks.integer_text("S (iterations)", value, 1, MAX_ITERATIONS)
-        with self._lock:
+        with self._step("parameter:iterations"), self._lock:
             limit = self.max_iterations
             if s > limit:
                 d_max = int(self._preset.topology.d_max)
@@ -775,20 +1053,20 @@ class Session:
 
     def set_l_start(self, value) -> None:
         x = checks.real("l_start", value, 0.0, 1.0, low_open=True)
-        with self._lock:
+        with self._step("parameter:l_start"), self._lock:
             self._params["l_start"] = x
             self._enqueue("l_start", x)
 
     def set_l_end(self, value) -> None:
         x = checks.real("l_end", value, 0.0, 1.0, low_open=True)
-        with self._lock:
+        with self._step("parameter:l_end"), self._lock:
             self._params["l_end"] = x
             self._enqueue("l_end", x)
 
     def set_learning_rates(self, l_start, l_end) -> None:
         a = checks.real("l_start", l_start, 0.0, 1.0, low_open=True)
         b = checks.real("l_end", l_end, 0.0, 1.0, low_open=True)
-        with self._lock:
+        with self._step("parameter:rates"), self._lock:
             self._params["l_start"], self._params["l_end"] = a, b
             self._enqueue("l_start", a)
             self._enqueue("l_end", b)
@@ -796,21 +1074,29 @@ class Session:
     def set_smoothing(self, value) -> None:
         """lambda of one Laplacian step per cycle, in [0, 1]; 0 is off."""
         x = checks.real("smoothing", value, 0.0, 1.0)
-        with self._lock:
+        with self._step("parameter:smoothing"), self._lock:
             self._params["smoothing"] = x
             self._enqueue("smoothing", x)
+
+    def set_reach(self, value) -> None:
+        """How far a moved control's pull reaches when the clay follows it: the neighbourhood radius a restart
+        begins with, as a share of the whole mesh's (0, 1]; small keeps the rest of the shape, 1 regrows it all."""
+        x = checks.real("reach", value, 0.0, 1.0, low_open=True)
+        with self._step("parameter:reach"), self._lock:
+            self._params["reach"] = x
+            self._enqueue("reach", x)
 
     def set_symmetry(self, value) -> None:
         """Mirror every control across the xz-plane (the preset's mirror dims) or not."""
         on = _check_bool("symmetry", value)
-        with self._lock:
+        with self._step("parameter:symmetry"), self._lock:
             self._check_controls(self._controls, symmetry=on)
             self._params["symmetry"] = on
             self._enqueue("mirror", self._mirror_dims if on else ())
 
     def set_metric_weights(self, value) -> None:
         """One weight >= 0 per feature dim (at least one positive) for the winner search."""
-        with self._lock:
+        with self._step("parameter:metric_weights"), self._lock:
             m = _finite_vector("metric_weights", value, self._layout.n_dims)
             if (m < 0).any():
                 raise ValueError(f"metric_weights: weights must be >= 0, got {m.tolist()}")
@@ -824,18 +1110,25 @@ class Session:
             d = checks.integer_text("feature dimension", dim, 0, self._layout.n_dims - 1)
             m = list(self._params["metric_weights"])
             m[d] = checks.real(f"metric weight of {self._layout.names[d]}", value, 0.0, MAX_ABS_VALUE)
-            self.set_metric_weights(m)
+        self.set_metric_weights(m)
 
     # -- intents: run control ------------------------------------------------------------------------------
     def train(self) -> None:
-        """Resume training; a converged run (s = S) starts again from s = 0 with the latest weights."""
+        """Resume training. A settled run (s = S) or a held state restarts locally from the latest weights (one
+        undo step: the shape changes)."""
         with self._lock:
-            self._paused = False
-            self._error = None
-            if self._som.iteration >= self._som.iterations and not self._ops:
-                self._enqueue("restart")
-            else:
-                self._enqueue("publish")
+            restart = self._som.iteration >= self._som.iterations and not self._ops
+        with contextlib.ExitStack() as stack:
+            if restart:
+                stack.enter_context(self._step("train"))
+            with self._lock:
+                self._paused = False
+                self._error = None
+                if restart:
+                    self._enqueue("restart")
+                else:
+                    self._hold = False
+                    self._enqueue("publish")
 
     def pause(self) -> None:
         with self._lock:
@@ -843,13 +1136,15 @@ class Session:
             self._enqueue("publish")
 
     def reset(self) -> None:
-        """Back to the start mesh and s = 0; the controls stay."""
-        with self._lock:
+        """Back to the start mesh and s = 0: the whole schedule runs again; the controls stay."""
+        with self._step("reset"), self._lock:
             self._enqueue("reset")
 
     # -- intents: whole session -----------------------------------------------------------------------------
     def load_preset(self, preset: str | Preset) -> None:
-        """Replace the mesh, layout, controls and parameters with a preset (a name or a Preset).
+        """Replace the mesh, layout, controls and parameters with a preset (a name or a Preset): one undo step. A
+        preset that grows (the paper's case studies) runs its whole schedule; any other shape is shown as it is.
+        Choosing the current preset again brings back its own controls and start.
 
         The new Som is built in the caller's thread (this can take a while for a big mesh); a failure leaves the
         session as it was.
@@ -857,18 +1152,24 @@ class Session:
         if isinstance(preset, str) and preset not in _presets.PRESETS:
             raise ValueError(f"unknown preset {preset!r}; known presets: {', '.join(_presets.PRESETS)}")
         built = self._build(preset)
+        with self._step("preset"):
+            self._replace(built)
+
+    def _replace(self, built, hold: bool = False) -> None:
         with self._som_lock, self._lock:
             if self._closed:
                 raise RuntimeError("session is closed")
             self._ops.clear()
             self._applied = self._enqueued  # the cleared intents belonged to the old mesh: handled
             self._install(built)
+            self._hold = hold
             self._error = None
             self._frame = self._make_frame(0)  # `frame` matches `preset` at once; listeners get the next one
             self._enqueue("publish")
 
     def load_mesh(self, path) -> Preset:
-        """Load a mesh file (io.load_mesh) as the new start mesh; ValueError for a bad file, session unchanged."""
+        """Load a mesh file (io.load_mesh) as the new start mesh, shown as it is with controls on it; ValueError for
+        a bad file, session unchanged."""
         from ..backend import io as sw_io
 
         preset = sw_io.load_mesh(path, max_vertices=self.max_vertices)
@@ -907,8 +1208,8 @@ class Session:
             "start_weights": np.asarray(preset.weights, np.float32), "weights": snap["weights"],
             "controls": snap["controls"], "iterations": params["iterations"], "iteration": snap["iteration"],
             "l_start": params["l_start"], "l_end": params["l_end"], "smoothing": params["smoothing"],
-            "smooth_dims": preset.smooth_dims, "metric_weights": np.asarray(params["metric_weights"], np.float32),
-            "mirror": tuple(params["mirror"]),
+            "reach": params["reach"], "smooth_dims": preset.smooth_dims,
+            "metric_weights": np.asarray(params["metric_weights"], np.float32), "mirror": tuple(params["mirror"]),
         }
 
     def save(self, path) -> None:
@@ -918,34 +1219,31 @@ class Session:
         sw_io.save_session(path, self.session_state())
 
     def load(self, path) -> None:
-        """Load a session saved by `save` (io.load_session); ValueError for a bad file, session unchanged."""
+        """Load a session saved by `save` (io.load_session) exactly as it was saved, training nothing until the
+        next intent; one undo step. ValueError for a bad file, session unchanged."""
         from ..backend import io as sw_io
 
-        self.restore(sw_io.load_session(path))
+        self.restore(sw_io.load_session(path, max_vertices=self.max_vertices))
 
     def restore(self, state: dict) -> None:
-        """Rebuild the session from a loaded session state: its start mesh and settings, then its saved weights
-        (the schedule restarts at s = 0 from them). ValueError if the state does not describe a session."""
+        """Rebuild the session from a loaded session state: its start mesh, controls and settings, its weights
+        and s exactly as saved, nothing training until the next intent. ValueError if the state does not describe
+        a session."""
         from ..backend import io as sw_io
 
         try:
             preset = sw_io.preset_from_session(state)
             weights = np.asarray(state["weights"], np.float32)
+            iteration = int(state.get("iteration", 0))
         except (KeyError, TypeError) as exc:
             raise ValueError(f"session: missing or malformed entry ({exc})") from None
         if weights.shape != preset.weights.shape or not np.isfinite(weights).all():
             raise ValueError(f"session: weights have shape {weights.shape}, expected {preset.weights.shape}")
         built = self._build(preset)
-        built[1].set_weights(weights)
-        with self._som_lock, self._lock:
-            self._ops.clear()
-            self._applied = self._enqueued  # the cleared intents belonged to the old mesh: handled
-            self._install(built)
-            self._error = None
-            self._frame = self._make_frame(0)  # `frame` matches `preset` at once; listeners get the next one
-            self._enqueue("publish")
+        built[1].restore(weights, min(iteration, preset.iterations))
+        with self._step("session"):
+            self._replace(built, hold=True)
 
 
 __all__ = ["Frame", "Session", "PARAMETERS", "default_mirror", "rgb_to_colour_dims", "parse_hex_colour",
            "hex_colour"]
-
