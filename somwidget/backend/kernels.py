@@ -702,13 +702,20 @@ def rows_missing(distances: wp.array2d(dtype=wp.int32), slot_of: wp.array(dtype=
 DISTANCE_SOURCES = (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32))
 
 
+#: How step 2 applies the controls (a compile-time choice of the kernels): one by one; in mirrored pairs whose two
+#: rates never sum past 1 (every rate of the table is at most 0.5, as with l_start <= 0.5), where the scale
+#: 1 / max(1, l1 + l2) is exactly 1 and is left out; in mirrored pairs that may need it.
+SINGLES, PAIRS, SCALED_PAIRS = 0, 1, 2
+
+
 @functools.cache
-def cycle_kernels(n_dims: int, gather: int = 8, paired: bool = False) -> SimpleNamespace:
+def cycle_kernels(n_dims: int, gather: int = 8, pairs: int = SINGLES) -> SimpleNamespace:
     """The cycle's kernels for weights with n_dims features (each compiled once, on first use per device); `move`
     looks up the rates of `gather` controls at once (a multiple of 8 up to 32).
 
-    With `paired` the controls come as mirrored pairs, each original next to its copy (slots 2i, 2i + 1; the Som
-    keeps them so on the device): `move` and `move_part` apply each pair at once (`move_pair`, DESIGN.md step 2).
+    With `pairs` (PAIRS or SCALED_PAIRS) the controls come as mirrored pairs, each original next to its copy (slots 2i,
+    2i + 1; the Som keeps them so on the device): `move` and `move_part` apply each pair at once (`move_pair`,
+    DESIGN.md step 2).
 
     `move` and `move_part` are generic in `distances` (the dense table or distance rows, see `winner_row`); each
     source has its own overload. In distance rows mode a cycle whose winners lack a row stalls: the move sets
@@ -749,11 +756,13 @@ def cycle_kernels(n_dims: int, gather: int = 8, paired: bool = False) -> SimpleN
         """Step 2 for a mirrored pair: W + (l1 (A - W) + l2 (B - W)) / max(1, l1 + l2), written as
         W + (m ((A + B) - 2 W) + h (A - B)) / max(1, l1 + l2) with m, h = (l1 +- l2) / 2, which swapping the pair
         (l1 <-> l2, A <-> B) or mirroring W, A and B maps onto itself bit for bit, fused multiply-adds or not: a
-        symmetric mesh stays exactly symmetric."""
+        symmetric mesh stays exactly symmetric. With PAIRS the division by 1 is left out (the same bits)."""
         m = wp.float32(0.5) * (l1 + l2)
         h = wp.float32(0.5) * (l1 - l2)
-        scale = wp.float32(1.0) / wp.max(wp.float32(1.0), l1 + l2)
-        return w + scale * (m * ((a + b) - wp.float32(2.0) * w) + h * (a - b))
+        step = m * ((a + b) - wp.float32(2.0) * w) + h * (a - b)
+        if wp.static(pairs == SCALED_PAIRS):
+            step = step / wp.max(wp.float32(1.0), l1 + l2)
+        return w + step
 
     # -- CUDA: a thread per neuron, a block of 32 ----------------------------------------------------------
     @wp.func
@@ -865,7 +874,7 @@ def cycle_kernels(n_dims: int, gather: int = 8, paired: bool = False) -> SimpleN
                 missing = wp.max(missing, row_missing(distances, row))
                 r = rate_at(table, s, distances, row, u)
                 rates[g] = wp.where(c0 + g < c_hi, r, wp.float32(0.0))
-            if wp.static(paired):
+            if wp.static(pairs != SINGLES):
                 for g in range(0, gather, 2):
                     w = move_pair(w, rates[g], rates[g + 1], controls[wp.min(c0 + g, c_hi - 1)],
                                   controls[wp.min(c0 + g + 1, c_hi - 1)])
@@ -927,7 +936,7 @@ def cycle_kernels(n_dims: int, gather: int = 8, paired: bool = False) -> SimpleN
         hi: int,
         stalled: wp.array(dtype=wp.int32),
     ):
-        """Step 2 of cycle s for neurons lo..hi-1 and controls c_lo .. c_hi - 1 (with `paired`, pair by pair),
+        """Step 2 of cycle s for neurons lo..hi-1 and controls c_lo .. c_hi - 1 (with `pairs`, pair by pair),
         control-major so each distance row is read in order; stalls on a missing distance row."""
         s = cycle[0]
         buf = s % 3
@@ -936,7 +945,7 @@ def cycle_kernels(n_dims: int, gather: int = 8, paired: bool = False) -> SimpleN
         else:
             for v in range(lo, hi):
                 weights_out[v] = weights_in[v]
-            if wp.static(paired):
+            if wp.static(pairs != SINGLES):
                 for c in range(c_lo, c_hi, 2):
                     a = controls[c]
                     b = controls[c + 1]
@@ -1085,16 +1094,16 @@ def key_of_cycle(keys: wp.array2d(dtype=wp.uint64), s: int, c: int) -> wp.uint64
 
 @functools.cache
 def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int, table_at: int,
-                  paired: bool) -> SimpleNamespace:
+                  pairs: int) -> SimpleNamespace:
     """The steps the spread kernels share: warp g of `warps` is in charge of the controls g, g + warps, ... (at
     most `per_warp` of them), whose copies sit in shared memory from word `controls_at`; the table's row s sits
     there from word `table_at` (rows up to SHARED_TABLE_WORDS long), or, with table_at < 0, is read from the
-    table. With `paired` the controls are mirrored pairs (slots 2i, 2i + 1; warps x per_warp even)."""
-    ks = cycle_kernels(n_dims)
+    table. With `pairs` the controls are mirrored pairs (slots 2i, 2i + 1; warps x per_warp even)."""
+    ks = cycle_kernels(n_dims, 8, pairs)
     vec, distance, move_pair = ks.vec, ks.distance, ks.move_pair
     threads = 32 * warps
     slots = warps * per_warp
-    if paired and slots % 2:
+    if pairs != SINGLES and slots % 2:
         raise ValueError(f"_spread_parts: mirrored pairs need an even number of control slots, got {slots}")
 
     @wp.func
@@ -1139,9 +1148,9 @@ def _spread_parts(n_dims: int, warps: int, per_warp: int, controls_at: int, tabl
 
     @wp.func
     def apply_rates(w: vec, word: int) -> vec:
-        """Step 2 for one neuron: W <- W + rate_c (C_c - W) for every slot in list order (with `paired`, a pair at a
+        """Step 2 for one neuron: W <- W + rate_c (C_c - W) for every slot in list order (with `pairs`, a pair at a
         time: `move_pair`), the rates from shared words word, word + 32, ..."""
-        if wp.static(paired):
+        if wp.static(pairs != SINGLES):
             for c in range(0, slots, 2):  # unrolled
                 w = move_pair(w, shared_get_float(word + c * 32), shared_get_float(word + (c + 1) * 32),
                               staged_control(c), staged_control(c + 1))
@@ -1196,7 +1205,7 @@ def _contiguous(*arrays: wp.array) -> None:
 
 @functools.cache
 def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bool, rows: bool,
-                        paired: bool = False) -> wp.Kernel:
+                        pairs: int = SINGLES) -> wp.Kernel:
     """The cycle kernel of small meshes (CUDA): a block of `warps` warps per 32 neurons, warp g in charge of the
     controls g, g + warps, ... (`per_warp` of them), so that the latency-bound steps of a cycle run side by side
     rather than one after another in one warp. Same results as `cycle_kernels(n_dims).move` with find_next for a whole
@@ -1227,7 +1236,7 @@ def spread_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bo
     words = controls_at + slots * n_dims
     hop_counts = wp.types.vector(length=per_warp, dtype=wp.int32)
     hop_type = wp.int32 if rows else wp.uint16
-    parts = _spread_parts(n_dims, warps, per_warp, controls_at, table_at if shared_table else -1, paired)
+    parts = _spread_parts(n_dims, warps, per_warp, controls_at, table_at if shared_table else -1, pairs)
 
     @wp.func
     def cycle(
@@ -1328,7 +1337,7 @@ def spread_cycle_inputs(weights_in: wp.array, weights_out: wp.array, controls: w
 
 @functools.cache
 def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared_table: bool, chunks: int,
-                                  width: int, paired: bool = False) -> wp.Kernel:
+                                  width: int, pairs: int = SINGLES) -> wp.Kernel:
     """A whole cycle with smoothing in one kernel for small meshes (CUDA): `spread_cycle_kernel`'s blocks, each of
     which also moves its halo (halos.py: `chunks` chunks of 32 neurons, its own first, chunks <= warps; neurons of
     at most `width` neighbours), so that it can smooth its own neurons without waiting for the other blocks. The
@@ -1357,7 +1366,7 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
     hop_counts = wp.types.matrix(shape=(chunks, per_warp), dtype=wp.int32)
     chunk_neurons = wp.types.vector(length=chunks, dtype=wp.int32)
     near_ones = wp.types.vector(length=width, dtype=wp.int32)
-    parts = _spread_parts(n_dims, warps, per_warp, controls_at, table_at if shared_table else -1, paired)
+    parts = _spread_parts(n_dims, warps, per_warp, controls_at, table_at if shared_table else -1, pairs)
     shared_vec = parts.shared_vec
 
     @wp.func

@@ -14,9 +14,9 @@ from numpy.typing import ArrayLike
 from . import checks, dependent_launch
 from .device import resolve, warp_exclusive
 from .halos import block_halos
-from .kernels import (CUDA_BLOCK, SHARED_TABLE_WORDS, assign_slots, barrier, cycle_kernels, sched_yield_address,
-                      spread_cycle_inputs, spread_cycle_kernel, spread_smoothing_cycle_inputs,
-                      spread_smoothing_cycle_kernel)
+from .kernels import (CUDA_BLOCK, PAIRS, SCALED_PAIRS, SHARED_TABLE_WORDS, SINGLES, assign_slots, barrier,
+                      cycle_kernels, sched_yield_address, spread_cycle_inputs, spread_cycle_kernel,
+                      spread_smoothing_cycle_inputs, spread_smoothing_cycle_kernel)
 from .schedule import learning_table
 from .topology import MAX_DENSE_NEURONS, RowSearch, Topology
 
@@ -141,6 +141,13 @@ class Som:
         self._w = wp.array(start, dtype=vec, device=dev)
         self._w_moved = wp.empty_like(self._w)
         self._c = wp.zeros(MAX_CONTROLS, dtype=vec, device=dev)
+        # the effective controls as the device holds them, written on the host: on the CPU straight into the array
+        # the kernels read; on CUDA into pinned memory, from which they go up asynchronously (a drag frame waits for
+        # no copy)
+        self._c_staging = None if dev == "cpu" else wp.zeros(MAX_CONTROLS, dtype=vec, device="cpu", pinned=True)
+        self._c_uploaded = None if dev == "cpu" else wp.Event(dev)
+        self._c_rows = (self._c if self._c_staging is None else self._c_staging).numpy().reshape(MAX_CONTROLS,
+                                                                                                  self.n_dims)
         self._m = wp.array(self._metric[None, :], dtype=vec, device=dev)
         self._mask = wp.array(self._mask_of(self._smooth_dims)[None, :], dtype=vec, device=dev)
         self._keys = wp.full((3, MAX_CONTROLS), _KEY_NONE, dtype=wp.uint64, device=dev)
@@ -152,7 +159,7 @@ class Som:
         self._meet = wp.zeros(1, dtype=wp.int64, device=dev)
         self._meet_failed = wp.zeros(1, dtype=wp.int32, device=dev)
         self._graphs: dict[tuple, tuple] = {}  # key -> (graph, the packed arguments of its dependent launches)
-        self._graph_controls: tuple[int, bool] | None = None  # (k_eff, paired) the graphs were recorded for
+        self._graph_controls: tuple[int, int] | None = None  # (k_eff, pairs) the graphs were recorded for
         self._table = None
         self._build_table()
         self._upload_controls()
@@ -423,6 +430,7 @@ class Som:
             raise ValueError(f"iterations: the learning table S x (d_max + 1) = {self._iterations:,} x {d_max + 1:,} "
                              f"exceeds {_MAX_TABLE_ENTRIES:,} entries (2 GiB); use fewer iterations")
         self._table_host = learning_table(self._iterations, d_max, self._l_start, self._l_end)
+        self._table_max = float(self._table_host.max())
         self._d_max = d_max
         self._table = wp.array(self._table_host, dtype=wp.float32, device=self.device)
         self._graphs.clear()
@@ -430,25 +438,38 @@ class Som:
     def _upload_controls(self) -> None:
         """The effective controls into the fixed-size device buffer, so that the captured graphs stay valid while
         only their values change (a drag); with mirroring in pairs, each original next to its copy (slots 2i and
-        2i + 1), the order in which step 2 applies them."""
-        eff = self.effective_controls
+        2i + 1), the order in which step 2 applies them. On CUDA they go through pinned memory, asynchronously."""
+        if self._c_staging is not None:  # the last upload has left the staging buffer before it is written again
+            wp.synchronize_event(self._c_uploaded)
+        rows = self._c_rows
         k = len(self._controls)
+        k_eff = 2 * k if self._mirror else k
         if self._mirror:
-            eff = np.stack([eff[:k], eff[k:]], axis=1).reshape(-1, self.n_dims)
-        self._k_eff = eff.shape[0]
-        padded = np.zeros((MAX_CONTROLS, self.n_dims), np.float32)  # fixed size: graphs keep their pointers
-        padded[: self._k_eff] = eff
-        self._c.assign(padded)
-        if self._graph_controls != (self._k_eff, self._paired):  # the graphs hold the count and the pairing
+            rows[0:k_eff:2] = self._controls
+            rows[1:k_eff:2] = self._controls
+            for d in self._mirror:
+                rows[1:k_eff:2, d] *= -1.0
+        else:
+            rows[:k] = self._controls
+        rows[k_eff:] = 0.0
+        self._k_eff = k_eff
+        if self._c_staging is not None:
+            wp.copy(self._c, self._c_staging)
+            wp.record_event(self._c_uploaded)
+        if self._graph_controls != (self._k_eff, self._pairs):  # the graphs hold the count and the pairing
             self._graphs.clear()
-            self._graph_controls = (self._k_eff, self._paired)
+            self._graph_controls = (self._k_eff, self._pairs)
             if self.device == "cpu":
                 self._plan_cores()
         self._winners_valid = False
 
     @property
-    def _paired(self) -> bool:
-        return bool(self._mirror)
+    def _pairs(self) -> int:
+        """How step 2 applies the controls (kernels.SINGLES, PAIRS, SCALED_PAIRS): in mirrored pairs with mirroring,
+        scaled only where the table has a rate above 0.5 (two rates may then sum past 1)."""
+        if not self._mirror:
+            return SINGLES
+        return SCALED_PAIRS if self._table_max > 0.5 else PAIRS
 
     def _plan_cores(self) -> None:
         """Split the CPU cycle: neuron ranges for the move and smoothing, a thread per extra core."""
@@ -581,25 +602,25 @@ class Som:
                 wp.launch_tiled(kernel, dim=[self._blocks], block_dim=threads, device=dev, inputs=inputs)
             after_kernel = True
 
-        paired = self._paired
+        pairs = self._pairs
         move, move_threads, spread = self._movers().move, threads, False
         shared_table = self._table.shape[1] <= SHARED_TABLE_WORDS
         halos = self._smoothing_in_one_kernel() if smoothing else None
         if self.n_neurons <= SMALL_MESH:
             if k <= _SPREAD_MOST_CONTROLS and not smoothing:
-                warps, per_warp = _spread_shape(k, 1, paired)
-                move = spread_cycle_kernel(self.n_dims, warps, per_warp, shared_table, self._rows_mode, paired)
+                warps, per_warp = _spread_shape(k, 1, pairs != SINGLES)
+                move = spread_cycle_kernel(self.n_dims, warps, per_warp, shared_table, self._rows_mode, pairs)
                 move_threads, spread = 32 * warps, True
             else:
-                move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8)), paired).move
+                move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8)), pairs).move
 
         if fresh:
             self._launch_find()
             after_kernel = True
         if halos is not None:  # a kernel a cycle from one weights array to the other, then back in self._w
-            warps, per_warp = _spread_shape(k, halos.chunks, paired)
+            warps, per_warp = _spread_shape(k, halos.chunks, pairs != SINGLES)
             kernel = spread_smoothing_cycle_kernel(self.n_dims, warps, per_warp, shared_table, halos.chunks,
-                                                   halos.width, paired)
+                                                   halos.width, pairs)
             pair = (self._w, self._w_moved)
             for i in range(cycles):
                 p = (parity + i) % 2
@@ -631,7 +652,7 @@ class Som:
 
     def _movers(self):
         """The kernels of step 2 for the current controls: pair by pair when mirrored."""
-        return cycle_kernels(self.n_dims, 8, self._paired)
+        return cycle_kernels(self.n_dims, 8, self._pairs)
 
     def _block_halos(self) -> _DeviceHalos | None:
         """The block halos of the one-kernel smoothing cycle on CUDA (dense table, small mesh), uploaded once here,
@@ -689,7 +710,7 @@ class Som:
         """One cycle in consecutive runs of controls whose winners fit in the cache (each neuron still applies the
         controls in list order)."""
         parts, lo, seen = [], 0, set()
-        unit = 2 if self._paired else 1  # a mirrored pair moves together: never split between parts
+        unit = 2 if self._mirror else 1  # a mirrored pair moves together: never split between parts
         for c in range(0, len(winners), unit):
             group = set(winners[c:c + unit].tolist())
             if len(seen | group) > self._cache.size:
