@@ -28,12 +28,12 @@ def render(what, path=None, **kwargs):
 
 
 def serve(preset: str | None = None, mesh=None, host: str | None = None, port: int = 8080, device: str = "auto",
-          open_browser: bool = False, lan: bool = False):
+          open_browser: bool = False, lan: bool = False, fresh: bool = False):
     """Run the web app (what `somwidget serve` runs) until interrupted; see somwidget.frontend.app.run_server."""
     from .frontend.app import run_server
 
     return run_server(preset=preset, mesh=mesh, host=host, port=port, device=device, open_browser=open_browser,
-                      lan=lan)
+                      lan=lan, fresh=fresh)
 
 
 __all__ = ["Som", "Topology", "presets", "serve", "show", "render"]

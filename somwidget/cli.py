@@ -55,6 +55,8 @@ def _build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--open", action="store_true", help="open the app in the default web browser once it is up")
     serve.add_argument("--lan", action="store_true", help="serve on the LAN for an AR headset: HTTPS with a "
                        "self-signed certificate, an access token in the URL, and a QR code to open it")
+    serve.add_argument("--fresh", action="store_true", help="start from --preset / --mesh even if a session did not "
+                       "close cleanly (by default the app brings that session back, as its autosave left it)")
 
     bench = sub.add_parser(
         "bench",
@@ -108,6 +110,7 @@ def _serve(args: argparse.Namespace) -> int:
         device=args.device,
         open_browser=args.open,
         lan=args.lan,
+        fresh=args.fresh,
     )
     return 0
 

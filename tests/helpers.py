@@ -61,13 +61,17 @@ class Serve:
     """`python -m somwidget.cli serve --port 0 --device cpu *args`, on the port it announces.
 
     `base` is scheme://127.0.0.1:port (no trailing slash), `url` the same with "/"; `state()` reads the read-only
-    debug route GET /api/state."""
+    debug route GET /api/state. Each server has a data directory of its own (`data_dir`: autosaves, certificates),
+    so that no server recovers another one's session, unless `env` names one."""
 
     def __init__(self, *args: str, env: dict | None = None, timeout: float = 120.0):
         full_env = dict(os.environ)
+        self.data_dir = Path(tempfile.mkdtemp(prefix="somwidget-serve-data-"))
+        full_env["SOMWIDGET_DATA_DIR"] = str(self.data_dir)
         full_env["PYTHONPATH"] = os.pathsep.join([str(ROOT), full_env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
         full_env.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
         full_env.update(env or {})
+        self.data_dir = Path(full_env["SOMWIDGET_DATA_DIR"])
         self.log_path = Path(tempfile.mkdtemp(prefix="somwidget-serve-")) / "serve.log"
         self.log = open(self.log_path, "w")
         self.proc = subprocess.Popen([sys.executable, "-m", "somwidget.cli", "serve", "--port", "0", "--device", "cpu",

@@ -405,7 +405,11 @@ def test_preset_chooser_lines_and_export(browser, server, tmp_path):
         st = server.wait(lambda s: s["session"]["n_vertices"] == 6, what="the uploaded mesh")
         assert st["session"]["preset"] == "mesh:octa" and st["panel"]["error_message"] == ""
         st = server.idle()
-        assert len(st["view"]["widget_centres"]) == len(st["session"]["controls"]) == 4
+        # the person's own shape, shown as it is: nothing trained, its controls on its vertices
+        assert len(st["view"]["widget_centres"]) == len(st["session"]["controls"]) == 6
+        assert st["session"]["frame"]["iteration"] == st["session"]["frame"]["iterations"]
+        corners = np.array(st["session"]["frame"]["positions"])
+        np.testing.assert_allclose(np.abs(corners).sum(axis=1), 1.0, atol=1e-6)
         time.sleep(1.0)
         assert not_blank(view_image(page)) > 0.02
     finally:

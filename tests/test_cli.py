@@ -68,10 +68,11 @@ def test_serve_defaults_and_passes_options(monkeypatch):
     monkeypatch.setitem(sys.modules, "somwidget.frontend.app", fake)
     assert main(["serve"]) == 0
     assert calls[-1] == dict(preset=None, mesh=None, host="127.0.0.1", port=8080, device="auto", open_browser=False,
-                           lan=False)
+                           lan=False, fresh=False)
     assert main(["serve", "--preset", "car", "--host", "0.0.0.0", "--port", "9001", "--device", "cpu", "--open"]) == 0
     assert calls[-1] == dict(preset="car", mesh=None, host="0.0.0.0", port=9001, device="cpu", open_browser=True,
-                           lan=False)
+                           lan=False, fresh=False)
+    assert main(["serve", "--fresh"]) == 0 and calls[-1]["fresh"] is True
     assert main(["serve", "--mesh", "bunny.obj"]) == 0
     assert calls[-1]["mesh"] == "bunny.obj" and calls[-1]["preset"] is None
 

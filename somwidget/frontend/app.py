@@ -34,14 +34,14 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 from aiohttp import web  # noqa: E402
 from trame.app import get_server  # noqa: E402
 from trame.ui.vuetify3 import SinglePageWithDrawerLayout  # noqa: E402
-from trame.widgets import html  # noqa: E402
+from trame.widgets import client, html  # noqa: E402
 from trame.widgets import vuetify3 as v3  # noqa: E402
 from trame_pyvista import PyVistaRemoteView  # noqa: E402
 from wslink.websocket import LinkProtocol  # noqa: E402
 
 from ..backend import presets as _presets  # noqa: E402
 from . import lan as _lan  # noqa: E402
-from .session import DEFAULT_MAX_VERTICES, Frame, Session, hex_colour  # noqa: E402
+from .session import DEFAULT_MAX_VERTICES, REACH_HELP, Frame, Session, hex_colour  # noqa: E402
 from .view import SceneView, control_colours  # noqa: E402
 from .xr import attach as attach_xr  # noqa: E402
 
@@ -63,6 +63,23 @@ MIME = {"obj": "text/plain", "ply": "application/octet-stream", "glb": "model/gl
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 #: Longest file name shown back in messages and preset titles.
 MAX_SHOWN_NAME = 80
+#: The page's keyboard shortcuts: Ctrl+Z undoes, Ctrl+Shift+Z or Ctrl+Y redoes (Cmd on a Mac), except while a text
+#: field has the focus (its own undo).
+SHORTCUTS_JS = """
+if (!window.somwidgetShortcuts) {
+  window.somwidgetShortcuts = true;
+  window.addEventListener('keydown', (e) => {
+    if (!(e.ctrlKey || e.metaKey) || e.altKey || !window.trame) return;
+    const t = e.target;
+    if (t && (t.tagName === 'INPUT' || t.tagName === 'TEXTAREA' || t.isContentEditable)) return;
+    const key = e.key.toLowerCase();
+    const name = key === 'z' ? (e.shiftKey ? 'redo' : 'undo') : key === 'y' ? 'redo' : null;
+    if (!name) return;
+    e.preventDefault();
+    window.trame.trigger(name);
+  });
+}
+"""
 
 
 def _fmt(x: float, digits: int = 3) -> str:
@@ -86,8 +103,9 @@ class _ClientWatch(LinkProtocol):
 class SomApp:
     """The trame app around one Session: layout, panel callbacks, the 3-D view and the frame pump."""
 
-    def __init__(self, session: Session, server=None, title: str = "somwidget"):
+    def __init__(self, session: Session, server=None, title: str = "somwidget", fresh=None):
         self.session = session
+        self.fresh = fresh if fresh is not None else session.preset  # what "Start fresh" loads after a recovery
         self.xr_token: str | None = None  # the LAN access token, when served beyond loopback
         # on a loopback bind, answer only loopback Host names (False behind a proxy that forwards the browser's Host)
         self.check_host = True
@@ -107,6 +125,7 @@ class SomApp:
         self._latest: Frame | None = None
         self._latest_lock = threading.Lock()
         self._applied_seq = -1
+        self._history_seen = session.frame.history
         self._last_change = 0.0
         self._last_panel = 0.0
         self._panel_seq = -1
@@ -139,9 +158,13 @@ class SomApp:
             self._latest = frame
 
     def _on_drag(self, index):
+        """A sphere's drag starts (its index) or ends (None): the drag is one undo step."""
         self._last_change = time.monotonic()
         if index is not None:
+            self.session.begin_gesture()
             self._start_animation()
+        else:
+            self.session.end_gesture()
 
     def _client_connected(self, client_id) -> None:
         self.clients.add(str(client_id))
@@ -238,6 +261,10 @@ class SomApp:
             self._last_change = now
             if rebuilt:
                 self._on_rebuild()
+            elif frame.history != self._history_seen:  # an undo, a redo or a new step (from any view)
+                with self.state:
+                    self._sync_session_state()
+            self._history_seen = frame.history
             self._start_animation()
         if self._animating and self.scene.dragging is None and now - self._last_change > LINGER:
             self._stop_animation()
@@ -281,6 +308,8 @@ class SomApp:
         s.controls_ui = []
         s.features_ui = []
         s.param_errors = {}
+        s.reach_help = REACH_HELP
+        s.recovered_message = self._recovered_message()
         self._sync_session_state()
         self._update_panel(self.session.frame)
 
@@ -295,6 +324,7 @@ class SomApp:
         s.param_l_start = _fmt(p["l_start"], 6)
         s.param_l_end = _fmt(p["l_end"], 6)
         s.param_smoothing = _fmt(p["smoothing"], 6)
+        s.param_reach = float(p["reach"])
         s.param_symmetry = bool(p["symmetry"])
         s.paused = sess.paused
         layout = sess.layout
@@ -336,6 +366,7 @@ class SomApp:
                 "fps": _fmt(sess.frames_per_second, 3),
                 "n_vertices": int(frame.positions.shape[0]), "k": k, "k_eff": int(len(gaps)),
                 "max_gap": _fmt(float(gaps.max()) if len(gaps) else 0.0, 3),
+                "can_undo": frame.history[0] > 0, "can_redo": frame.history[1] > 0, "held": frame.held,
             }
             s.paused = frame.paused
             if sess.error and not s.error_message:
@@ -398,12 +429,53 @@ class SomApp:
     def reset(self) -> None:
         self.session.reset()
 
+    def undo(self) -> None:
+        self._travel(self.session.undo)
+
+    def redo(self) -> None:
+        self._travel(self.session.redo)
+
+    def _travel(self, move) -> None:
+        try:
+            move()
+        except (ValueError, RuntimeError) as exc:
+            self._error(str(exc))
+        with self.state:
+            self._sync_session_state()
+            self._update_panel(self.session.frame)
+
+    def _recovered_message(self) -> str:
+        found = self.session.recovered
+        if not found:
+            return ""
+        saved = time.strftime("%Y-%m-%d %H:%M", time.localtime(found["saved"]))
+        return (f"Recovered your session of {saved} ({found['preset'] or 'a session'}), which did not close cleanly: "
+                "everything is as its last completed step left it.")
+
+    async def reload_preset(self) -> None:
+        """The current preset again, as it starts: its own controls and start mesh (one undo step)."""
+        preset = self.session.preset
+        name = preset.name if preset.name in _presets.PRESETS else None
+        fresh = self._uploaded.get(preset.name) if name is None else name
+        if fresh is None:  # a loaded session: its start mesh with the controls it was saved with
+            fresh = preset
+        await self._replace(lambda: self.session.load_preset(fresh))
+
+    async def start_fresh(self) -> None:
+        """After a recovery: load what the server was started with (one undo step: Undo brings the recovered
+        session back)."""
+        fresh = self.fresh
+        with self.state:
+            self.state.recovered_message = ""
+        await self._replace(lambda: self.session.load_preset(fresh))
+
     def _remember_upload(self, preset) -> None:
         self._uploaded = {preset.name: preset}  # keep the latest upload only
         self._extra_presets = [{"title": f"Uploaded: {preset.title} ({preset.n_vertices} nodes)",
                                 "value": preset.name}]
 
     async def choose_preset(self, name) -> None:
+        """Load a preset chosen in the menu (the current one again: `reload_preset`)."""
         if not name or name == self.session.preset.name:
             return
         if name in self._uploaded:
@@ -587,6 +659,10 @@ class SomApp:
         server.trigger("remove_control")(self.remove_control)
         server.trigger("toggle_training")(self.toggle_training)
         server.trigger("reset")(self.reset)
+        server.trigger("undo")(self.undo)
+        server.trigger("redo")(self.redo)
+        server.trigger("start_fresh")(self.start_fresh)
+        server.trigger("reload_preset")(self.reload_preset)
         server.trigger("export_mesh")(self.export_mesh)
         server.trigger("save_session")(self.save_session)
         server.trigger("reset_camera")(lambda: (self.scene._frame_camera(self.scene.frame.positions),
@@ -640,6 +716,7 @@ class SomApp:
         body = {"session": self.session.state(positions=positions), "view": self.scene.describe(),
                 "clients": len(self.clients), "applied_frames": self.images, "animating": self._animating,
                 "panel": {"error_message": self.state.error_message, "param_S": self.state.param_S,
+                          "recovered_message": self.state.recovered_message,
                           "preset_name": self.state.preset_name}}
         return web.json_response(body, headers={"Cache-Control": "no-store"})
 
@@ -652,12 +729,17 @@ class SomApp:
                 html.Div("{{ stats.iteration }} / {{ stats.S }}", classes="mr-3 text-body-2", id="iteration-label")
                 v3.VBtn("{{ paused ? 'Train' : 'Pause' }}", id="train-button", click="trigger('toggle_training')",
                         prepend_icon=("paused ? 'mdi-play' : 'mdi-pause'",), variant="tonal", classes="mr-2")
+                v3.VBtn(icon="mdi-undo", id="undo-button", click="trigger('undo')", disabled=("!stats.can_undo",),
+                        title="Undo (Ctrl+Z)", variant="text")
+                v3.VBtn(icon="mdi-redo", id="redo-button", click="trigger('redo')", disabled=("!stats.can_redo",),
+                        title="Redo (Ctrl+Shift+Z)", variant="text", classes="mr-2")
                 v3.VBtn("Reset", id="reset-button", click="trigger('reset')", prepend_icon="mdi-restore",
-                        variant="tonal", classes="mr-2")
+                        variant="tonal", classes="mr-2", title="Back to the start mesh; the whole schedule runs again")
                 v3.VBtn(icon="mdi-crop-free", click="trigger('reset_camera')", title="Reset the camera")
             with layout.drawer as drawer:
                 drawer.width = 390
                 self._panel()
+            client.Script(SHORTCUTS_JS)
             with layout.content:
                 with v3.VContainer(fluid=True, classes="pa-0 fill-height", id="view-container"):
                     self.view = PyVistaRemoteView(self.scene.plotter, interactive_ratio=1, still_ratio=1,
@@ -675,11 +757,21 @@ class SomApp:
                       click_close="error_message = ''")
             v3.VAlert(v_if="info_message && !error_message", text=("info_message",), type="info",
                       density="compact", closable=True, classes="mb-2", click_close="info_message = ''")
+            with v3.VAlert(v_if="recovered_message", type="success", density="compact", classes="mb-2",
+                           id="recovered-alert", closable=True, click_close="recovered_message = ''"):
+                html.Div("{{ recovered_message }}")
+                v3.VBtn("Start fresh", size="small", variant="tonal", classes="mt-1", id="start-fresh",
+                        click="trigger('start_fresh')", title="Load the preset the server was started with (Undo "
+                                                           "brings the recovered session back)")
             v3.VProgressLinear(v_if="busy", indeterminate=True, classes="mb-2")
 
             # preset and files
-            v3.VSelect(v_model=("preset_name",), items=("preset_items",), label="Preset", density="compact",
-                       hide_details=True, id="preset-select", classes="mb-1", disabled=("busy",))
+            with html.Div(classes="d-flex align-center mb-1"):
+                v3.VSelect(v_model=("preset_name",), items=("preset_items",), label="Preset", density="compact",
+                           hide_details=True, id="preset-select", disabled=("busy",))
+                v3.VBtn(icon="mdi-reload", variant="text", size="small", id="reload-preset",
+                        click="trigger('reload_preset')", disabled=("busy",),
+                        title="This preset again as it starts: its own controls and start mesh")
             html.Div("{{ preset_description }}", classes="text-caption mb-2")
             v3.VFileInput(v_model=("mesh_upload",), label="Upload a mesh (OBJ, PLY, STL, OFF, GLB)",
                           density="compact", hide_details=True, prepend_icon="mdi-upload", id="mesh-upload",
@@ -709,6 +801,11 @@ class SomApp:
                                       id=f"field-{name}",
                                       raw_attrs=self._on_enter_or_change(
                                           f"trigger('set_param', ['{name}', $event.target.value])"))
+            v3.VSlider(v_model=("param_reach",), label=("'reach ' + Number(param_reach).toFixed(2)",), min=0.01,
+                       max=1.0, step=0.01, density="compact",
+                       hide_details=True, thumb_label=True, id="reach-slider", classes="mt-1",
+                       end="trigger('set_param', ['reach', $event])")
+            html.Div("{{ reach_help }}", classes="text-caption", id="reach-help")
             v3.VSwitch(v_model=("param_symmetry",), label="symmetry (mirror across the xz-plane)",
                        density="compact", hide_details=True, color="primary", id="symmetry-switch")
 
@@ -764,18 +861,21 @@ class SomApp:
                           disabled=("busy",))
 
 
-def build_app(session: Session, server=None, title: str = "somwidget") -> SomApp:
-    """The trame app for `session` on `server` (a fresh vue3 trame server by default)."""
-    return SomApp(session, server=server, title=title)
+def build_app(session: Session, server=None, title: str = "somwidget", fresh=None) -> SomApp:
+    """The trame app for `session` on `server` (a fresh vue3 trame server by default); `fresh`: the preset (a name
+    or a Preset) that "Start fresh" loads after a recovered session (default: the session's own)."""
+    return SomApp(session, server=server, title=title, fresh=fresh)
 
 
 def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080, device: str = "auto",
-               open_browser: bool = False, lan: bool = False) -> None:
+               open_browser: bool = False, lan: bool = False, fresh: bool = False) -> None:
     """Serve the app until interrupted: `somwidget serve`.
 
     preset: a preset name (default "car", case study 2); mesh: a mesh file to start from instead (io.load_mesh);
     host: interface to listen on (loopback by default; "0.0.0.0" every interface; "" is refused); port: 0 picks a
-    free one (the printed URL has it); device: "auto", "cpu", "cuda" or "cuda:N" for the training. lan: serve on
+    free one (the printed URL has it); device: "auto", "cpu", "cuda" or "cuda:N" for the training. Unless `fresh`,
+    a session that did not close cleanly (a crash, a kill) comes back as its autosave left it, and the panel says so
+    with a "Start fresh" button that loads `preset` or `mesh` instead. lan: serve on
     this machine's LAN address. Any address beyond loopback is served over HTTPS (a self-signed certificate, made
     once and reused) with an access token on every route, and the URL, certificate fingerprint and a QR code for a
     headset are printed.
@@ -794,8 +894,13 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
 
         start = sw_io.load_mesh(mesh, max_vertices=DEFAULT_MAX_VERTICES)
         start.name = f"mesh:{start.name}"
-    session = Session(start, device=device, start=False)
-    app = build_app(session)
+    session = None if fresh else Session.recover(device=device, start=False)
+    if session is not None:
+        print(f"somwidget: recovered the session that did not close cleanly ({session.recovered['path']}); "
+              "`somwidget serve --fresh` starts anew", flush=True)
+    else:
+        session = Session(start, device=device, start=False)
+    app = build_app(session, fresh=start)
     if lan_cfg is not None:
         app.xr_token = lan_cfg.token
         app.ctrl.on_server_bind.add(lambda wslink_server: _lan.apply_lan(wslink_server, lan_cfg))

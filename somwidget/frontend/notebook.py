@@ -37,7 +37,7 @@ import ipywidgets as widgets  # noqa: E402
 
 from ..backend import presets as _presets  # noqa: E402
 from ..backend.presets import Preset  # noqa: E402
-from .session import Frame, Session, hex_colour  # noqa: E402
+from .session import REACH_HELP, Frame, Session, hex_colour  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -89,8 +89,13 @@ class Panel(widgets.VBox):
         self.preset = widgets.Dropdown(description="preset", style=style, layout=wide)
         self.train_button = widgets.Button(description="Pause", icon="pause", layout=widgets.Layout(width="100px"),
                                            tooltip="Train / pause the map")
-        self.reset_button = widgets.Button(description="Reset", icon="undo", layout=widgets.Layout(width="100px"),
-                                           tooltip="Back to the start mesh (the controls stay)")
+        self.reset_button = widgets.Button(description="Reset", icon="refresh", layout=widgets.Layout(width="100px"),
+                                           tooltip="Back to the start mesh, the whole schedule again (the controls "
+                                                   "stay)")
+        self.undo_button = widgets.Button(description="Undo", icon="undo", layout=widgets.Layout(width="80px"),
+                                          tooltip="Undo the last step (a drag, a setting, a preset...)")
+        self.redo_button = widgets.Button(description="Redo", icon="repeat", layout=widgets.Layout(width="80px"),
+                                          tooltip="Redo the step undone last")
         self.progress = widgets.IntProgress(min=0, max=1, value=0, description="progress", style=style,
                                             layout=wide)
         self.status = widgets.HTML()
@@ -105,6 +110,8 @@ class Panel(widgets.VBox):
         self.smoothing = widgets.FloatSlider(description="smoothing", min=0.0, max=1.0, step=0.01,
                                              readout_format=".2f", continuous_update=False, style=style,
                                              layout=wide)
+        self.reach = widgets.FloatSlider(description="reach", min=0.01, max=1.0, step=0.01, readout_format=".2f",
+                                         continuous_update=False, style=style, layout=wide)
         self.symmetry = widgets.Checkbox(description="symmetry (mirror across the xz-plane)", indent=False)
         self.features_box = widgets.VBox()
         self.metric: list[widgets.BoundedFloatText] = []
@@ -113,11 +120,13 @@ class Panel(widgets.VBox):
 
         super().__init__([
             self.title, self.preset,
-            widgets.HBox([self.train_button, self.reset_button]),
+            widgets.HBox([self.train_button, self.undo_button, self.redo_button, self.reset_button]),
             self.progress, self.status,
             widgets.HTML(_BLOCK.format("<b>Schedule</b> <small>(alpha(s) from l_start to l_end over S cycles)"
                                        "</small>")),
-            self.S, self.l_start, self.l_end, self.smoothing, self.symmetry,
+            self.S, self.l_start, self.l_end, self.smoothing, self.reach,
+            widgets.HTML(_BLOCK.format(f"<small>{_html.escape(REACH_HELP)}</small>")),
+            self.symmetry,
             widgets.HTML(_BLOCK.format("<b>Feature dimensions</b> <small>(metric weights m<sub>j</sub> of the "
                                        "winner search)</small>")),
             self.features_box,
@@ -128,11 +137,13 @@ class Panel(widgets.VBox):
 
         for w, setter in ((self.S, session.set_iterations), (self.l_start, session.set_l_start),
                           (self.l_end, session.set_l_end), (self.smoothing, session.set_smoothing),
-                          (self.symmetry, session.set_symmetry)):
+                          (self.reach, session.set_reach), (self.symmetry, session.set_symmetry)):
             w.observe(lambda change, setter=setter: self._intent(setter, change["new"]), names="value")
         self.preset.observe(self._preset_chosen, names="value")
         self.train_button.on_click(lambda _b: self._intent(self._toggle_training))
         self.reset_button.on_click(lambda _b: self._intent(session.reset))
+        self.undo_button.on_click(lambda _b: self._intent(session.undo))
+        self.redo_button.on_click(lambda _b: self._intent(session.redo))
 
         self.refresh()
         session.add_listener(self._on_frame, replay=False)
@@ -222,6 +233,7 @@ class Panel(widgets.VBox):
             _set(self.l_start, float(p["l_start"]))
             _set(self.l_end, float(p["l_end"]))
             _set(self.smoothing, float(p["smoothing"]))
+            _set(self.reach, float(p["reach"]))
             _set(self.symmetry, bool(p["symmetry"]))
             for w, m in zip(self.metric, p["metric_weights"]):
                 _set(w, float(m))
@@ -238,6 +250,8 @@ class Panel(widgets.VBox):
             running = frame.running
             self.train_button.description = "Pause" if running else "Train"
             self.train_button.icon = "pause" if running else "play"
+            self.undo_button.disabled = frame.history[0] == 0
+            self.redo_button.disabled = frame.history[1] == 0
             self.controls_html.value = _controls_table(frame, session.layout.colour_space != "none")
             if session.error and not self.error.value:
                 self.error.value = f'<span style="color:#b00020">{_html.escape(session.error)}</span>'

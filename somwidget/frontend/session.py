@@ -22,6 +22,11 @@ paper's case studies) runs its whole schedule when chosen, any other shape (a ge
 shown as it is until the person acts; undo, redo, a loaded session and a recovered one put everything back exactly
 and train nothing until the next intent.
 
+Drags: each frame of a drag (`begin_gesture()` .. `end_gesture()`) is the local restart from the shape the drag began
+with, to the hand's latest position; so a drag ends exactly as one move there would, however many frames it took
+(restarting from the latest weights at every frame would pull the neighbourhoods of the other controls in again and
+again, wearing the rest of the shape down).
+
 History: every completed gesture is one undo step (history.py): a drag from `begin_gesture()` to `end_gesture()`,
 and each other intent call (a control added, removed or recoloured, a parameter set, a reset, a preset, a mesh, a
 loaded session); the same parameter set again within PARAMETER_STEP_SECONDS joins its step. Autosave: the latest
@@ -71,6 +76,9 @@ DEFAULT_MAX_VERTICES = 16384
 MAX_ABS_VALUE = 1e6
 
 PARAMETERS = ("iterations", "l_start", "l_end", "smoothing", "reach", "symmetry", "metric_weights")
+#: The line every panel shows under its reach slider.
+REACH_HELP = ("How far a moved control's pull spreads when the clay follows it: small keeps the rest of your shape, "
+              "1 regrows the whole mesh.")
 #: Setting the same parameter again within this many seconds joins the previous undo step (a slider's drag).
 PARAMETER_STEP_SECONDS = 1.5
 #: While training, the autosave writes at most this often (it always writes when training settles).
@@ -251,6 +259,7 @@ class Session:
         self._history = History()
         self._gesture = 0  # 1 while a gesture (a drag) is open: its intents belong to one step
         self._gesture_step: Step | None = None  # the step the open gesture recorded, once it changed something
+        self._gesture_base: np.ndarray | None = None  # that step's weights: where each frame of the drag restarts
         self._last_step: tuple[str, float] = ("", 0.0)  # kind and time of the latest recorded step
         self._unsaved = False  # a change the autosave has not written yet
         self._saved_at = 0.0
@@ -407,7 +416,9 @@ class Session:
                 stepping = self._should_step()
             if stepping:
                 k = self._cycles_per_step
-                if ops:  # a fresh intent (a drag): a short first step gets the moved clay out sooner
+                with self._lock:
+                    dragging = bool(self._gesture)
+                if ops and not dragging:  # a fresh intent: a short first step gets the change out sooner
                     k = max(1, k // 4)
                 k = max(1, min(k, som.iterations - som.iteration))
                 t = time.perf_counter()
@@ -482,7 +493,10 @@ class Session:
     @staticmethod
     def _apply(som, kind: str, payload) -> None:
         if kind == "controls":
-            som.set_controls(payload)
+            controls, base = payload
+            if base is not None:  # a drag's frame: from the shape the drag began with
+                som.restore(base, som.iterations)
+            som.set_controls(controls)
         elif kind == "iterations":
             som.iterations = payload
         elif kind == "l_start":
@@ -507,6 +521,12 @@ class Session:
             pass
         else:  # pragma: no cover - programming error
             raise RuntimeError(f"unknown op {kind!r}")
+
+    def _enqueue_controls(self, controls: np.ndarray) -> None:
+        """Queue new controls (caller holds self._lock). Inside a gesture they carry the weights the gesture began
+        from: each frame of a drag is the local restart from that shape, so a long drag does not wear down the rest
+        of the shape restart after restart (it ends as one move would)."""
+        self._enqueue("controls", (controls, self._gesture_base if self._gesture else None))
 
     def _enqueue(self, kind: str, payload=None, intent: bool = True) -> None:
         """Queue an op for the training thread (caller holds self._lock). An intent gets the next number; the
@@ -715,6 +735,7 @@ class Session:
                 "gaps": frame.gaps.tolist(), "centroid": frame.positions.mean(axis=0).tolist(),
             },
             "frames_per_second": self.frames_per_second, "error": self.error,
+            "history": list(frame.history), "held": frame.held, "recovered": self.recovered is not None,
         }
         if positions:
             out["frame"]["positions"] = frame.positions.tolist()
@@ -727,6 +748,7 @@ class Session:
         with self._lock:
             self._gesture = 1
             self._gesture_step = None
+            self._gesture_base = None
 
     def end_gesture(self) -> None:
         """The gesture ends (a drag's release): the step is complete and goes to the autosave."""
@@ -734,6 +756,7 @@ class Session:
             if not self._gesture:
                 return
             self._gesture = 0
+            self._gesture_base = None
             self._unsaved = True
             self._wake.notify_all()
 
@@ -763,11 +786,12 @@ class Session:
                 with self._lock:
                     self._history.drop_last(step)
                     if self._gesture and self._gesture_step is step:
-                        self._gesture_step = None
+                        self._gesture_step = self._gesture_base = None
             raise
         with self._lock:
             if step is not None and self._gesture:
                 self._gesture_step = step
+                self._gesture_base = step.weights
             self._last_step = (kind, time.monotonic())
             self._unsaved = True
 
@@ -952,7 +976,7 @@ class Session:
             controls = self._controls.copy()
             controls[i] = values
             self._controls = controls
-            self._enqueue("controls", controls.copy())
+            self._enqueue_controls(controls.copy())
 
     def set_control_feature(self, index: int, dim: int, value) -> None:
         """Set one feature dim of control `index`."""
@@ -963,7 +987,7 @@ class Session:
             controls = self._controls.copy()
             controls[i, d] = x
             self._controls = controls
-            self._enqueue("controls", controls.copy())
+            self._enqueue_controls(controls.copy())
 
     def set_controls(self, controls) -> None:
         """Replace every control: (k, n) finite values, 1 <= k (counting mirrored copies <= 256)."""
@@ -977,7 +1001,7 @@ class Session:
                 raise ValueError(f"controls: expected shape (k, {n}), got {arr.shape}")
             self._check_controls(arr)
             self._controls = arr.copy()
-            self._enqueue("controls", arr)
+            self._enqueue_controls(arr)
 
     def set_control_colour(self, index: int, colour) -> None:
         """Set control `index`'s colour dims from an RGB triple in [0, 1] or a '#rrggbb' string."""
@@ -988,7 +1012,7 @@ class Session:
             controls = self._controls.copy()
             controls[i, list(self._layout.colour)] = dims
             self._controls = controls
-            self._enqueue("controls", controls.copy())
+            self._enqueue_controls(controls.copy())
 
     def add_control(self, values=None) -> int:
         """Append a control (all n features; default: next to the last one); returns its index."""
@@ -1006,7 +1030,7 @@ class Session:
             controls = np.concatenate([self._controls, v[None, :]]).astype(np.float32)
             self._check_controls(controls)
             self._controls = controls
-            self._enqueue("controls", controls.copy())
+            self._enqueue_controls(controls.copy())
             return controls.shape[0] - 1
 
     def remove_control(self, index: int) -> None:
@@ -1016,7 +1040,7 @@ class Session:
                 raise ValueError("controls: cannot remove the last control")
             controls = np.delete(self._controls, i, axis=0)
             self._controls = controls
-            self._enqueue("controls", controls.copy())
+            self._enqueue_controls(controls.copy())
 
     # -- intents: parameters -----------------------------------------------------------------------------------
     def set_parameter(self, name: str, value) -> None:

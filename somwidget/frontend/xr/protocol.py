@@ -27,7 +27,8 @@ Server -> client
    offset  size       type  field
    0       4          4s    magic b"SOMF"
    4       2          u16   protocol version (1)
-   6       2          u16   flags: 1 running, 2 paused, 4 mirrored copies present
+   6       2          u16   flags: 1 running, 2 paused, 4 mirrored copies present, 8 a step to undo, 16 a step
+                              to redo
    8       4          u32   seq: the session's frame number (increases by one per published frame)
    12      4          u32   generation (matches the latest topology message)
    16      4          u32   iteration s
@@ -52,8 +53,9 @@ Client -> server: JSON text, one intent per message, at most MAX_MESSAGE_BYTES b
    {"type": "grab", "index": i}                          hold control i (0 <= i < k); refused while another
                                                          client holds it
    {"type": "move", "index": i, "position": [x, y, z]}   move a held control (model units)
-   {"type": "release", "index": i}                       let go (optionally with a last "position")
-   {"type": "reset"} | {"type": "train"} | {"type": "pause"}
+   {"type": "release", "index": i}                       let go (optionally with a last "position"); a grab to
+                                                         its release is one undo step (one gesture)
+   {"type": "reset"} | {"type": "train"} | {"type": "pause"} | {"type": "undo"} | {"type": "redo"}
    {"type": "ping", "t": number}
 
 Anything else is refused with an error message sent back (and logged) and changes nothing: binary messages,
@@ -78,7 +80,7 @@ PROTOCOL_VERSION = 1
 MAGIC = b"SOMF"
 HEADER = struct.Struct("<4sHHIIIIIHH")
 HEADER_SIZE = HEADER.size  # 32
-FLAG_RUNNING, FLAG_PAUSED, FLAG_MIRRORED = 1, 2, 4
+FLAG_RUNNING, FLAG_PAUSED, FLAG_MIRRORED, FLAG_CAN_UNDO, FLAG_CAN_REDO = 1, 2, 4, 8, 16
 #: Longest intent message accepted (bytes of UTF-8 text).
 MAX_MESSAGE_BYTES = 2048
 #: Largest |coordinate| a move may carry (model units; the presets span a few units, meshes are normalised).
@@ -91,6 +93,8 @@ INTENT_FIELDS = {
     "reset": (set(), set()),
     "train": (set(), set()),
     "pause": (set(), set()),
+    "undo": (set(), set()),
+    "redo": (set(), set()),
     "ping": ({"t"}, set()),
 }
 
@@ -261,8 +265,9 @@ def encode_frame(frame, session) -> bytes:
     cpos = np.asarray(frame.effective_positions, np.float32).reshape(-1, 3)
     ccol = control_colours(frame, session.layout.colour_space != "none")
     n, k, k_eff = len(pos), int(frame.n_controls), len(cpos)
+    undo, redo = frame.history
     flags = (FLAG_RUNNING if frame.running else 0) | (FLAG_PAUSED if frame.paused else 0) | (
-        FLAG_MIRRORED if k_eff > k else 0)
+        FLAG_MIRRORED if k_eff > k else 0) | (FLAG_CAN_UNDO if undo else 0) | (FLAG_CAN_REDO if redo else 0)
     header = HEADER.pack(MAGIC, PROTOCOL_VERSION, flags, frame.seq & 0xFFFFFFFF, frame.generation & 0xFFFFFFFF,
                          frame.iteration, frame.iterations, n, k, k_eff)
     body = b"".join([header, np.ascontiguousarray(pos, "<f4").tobytes(), np.ascontiguousarray(cpos, "<f4").tobytes(),
@@ -293,6 +298,7 @@ def decode_frame(data: bytes) -> dict:
     o += 3 * n
     ccol = np.frombuffer(data, np.uint8, 3 * k_eff, o).reshape(k_eff, 3)
     return {"flags": flags, "running": bool(flags & FLAG_RUNNING), "paused": bool(flags & FLAG_PAUSED),
+            "can_undo": bool(flags & FLAG_CAN_UNDO), "can_redo": bool(flags & FLAG_CAN_REDO),
             "seq": seq, "generation": generation, "iteration": s, "iterations": S, "n": n, "k": k, "k_eff": k_eff,
             "positions": pos, "control_positions": cpos, "colours": col, "control_colours": ccol}
 

@@ -279,6 +279,7 @@ class XRHub:
                 del self.grabs[i]
             if released:
                 self._broadcast_grabs()
+                self.session.end_gesture()  # a headset gone mid-grab: its drag is a completed step
             client.wake.set()
             sender.cancel()
             log.info("XR client %d disconnected (%d frames, %d bytes sent, %d refused)", client.id,
@@ -318,6 +319,8 @@ class XRHub:
             holder = self.grabs.get(i)
             if holder is not None and holder != client.id:
                 raise ValueError(f"grab: control {i} is held by another client")
+            if holder is None:
+                self.session.begin_gesture()  # grab to release: one undo step
             self.grabs[i] = client.id
             self._broadcast_grabs()
         elif kind in ("move", "release"):
@@ -328,6 +331,11 @@ class XRHub:
             if kind == "release":
                 del self.grabs[i]
                 self._broadcast_grabs()
+                self.session.end_gesture()
+        elif kind == "undo":
+            self.session.undo()
+        elif kind == "redo":
+            self.session.redo()
         elif kind == "reset":
             self.session.reset()
         elif kind == "train":

@@ -14,7 +14,7 @@ import { XRApp } from './xr.js';
 const $ = (id) => document.getElementById(id);
 const ui = {
   status: $('status'), error: $('error'), ar: $('enter-ar'), vr: $('enter-vr'), train: $('train'),
-  reset: $('reset'), title: $('title'),
+  reset: $('reset'), title: $('title'), undo: $('undo'), redo: $('redo'),
 };
 
 const renderer = new THREE.WebGLRenderer({ antialias: true, alpha: true });
@@ -96,6 +96,8 @@ function toggleTraining() {
 
 const menu = new Menu({
   train: toggleTraining,
+  undo: () => link.send(intents.undo()),
+  redo: () => link.send(intents.redo()),
   reset: () => link.send(intents.reset()),
   smaller: () => xr.rescale(1 / 1.25),
   bigger: () => xr.rescale(1.25),
@@ -119,6 +121,17 @@ const desktop = new Desktop({ renderer, camera, clay, grabs });
 
 ui.train.addEventListener('click', toggleTraining);
 ui.reset.addEventListener('click', () => link.send(intents.reset()));
+ui.undo.addEventListener('click', () => link.send(intents.undo()));
+ui.redo.addEventListener('click', () => link.send(intents.redo()));
+// Ctrl+Z undoes, Ctrl+Shift+Z (or Ctrl+Y) redoes; Cmd on a Mac
+window.addEventListener('keydown', (e) => {
+  if (!(e.ctrlKey || e.metaKey) || e.altKey) return;
+  const key = e.key.toLowerCase();
+  if (key === 'z' && !e.shiftKey) link.send(intents.undo());
+  else if ((key === 'z' && e.shiftKey) || key === 'y') link.send(intents.redo());
+  else return;
+  e.preventDefault();
+});
 async function enter(mode) {
   try {
     await xr.enter(mode);
@@ -150,6 +163,8 @@ function showStatus() {
   const text = parts.join(' \u00b7 ');
   ui.status.textContent = text;
   ui.train.textContent = state.paused ? 'Train' : 'Pause';
+  ui.undo.disabled = !(f && f.canUndo);
+  ui.redo.disabled = !(f && f.canRedo);
   menu.setLabel('train', state.paused ? 'Train' : 'Pause');
   menu.setStatus(f ? `${t ? t.title : ''}  ${f.iteration}/${f.iterations}  ${f.running ? 'training' : f.paused
     ? 'paused' : 'converged'}` : text);

@@ -1,4 +1,4 @@
-// The in-headset menu: a row of buttons (Train / Pause, Reset, smaller, bigger, bring here, exit) and a status
+// The in-headset menu: a row of buttons (Train / Pause, Undo, Redo, Reset, smaller, bigger, bring here, exit) and a status
 // line, drawn on canvases, floating below the clay and facing the person. Pressed by pointing a ray and pulling
 // the trigger (or pinching), or by touching a button with an index finger tip.
 
@@ -28,8 +28,8 @@ export class Menu {
     this.group = new THREE.Group();
     this.group.name = 'xr-menu';
     this.buttons = [];
-    const names = [['train', 'Train'], ['reset', 'Reset'], ['smaller', '\u2212'], ['bigger', '+'],
-      ['here', 'Bring here'], ['exit', 'Exit']];
+    const names = [['train', 'Train'], ['undo', 'Undo'], ['redo', 'Redo'], ['reset', 'Reset'], ['smaller', '\u2212'],
+      ['bigger', '+'], ['here', 'Bring here'], ['exit', 'Exit']];
     const total = names.length * W + (names.length - 1) * GAP;
     names.forEach(([name, label], i) => {
       const canvas = document.createElement('canvas');

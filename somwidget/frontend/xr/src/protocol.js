@@ -9,6 +9,8 @@ export const HEADER_SIZE = 32;
 export const FLAG_RUNNING = 1;
 export const FLAG_PAUSED = 2;
 export const FLAG_MIRRORED = 4;
+export const FLAG_CAN_UNDO = 8;
+export const FLAG_CAN_REDO = 16;
 const MAGIC = [0x53, 0x4f, 0x4d, 0x46]; // "SOMF"
 
 export function parseFrame(buffer) {
@@ -41,6 +43,8 @@ export function parseFrame(buffer) {
     flags,
     running: (flags & FLAG_RUNNING) !== 0,
     paused: (flags & FLAG_PAUSED) !== 0,
+    canUndo: (flags & FLAG_CAN_UNDO) !== 0,
+    canRedo: (flags & FLAG_CAN_REDO) !== 0,
     seq: dv.getUint32(8, true),
     generation: dv.getUint32(12, true),
     iteration: dv.getUint32(16, true),
@@ -58,5 +62,7 @@ export const intents = {
   reset: () => ({ type: 'reset' }),
   train: () => ({ type: 'train' }),
   pause: () => ({ type: 'pause' }),
+  undo: () => ({ type: 'undo' }),
+  redo: () => ({ type: 'redo' }),
   ping: (t) => ({ type: 'ping', t }),
 };
