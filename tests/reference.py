@@ -189,7 +189,7 @@ class ReferenceSom:
         smooth_dims=None,
         metric_weights=None,
         mirror: Sequence[int] = (),
-        reach: float = 0.06,  # the engine's default (DESIGN.md: chosen by measurement)
+        reach: float = 0.08,  # the engine's default (DESIGN.md: chosen by measurement)
     ):
         self.n_vertices = int(n_vertices)
         self.reach = float(reach)

@@ -169,6 +169,61 @@ def test_mouse_drag_moves_control_and_clay_follows(browser, server):
         page.close()
 
 
+def diagonal(positions) -> float:
+    p = np.asarray(positions)
+    return float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
+
+
+def test_a_one_second_drag_never_shrinks_the_clay_and_undoes_in_one_step(browser, server):
+    """Interaction: the mouse drags a control for a second; every frame the server made meanwhile (sampled from its
+    state route as they come) keeps the car at least 90% of its size while the clay follows. The drag is one undo
+    step: Ctrl+Z on the page brings back the car exactly, the Redo button the dragged one."""
+    page = open_page(browser, server)
+    try:
+        st0 = server.idle()
+        size0 = diagonal(st0["session"]["frame"]["positions"])
+        i = pick_control(page, st0)
+        c0 = np.array(st0["session"]["controls"][i][:3])
+        start = control_on_screen(page, st0, i)
+        delta = toward_centre(page, start, 110)
+        frames, stop = {}, False
+
+        def sample():
+            while not stop:
+                f = server.state(positions=True)["session"]["frame"]
+                frames[f["seq"]] = (diagonal(f["positions"]), f["iteration"])
+
+        with concurrent.futures.ThreadPoolExecutor(1) as pool:
+            sampling = pool.submit(sample)
+            mouse_drag(page, start, delta, steps=30, pause=1.0 / 30)  # one second, a move a frame
+            st1 = server.idle()
+            stop = True
+            sampling.result()
+        during = [frames[k] for k in sorted(frames) if k > st0["session"]["frame"]["seq"]]
+        assert len(during) >= 10, f"only {len(during)} frames seen during the drag"
+        least = min(d for d, _ in during) / size0
+        assert least >= 0.90, f"the clay shrank to {least:.2f} of its size during the drag"
+        assert min(s for _, s in during) >= 920  # local restarts only, never the whole schedule
+        c1 = np.array(st1["session"]["controls"][i][:3])
+        assert np.linalg.norm(c1 - c0) > 0.3
+        assert nearest(st1["session"]["frame"]["positions"], c1) < 0.02 * size0  # followed to within 2%
+        assert st1["session"]["history"][0] == st0["session"]["history"][0] + 1  # the whole drag: one step
+        page.locator("#iteration-label").click()  # the page has the focus, no text field does
+        page.keyboard.press("Control+z")
+        back = server.wait(lambda s: s["session"]["history"] == st0["session"]["history"][:1] + [1],
+                           what="Ctrl+Z")
+        assert back["session"]["held"]
+        np.testing.assert_array_equal(back["session"]["frame"]["positions"], st0["session"]["frame"]["positions"])
+        np.testing.assert_array_equal(back["session"]["controls"], st0["session"]["controls"])
+        page.locator("#redo-button").click()
+        again = server.wait(lambda s: s["session"]["history"][1] == 0, what="Redo")
+        np.testing.assert_array_equal(again["session"]["frame"]["positions"], st1["session"]["frame"]["positions"])
+        page.keyboard.press("Control+z")  # leave the car as the module's other tests expect it
+        server.wait(lambda s: s["session"]["history"][1] == 1, what="Ctrl+Z again")
+    finally:
+        page.close()
+
+
 def test_panel_sets_schedule_and_refuses_bad_values(browser, server):
     page = open_page(browser, server)
     try:

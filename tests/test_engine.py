@@ -436,7 +436,7 @@ def test_set_controls_restarts_from_latest_weights(device):
     _assert_matches(som, ref, _scale(case.points, C1, C2))
 
 
-@pytest.mark.parametrize(("reach", "s0"), [(1.0, 0), (0.5, 20), (0.06, 37), (0.02, 39), (1e-9, 39)])
+@pytest.mark.parametrize(("reach", "s0"), [(1.0, 0), (0.5, 20), (0.08, 36), (0.02, 39), (1e-9, 39)])
 def test_restart_iteration_follows_reach(device, reach, s0):
     """s0 = floor((1 - reach) S), at most S - 1; reach = 1 is the paper's restart at s = 0."""
     case = _case("mixed")
@@ -455,7 +455,7 @@ def test_reach_is_checked(device, bad):
     som, _ = _pair(case, case.points, _controls(np.random.default_rng(1), 2, 3), device)
     with pytest.raises(ValueError, match="reach"):
         som.reach = bad
-    assert som.reach == 0.06
+    assert som.reach == 0.08
 
 
 def test_restore_puts_weights_and_iteration_back_without_training(device):

@@ -155,7 +155,7 @@ def test_a_loaded_session_is_exactly_as_saved_and_trains_nothing(car, tmp_path):
     drag(car, 4, [-0.2, 0.7, 1.3])
     assert car.wait_applied(30)
     saved = state_of(car)
-    assert saved["iteration"] == 940  # saved mid-run: restarted at s0, paused there
+    assert saved["iteration"] == 920  # saved mid-run: restarted at s0, paused there
     car.save(tmp_path / "s.npz")
     car.train()
     car.load_preset("sphere")

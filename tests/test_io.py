@@ -9,7 +9,8 @@ import pytest
 import trimesh
 
 from somwidget.backend import io
-from somwidget.backend.presets import XYZ, FeatureLayout, Preset, colours_of, get_preset, line_display_mesh
+from somwidget.backend.presets import (KEPT_SHAPE_REACH, XYZ, FeatureLayout, Preset, colours_of, get_preset,
+                                       line_display_mesh)
 from somwidget.backend.topology import Topology
 
 LOAD_FORMATS = ["obj", "ply", "stl", "off", "glb"]
@@ -60,7 +61,7 @@ def test_load_mesh_round_trip(tmp_path, ext):
     assert t["scale"] == pytest.approx(2.0 / 20.0, rel=1e-6)
     assert preset.meta["source"] == str(path)
     # the person's own shape: kept as it is, six 3-D controls on its vertices, spread over it
-    assert not preset.grow
+    assert not preset.grow and preset.reach == KEPT_SHAPE_REACH
     assert preset.controls.shape == (6, 3)
     gaps = np.sqrt(((preset.controls[:, None] - preset.weights[None]) ** 2).sum(-1)).min(axis=1)
     np.testing.assert_array_equal(gaps, 0.0)

@@ -112,8 +112,8 @@ def test_session_intents_update_the_widgets(panel, session):
     gap_before = _gap_of(panel, 2)
     session.move_control(2, [3.6, 0.25, -0.2])  # the nose control, 1 unit forward: the schedule restarts
     wait_for(lambda: "3.60, 0.25, -0.20" in panel.controls_html.value, what="the control's new position")
-    # a local restart: s0 = floor((1 - reach) S) = 470
-    wait_for(lambda: panel.progress.value == 470 and "iteration 470 / 500 (paused)" in panel.status.value,
+    # a local restart: s0 = floor((1 - reach) S) = 460
+    wait_for(lambda: panel.progress.value == 460 and "iteration 460 / 500 (paused)" in panel.status.value,
              what="the restarted iteration")
     assert _gap_of(panel, 2) > gap_before + 0.5  # paused: the clay has not followed yet
     assert panel.train_button.description == "Train"
@@ -306,9 +306,9 @@ def test_drag_in_the_view_updates_the_panel(shown):
             browser.close()
     assert session.controls[2][0] > before[0] + 0.1  # dragged to the right: towards +x (the nose), in this view
     position = ", ".join(f"{x:.2f}" for x in session.controls[2][:3])
-    wait_for(lambda: position in panel.controls_html.value and "iteration 940 / 1000 (paused)" in panel.status.value,
+    wait_for(lambda: position in panel.controls_html.value and "iteration 920 / 1000 (paused)" in panel.status.value,
              what="the panel to show the dragged control and the locally restarted schedule")
-    assert panel.progress.value == 940
+    assert panel.progress.value == 920
     gap_dragged = _gap_of(panel, 2)
     assert gap_dragged > gap_before  # the clay has not followed (paused) ...
     panel.train_button.click()  # ... until Train: the local restart closes most of the gap

@@ -19,6 +19,7 @@ from somwidget.backend.presets import (
     line_display_mesh,
     uv_ellipsoid,
 )
+from somwidget.backend.som import DEFAULT_REACH
 from somwidget.backend.topology import Topology
 
 
@@ -128,7 +129,7 @@ def test_space_grid_is_the_papers_lattice():
     assert p.layout.names == ("x", "y", "z") and p.layout.colour_space == "none"
     assert p.controls.shape == (8, 3) and p.mirror == ()
     assert (p.iterations, p.l_start, p.l_end, p.smoothing) == (1000, 0.3, 0.03, P.SPACE_GRID_SMOOTHING)
-    assert 0 < P.SPACE_GRID_SMOOTHING and p.reach == P.SPACE_GRID_REACH
+    assert 0 < P.SPACE_GRID_SMOOTHING and p.reach == DEFAULT_REACH
     assert p.display == "points"
     assert p.weights.min() == -7.5 and p.weights.max() == 7.5
     # spacing 1: every edge joins points one unit apart along one axis

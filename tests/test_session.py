@@ -128,7 +128,7 @@ def test_move_control_restarts_schedule_and_mesh_follows(session):
     session.move_control(2, [3.0, 1.0, 0.5])
     assert session.wait_applied(10)
     paused = session.frame
-    assert paused.iteration == 940 and session.parameters["reach"] == 0.06
+    assert paused.iteration == 920 and session.parameters["reach"] == 0.08
     np.testing.assert_array_equal(paused.weights, after.weights)
 
 

@@ -14,7 +14,8 @@ import numpy as np
 
 from . import checks
 from .som import DEFAULT_REACH
-from .presets import DISPLAYS, XYZ, FeatureLayout, Preset, colours_of, controls_on, line_display_mesh, positions_of
+from .presets import (DISPLAYS, KEPT_SHAPE_REACH, XYZ, FeatureLayout, Preset, colours_of, controls_on,
+                      line_display_mesh, positions_of)
 from .topology import Topology
 
 #: The default vertex limit of `load_mesh`: the dense distance table's cap (2^16 neurons).
@@ -106,6 +107,7 @@ def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
         name=p.stem or p.name, title=p.name,
         description=f"Loaded from {p.name}: {n} vertices, {len(mesh.faces)} triangles.",
         topology=topology, weights=points, controls=controls_on(points), layout=XYZ, display="surface",
+        reach=KEPT_SHAPE_REACH,
         meta={"source": str(p), "transform": {"centre": tuple(float(c) for c in centre), "scale": scale}})
 
 

@@ -458,9 +458,10 @@ CAR_LON, CAR_RINGS = 25, 24
 #: lambda of the space grid's Laplacian step: enough to keep the lattice even without holding it back from the
 #: controls (at 0.2 it stopped 12% of its size short of them, and every restart shrank it further).
 SPACE_GRID_SMOOTHING = 0.02
-#: Its restarts begin a little wider than the default (0.06), so that the smoothed lattice still reaches a moved
-#: control to within 1% of its size (BENCHMARKS.md, Local restarts).
-SPACE_GRID_REACH = 0.08
+#: The reach of shapes kept as they are (the general shapes, uploaded meshes): narrower than the default, since their
+#: controls sit on them and every restart pulls the nodes around each one in a little (BENCHMARKS.md, Local
+#: restarts: at 0.08 the far half of the torus, grid and lattice moved 2.6-3.5% of their size for a 5% move).
+KEPT_SHAPE_REACH = 0.06
 
 
 def space_grid() -> Preset:
@@ -481,8 +482,7 @@ def space_grid() -> Preset:
         description="Case study 1 of Felbrich et al. 2018: a 16 x 16 x 16 lattice of neurons joined to their six "
                     "neighbours, shaped by 8 controls, with one Laplacian smoothing step per cycle.",
         topology=Topology.from_edges(edges, len(pts)), weights=pts, controls=controls, layout=XYZ,
-        iterations=1000, l_start=0.3, l_end=0.03, smoothing=SPACE_GRID_SMOOTHING, display="points", grow=True,
-        reach=SPACE_GRID_REACH)
+        iterations=1000, l_start=0.3, l_end=0.03, smoothing=SPACE_GRID_SMOOTHING, display="points", grow=True)
 
 
 def _car_start() -> tuple[Topology, np.ndarray]:
@@ -560,7 +560,7 @@ def lattice_preset() -> Preset:
         name="lattice", title="Lattice", description="An 8 x 8 x 8 lattice (6-neighbour synapses) with 6 controls "
                                                      "on its nodes: drag one to pull the lattice.",
         topology=Topology.from_edges(edges, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
-        l_start=0.3, display="points")
+        l_start=0.3, display="points", reach=KEPT_SHAPE_REACH)
 
 
 def grid_preset() -> Preset:
@@ -569,7 +569,8 @@ def grid_preset() -> Preset:
     return Preset(
         name="grid", title="Grid", description="An open 32 x 32 quad sheet lying in the xy-plane, with 6 controls on "
                                                "it: drag one up or down to shape the sheet.",
-        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ)
+        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
+        reach=KEPT_SHAPE_REACH)
 
 
 def sphere_preset() -> Preset:
@@ -587,7 +588,8 @@ def torus_preset() -> Preset:
     return Preset(
         name="torus", title="Torus", description="A periodic quad torus around the z-axis, with 6 controls on it: "
                                                  "drag one to reshape the ring.",
-        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ)
+        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
+        reach=KEPT_SHAPE_REACH)
 
 
 PRESETS: dict[str, Callable[[], Preset]] = {

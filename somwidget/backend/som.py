@@ -47,9 +47,11 @@ _PREFETCH_RINGS = 8
 #: Learning table entries (S x (d_max + 1) float32) a Som may hold: 2 GiB.
 _MAX_TABLE_ENTRIES = 1 << 29
 #: The neighbourhood radius a restart begins with, as a share of the full radius sigma (DESIGN.md, Restarts). Chosen
-#: by measurement on the car, the space grid and a torus (BENCHMARKS.md, "Local restarts"): the clay follows a moved
-#: control to within 1% of the model's size while the far half of the mesh stays put and nothing collapses.
-DEFAULT_REACH = 0.06
+#: by measurement on the car (BENCHMARKS.md, "Local restarts"): a control moved by 5% of the size is followed to
+#: within 1% while the far half of the mesh stays within 2% and nothing collapses, with the least spike at the moved
+#: control among the values that do (a smaller reach pulls a narrower, pointier bump; a larger one wears down the
+#: neighbourhoods of the other controls).
+DEFAULT_REACH = 0.08
 
 
 def restart_iteration(reach: float, iterations: int) -> int:
@@ -140,22 +142,26 @@ class Som:
         vec = self._kernels.vec
         self._w = wp.array(start, dtype=vec, device=dev)
         self._w_moved = wp.empty_like(self._w)
-        self._c = wp.zeros(MAX_CONTROLS, dtype=vec, device=dev)
-        # the effective controls as the device holds them, written on the host: on the CPU straight into the array
-        # the kernels read; on CUDA into pinned memory, from which they go up asynchronously (a drag frame waits for
-        # no copy)
-        self._c_staging = None if dev == "cpu" else wp.zeros(MAX_CONTROLS, dtype=vec, device="cpu", pinned=True)
-        self._c_uploaded = None if dev == "cpu" else wp.Event(dev)
-        self._c_rows = (self._c if self._c_staging is None else self._c_staging).numpy().reshape(MAX_CONTROLS,
-                                                                                                  self.n_dims)
+        # The effective controls (a fixed-size buffer: captured graphs keep its pointer) and the cycle counters (CUDA:
+        # two that the kernels pass on, ping-pong; CPU: one per core; a 64-byte line each, no false sharing between
+        # cores), in one device block. The host writes them into `_staging`: on the CPU that is the block itself;
+        # on CUDA pinned memory, which goes up in one asynchronous copy when a run starts afresh (`_set_cycle`), so
+        # that a drag frame costs one copy more than a plain one, not a wait.
+        counters = 64 if dev == "cpu" else 2
+        control_bytes = MAX_CONTROLS * self.n_dims * 4
+        self._block = wp.zeros(control_bytes + counters * 64, dtype=wp.uint8, device=dev)
+        self._c = wp.array(ptr=self._block.ptr, dtype=vec, shape=(MAX_CONTROLS,), device=dev)
+        self._counters = wp.array(ptr=self._block.ptr + control_bytes, dtype=wp.int32, shape=(counters * 16,),
+                                  device=dev)
+        self._cycle = [self._counters[i * 16: i * 16 + 1] for i in range(counters)]
+        self._staging = None if dev == "cpu" else wp.zeros_like(self._block, device="cpu", pinned=True)
+        self._uploaded = None if dev == "cpu" else wp.Event(dev)
+        words = (self._block if self._staging is None else self._staging).numpy().view(np.float32)
+        self._c_rows = words[: control_bytes // 4].reshape(MAX_CONTROLS, self.n_dims)
+        self._counter_words = words[control_bytes // 4:].view(np.int32)
         self._m = wp.array(self._metric[None, :], dtype=vec, device=dev)
         self._mask = wp.array(self._mask_of(self._smooth_dims)[None, :], dtype=vec, device=dev)
         self._keys = wp.full((3, MAX_CONTROLS), _KEY_NONE, dtype=wp.uint64, device=dev)
-        # CUDA: two cycle counters that the kernels pass on (ping-pong); CPU: one counter per core
-        # one array, a 64-byte line per counter (no false sharing between cores), filled in one go on a restart
-        counters = 64 if dev == "cpu" else 2
-        self._counters = wp.zeros(counters * 16, dtype=wp.int32, device=dev)
-        self._cycle = [self._counters[i * 16: i * 16 + 1] for i in range(counters)]
         self._meet = wp.zeros(1, dtype=wp.int64, device=dev)
         self._meet_failed = wp.zeros(1, dtype=wp.int32, device=dev)
         self._graphs: dict[tuple, tuple] = {}  # key -> (graph, the packed arguments of its dependent launches)
@@ -438,9 +444,9 @@ class Som:
     def _upload_controls(self) -> None:
         """The effective controls into the fixed-size device buffer, so that the captured graphs stay valid while
         only their values change (a drag); with mirroring in pairs, each original next to its copy (slots 2i and
-        2i + 1), the order in which step 2 applies them. On CUDA they go through pinned memory, asynchronously."""
-        if self._c_staging is not None:  # the last upload has left the staging buffer before it is written again
-            wp.synchronize_event(self._c_uploaded)
+        2i + 1), the order in which step 2 applies them. On CUDA they go up with the next `_set_cycle`."""
+        if self._staging is not None:  # the last upload has left the staging buffer before it is written again
+            wp.synchronize_event(self._uploaded)
         rows = self._c_rows
         k = len(self._controls)
         k_eff = 2 * k if self._mirror else k
@@ -453,9 +459,6 @@ class Som:
             rows[:k] = self._controls
         rows[k_eff:] = 0.0
         self._k_eff = k_eff
-        if self._c_staging is not None:
-            wp.copy(self._c, self._c_staging)
-            wp.record_event(self._c_uploaded)
         if self._graph_controls != (self._k_eff, self._pairs):  # the graphs hold the count and the pairing
             self._graphs.clear()
             self._graph_controls = (self._k_eff, self._pairs)
@@ -488,7 +491,14 @@ class Som:
         self._winners_valid = False
 
     def _set_cycle(self) -> None:
-        self._counters.fill_(self._s)
+        """Every cycle counter to s; on CUDA the staged controls go up with them, in one asynchronous copy."""
+        if self._staging is None:
+            self._counter_words[:] = self._s
+            return
+        wp.synchronize_event(self._uploaded)
+        self._counter_words[:] = self._s
+        wp.copy(self._block, self._staging)
+        wp.record_event(self._uploaded)
 
     def _find_winners_now(self) -> None:
         if self._winners_valid:
