@@ -11,6 +11,11 @@ import numpy as np
 import warp as wp
 from numpy.typing import ArrayLike
 
+try:  # Warp's internals, for `_upload` (warp-lang is pinned to 1.19.x in pyproject.toml)
+    from warp._src import context as _warp_context
+except ImportError:  # pragma: no cover - another Warp layout: wp.copy then
+    _warp_context = None
+
 from . import checks, dependent_launch
 from .device import resolve, warp_exclusive
 from .halos import block_halos
@@ -156,6 +161,7 @@ class Som:
         self._cycle = [self._counters[i * 16: i * 16 + 1] for i in range(counters)]
         self._staging = None if dev == "cpu" else wp.zeros_like(self._block, device="cpu", pinned=True)
         self._uploaded = None if dev == "cpu" else wp.Event(dev)
+        self._staging_busy = False  # an upload from `_staging` may still be under way
         words = (self._block if self._staging is None else self._staging).numpy().view(np.float32)
         self._c_rows = words[: control_bytes // 4].reshape(MAX_CONTROLS, self.n_dims)
         self._counter_words = words[control_bytes // 4:].view(np.int32)
@@ -445,8 +451,7 @@ class Som:
         """The effective controls into the fixed-size device buffer, so that the captured graphs stay valid while
         only their values change (a drag); with mirroring in pairs, each original next to its copy (slots 2i and
         2i + 1), the order in which step 2 applies them. On CUDA they go up with the next `_set_cycle`."""
-        if self._staging is not None:  # the last upload has left the staging buffer before it is written again
-            wp.synchronize_event(self._uploaded)
+        self._staging_ready()
         rows = self._c_rows
         k = len(self._controls)
         k_eff = 2 * k if self._mirror else k
@@ -492,13 +497,18 @@ class Som:
 
     def _set_cycle(self) -> None:
         """Every cycle counter to s; on CUDA the staged controls go up with them, in one asynchronous copy."""
-        if self._staging is None:
-            self._counter_words[:] = self._s
-            return
-        wp.synchronize_event(self._uploaded)
+        self._staging_ready()
         self._counter_words[:] = self._s
-        wp.copy(self._block, self._staging)
-        wp.record_event(self._uploaded)
+        if self._staging is not None:
+            _upload(self._block, self._staging)
+            wp.record_event(self._uploaded)
+            self._staging_busy = True
+
+    def _staging_ready(self) -> None:
+        """On CUDA, wait until the last upload has left the staging buffer (so that it can be written again)."""
+        if self._staging_busy:
+            wp.synchronize_event(self._uploaded)
+            self._staging_busy = False
 
     def _find_winners_now(self) -> None:
         if self._winners_valid:
@@ -760,6 +770,20 @@ class Som:
         self._s += 1
         self._set_cycle()
         self._winners_valid = True
+
+
+def _upload(dest: wp.array, src: wp.array) -> None:
+    """An asynchronous copy of a pinned host array into a device array of the same size, on the device's stream:
+    Warp's own memcpy entry point, without wp.copy's checks (a sixth of its time; this runs every drag frame);
+    wp.copy where that entry point is missing."""
+    core = getattr(getattr(_warp_context, "runtime", None), "core", None)
+    copy = getattr(core, "wp_memcpy_h2d", None)
+    if copy is None:
+        wp.copy(dest, src)
+        return
+    device = dest.device
+    if not copy(device.context, dest.ptr, src.ptr, dest.capacity, device.stream.cuda_stream):
+        raise RuntimeError(f"Som: uploading the controls to {device} failed")
 
 
 def _spread_shape(controls: int, least_warps: int, paired: bool = False) -> tuple[int, int]:
