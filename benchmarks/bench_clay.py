@@ -12,8 +12,14 @@ to s = S in frames of 10 cycles, from a fresh copy each time. Printed per preset
                edge length (a needle drawn out to a control shows as several)
   symmetry     for mirrored presets, after the case study's run: the largest mirror mismatch over the size
 
+With `--drag N` it measures a drag instead: control 1 moved by 5% of the size in N steps, each a restart followed by
+a frame's cycles (the whole restarted schedule, or 10 cycles), then the run to s = S; the far half's 90th percentile
+when every step restarts from the latest weights, and when each restarts from the shape the drag began with (what
+the session does).
+
     PYTHONPATH=. python benchmarks/bench_clay.py                     # every preset, the presets' own reach
     PYTHONPATH=. python benchmarks/bench_clay.py --reach 0.05 0.08 0.12 --presets car torus   # compare reach values
+    PYTHONPATH=. python benchmarks/bench_clay.py --drag 30 --presets car torus sphere
 """
 
 from __future__ import annotations
@@ -64,12 +70,55 @@ def measure(name: str, device: str = "cpu", reach: float | None = None, controls
     return {"preset": name, "reach": start.reach, "controls": len(list(chosen)), "symmetry": symmetry, **worst}
 
 
+def drag(name: str, steps: int, frame_cycles: int, rebase: bool, device: str = "cpu") -> tuple[float, float]:
+    """(least size at any frame, far half's 90th percentile at the end) of a drag of control 1 by 5% in `steps`."""
+    preset = presets.get_preset(name)
+    som = shown_som(preset, device, None)
+    dims = list(preset.layout.position)
+    start = som.weights
+    before = start[:, dims].astype(np.float64)
+    size = metrics.bounding_diagonal(before)
+    controls = som.controls
+    origin = controls[1, dims].astype(np.float64)
+    away = (origin - before.mean(axis=0)) / np.linalg.norm(origin - before.mean(axis=0))
+    least = 1.0
+    for i in range(1, steps + 1):
+        controls[1, dims] = origin + away * 0.05 * size * i / steps
+        if rebase:
+            som.restore(start, som.iterations)
+        som.set_controls(controls)
+        som.step(frame_cycles)
+        least = min(least, metrics.bounding_diagonal(som.weights[:, dims]) / size)
+    som.train()
+    target = controls[1, dims].astype(np.float64)
+    near = np.linalg.norm(before - target, axis=1)
+    if preset.mirror:
+        image = target.copy()
+        image[1] *= -1.0
+        near = np.minimum(near, np.linalg.norm(before - image, axis=1))
+    far = near > np.median(near)
+    moved = np.linalg.norm(som.weights[:, dims] - before, axis=1)
+    return least, float(np.percentile(moved[far], 90)) / size
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--presets", nargs="+", default=list(DEFAULT_PRESETS))
     parser.add_argument("--reach", nargs="+", type=float, default=[None])
     parser.add_argument("--device", default="cpu")
+    parser.add_argument("--drag", type=int, metavar="N", help="measure a drag in N steps instead (see above)")
     args = parser.parse_args(argv)
+    if args.drag:
+        print("| preset | restarts from | cycles a frame | least size | far p90 |")
+        print("|---|---|---|---|---|")
+        for name in args.presets:
+            for rebase in (False, True):
+                for cycles in (1_000_000, 10):
+                    least, far = drag(name, args.drag, cycles, rebase, args.device)
+                    origin = "the drag's start" if rebase else "the latest weights"
+                    print(f"| {name} | {origin} | "
+                          f"{'all' if cycles > 1000 else cycles} | {least:.3f} | {far:.4f} |", flush=True)
+        return 0
     print("| preset | reach | controls | least size | far p90 | gap | spike | symmetry | s |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name in args.presets:

@@ -279,25 +279,54 @@ def _look_along(direction) -> list[float]:
     return [*(axis * math.sin(angle / 2)), math.cos(angle / 2)]
 
 
+def point_and_pull(page, dev: str, name: str) -> None:
+    """Point the right controller's ray at menu button `name` from 20 cm in front of it and pull the trigger."""
+    b = page.evaluate(f"somxr.button('{name}')")
+    centre, normal = np.array(b["centre"]), np.array(b["normal"])
+    set_position(page, dev, centre + 0.2 * normal)
+    page.evaluate("(q) => iwerDevice.controllers.right.quaternion.set(q[0], q[1], q[2], q[3])", _look_along(-normal))
+    wait_frames(page, 2)
+    page.evaluate(f"{dev}.updateButtonValue('trigger', 1)")
+    wait_frames(page, 2)
+    page.evaluate(f"{dev}.updateButtonValue('trigger', 0)")
+    wait_frames(page, 2)
+    page.evaluate("iwerDevice.controllers.right.quaternion.set(0, 0, 0, 1)")
+
+
+def test_menu_undo_and_redo_take_back_a_grab(ar_page, server, session):
+    """Interaction: a controller grab moves a control (one step); pointing at the menu's "Undo" and pulling the
+    trigger puts the session back exactly, "Redo" forward again."""
+    assert session.wait_idle(60)
+    dev = device_input(ar_page, "controller")
+    start = session.controls
+    before = session.frame.weights.copy()
+    steps = session.history[0]
+    _, expected, _ = grab_move_release(ar_page, server, session, dev, False, 6, np.array([0.0, 0.05, 0.04]),
+                                       f"{dev}.updateButtonValue('trigger', 1)",
+                                       f"{dev}.updateButtonValue('trigger', 0)")
+    wait_for(lambda: np.allclose(session.controls[6, :3], expected, atol=2e-3), what="the grab's move")
+    assert session.wait_idle(60) and session.history == (steps + 1, 0)
+    moved = session.frame.weights.copy()
+    set_position(ar_page, dev, [0.25, 1.5, -0.4])
+    point_and_pull(ar_page, dev, "undo")
+    wait_for(lambda: session.history == (steps, 1), what="the undo from the XR menu")
+    np.testing.assert_array_equal(session.frame.weights, before)
+    np.testing.assert_array_equal(session.controls, start)
+    point_and_pull(ar_page, dev, "redo")
+    wait_for(lambda: session.history == (steps + 1, 0), what="the redo from the XR menu")
+    np.testing.assert_array_equal(session.frame.weights, moved)
+    session.undo()  # the module's other tests start from the converged car
+
+
 def test_menu_pause_reset_train_in_xr(ar_page, session):
     """Point the controller at "Pause" and pull the trigger; touch "Reset" with a finger; point at "Train"."""
     dev = device_input(ar_page, "controller")
 
-    def point_and_pull(name):
-        b = ar_page.evaluate(f"somxr.button('{name}')")
-        centre, normal = np.array(b["centre"]), np.array(b["normal"])
-        set_position(ar_page, dev, centre + 0.2 * normal)
-        ar_page.evaluate("(q) => iwerDevice.controllers.right.quaternion.set(q[0], q[1], q[2], q[3])",
-                         _look_along(-normal))
-        wait_frames(ar_page, 2)
-        ar_page.evaluate(f"{dev}.updateButtonValue('trigger', 1)")
-        wait_frames(ar_page, 2)
-        ar_page.evaluate(f"{dev}.updateButtonValue('trigger', 0)")
-        wait_frames(ar_page, 2)
-        ar_page.evaluate("iwerDevice.controllers.right.quaternion.set(0, 0, 0, 1)")
+    def point_and_pull_here(name):
+        point_and_pull(ar_page, dev, name)
 
     assert not session.paused
-    point_and_pull("train")  # labelled "Pause" while training
+    point_and_pull_here("train")  # labelled "Pause" while training
     wait_for(lambda: session.paused, what="the session paused from the XR menu")
     ar_page.wait_for_function("somxr.button('train').label === 'Train'", timeout=5000)
 
@@ -319,7 +348,7 @@ def test_menu_pause_reset_train_in_xr(ar_page, session):
     ar_page.wait_for_function("somxr.inputs().some((i) => !i.hand && i.handedness === 'right')", timeout=10000)
     set_position(ar_page, dev, [0.25, 1.5, -0.4])
     wait_frames(ar_page, 2)
-    point_and_pull("train")
+    point_and_pull_here("train")
     wait_for(lambda: not session.paused, what="the session training again")
     assert session.wait_idle(60)
 

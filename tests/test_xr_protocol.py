@@ -328,6 +328,39 @@ def test_train_pause_reset_intents(srv, session):
     assert session.paused
 
 
+def test_a_grab_is_one_step_that_undo_and_redo_intents_take_back(srv, session):
+    """Protocol: grab, several moves, release make one undo step; "undo" puts the session back exactly and the
+    frames say a redo is there; "redo" brings the move back."""
+    before_controls = session.controls
+    before = session.frame.weights.copy()
+    steps = session.history[0]
+
+    async def main():
+        async with aiohttp.ClientSession() as cs:
+            c = await connect(cs, srv)
+            await c.send({"type": "grab", "index": 4})
+            for z in (1.0, 1.1, 1.2):
+                await c.send({"type": "move", "index": 4, "position": [-0.3, 0.45, z]})
+            await c.send({"type": "release", "index": 4})
+            await c.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [])
+            f = await c.until(lambda m: isinstance(m, dict) and "can_undo" in m and m["can_undo"]
+                              and np.allclose(m["control_positions"][4], [-0.3, 0.45, 1.2]))
+            assert not f["can_redo"]
+            await c.send({"type": "undo"})
+            f = await c.until(lambda m: isinstance(m, dict) and "can_redo" in m and m["can_redo"])
+            np.testing.assert_allclose(f["control_positions"][:9], before_controls[:, :3])
+            await c.send({"type": "redo"})
+            await c.until(lambda m: isinstance(m, dict) and "can_redo" in m and not m["can_redo"]
+                          and np.allclose(m["control_positions"][4], [-0.3, 0.45, 1.2]))
+            await c.ws.close()
+
+    run(main())
+    assert session.history[0] == steps + 1
+    assert session.undo()
+    np.testing.assert_array_equal(session.frame.weights, before)
+    np.testing.assert_array_equal(session.controls, before_controls)
+
+
 # -- the access token ----------------------------------------------------------------------------------------
 def test_token_required(session):
     token = "s3cret-token_value"
