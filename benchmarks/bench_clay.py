@@ -1,4 +1,4 @@
-"""How the clay follows a moved control: the figures DESIGN.md's local restarts are held to, per preset.
+"""How the clay follows a moved control: the figures the local restarts (somwidget/backend/som.py) are held to.
 
 For each preset: the shape a session shows (the paper's case studies trained by their whole schedule; the general
 shapes as they are), then each control in turn moved by 5% of the shape's size away from its centroid and followed

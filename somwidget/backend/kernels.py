@@ -714,8 +714,7 @@ def cycle_kernels(n_dims: int, gather: int = 8, pairs: int = SINGLES) -> SimpleN
     looks up the rates of `gather` controls at once (a multiple of 8 up to 32).
 
     With `pairs` (PAIRS or SCALED_PAIRS) the controls come as mirrored pairs, each original next to its copy (slots 2i,
-    2i + 1; the Som keeps them so on the device): `move` and `move_part` apply each pair at once (`move_pair`,
-    DESIGN.md step 2).
+    2i + 1; the Som keeps them so on the device): `move` and `move_part` apply each pair at once (`move_pair`).
 
     `move` and `move_part` are generic in `distances` (the dense table or distance rows, see `winner_row`); each
     source has its own overload. In distance rows mode a cycle whose winners lack a row stalls: the move sets

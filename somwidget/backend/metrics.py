@@ -1,5 +1,5 @@
 """Figures that tell whether the clay behaves like clay: size, gaps to the controls, spikes, mirror symmetry, and how
-a trained shape follows one moved control (DESIGN.md, Restarts). numpy only; positions are (N, 3) float arrays."""
+a trained shape follows one moved control (som.py, Restarts). numpy only; positions are (N, 3) float arrays."""
 
 from __future__ import annotations
 

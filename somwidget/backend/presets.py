@@ -117,7 +117,7 @@ class Preset:
 
     grow: True for the paper's case studies, which grow a shape from a generic start mesh: a session runs their
     whole schedule when they are chosen. False for a shape that is the person's own (a general shape, an uploaded
-    mesh): it is shown as it is and nothing trains until the person acts (DESIGN.md, Restarts).
+    mesh): it is shown as it is and nothing trains until the person acts (som.py, Restarts).
     """
 
     name: str

@@ -1,4 +1,18 @@
-"""The self-organizing map as computational clay: device state and the training cycle (DESIGN.md, the algorithm)."""
+"""The self-organizing map as computational clay: device state and the training cycle (DESIGN.md, the algorithm).
+
+Restarts. A run is S cycles of the learning table L[s, d], whose neighbourhood starts as wide as the whole mesh and
+narrows to nothing. Restarting at s = 0 when a control moves (the paper's retraining) would pull the clay into a
+blob and regrow all of it, so a restart begins later in the same table: at s0 = floor((1 - reach) S), where `reach`
+in (0, 1] is the neighbourhood radius the restart begins with, as a share of the full one; reach 1 is s = 0. Moving,
+adding or removing controls and changing S, l_start, l_end, smoothing, smooth_dims or metric weights restart so
+from the latest weights; `reset()` runs the whole schedule from the start weights; `restore()` puts weights and s
+back as they were (an undo, a loaded session) and restarts nothing.
+
+Mirrored pairs. With mirroring each control has a copy with the `mirror` dims negated, and the two act together
+at the pair's place in the list: both rates from the same weights, l1 = L[s, D[u_c, v]] and l2 = L[s, D[u_c', v]],
+W <- W + (l1 (C - W) + l2 (C' - W)) / max(1, l1 + l2) (`kernels.move_pair`), so a symmetric mesh stays exactly
+symmetric. The device holds each original next to its copy.
+"""
 
 from __future__ import annotations
 
@@ -51,7 +65,7 @@ _CACHE_MOST_ROWS = 4096
 _PREFETCH_RINGS = 8
 #: Learning table entries (S x (d_max + 1) float32) a Som may hold: 2 GiB.
 _MAX_TABLE_ENTRIES = 1 << 29
-#: The neighbourhood radius a restart begins with, as a share of the full radius sigma (DESIGN.md, Restarts). Chosen
+#: The neighbourhood radius a restart begins with, as a share of the full radius sigma (Restarts, above). Chosen
 #: by measurement on the car (BENCHMARKS.md, "Local restarts"): a control moved by 5% of the size is followed to
 #: within 1% while the far half of the mesh stays within 2% and nothing collapses, with the least spike at the moved
 #: control among the values that do (a smaller reach pulls a narrower, pointier bump; a larger one wears down the
@@ -77,8 +91,8 @@ class Som:
     most 4096; 2 at the least); None picks dense up to 65,536 neurons, else rows.
     Both give the same weights.
 
-    reach (0, 1]: the neighbourhood radius a restart begins with, as a share of the full radius (DESIGN.md,
-    Restarts). Moving controls and changing S, l_start, l_end, smoothing or metric weights restart at
+    reach (0, 1]: the neighbourhood radius a restart begins with, as a share of the full radius (Restarts, in the
+    module's docstring). Moving controls and changing S, l_start, l_end, smoothing or metric weights restart at
     s0 = floor((1 - reach) S) from the latest weights (the clay follows locally); `reset()` runs the whole schedule
     from the start weights; `restore()` puts saved weights and s back without training.
     """

@@ -16,7 +16,7 @@ seconds, publishes a Frame after each step (and after each batch of intents), an
 the next intent. Listeners run on the training thread: they must return quickly (copy what they need, hand the
 frame to their own loop).
 
-Clay rules (DESIGN.md, Restarts): a control move, an added or removed control and a parameter change restart the
+Clay rules (backend/som.py, Restarts): a control move, an added or removed control and a parameter change restart the
 schedule locally (the Som's `reach`); `reset()` runs the whole schedule from the start mesh; a preset that grows (the
 paper's case studies) runs its whole schedule when chosen, any other shape (a general shape, an uploaded mesh) is
 shown as it is until the person acts; undo, redo, a loaded session and a recovered one put everything back exactly
