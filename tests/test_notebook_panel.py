@@ -85,6 +85,29 @@ def test_sliders_send_intents(panel, session):
     assert panel.error.value == ""
 
 
+def test_undo_redo_reload_and_reach_from_the_panel(panel, session):
+    """The panel's Undo, Redo and reload buttons, and its reach slider, act on the session; the buttons are
+    disabled while there is nothing to undo or redo."""
+    assert session.wait_idle(60)
+    start, original = session.controls, session.preset.controls
+    wait_for(lambda: panel.undo_button.disabled and panel.redo_button.disabled, what="nothing to undo yet")
+    session.move_control(0, start[0, :3] + np.float32([0.0, 0.0, 0.3]))
+    moved = session.controls
+    wait_for(lambda: not panel.undo_button.disabled, what="Undo enabled")
+    panel.undo_button.click()
+    np.testing.assert_array_equal(session.controls, start)
+    wait_for(lambda: not panel.redo_button.disabled, what="Redo enabled")
+    panel.redo_button.click()
+    np.testing.assert_array_equal(session.controls, moved)
+    panel.reload_button.click()  # the car again, as it starts: its own controls
+    np.testing.assert_array_equal(session.controls, original)
+    panel.reach.value = 0.12
+    assert session.parameters["reach"] == 0.12
+    assert session.wait_applied(30) and session._som.reach == 0.12
+    panel.undo_button.click()  # the reach, then the reload, go back
+    assert session.parameters["reach"] == session.preset.reach
+
+
 def test_refused_value_shows_the_message_and_reverts(panel, session):
     for w in panel.metric[:-1]:
         w.value = 0.0

@@ -86,7 +86,9 @@ class Panel(widgets.VBox):
         style = {"description_width": "70px"}
         wide = widgets.Layout(width="330px")
         self.title = widgets.HTML()
-        self.preset = widgets.Dropdown(description="preset", style=style, layout=wide)
+        self.preset = widgets.Dropdown(description="preset", style=style, layout=widgets.Layout(width="290px"))
+        self.reload_button = widgets.Button(icon="rotate-left", layout=widgets.Layout(width="36px"),
+                                            tooltip="This preset again as it starts: its own controls and start mesh")
         self.train_button = widgets.Button(description="Pause", icon="pause", layout=widgets.Layout(width="100px"),
                                            tooltip="Train / pause the map")
         self.reset_button = widgets.Button(description="Reset", icon="refresh", layout=widgets.Layout(width="100px"),
@@ -119,7 +121,7 @@ class Panel(widgets.VBox):
         self.error = widgets.HTML()
 
         super().__init__([
-            self.title, self.preset,
+            self.title, widgets.HBox([self.preset, self.reload_button]),
             widgets.HBox([self.train_button, self.undo_button, self.redo_button, self.reset_button]),
             self.progress, self.status,
             widgets.HTML(_BLOCK.format("<b>Schedule</b> <small>(alpha(s) from l_start to l_end over S cycles)"
@@ -143,6 +145,7 @@ class Panel(widgets.VBox):
         self.train_button.on_click(lambda _b: self._intent(self._toggle_training))
         self.reset_button.on_click(lambda _b: self._intent(session.reset))
         self.undo_button.on_click(lambda _b: self._intent(session.undo))
+        self.reload_button.on_click(lambda _b: self._reload_preset())
         self.redo_button.on_click(lambda _b: self._intent(session.redo))
 
         self.refresh()
@@ -190,6 +193,12 @@ class Panel(widgets.VBox):
             return
         self.status.value = f"<i>loading {_html.escape(str(name))}...</i>"
         if self._intent(self.session.load_preset, name):
+            self.refresh()
+
+    def _reload_preset(self) -> None:
+        """The current preset again, as it starts (one undo step)."""
+        preset = self.session.preset
+        if self._intent(self.session.load_preset, preset.name if preset.name in _presets.PRESETS else preset):
             self.refresh()
 
     def set_metric_weight(self, dim: int, value) -> None:
