@@ -196,6 +196,7 @@ def test_a_one_second_drag_never_shrinks_the_clay_and_undoes_in_one_step(browser
         with concurrent.futures.ThreadPoolExecutor(1) as pool:
             sampling = pool.submit(sample)
             mouse_drag(page, start, delta, steps=30, pause=1.0 / 30)  # one second, a move a frame
+            server.wait(lambda s: s["view"]["dragging"] is None, what="the release")  # its last move is in
             st1 = server.idle()
             stop = True
             sampling.result()
