@@ -90,15 +90,8 @@ def drag(name: str, steps: int, frame_cycles: int, rebase: bool, device: str = "
         som.step(frame_cycles)
         least = min(least, metrics.bounding_diagonal(som.weights[:, dims]) / size)
     som.train()
-    target = controls[1, dims].astype(np.float64)
-    near = np.linalg.norm(before - target, axis=1)
-    if preset.mirror:
-        image = target.copy()
-        image[1] *= -1.0
-        near = np.minimum(near, np.linalg.norm(before - image, axis=1))
-    far = near > np.median(near)
-    moved = np.linalg.norm(som.weights[:, dims] - before, axis=1)
-    return least, float(np.percentile(moved[far], 90)) / size
+    mirrored = [dims.index(m) for m in som.mirror if m in dims]
+    return least, metrics.far_half_moved(before, som.weights[:, dims], controls[1, dims], mirrored)
 
 
 def main(argv=None) -> int:

@@ -1,8 +1,9 @@
 """What a drag costs per frame: the app's frame while a control moves against its frame while the clay only trains.
 
-Per drag event the session hands the moved controls to the Som (`set_controls`: a local restart), runs the
-frame's cycles (`step(k)`) and reads the weights for the views; a plain frame only steps and reads. Both are timed
-the same way, frame after frame, on one Som (the drag moves control 0 a little further each frame, as a hand does).
+Per drag event the session puts back the shape the drag began with (`restore` from a `snapshot` kept on the
+device), hands the moved controls to the Som (`set_controls`: a local restart), runs the frame's cycles (`step(k)`)
+and reads the weights for the views; a plain frame only steps and reads. Both are timed the same way, frame after
+frame, on one Som (the drag moves control 0 a little further each frame, as a hand does).
 
 (At the session's level the two cannot be told apart this way: the session sizes each step to fill the frame's
 time budget, and a drag frame's step is a quarter as long, to show the move sooner.)
@@ -26,9 +27,11 @@ from somwidget.backend import presets
 
 
 def frames(som, cycles: int, count: int, drag: bool) -> list[float]:
-    """Seconds per frame: (set_controls with control 0 moved a step, when `drag`), step(cycles), the weights read."""
+    """Seconds per frame: (when `drag`: the drag's start restored, set_controls with control 0 moved a step),
+    step(cycles), the weights read."""
     controls = som.controls
     step = 0.002 * np.float32(np.abs(som.weights).max())
+    base = som.snapshot()
     out = []
     for _ in range(count):
         if som.iteration >= som.iterations:
@@ -37,6 +40,7 @@ def frames(som, cycles: int, count: int, drag: bool) -> list[float]:
         t = time.perf_counter()
         if drag:
             controls[0, 0] += step
+            som.restore(base, som.iterations)
             som.set_controls(controls)
         som.step(cycles)
         wp.synchronize_device(som.device)

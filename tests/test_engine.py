@@ -473,6 +473,15 @@ def test_restore_puts_weights_and_iteration_back_without_training(device):
     som.train()
     ref.train()
     _assert_matches(som, ref, _scale(case.points, C))
+    kept = som.snapshot()  # on the device: a drag's frames restart from it
+    trained = som.weights
+    som.restore(saved, 12)
+    som.restore(kept, 30)
+    np.testing.assert_array_equal(som.weights, trained)
+    assert som.iteration == 30
+    other, _ = _pair(_case("mixed"), _case("mixed").points, C, device, iterations=30)
+    with pytest.raises(ValueError, match="snapshot"):
+        som.restore(other.snapshot(), 3)
     with pytest.raises(ValueError, match="iteration"):
         som.restore(saved, 31)
     with pytest.raises(ValueError, match="weights"):

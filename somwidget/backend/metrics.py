@@ -68,6 +68,21 @@ def symmetry_error(positions, pairing: np.ndarray, dim: int = 1) -> float:
     return float(np.linalg.norm(image - p[pairing], axis=1).max() / size)
 
 
+def far_half_moved(before, after, target, mirrored_axes=()) -> float:
+    """How far the half of the nodes farther from `target` (and from its mirror image, `mirrored_axes` of the
+    position negated) moved from `before` to `after`: the 90th percentile, over the size of `before`."""
+    before = np.asarray(before, np.float64)
+    target = np.asarray(target, np.float64)
+    near = np.linalg.norm(before - target, axis=1)
+    if len(mirrored_axes):
+        image = target.copy()
+        image[list(mirrored_axes)] *= -1.0
+        near = np.minimum(near, np.linalg.norm(before - image, axis=1))
+    far = near > np.median(near)
+    moved = np.linalg.norm(np.asarray(after, np.float64) - before, axis=1)
+    return float(np.percentile(moved[far], 90)) / (bounding_diagonal(before) or 1.0)
+
+
 @dataclass(frozen=True)
 class FollowFigures:
     """How a trained shape followed one control moved by `share` of its size, run to s = S (all as shares of the
@@ -103,16 +118,8 @@ def follow(som, control: int, share: float = 0.05, direction=None, position_dims
         least = min(least, bounding_diagonal(som.weights[:, dims]))
     after = som.weights[:, dims].astype(np.float64)
     target = controls[control, dims].astype(np.float64)
-    near = np.linalg.norm(before - target, axis=1)
-    if som.mirror:
-        image = target.copy()
-        for m in som.mirror:
-            if m in dims:
-                image[dims.index(m)] *= -1.0
-        near = np.minimum(near, np.linalg.norm(before - image, axis=1))
-    far = near > np.median(near)
-    moved = np.linalg.norm(after - before, axis=1)
+    mirrored = [dims.index(m) for m in som.mirror if m in dims]
     return FollowFigures(
-        least_size=least / size, far_moved_p90=float(np.percentile(moved[far], 90)) / size,
+        least_size=least / size, far_moved_p90=far_half_moved(before, after, target, mirrored),
         gap=float(nearest_distances(target[None, :], after)[0]) / size,
         spike=float(spike_figures(after, som.topology, np.unique(som.winners())).max()), cycles=cycles)

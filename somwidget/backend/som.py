@@ -25,7 +25,7 @@ import numpy as np
 import warp as wp
 from numpy.typing import ArrayLike
 
-try:  # Warp's internals, for `_upload` (warp-lang is pinned to 1.19.x in pyproject.toml)
+try:  # Warp's internals, for `_copy` (warp-lang is pinned to 1.19.x in pyproject.toml)
     from warp._src import context as _warp_context
 except ImportError:  # pragma: no cover - another Warp layout: wp.copy then
     _warp_context = None
@@ -406,11 +406,24 @@ class Som:
         self._restart(0)
 
     @warp_exclusive
-    def restore(self, weights: ArrayLike, iteration: int) -> None:
-        """Put saved weights and s back exactly (a loaded session, an undo): nothing trains, nothing restarts."""
+    def restore(self, weights: ArrayLike | wp.array, iteration: int) -> None:
+        """Put saved weights and s back exactly (a loaded session, an undo): nothing trains, nothing restarts.
+        `weights`: (N, n) values, or a `snapshot()` of this Som (copied on the device, no trip through the host)."""
         s = checks.integer("iteration", iteration, 0, self._iterations)
-        self._w.assign(self._checked_weights(weights))
+        if isinstance(weights, wp.array):
+            if weights.shape != self._w.shape or weights.dtype != self._w.dtype or str(weights.device) != self.device:
+                raise ValueError(f"weights: expected a snapshot() of this Som ({self.n_neurons} weights of "
+                                 f"{self.n_dims} on {self.device}), got {weights.shape} on {weights.device}")
+            _copy(self._w, weights)
+        else:
+            self._w.assign(self._checked_weights(weights))
         self._restart(s)
+
+    @warp_exclusive
+    def snapshot(self) -> wp.array:
+        """A copy of the current weights kept on the device, for `restore` (each frame of a drag restarts from
+        the shape the drag began with, without sending it up again)."""
+        return wp.clone(self._w)
 
     @warp_exclusive
     def winners(self) -> np.ndarray:
@@ -514,7 +527,7 @@ class Som:
         self._staging_ready()
         self._counter_words[:] = self._s
         if self._staging is not None:
-            _upload(self._block, self._staging)
+            _copy(self._block, self._staging)
             wp.record_event(self._uploaded)
             self._staging_busy = True
 
@@ -786,18 +799,19 @@ class Som:
         self._winners_valid = True
 
 
-def _upload(dest: wp.array, src: wp.array) -> None:
-    """An asynchronous copy of a pinned host array into a device array of the same size, on the device's stream:
-    Warp's own memcpy entry point, without wp.copy's checks (a sixth of its time; this runs every drag frame);
-    wp.copy where that entry point is missing."""
+def _copy(dest: wp.array, src: wp.array) -> None:
+    """`src` into `dest`, of the same size. Into a CUDA array from a pinned host array or one on the same device:
+    asynchronous, on the device's stream, through Warp's own memcpy entry points without wp.copy's checks (a sixth
+    of its time; this runs every drag frame). wp.copy on the CPU, and where those entry points are missing."""
     core = getattr(getattr(_warp_context, "runtime", None), "core", None)
-    copy = getattr(core, "wp_memcpy_h2d", None)
+    copy = None if dest.device.is_cpu else getattr(core, "wp_memcpy_h2d" if src.device.is_cpu else "wp_memcpy_d2d",
+                                                     None)
     if copy is None:
         wp.copy(dest, src)
         return
     device = dest.device
     if not copy(device.context, dest.ptr, src.ptr, dest.capacity, device.stream.cuda_stream):
-        raise RuntimeError(f"Som: uploading the controls to {device} failed")
+        raise RuntimeError(f"Som: a copy to {device} failed")
 
 
 def _spread_shape(controls: int, least_warps: int, paired: bool = False) -> tuple[int, int]:

@@ -82,19 +82,20 @@ class History:
 
     def undo(self, current: Step) -> Step | None:
         """The state before the latest step (None if there is none); `current` becomes the next redo."""
-        if not self._undo:
-            return None
-        self._redo.append(current)
-        self._bound()
-        return self._load(self._undo.pop())
+        return self._travel(self._undo, self._redo, current)
 
     def redo(self, current: Step) -> Step | None:
         """The state an undo left (None if there is none); `current` becomes the next undo."""
-        if not self._redo:
+        return self._travel(self._redo, self._undo, current)
+
+    def _travel(self, source: list[Step], dest: list[Step], current: Step) -> Step | None:
+        """Take the top of `source` (in memory), leave `current` on `dest`."""
+        if not source:
             return None
-        self._undo.append(current)
+        step = source.pop()
+        dest.append(current)
         self._bound()
-        return self._load(self._redo.pop())
+        return self._load(step)
 
     def clear(self) -> None:
         self._discard(self._undo + self._redo)

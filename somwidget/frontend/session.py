@@ -257,17 +257,16 @@ class Session:
         self._error: str | None = None
         self._hold = False  # nothing trains until the next intent (undo, redo, a loaded or recovered session)
         self._history = History()
-        self._gesture = 0  # 1 while a gesture (a drag) is open: its intents belong to one step
+        self._gesture = False  # a gesture (a drag) is open: its intents belong to one step
         self._gesture_step: Step | None = None  # the step the open gesture recorded, once it changed something
-        self._gesture_base: np.ndarray | None = None  # that step's weights: where each frame of the drag restarts
+        self._gesture_base = None  # its weights, kept on the Som's device: where each frame of the drag restarts
         self._last_step: tuple[str, float] = ("", 0.0)  # kind and time of the latest recorded step
-        self._unsaved = False  # a change the autosave has not written yet
+        self._unsaved = True  # a change the autosave has not written yet (a new session: its first state)
         self._saved_at = 0.0
         self._install(self._build(preset))
         self._frame = self._make_frame(0)
         self._autosave = storage.Autosave() if autosave else None
         _LIVE.add(self)
-        self._unsaved = True
         if start:
             self.start()
 
@@ -417,7 +416,7 @@ class Session:
             if stepping:
                 k = self._cycles_per_step
                 with self._lock:
-                    dragging = bool(self._gesture)
+                    dragging = self._gesture
                 if ops and not dragging:  # a fresh intent: a short first step gets the change out sooner
                     k = max(1, k // 4)
                 k = max(1, min(k, som.iterations - som.iteration))
@@ -746,7 +745,7 @@ class Session:
         """A gesture starts (a drag's press): the intents until `end_gesture()` make one undo step, recorded with
         the state before the first of them. A gesture left open (a tab closed mid-drag) ends at the next one."""
         with self._lock:
-            self._gesture = 1
+            self._gesture = True
             self._gesture_step = None
             self._gesture_base = None
 
@@ -755,7 +754,7 @@ class Session:
         with self._wake:
             if not self._gesture:
                 return
-            self._gesture = 0
+            self._gesture = False
             self._gesture_base = None
             self._unsaved = True
             self._wake.notify_all()
@@ -778,7 +777,7 @@ class Session:
             joins = (self._gesture and self._gesture_step is not None) or (
                 kind.startswith("parameter:") and kind == last_kind
                 and time.monotonic() - last_time < PARAMETER_STEP_SECONDS)
-        step = None if joins else self._record_step()
+        step, base = (None, None) if joins else self._record_step()
         try:
             yield
         except BaseException:
@@ -790,21 +789,22 @@ class Session:
             raise
         with self._lock:
             if step is not None and self._gesture:
-                self._gesture_step = step
-                self._gesture_base = step.weights
+                self._gesture_step, self._gesture_base = step, base
             self._last_step = (kind, time.monotonic())
             self._unsaved = True
 
-    def _record_step(self) -> Step:
-        """Push the current state (every queued intent applied first) as an undo step."""
+    def _record_step(self) -> tuple[Step, object]:
+        """Push the current state (every queued intent applied first) as an undo step. Returns it, and inside a
+        gesture its weights kept on the Som's device (`Som.snapshot`, where the drag's frames restart), else None."""
         with self._som_lock:
             drained = self._drain()
             with self._lock:
                 step = self._capture()
                 self._history.push(step)
+                base = self._som.snapshot() if self._gesture else None
                 if drained:
                     self._enqueue("publish", intent=False)  # a frame that shows the drained intents
-        return step
+        return step, base
 
     def _capture(self) -> Step:
         # caller holds _som_lock and _lock, with no intent queued
@@ -825,7 +825,7 @@ class Session:
 
     def _travel(self, move) -> bool:
         with self._lock:
-            self._gesture = 0
+            self._gesture = False
         with self._som_lock:
             self._drain()
             with self._lock:
@@ -916,7 +916,7 @@ class Session:
         return self._autosave.flush(timeout)
 
     @classmethod
-    def recover(cls, directory=None, **options) -> Session | None:
+    def recover(cls, **options) -> Session | None:
         """The session of the latest exit that did not close cleanly (a crash, a kill), restored exactly as its
         autosave left it (nothing trains until the next intent); None if there is none. `options` go to Session
         (device, start...). Its autosave is taken over: it is deleted once the new session has saved its own."""
@@ -924,7 +924,7 @@ class Session:
 
         start = options.pop("start", True)
         max_vertices = options.get("max_vertices", DEFAULT_MAX_VERTICES)
-        for path in storage.crashed(directory):
+        for path in storage.crashed():
             try:
                 state = sw_io.load_session(path, max_vertices=max_vertices)
                 saved = path.stat().st_mtime
