@@ -1,8 +1,8 @@
 """What a drag costs per frame: the app's frame while a control moves against its frame while the clay only trains.
 
-Per drag event the session puts back the shape the drag began with (`restore` from a `snapshot` kept on the
-device), hands the moved controls to the Som (`set_controls`: a local restart), runs the frame's cycles (`step(k)`)
-and reads the weights for the views; a plain frame only steps and reads. Both are timed the same way, frame after
+Per drag event the session hands the moved controls to the Som (`set_controls`: a local restart from the shape the
+drag began with, a `snapshot` kept on the device), runs the frame's cycles (`step(k)`) and reads the weights for
+the views; a plain frame only steps and reads. Both are timed the same way, frame after
 frame, on one Som (the drag moves control 0 a little further each frame, as a hand does).
 
 (At the session's level the two cannot be told apart this way: the session sizes each step to fill the frame's
@@ -40,8 +40,7 @@ def frames(som, cycles: int, count: int, drag: bool) -> list[float]:
         t = time.perf_counter()
         if drag:
             controls[0, 0] += step
-            som.restore(base, som.iterations)
-            som.set_controls(controls)
+            som.set_controls(controls, start=base)
         som.step(cycles)
         wp.synchronize_device(som.device)
         _ = som.weights

@@ -479,9 +479,15 @@ def test_restore_puts_weights_and_iteration_back_without_training(device):
     som.restore(kept, 30)
     np.testing.assert_array_equal(som.weights, trained)
     assert som.iteration == 30
+    som.set_controls(C, start=kept)  # a drag's frame: a local restart from the snapshot, not the latest weights
+    assert som.iteration == som.restart_iteration
+    np.testing.assert_array_equal(som.weights, trained)
     other, _ = _pair(_case("mixed"), _case("mixed").points, C, device, iterations=30)
     with pytest.raises(ValueError, match="snapshot"):
         som.restore(other.snapshot(), 3)
+    with pytest.raises(ValueError, match="snapshot"):
+        som.set_controls(C + 1.0, start=other.snapshot())
+    np.testing.assert_array_equal(som.controls, _f32(C))  # refused: nothing changed
     with pytest.raises(ValueError, match="iteration"):
         som.restore(saved, 31)
     with pytest.raises(ValueError, match="weights"):

@@ -16,6 +16,7 @@ symmetric. The device holds each original next to its copy.
 
 from __future__ import annotations
 
+import functools
 import os
 from collections import OrderedDict
 from collections.abc import Sequence
@@ -382,9 +383,13 @@ class Som:
 
     # -- intents ------------------------------------------------------------------------------------------
     @warp_exclusive
-    def set_controls(self, controls: ArrayLike) -> None:
-        """New controls (any count k); the schedule restarts at s0 from the latest weights (local follow)."""
-        self._controls = self._check_controls(controls, self._mirror)
+    def set_controls(self, controls: ArrayLike, start: wp.array | None = None) -> None:
+        """New controls (any count k); the schedule restarts at s0 from the latest weights (local follow), or from
+        `start`, a `snapshot()` of this Som (each frame of a drag restarts from the shape the drag began with)."""
+        checked = self._check_controls(controls, self._mirror)
+        if start is not None:
+            self._put_snapshot(start)
+        self._controls = checked
         self._upload_controls()
         self._restart()
 
@@ -411,10 +416,7 @@ class Som:
         `weights`: (N, n) values, or a `snapshot()` of this Som (copied on the device, no trip through the host)."""
         s = checks.integer("iteration", iteration, 0, self._iterations)
         if isinstance(weights, wp.array):
-            if weights.shape != self._w.shape or weights.dtype != self._w.dtype or str(weights.device) != self.device:
-                raise ValueError(f"weights: expected a snapshot() of this Som ({self.n_neurons} weights of "
-                                 f"{self.n_dims} on {self.device}), got {weights.shape} on {weights.device}")
-            _copy(self._w, weights)
+            self._put_snapshot(weights)
         else:
             self._w.assign(self._checked_weights(weights))
         self._restart(s)
@@ -434,6 +436,12 @@ class Som:
         if not self._mirror:
             return found
         return np.concatenate([found[0::2], found[1::2]])
+
+    def _put_snapshot(self, snapshot: wp.array) -> None:
+        if snapshot.shape != self._w.shape or snapshot.dtype != self._w.dtype or snapshot.device != self._w.device:
+            raise ValueError(f"weights: expected a snapshot() of this Som ({self.n_neurons} weights of "
+                             f"{self.n_dims} on {self.device}), got {snapshot.shape} on {snapshot.device}")
+        _copy(self._w, snapshot)
 
     def _checked_weights(self, weights: ArrayLike) -> np.ndarray:
         w = checks.finite_array("weights", weights, 2)
@@ -799,13 +807,18 @@ class Som:
         self._winners_valid = True
 
 
+@functools.cache
+def _memcpy(name: str):
+    """Warp's memcpy entry point `name` (wp_memcpy_h2d, wp_memcpy_d2d), None where there is none."""
+    core = getattr(getattr(_warp_context, "runtime", None), "core", None)
+    return getattr(core, name, None)
+
+
 def _copy(dest: wp.array, src: wp.array) -> None:
     """`src` into `dest`, of the same size. Into a CUDA array from a pinned host array or one on the same device:
     asynchronous, on the device's stream, through Warp's own memcpy entry points without wp.copy's checks (a sixth
     of its time; this runs every drag frame). wp.copy on the CPU, and where those entry points are missing."""
-    core = getattr(getattr(_warp_context, "runtime", None), "core", None)
-    copy = None if dest.device.is_cpu else getattr(core, "wp_memcpy_h2d" if src.device.is_cpu else "wp_memcpy_d2d",
-                                                     None)
+    copy = None if dest.device.is_cpu else _memcpy("wp_memcpy_h2d" if src.device.is_cpu else "wp_memcpy_d2d")
     if copy is None:
         wp.copy(dest, src)
         return

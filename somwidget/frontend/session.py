@@ -492,10 +492,8 @@ class Session:
     @staticmethod
     def _apply(som, kind: str, payload) -> None:
         if kind == "controls":
-            controls, base = payload
-            if base is not None:  # a drag's frame: from the shape the drag began with
-                som.restore(base, som.iterations)
-            som.set_controls(controls)
+            controls, base = payload  # base: in a drag, the shape it began with (each frame restarts from it)
+            som.set_controls(controls, start=base)
         elif kind == "iterations":
             som.iterations = payload
         elif kind == "l_start":
