@@ -1,7 +1,7 @@
 """What a drag costs per frame: the app's frame while a control moves against its frame while the clay only trains.
 
 Per drag event the session hands the moved controls to the Som (`set_controls`: a local restart from the shape the
-drag began with, a `snapshot` kept on the device), runs the frame's cycles (`step(k)`) and reads the weights for
+drag began with, which `anchor` kept on the device), runs the frame's cycles (`step(k)`) and reads the weights for
 the views; a plain frame only steps and reads. Both are timed the same way, frame after
 frame, on one Som (the drag moves control 0 a little further each frame, as a hand does).
 
@@ -31,7 +31,7 @@ def frames(som, cycles: int, count: int, drag: bool) -> list[float]:
     step(cycles), the weights read."""
     controls = som.controls
     step = 0.002 * np.float32(np.abs(som.weights).max())
-    base = som.snapshot()
+    som.anchor()
     out = []
     for _ in range(count):
         if som.iteration >= som.iterations:
@@ -40,7 +40,7 @@ def frames(som, cycles: int, count: int, drag: bool) -> list[float]:
         t = time.perf_counter()
         if drag:
             controls[0, 0] += step
-            som.set_controls(controls, start=base)
+            som.set_controls(controls, from_anchor=True)
         som.step(cycles)
         wp.synchronize_device(som.device)
         _ = som.weights

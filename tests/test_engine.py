@@ -473,21 +473,24 @@ def test_restore_puts_weights_and_iteration_back_without_training(device):
     som.train()
     ref.train()
     _assert_matches(som, ref, _scale(case.points, C))
-    kept = som.snapshot()  # on the device: a drag's frames restart from it
-    trained = som.weights
-    som.restore(saved, 12)
-    som.restore(kept, 30)
-    np.testing.assert_array_equal(som.weights, trained)
-    assert som.iteration == 30
-    som.set_controls(C, start=kept)  # a drag's frame: a local restart from the snapshot, not the latest weights
+    # a drag: anchor the shape it begins with; every frame restarts from it, wherever the last frame left off
+    som.anchor()
+    anchored = som.weights
+    som.set_controls(C + 0.05, from_anchor=True)
+    np.testing.assert_array_equal(som.weights, anchored)  # read before the run: the anchor already
+    som.step(5)
+    som.set_controls(C + 0.1, from_anchor=True)
     assert som.iteration == som.restart_iteration
-    np.testing.assert_array_equal(som.weights, trained)
+    som.train()
+    fresh, _ = _pair(case, case.points, C, device, iterations=30, smoothing=0.1, mirror=(1,))
+    fresh.restore(anchored, 12)
+    fresh.set_controls(C + 0.1)
+    fresh.train()
+    np.testing.assert_array_equal(som.weights, fresh.weights)  # as one move from the anchored shape
     other, _ = _pair(_case("mixed"), _case("mixed").points, C, device, iterations=30)
-    with pytest.raises(ValueError, match="snapshot"):
-        som.restore(other.snapshot(), 3)
-    with pytest.raises(ValueError, match="snapshot"):
-        som.set_controls(C + 1.0, start=other.snapshot())
-    np.testing.assert_array_equal(som.controls, _f32(C))  # refused: nothing changed
+    with pytest.raises(ValueError, match="anchor"):
+        other.set_controls(C + 1.0, from_anchor=True)
+    np.testing.assert_array_equal(other.controls, _f32(C))  # refused: nothing changed
     with pytest.raises(ValueError, match="iteration"):
         som.restore(saved, 31)
     with pytest.raises(ValueError, match="weights"):

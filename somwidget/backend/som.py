@@ -177,6 +177,8 @@ class Som:
         self._staging = None if dev == "cpu" else wp.zeros_like(self._block, device="cpu", pinned=True)
         self._uploaded = None if dev == "cpu" else wp.Event(dev)
         self._staging_busy = False  # an upload from `_staging` may still be under way
+        self._w_anchor = None  # weights kept by `anchor()`
+        self._anchor_pending = False  # the next run starts by copying them back (set_controls(from_anchor=True))
         words = (self._block if self._staging is None else self._staging).numpy().view(np.float32)
         self._c_rows = words[: control_bytes // 4].reshape(MAX_CONTROLS, self.n_dims)
         self._counter_words = words[control_bytes // 4:].view(np.int32)
@@ -366,6 +368,7 @@ class Som:
     @warp_exclusive
     def weights(self) -> np.ndarray:
         """(N, n) float32 host copy of the current weights."""
+        self._settle_anchor()
         return self._w.numpy().reshape(self.n_neurons, self.n_dims).copy()
 
     @property
@@ -383,19 +386,31 @@ class Som:
 
     # -- intents ------------------------------------------------------------------------------------------
     @warp_exclusive
-    def set_controls(self, controls: ArrayLike, start: wp.array | None = None) -> None:
-        """New controls (any count k); the schedule restarts at s0 from the latest weights (local follow), or from
-        `start`, a `snapshot()` of this Som (each frame of a drag restarts from the shape the drag began with)."""
-        checked = self._check_controls(controls, self._mirror)
-        if start is not None:
-            self._put_snapshot(start)
-        self._controls = checked
+    def set_controls(self, controls: ArrayLike, from_anchor: bool = False) -> None:
+        """New controls (any count k); the schedule restarts at s0 from the latest weights (local follow), or with
+        `from_anchor` from the weights `anchor()` kept (each frame of a drag restarts from the shape the drag began
+        with: on CUDA the copy back is a node of the run's first graph, not a call of its own)."""
+        if from_anchor and self._w_anchor is None:
+            raise ValueError("set_controls: from_anchor needs anchor() first (no weights are kept)")
+        self._controls = self._check_controls(controls, self._mirror)
+        self._anchor_pending = from_anchor
+        if from_anchor and self.device == "cpu":
+            self._settle_anchor()
         self._upload_controls()
         self._restart()
 
     @warp_exclusive
+    def anchor(self) -> None:
+        """Keep a copy of the current weights on the device, for `set_controls(..., from_anchor=True)`."""
+        self._settle_anchor()
+        if self._w_anchor is None:
+            self._w_anchor = wp.empty_like(self._w)
+        wp.copy(self._w_anchor, self._w)
+
+    @warp_exclusive
     def set_weights(self, weights: ArrayLike) -> None:
         """Replace the current weights (same shape); the schedule restarts at s0 from them."""
+        self._anchor_pending = False
         self._w.assign(self._checked_weights(weights))
         self._restart()
 
@@ -407,25 +422,18 @@ class Som:
     @warp_exclusive
     def reset(self) -> None:
         """Back to the start weights and s = 0 (the whole schedule); the controls stay."""
+        self._anchor_pending = False
         self._w.assign(self._start)
         self._restart(0)
 
     @warp_exclusive
-    def restore(self, weights: ArrayLike | wp.array, iteration: int) -> None:
-        """Put saved weights and s back exactly (a loaded session, an undo): nothing trains, nothing restarts.
-        `weights`: (N, n) values, or a `snapshot()` of this Som (copied on the device, no trip through the host)."""
+    def restore(self, weights: ArrayLike, iteration: int) -> None:
+        """Put saved weights and s back exactly (a loaded session, an undo): nothing trains, nothing restarts."""
         s = checks.integer("iteration", iteration, 0, self._iterations)
-        if isinstance(weights, wp.array):
-            self._put_snapshot(weights)
-        else:
-            self._w.assign(self._checked_weights(weights))
+        w = self._checked_weights(weights)
+        self._anchor_pending = False
+        self._w.assign(w)
         self._restart(s)
-
-    @warp_exclusive
-    def snapshot(self) -> wp.array:
-        """A copy of the current weights kept on the device, for `restore` (each frame of a drag restarts from
-        the shape the drag began with, without sending it up again)."""
-        return wp.clone(self._w)
 
     @warp_exclusive
     def winners(self) -> np.ndarray:
@@ -437,11 +445,11 @@ class Som:
             return found
         return np.concatenate([found[0::2], found[1::2]])
 
-    def _put_snapshot(self, snapshot: wp.array) -> None:
-        if snapshot.shape != self._w.shape or snapshot.dtype != self._w.dtype or snapshot.device != self._w.device:
-            raise ValueError(f"weights: expected a snapshot() of this Som ({self.n_neurons} weights of "
-                             f"{self.n_dims} on {self.device}), got {snapshot.shape} on {snapshot.device}")
-        _copy(self._w, snapshot)
+    def _settle_anchor(self) -> None:
+        """The anchored weights into the current ones now, if a restart from the anchor still waits for its run."""
+        if self._anchor_pending:
+            self._anchor_pending = False
+            _copy(self._w, self._w_anchor)
 
     def _checked_weights(self, weights: ArrayLike) -> np.ndarray:
         w = checks.finite_array("weights", weights, 2)
@@ -548,6 +556,7 @@ class Som:
     def _find_winners_now(self) -> None:
         if self._winners_valid:
             return
+        self._settle_anchor()
         self._set_cycle()
         self._launch_find()
         self._winners_valid = True
@@ -569,6 +578,7 @@ class Som:
     def _run(self, cycles: int) -> None:
         """`cycles` cycles from s, replayed from captured graphs (one per CPU core)."""
         if self._rows_mode:
+            self._settle_anchor()
             self._run_rows(cycles)
             return
         fresh = not self._winners_valid
@@ -580,8 +590,9 @@ class Som:
         else:
             parity = 0 if fresh else self._parity
             two_kernels = smoothing and self._smoothing_in_one_kernel() is None
-            graph = self._graph((cycles, fresh, parity, smoothing),
-                                lambda: self._record_cuda(cycles, fresh, parity, smoothing))
+            anchored, self._anchor_pending = self._anchor_pending, False  # the graph copies the anchor back first
+            graph = self._graph((cycles, fresh, parity, smoothing, anchored),
+                                lambda: self._record_cuda(cycles, fresh, parity, smoothing, anchored))
             wp.capture_launch(graph)
             self._parity = parity if two_kernels else (parity + cycles) % 2  # a kernel a cycle passes the counter on
         self._s += cycles
@@ -640,10 +651,11 @@ class Som:
             wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 1, stalled])
             meet()
 
-    def _record_cuda(self, cycles: int, fresh: bool, parity: int, smoothing: bool) -> list:
+    def _record_cuda(self, cycles: int, fresh: bool, parity: int, smoothing: bool, anchored: bool = False) -> list:
         """A kernel a cycle (move + next winners), or two with smoothing (move; smooth + next winners). Without
-        `fresh` the winners of the first cycle are known (always so in distance rows mode). Returns the packed
-        arguments of the dependent launches, which the graph needs as long as it lives."""
+        `fresh` the winners of the first cycle are known (always so in distance rows mode); `anchored` starts with
+        the anchored weights copied back (`set_controls(..., from_anchor=True)`). Returns the packed arguments of
+        the dependent launches, which the graph needs as long as it lives."""
         dev, threads, k = self.device, int(CUDA_BLOCK), self._k_eff
         dependent = dependent_launch.available(dev)
         after_kernel = False
@@ -669,6 +681,8 @@ class Som:
             else:
                 move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8)), pairs).move
 
+        if anchored:
+            wp.copy(self._w, self._w_anchor)
         if fresh:
             self._launch_find()
             after_kernel = True

@@ -259,7 +259,7 @@ class Session:
         self._history = History()
         self._gesture = False  # a gesture (a drag) is open: its intents belong to one step
         self._gesture_step: Step | None = None  # the step the open gesture recorded, once it changed something
-        self._gesture_base = None  # its weights, kept on the Som's device: where each frame of the drag restarts
+        self._gesture_base = None  # the Som that anchored its weights (Som.anchor): where each frame restarts
         self._last_step: tuple[str, float] = ("", 0.0)  # kind and time of the latest recorded step
         self._unsaved = True  # a change the autosave has not written yet (a new session: its first state)
         self._saved_at = 0.0
@@ -492,8 +492,8 @@ class Session:
     @staticmethod
     def _apply(som, kind: str, payload) -> None:
         if kind == "controls":
-            controls, base = payload  # base: in a drag, the shape it began with (each frame restarts from it)
-            som.set_controls(controls, start=base)
+            controls, base = payload  # base: in a drag, the Som that anchored the shape it began with
+            som.set_controls(controls, from_anchor=base is som)  # each frame of the drag restarts from that shape
         elif kind == "iterations":
             som.iterations = payload
         elif kind == "l_start":
@@ -793,13 +793,16 @@ class Session:
 
     def _record_step(self) -> tuple[Step, object]:
         """Push the current state (every queued intent applied first) as an undo step. Returns it, and inside a
-        gesture its weights kept on the Som's device (`Som.snapshot`, where the drag's frames restart), else None."""
+        gesture the Som that kept its weights (`Som.anchor`: the drag's frames restart from them), else None."""
         with self._som_lock:
             drained = self._drain()
             with self._lock:
                 step = self._capture()
                 self._history.push(step)
-                base = self._som.snapshot() if self._gesture else None
+                base = None
+                if self._gesture:
+                    base = self._som
+                    base.anchor()
                 if drained:
                     self._enqueue("publish", intent=False)  # a frame that shows the drained intents
         return step, base
