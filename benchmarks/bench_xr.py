@@ -38,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from somwidget.frontend.session import Session  # noqa: E402
-from somwidget.frontend.xr import protocol  # noqa: E402
+from somwidget.frontend import protocol  # noqa: E402
 from somwidget.frontend.xr.server import DIST  # noqa: E402
 from somwidget.frontend.xr.standalone import XRServer  # noqa: E402
 

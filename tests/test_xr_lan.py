@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from somwidget.frontend import lan
-from somwidget.frontend.xr import protocol
+from somwidget.frontend import protocol
 from somwidget.frontend.xr.standalone import XRServer
 
 

@@ -17,7 +17,8 @@ import aiohttp
 import numpy as np
 import pytest
 
-from somwidget.frontend.xr import protocol, server as xr_server
+from somwidget.frontend import protocol
+from somwidget.frontend.xr import server as xr_server
 from somwidget.frontend.xr.standalone import XRServer
 
 

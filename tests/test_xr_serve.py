@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, insecure_context
 
-from somwidget.frontend.xr import protocol
+from somwidget.frontend import protocol
 from somwidget.frontend.xr.server import DIST
 
 NOT_WIRED = ("`somwidget serve` does not serve /xr/: app.py must call somwidget.frontend.xr.attach(wslink_server, "

@@ -1,14 +1,16 @@
-"""The web app: a trame (vue3 + vuetify3) page with the session's panel and its server-rendered 3-D view.
+"""The web app: a trame (vue3 + vuetify3) page with the session's panel beside the clay view.
 
-`somwidget serve` calls `run_server(...)`. One server holds one `Session`; every tab on it shares the session and
-the same server-side render window, so any tab can drag a control and all of them see the clay follow.
+`somwidget serve` calls `run_server(...)`. One server holds one `Session`; every tab on it shares the session, so
+any tab can drag a control and all of them see the clay follow. The 3-D view is the browser's own (the module
+/xr/somview.js, built from xr/src/view.js, mounted into the page): it draws the frames the XR hub streams over the
+websocket /xr/ws and sends the drags back as intents, so each tab keeps its own camera and nothing is rendered on
+the server. The panel is trame's: its state and triggers.
 
 Threads: the session trains on its own thread and hands frames to `SomApp._on_frame`, which only stores the
-latest one. A task on the server's event loop (`_pump`) applies the latest frame to the pyvista scene, keeps
-trame's image stream animating while frames flow, and refreshes the panel's numbers a few times a second. All
-VTK work happens on the event loop's thread.
+latest one. A task on the server's event loop (`_pump`) refreshes the panel's numbers a few times a second and the
+panel's fields when the preset or the history changes.
 
-A read-only JSON route, GET /api/state, reports the session, the scene and the connected clients (for tests,
+A read-only JSON route, GET /api/state, reports the session, the panel and the connected clients (for tests,
 benchmarks and scripts); add ?positions=1 for every node's position.
 
 Every bind gets `lan.request_guard`: websockets (trame's /ws, /xr/ws) from pages of other sites are refused, and a
@@ -29,35 +31,25 @@ import time
 import unicodedata
 from pathlib import Path
 
-os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+from aiohttp import web
+from trame.app import get_server
+from trame.ui.vuetify3 import SinglePageWithDrawerLayout
+from trame.widgets import client, html
+from trame.widgets import vuetify3 as v3
+from wslink.websocket import LinkProtocol
 
-from aiohttp import web  # noqa: E402
-from trame.app import get_server  # noqa: E402
-from trame.ui.vuetify3 import SinglePageWithDrawerLayout  # noqa: E402
-from trame.widgets import client, html  # noqa: E402
-from trame.widgets import vuetify3 as v3  # noqa: E402
-from trame_pyvista import PyVistaRemoteView  # noqa: E402
-from wslink.websocket import LinkProtocol  # noqa: E402
-
-from ..backend import presets as _presets  # noqa: E402
-from . import lan as _lan  # noqa: E402
-from .session import DEFAULT_MAX_VERTICES, REACH_HELP, Frame, Session, hex_colour  # noqa: E402
-from .view import SceneView, control_colours  # noqa: E402
-from .xr import attach as attach_xr  # noqa: E402
+from ..backend import presets as _presets
+from . import lan as _lan
+from .protocol import control_colours
+from .session import DEFAULT_MAX_VERTICES, REACH_HELP, Frame, Session, hex_colour
+from .xr import attach as attach_xr
 
 log = logging.getLogger(__name__)
 
 #: Largest file the upload fields accept (a mesh or a session).
 MAX_UPLOAD_BYTES = 50 * 1024 * 1024
-#: Images per second the server-rendered view aims at while the clay moves.
-VIEW_FPS = 30
-#: JPEG quality while the clay moves (the still image after it is sharper). The images keep the view's full size:
-#: a smaller render window during a drag would move the dragged sphere under the pointer.
-ANIMATION_QUALITY = 85
 #: Panel numbers (iteration, gaps, cycle time) refresh at most this often per second.
 PANEL_HZ = 8
-#: Keep the image stream running this long after the last change (s).
-LINGER = 0.6
 MIME = {"obj": "text/plain", "ply": "application/octet-stream", "glb": "model/gltf-binary"}
 #: Mesh files the upload field takes (by the suffix of the browser's file name).
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -82,26 +74,45 @@ if (!window.somwidgetShortcuts) {
 """
 
 
+#: Mounts the clay view (the module the XR hub serves) into the page's #clay-view, and again should the page
+#: replace that element.
+MOUNT_VIEW_JS = """
+if (!window.somwidgetMount) {
+  window.somwidgetMount = () => {
+    const el = document.getElementById('clay-view');
+    if (!el || el.somview || el.dataset.mounting) return;
+    el.dataset.mounting = '1';
+    import(new URL('xr/somview.js', document.baseURI).href)
+      .then((m) => { window.somview = m.mountWebView(el); })
+      .catch((err) => { el.textContent = `The clay view did not load: ${err}`; })
+      .finally(() => { delete el.dataset.mounting; });
+  };
+  setInterval(window.somwidgetMount, 300);
+  window.somwidgetMount();
+}
+"""
+
+
 def _fmt(x: float, digits: int = 3) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
 
 
 class _ClientWatch(LinkProtocol):
-    """Counts websocket clients and tells the app when one goes away (to end a drag it left behind)."""
+    """Counts the page's websocket clients (for /api/state)."""
 
     def __init__(self, app: SomApp):
         super().__init__()
         self._app = app
 
     def onConnect(self, request, client_id):  # noqa: N802 (wslink's name)
-        self._app._client_connected(client_id)
+        self._app.clients.add(str(client_id))
 
     def onClose(self, client_id):  # noqa: N802
-        self._app._client_closed(client_id)
+        self._app.clients.discard(str(client_id))
 
 
 class SomApp:
-    """The trame app around one Session: layout, panel callbacks, the 3-D view and the frame pump."""
+    """The trame app around one Session: layout, panel callbacks, the clay view's hub and the panel pump."""
 
     def __init__(self, session: Session, server=None, title: str = "somwidget", fresh=None):
         self.session = session
@@ -109,27 +120,18 @@ class SomApp:
         self.xr_token: str | None = None  # the LAN access token, when served beyond loopback
         # on a loopback bind, answer only loopback Host names (False behind a proxy that forwards the browser's Host)
         self.check_host = True
-        self.xr = None  # the XR hub, once the server is bound
-        self._web_app = None  # the wslink server (for the client behind the current RPC)
-        self._press_client: str | None = None  # the client whose mouse button is down in the view
-        self._observed_app = None
+        self.xr = None  # the clay view's hub (/xr/ws, /xr/somview.js), once the server is bound
         self.server = server if server is not None else get_server("somwidget", client_type="vue3")
         self.server.client_type = "vue3"
         self.state, self.ctrl = self.server.state, self.server.controller
         self.title = title
-        self.scene = SceneView(session)
-        self.scene.on_drag = self._on_drag
-        self.scene.build(session.frame)
         self.clients: set[str] = set()
-        self.images = 0  # frames applied to the scene
         self._latest: Frame | None = None
         self._latest_lock = threading.Lock()
-        self._applied_seq = -1
+        self._generation_seen = session.frame.generation
         self._history_seen = session.frame.history
-        self._last_change = 0.0
         self._last_panel = 0.0
         self._panel_seq = -1
-        self._animating = False
         self._pump_task = None
         self._extra_presets: list[dict] = []
         self._uploaded: dict[str, object] = {}  # name -> Preset of the meshes loaded in this server's life
@@ -141,153 +143,43 @@ class SomApp:
         session.add_listener(self._on_frame)
 
     def close(self) -> None:
-        """Detach from the session (the app and its XR hub) and free the render window (call on the server's
-        thread, after it stopped)."""
+        """Detach from the session (the app and its hub; call on the server's thread, after it stopped)."""
         self.session.remove_listener(self._on_frame)
         if self.xr is not None:
             self.xr.detach()
         if self._pump_task is not None:
             self._pump_task.cancel()
             self._pump_task = None
-        self.scene.plotter.close()
 
-    # -- session -> app -------------------------------------------------------------------------------------
+    # -- session -> panel -------------------------------------------------------------------------------------
     def _on_frame(self, frame: Frame) -> None:
-        """Training thread: keep only the latest frame; the pump shows it."""
+        """Training thread: keep only the latest frame; the pump shows its numbers."""
         with self._latest_lock:
             self._latest = frame
 
-    def _on_drag(self, index):
-        """A sphere's drag starts (its index) or ends (None): the drag is one undo step."""
-        self._last_change = time.monotonic()
-        if index is not None:
-            self.session.begin_gesture()
-            self._start_animation()
-        else:
-            self.session.end_gesture()
-
-    def _client_connected(self, client_id) -> None:
-        self.clients.add(str(client_id))
-
-    def _client_closed(self, client_id) -> None:
-        client_id = str(client_id)
-        self.clients.discard(client_id)
-        # a tab closed with the mouse button down leaves the button "pressed" in VTK's web application (it
-        # compares each event's buttons with the last ones) and the widget grabbed: release both, so the
-        # session keeps the last position and the next tab starts clean. Only for the tab that pressed: another
-        # tab's drag goes on.
-        owner = self._press_client
-        if owner is not None and owner != client_id:
-            return
-        try:
-            if self.scene.dragging is not None or self._button_down():
-                self._release_button()
-            self.scene.cancel_drag()
-        except Exception:  # pragma: no cover - never let a closing socket break the server
-            log.exception("releasing the mouse failed")
-        finally:
-            self._press_client = None
-
-    def _active_client(self) -> str | None:
-        """The client whose RPC the server is handling now (wslink records it before each call)."""
-        web_app = self._web_app
-        cid = getattr(web_app, "last_active_client_id", None) if web_app is not None else None
-        return None if cid is None else str(cid)
-
-    def _watch_presses(self) -> None:
-        """Note which client pressed a mouse button in the view: VTK's web application fires StartInteractionEvent
-        on a client's first "down" and EndInteractionEvent on its "up", inside that client's RPC."""
-        handler = self._mouse_handler()
-        vtk_app = getattr(handler, "app", None) if handler is not None else None
-        if vtk_app is None or vtk_app is self._observed_app:
-            return
-        self._observed_app = vtk_app
-
-        def pressed(*_):
-            self._press_client = self._active_client()
-
-        def released(*_):
-            self._press_client = None
-
-        vtk_app.AddObserver("StartInteractionEvent", pressed)
-        vtk_app.AddObserver("EndInteractionEvent", released)
-
-    def _mouse_handler(self):
-        protocol = self.server.protocol
-        if protocol is None:
-            return None
-        for link in protocol.getLinkProtocols():
-            if hasattr(link, "mouse_interaction") and hasattr(link, "last_action"):
-                return link
-        return None
-
-    def _button_down(self) -> bool:
-        handler = self._mouse_handler()
-        return handler is not None and handler.last_action == "down"
-
-    def _release_button(self) -> None:
-        handler = self._mouse_handler()
-        if handler is None:
-            return
-        w, h = self.scene.plotter.render_window.GetSize()
-        x = y = 0.5
-        if self.scene.dragging is not None:  # release where the sphere is, so it stays put
-            centre = self.scene.widgets[self.scene.dragging].GetCenter()
-            sx, sy = self.scene.screen_positions([centre])[0]
-            x, y = sx / max(w, 1), 1.0 - sy / max(h, 1)
-        handler.mouse_interaction({
-            "view": self.state[f"{self.view.ref_name}Id"], "action": "up", "buttonLeft": False,
-            "buttonMiddle": False, "buttonRight": False, "shiftKey": False, "ctrlKey": False, "altKey": False,
-            "metaKey": False, "x": x, "y": y})
-
     async def _pump(self) -> None:
-        period = 1.0 / (2 * VIEW_FPS)
         while True:
             try:
                 self._pump_once()
             except Exception:
-                log.exception("frame pump failed")
-            await asyncio.sleep(period)
+                log.exception("panel pump failed")
+            await asyncio.sleep(1.0 / (2 * PANEL_HZ))
 
     def _pump_once(self) -> None:
         with self._latest_lock:
             frame = self._latest
+        if frame is None:
+            return
+        if frame.generation != self._generation_seen or frame.history != self._history_seen:
+            # a new preset, an undo, a redo or a new step (from any view): the panel's fields follow
+            self._generation_seen, self._history_seen = frame.generation, frame.history
+            with self.state:
+                self._sync_session_state()
         now = time.monotonic()
-        changed = frame is not None and frame.seq != self._applied_seq
-        if changed:
-            rebuilt = self.scene.apply(frame)
-            self._applied_seq = frame.seq
-            self.images += 1
-            self._last_change = now
-            if rebuilt:
-                self._on_rebuild()
-            elif frame.history != self._history_seen:  # an undo, a redo or a new step (from any view)
-                with self.state:
-                    self._sync_session_state()
-            self._history_seen = frame.history
-            self._start_animation()
-        if self._animating and self.scene.dragging is None and now - self._last_change > LINGER:
-            self._stop_animation()
-        if frame is not None and now - self._last_panel > 1 / PANEL_HZ and (
-                frame.seq != self._panel_seq or now - self._last_panel > 1.0):
+        if now - self._last_panel > 1 / PANEL_HZ and (frame.seq != self._panel_seq or now - self._last_panel > 1.0):
             self._update_panel(frame)
             self._panel_seq = frame.seq
             self._last_panel = now
-
-    def _start_animation(self) -> None:
-        if not self._animating and self.server.protocol is not None:
-            self._animating = True
-            self.view.start_animation(fps=VIEW_FPS, quality=ANIMATION_QUALITY, ratio=1)
-
-    def _stop_animation(self) -> None:
-        if self._animating:
-            self._animating = False
-            self.view.stop_animation()  # pushes one last still image
-
-    def _on_rebuild(self) -> None:
-        with self.state:
-            self._sync_session_state()
-        self.view.update()
 
     # -- state -------------------------------------------------------------------------------------------------------
     def _preset_items(self) -> list[dict]:
@@ -347,7 +239,7 @@ class SomApp:
         sess = self.session
         k = frame.n_controls
         gaps = frame.gaps
-        own, _ = control_colours(frame, frame.layout.colour_space != "none")
+        own = control_colours(frame, frame.layout.colour_space != "none")[:k]
         controls = []
         for i in range(k):
             g = [float(gaps[i])]
@@ -665,8 +557,6 @@ class SomApp:
         server.trigger("reload_preset")(self.reload_preset)
         server.trigger("export_mesh")(self.export_mesh)
         server.trigger("save_session")(self.save_session)
-        server.trigger("reset_camera")(lambda: (self.scene._frame_camera(self.scene.frame.positions),
-                                                self.view.update()))
 
         @state.change("preset_name")
         async def _preset_changed(preset_name, **_):
@@ -692,16 +582,10 @@ class SomApp:
         server.add_protocol_to_configure(lambda protocol: protocol.registerLinkProtocol(_ClientWatch(self)))
 
     def _on_ready(self, **_):
-        loop = asyncio.get_event_loop()
         if self._pump_task is None:
-            self._pump_task = loop.create_task(self._pump())
-        try:
-            self._watch_presses()
-        except Exception:  # pragma: no cover - the drag bookkeeping must not stop the server
-            log.exception("watching mouse presses failed")
+            self._pump_task = asyncio.get_event_loop().create_task(self._pump())
 
     def _bind_routes(self, wslink_server) -> None:
-        self._web_app = wslink_server
         bound = getattr(wslink_server, "config", {}).get("host")
         try:
             loopback = _lan.is_loopback(bound)
@@ -713,8 +597,11 @@ class SomApp:
 
     async def _api_state(self, request: web.Request) -> web.Response:
         positions = request.query.get("positions", "0") not in ("0", "", "false")
-        body = {"session": self.session.state(positions=positions), "view": self.scene.describe(),
-                "clients": len(self.clients), "applied_frames": self.images, "animating": self._animating,
+        hub = self.xr
+        body = {"session": self.session.state(positions=positions), "clients": len(self.clients),
+                "views": {"clients": len(hub.clients) if hub else 0,
+                          "frames_sent": sum(c.frames_sent for c in hub.clients.values()) if hub else 0,
+                          "grabs": {str(i): cid for i, cid in hub.grabs.items()} if hub else {}},
                 "panel": {"error_message": self.state.error_message, "param_S": self.state.param_S,
                           "recovered_message": self.state.recovered_message,
                           "preset_name": self.state.preset_name}}
@@ -735,15 +622,14 @@ class SomApp:
                         title="Redo (Ctrl+Shift+Z)", variant="text", classes="mr-2")
                 v3.VBtn("Reset", id="reset-button", click="trigger('reset')", prepend_icon="mdi-restore",
                         variant="tonal", classes="mr-2", title="Back to the start mesh; the whole schedule runs again")
-                v3.VBtn(icon="mdi-crop-free", click="trigger('reset_camera')", title="Reset the camera")
             with layout.drawer as drawer:
                 drawer.width = 390
                 self._panel()
             client.Script(SHORTCUTS_JS)
+            client.Script(MOUNT_VIEW_JS)
             with layout.content:
-                with v3.VContainer(fluid=True, classes="pa-0 fill-height", id="view-container"):
-                    self.view = PyVistaRemoteView(self.scene.plotter, interactive_ratio=1, still_ratio=1,
-                                                  interactive_quality=85, still_quality=95)
+                # the clay view mounts here (MOUNT_VIEW_JS); Vue leaves the element's children alone
+                html.Div(id="clay-view", style="position: relative; width: 100%; height: calc(100vh - 88px)")
         self.layout = layout
 
     @staticmethod

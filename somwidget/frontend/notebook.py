@@ -1,18 +1,12 @@
-"""somwidget inside Jupyter: an ipywidgets panel beside the web app's live 3-D view, both bound to one Session.
+"""somwidget inside Jupyter: an ipywidgets panel beside the live 3-D clay view, both bound to one Session.
 
 `show(...)` returns a `SomWidget` (an ipywidgets HBox): on the left the `Panel` (preset, S, l_start, l_end,
-smoothing, symmetry, the feature dimensions with their metric weights, Train / Pause / Reset, progress, the
-controls and their gaps), on the right an iframe with the draggable view. Both talk to the same `Session`:
+smoothing, reach, symmetry, the feature dimensions with their metric weights, Train / Pause / Reset, Undo / Redo,
+progress, the controls and their gaps), on the right the `ClayWidget` (widget.py): the browser's own view of the
+clay, fed frames over the kernel's comm. Both talk to the same `Session`:
 
     panel widget --set_iterations / set_l_start / ... --> Session --frames--> panel (iteration, gaps, parameters)
-    view (drag a sphere) --move_control--> Session --frames--> view and panel
-
-The view is the web app of app.py (`build_app`), served by its own trame server on a free loopback port and run
-on a thread of its own with its own event loop (`NotebookServer`): it keeps drawing while a cell runs, and every
-route the app registers (the /api/state debug route, the later WebXR page) is on that server too. trame's Jupyter
-extension is not used (its backend has no aiohttp app for extra routes): the iframe points at the server itself,
-which works when the browser runs on the kernel's machine. Elsewhere (a remote Jupyter server, JupyterHub), install
-jupyter-server-proxy and set SOMWIDGET_JUPYTER_URL (see `view_url`).
+    view (drag a sphere) --grab / move / release--> Session --frames--> every view and panel
 
 The panel works without a frontend: its widgets are plain Python objects, so tests (and scripts) can set
 `panel.S.value = 300` and watch the session follow, or move a control and watch `panel.progress.value` restart.
@@ -20,9 +14,7 @@ The panel works without a frontend: its widgets are plain Python objects, so tes
 
 from __future__ import annotations
 
-import asyncio
 import html as _html
-import itertools
 import logging
 import math
 import os
@@ -31,27 +23,24 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")  # the saved notebook's picture
 
 import ipywidgets as widgets  # noqa: E402
 
 from ..backend import presets as _presets  # noqa: E402
 from ..backend.presets import Preset  # noqa: E402
 from .session import REACH_HELP, Frame, Session, hex_colour  # noqa: E402
+from .widget import ClayWidget  # noqa: E402
 
 log = logging.getLogger(__name__)
 
-#: The panel refreshes its numbers at most this often per second (frames arrive at up to 30 a second).
+#: The panel refreshes its numbers at most this often per second (frames arrive at up to 60 a second).
 PANEL_HZ = 8
-#: The trame template (`?ui=...`) that holds the view alone, without the web app's own panel.
-VIEW_TEMPLATE = "notebook_view"
 #: The S slider's range and step (the session accepts any S >= 1 through `session.set_iterations`; the slider's
 #: range widens to show a larger one).
 S_SLIDER = (10, 5000, 10)
 #: Text blocks: the notebook's default line height spreads small print apart.
 _BLOCK = '<div style="line-height:1.35">{}</div>'
-#: Seconds to wait for a notebook server to come up.
-START_TIMEOUT = 60.0
 
 #: The dropdown's preset names: the web app's, shorter for the case studies (the panel is narrow).
 _PRESET_LABELS = {**_presets.PRESET_LABELS, "space-grid": "Case study 1: space grid",
@@ -346,214 +335,54 @@ def _controls_table(frame: Frame, has_colour: bool) -> str:
 
 
 # --------------------------------------------------------------------------------------------------------------
-# The view: the web app's trame server on a thread of its own
-# --------------------------------------------------------------------------------------------------------------
-_START_LOCK = threading.Lock()  # trame binds its protocol to the server being started: one start at a time
-_SERVERS: dict[int, NotebookServer] = {}
-_NAMES = itertools.count(1)
-
-
-class NotebookServer:
-    """The web app (app.build_app) for `session`, served on `host`:`port` (0: a free port) from its own thread.
-
-    Everything trame and VTK do happens on that thread's event loop; the kernel's thread only starts and stops it.
-    Besides the app's page (`app_url`), a template with the view alone (`view_url`, `?ui=notebook_view`) is what
-    the notebook's iframe shows.
-
-    `host` must be a loopback address (ValueError otherwise): the notebook's server has no access token and no TLS.
-    For a headset or another machine, serve the session with `somwidget serve --lan`; for a remote Jupyter server,
-    go through jupyter-server-proxy (see `base_url`). Like `somwidget serve`, it answers only loopback Host names,
-    except behind such a proxy (SOMWIDGET_JUPYTER_URL or JupyterHub), which forwards the browser's Host; websockets
-    from pages of other sites are refused either way (lan.request_guard).
-    """
-
-    def __init__(self, session: Session, host: str = "127.0.0.1", port: int = 0, timeout: float = START_TIMEOUT):
-        from . import lan
-
-        host = lan.normalise_host(host) or "127.0.0.1"
-        if not lan.is_loopback(host):
-            raise ValueError(f"the notebook's view serves on loopback only (got host {host!r}): it has no access "
-                             "token and no HTTPS. To reach the session from another machine or a headset, run "
-                             "`somwidget serve --lan` (HTTPS, a token and a QR code); for a remote Jupyter server "
-                             "use jupyter-server-proxy (SOMWIDGET_JUPYTER_URL)")
-        self.session = session
-        self.host = host
-        self.name = f"somwidget-notebook-{next(_NAMES)}"
-        self.app = None
-        self.server = None
-        self.port: int | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._ready = threading.Event()
-        self._error: BaseException | None = None
-        self._stopped = False
-        with _START_LOCK:
-            self._thread = threading.Thread(target=self._run, args=(port,), name=self.name, daemon=True)
-            self._thread.start()
-            if not self._ready.wait(timeout):
-                raise RuntimeError(f"the notebook view's server did not start within {timeout:g} s")
-        if self._error is not None:
-            raise RuntimeError(f"the notebook view's server failed to start: {self._error}") from self._error
-
-    def _run(self, port: int) -> None:
-        try:
-            from trame.app import get_server
-            from trame.ui.vuetify3 import VAppLayout
-            from trame_pyvista import PyVistaRemoteView
-
-            from .app import build_app
-
-            loop = asyncio.new_event_loop()
-            asyncio.set_event_loop(loop)
-            self._loop = loop
-            server = get_server(self.name, client_type="vue3")
-            app = build_app(self.session, server=server, title="somwidget")
-            app.check_host = not behind_proxy()  # a proxy forwards the browser's Host (the Jupyter server's)
-            with VAppLayout(server, template_name=VIEW_TEMPLATE, fill_height=True) as layout:
-                layout.root.style = "height: 100vh; overflow: hidden"
-                PyVistaRemoteView(app.scene.plotter, interactive_ratio=1, still_ratio=1, interactive_quality=80,
-                                  still_quality=95, style="width: 100%; height: 100vh")
-            self.server, self.app = server, app
-            server.controller.on_server_ready.add(self._on_ready)
-            coro = server.start(exec_mode="coroutine", port=port, host=self.host, thread=True, open_browser=False,
-                                show_connection_info=False, disable_logging=True, timeout=0)
-        except BaseException as exc:  # report to the starting thread
-            self._error = exc
-            self._ready.set()
-            return
-        try:
-            loop.run_until_complete(coro)
-        except BaseException as exc:
-            if not self._ready.is_set():
-                self._error = exc
-            else:
-                log.exception("notebook view server stopped")
-        finally:
-            self._ready.set()
-            try:
-                app.close()  # off the session (app and XR hub), the frame pump cancelled, the render window freed
-            except Exception:
-                log.exception("closing the notebook view failed")
-            try:
-                pending = [t for t in asyncio.all_tasks(loop) if not t.done()]
-                for task in pending:
-                    task.cancel()
-                if pending:
-                    loop.run_until_complete(asyncio.gather(*pending, return_exceptions=True))
-            except Exception:
-                log.exception("cancelling the notebook view's tasks failed")
-            loop.close()
-
-    def _on_ready(self, **_) -> None:
-        self.port = int(self.server.port)
-        self._ready.set()
-
-    @property
-    def running(self) -> bool:
-        return self._thread.is_alive() and not self._stopped
-
-    @property
-    def base_url(self) -> str:
-        return base_url(self.port, self.host)
-
-    @property
-    def app_url(self) -> str:
-        """The whole web app (its own panel included) of this session."""
-        return self.base_url
-
-    @property
-    def view_url(self) -> str:
-        """The view alone: what the notebook's iframe shows."""
-        return f"{self.base_url}?ui={VIEW_TEMPLATE}"
-
-    def stop(self, timeout: float = 10.0) -> None:
-        """Stop the server and its thread (the session keeps running)."""
-        if self._stopped:
-            return
-        self._stopped = True
-        _SERVERS.pop(id(self.session), None)
-        loop, server = self._loop, self.server
-        if loop is not None and server is not None and not loop.is_closed() and self._thread.is_alive():
-            try:
-                asyncio.run_coroutine_threadsafe(server.stop(), loop).result(timeout)
-            except Exception:
-                log.exception("stopping the notebook view server failed")
-        self._thread.join(timeout)
-
-
-def behind_proxy() -> bool:
-    """True when the notebook's views go through a proxy (SOMWIDGET_JUPYTER_URL or JupyterHub's), not straight to
-    the loopback port."""
-    return bool(os.environ.get("SOMWIDGET_JUPYTER_URL") or os.environ.get("JUPYTERHUB_SERVICE_PREFIX"))
-
-
-def base_url(port: int, host: str = "127.0.0.1") -> str:
-    """Where the browser finds a notebook server on `port`.
-
-    SOMWIDGET_JUPYTER_URL, when set, is a template with {port} (and optionally {host}): e.g. "/proxy/{port}/"
-    behind jupyter-server-proxy on a remote Jupyter server. On JupyterHub (JUPYTERHUB_SERVICE_PREFIX set) the
-    default is the hub's server proxy, "<prefix>proxy/{port}/". Otherwise http://127.0.0.1:{port}/ (the browser
-    runs on the kernel's machine).
-    """
-    template = os.environ.get("SOMWIDGET_JUPYTER_URL")
-    if template:
-        return template.format(port=port, host=host)
-    prefix = os.environ.get("JUPYTERHUB_SERVICE_PREFIX")
-    if prefix:
-        return f"{prefix.rstrip('/')}/proxy/{port}/"
-    shown = "127.0.0.1" if host in ("0.0.0.0", "", "::", None) else host
-    shown = f"[{shown}]" if ":" in shown else shown
-    return f"http://{shown}:{port}/"
-
-
-def server_for(session: Session, host: str = "127.0.0.1", port: int = 0) -> NotebookServer:
-    """The running notebook server of `session`, started on first use (one per session, shared by its views)."""
-    srv = _SERVERS.get(id(session))
-    if srv is not None and srv.session is session and srv.running:
-        return srv
-    srv = NotebookServer(session, host=host, port=port)
-    _SERVERS[id(session)] = srv
-    return srv
-
-
-# --------------------------------------------------------------------------------------------------------------
 # The widget show() returns
 # --------------------------------------------------------------------------------------------------------------
 class SomWidget(widgets.HBox):
-    """The panel and the live view side by side. `session`, `panel`, `server` (None without a view), `url`."""
+    """The panel and the live view side by side: `session`, `panel`, `view` (a ClayWidget; None without one).
 
-    def __init__(self, session: Session, panel: Panel, server: NotebookServer | None = None, height: int = 560,
-                 full_app: bool = False, owns_session: bool = False):
+    In a saved notebook the output keeps a picture of the clay as it was when the widget was shown (image/png next
+    to the widget), so the notebook reads without a kernel."""
+
+    def __init__(self, session: Session, panel: Panel, view: ClayWidget | None = None, owns_session: bool = False):
         self.session = session
         self.panel = panel
-        self.server = server
+        self.view = view
         self.owns_session = owns_session
-        self.url = None
-        children = [panel]
-        if server is not None:
-            self.url = server.app_url if full_app else server.view_url
-            frame = (f'<iframe src="{_html.escape(self.url, quote=True)}" style="width:100%;height:{int(height)}px;'
-                     'border:1px solid #ddd;border-radius:4px" allow="xr-spatial-tracking; fullscreen"></iframe>')
-            self.view = widgets.HTML(frame, layout=widgets.Layout(flex="1 1 auto", min_width="360px"))
-            children.append(self.view)
-        else:
-            self.view = None
+        children = [panel] if view is None else [panel, view]
+        if view is not None:
+            view.layout = widgets.Layout(flex="1 1 auto", min_width="360px")
         super().__init__(children, layout=widgets.Layout(width="100%", align_items="flex-start"))
 
-    @property
-    def app_url(self) -> str | None:
-        """The whole web app of this session (open it in a tab; a later WebXR page lives on the same server)."""
-        return None if self.server is None else self.server.app_url
+    def _repr_mimebundle_(self, **kwargs):
+        bundle = super()._repr_mimebundle_(**kwargs)
+        if self.view is not None and isinstance(bundle, dict):
+            try:
+                bundle["image/png"] = picture_png(self.session)
+            except Exception:  # no off-screen rendering here: the live view is all there is
+                log.debug("no picture for the saved notebook", exc_info=True)
+        return bundle
 
-    def close(self, stop_server: bool = True) -> None:
-        """Close the widgets; stop the view's server (unless `stop_server=False`) and a session show() made."""
+    def close(self) -> None:
+        """Close the widgets, and the session when show() made it."""
         self.panel.close()
         if self.view is not None:
             self.view.close()
-        if stop_server and self.server is not None:
-            self.server.stop()
         if self.owns_session:
             self.session.close()
         super().close()
+
+
+def picture_png(session: Session, size=(640, 420)) -> bytes:
+    """The session's latest frame as a PNG (pyvista, off screen)."""
+    import io
+
+    from PIL import Image  # pyvista's own dependency
+
+    from .picture import render
+
+    buf = io.BytesIO()
+    Image.fromarray(render(session, size=size)).save(buf, format="PNG")
+    return buf.getvalue()
 
 
 def _session_of(what, device, paused: bool) -> tuple[Session, bool]:
@@ -581,39 +410,30 @@ def _session_of(what, device, paused: bool) -> tuple[Session, bool]:
     raise ValueError(f"show: expected a preset name, a Preset, a mesh path or a Session, got {type(what).__name__}")
 
 
-def show(what="car", *, device: str | None = "auto", paused: bool = False, view: bool = True, full_app: bool = False,
-         host: str = "127.0.0.1", port: int = 0, height: int = 560) -> SomWidget:
+def show(what="car", *, device: str | None = "auto", paused: bool = False, view: bool = True,
+         height: int = 520) -> SomWidget:
     """An interactive SOM in a notebook cell: the panel beside the live, draggable 3-D view of one Session.
 
     what:     a preset name ("car", "space-grid", "lines", ...), a Preset, a mesh file path (OBJ, PLY, STL, OFF,
               GLB), an existing Session (its other views, e.g. the web app, stay in step), or a SomWidget
     device:   where a new session trains: "auto" (the GPU when there is one), "cpu", "cuda:N"
     paused:   a new session starts paused (press Train)
-    view:     False: the panel alone (no server, no iframe)
-    full_app: show the whole web app (its own panel too) instead of the view alone
-    host, port: where the view's server listens (loopback and a free port by default; a host beyond loopback is
-              refused with ValueError: use `somwidget serve --lan` to reach a session from another machine)
+    view:     False: the panel alone
     height:   of the view in pixels
 
     Returns the widget (an ipywidgets HBox: put it last in the cell, or `display()` it); `.session` is the
-    Session to script (`move_control`, `set_iterations`, `wait_idle`, `export_mesh`...), `.app_url` the whole
-    web app of the same session, `.close()` stops it all.
+    Session to script (`move_control`, `set_iterations`, `wait_idle`, `export_mesh`...), `.close()` closes it.
+    The view draws in the browser from frames the kernel sends over the widget's comm: no server, no port.
     """
     session, owned = _session_of(what, device, paused)
     try:
-        server = server_for(session, host=host, port=port) if view else None
         panel = Panel(session)
+        clay = ClayWidget(session, height=height) if view else None
     except Exception:
         if owned:
             session.close()
         raise
-    return SomWidget(session, panel, server, height=height, full_app=full_app, owns_session=owned)
+    return SomWidget(session, panel, clay, owns_session=owned)
 
 
-def close_all() -> None:
-    """Stop every notebook server this kernel started (their sessions keep running)."""
-    for srv in list(_SERVERS.values()):
-        srv.stop()
-
-
-__all__ = ["Panel", "NotebookServer", "SomWidget", "show", "server_for", "base_url", "close_all", "VIEW_TEMPLATE"]
+__all__ = ["Panel", "SomWidget", "ClayWidget", "show", "picture_png"]

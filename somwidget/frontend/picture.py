@@ -25,7 +25,21 @@ from ..backend import presets as _presets  # noqa: E402
 from ..backend.presets import FeatureLayout, Preset  # noqa: E402
 from ..backend.topology import Topology  # noqa: E402
 
-from .view import BACKGROUND, cell_array  # noqa: E402  (the app's background, so pictures match the live view)
+#: The pictures' background: the clay view's, so a picture looks like the live view.
+BACKGROUND = (0.933, 0.941, 0.957)
+
+
+def cell_array(faces) -> np.ndarray:
+    """pyvista's flat cell array [k, i0, ..., ik-1, ...] from faces of any size (list or (F, k) array)."""
+    if isinstance(faces, np.ndarray) and faces.ndim == 2:
+        f = np.asarray(faces, np.int64)
+        return np.hstack([np.full((len(f), 1), f.shape[1], np.int64), f]).ravel()
+    parts = []
+    for face in faces:
+        face = np.asarray(face, np.int64).ravel()
+        parts.append(np.concatenate([[len(face)], face]))
+    return np.concatenate(parts) if parts else np.zeros(0, np.int64)
+
 
 #: Named camera directions (from the centre towards the camera) and up vectors.
 CAMERAS = {

@@ -227,7 +227,7 @@ class Session:
                 crash; False for a session nothing should outlive
     """
 
-    def __init__(self, preset: str | Preset | None = "car", device: str | None = "auto", frame_rate: float = 30.0,
+    def __init__(self, preset: str | Preset | None = "car", device: str | None = "auto", frame_rate: float = 60.0,
                  step_fraction: float = 0.6, start: bool = True, paused: bool = False,
                  max_vertices: int = DEFAULT_MAX_VERTICES, autosave: bool = True):
         self.frame_rate = checks.real("frame_rate", frame_rate, 0.0, 1000.0, low_open=True)

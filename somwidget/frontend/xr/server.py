@@ -1,4 +1,5 @@
-"""The WebXR client's server side: the static page at /xr/ and the websocket /xr/ws on an aiohttp app.
+"""The clay view's server side: the websocket /xr/ws that feeds every browser view of a Session (the web app's
+page and the XR page), the XR page at /xr/ and the view's module at /xr/somview.js, on an aiohttp app.
 
 `attach(server, session, token=None)` adds the routes to a running trame/wslink server (call it from
 `ctrl.on_server_bind`, whose argument is the wslink server) or to any aiohttp `web.Application`. One `XRHub` per
@@ -22,8 +23,8 @@ from pathlib import Path
 
 from aiohttp import WSMsgType, web
 
-from .. import lan
-from . import protocol
+from .. import lan, protocol
+from ..gestures import Gestures
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +37,8 @@ MAX_ERRORS = 200
 ERROR_WINDOW = 10.0
 #: JSON messages waiting for one client beyond which it is dropped as too slow.
 MAX_OUTBOX = 512
+#: Seconds between status messages (cycle time, frames/s) while frames flow.
+STATUS_PERIOD = 0.5
 NOT_BUILT = """<!doctype html><meta charset="utf-8"><title>somwidget XR: not built</title>
 <p>The WebXR client is not built. Run <code>npm ci &amp;&amp; npm run build</code> in
 <code>somwidget/frontend/xr</code> (<code>bash scripts/setup.sh</code> does it), then reload.</p>"""
@@ -76,7 +79,8 @@ class XRHub:
         self.dist = Path(dist) if dist is not None else DIST
         self.max_fps = float(max_fps)
         self.clients: dict[int, _Client] = {}
-        self.grabs: dict[int, int] = {}  # control index -> client id
+        self.gestures = Gestures(session, on_change=self._broadcast_grabs)
+        self._last_status = 0.0
         self.refused_total = 0
         self.intents_total = 0
         self._next_id = 1
@@ -95,6 +99,7 @@ class XRHub:
         router.add_get("/xr/", self._index)
         router.add_get("/xr/ws", self._websocket)
         router.add_get("/xr/status", self._status)
+        router.add_get("/xr/somview.js", self._view_module)
         router.add_get("/xr/{name:[A-Za-z0-9_.-]+\\.html}", self._page)
         if (self.dist / "assets").is_dir():
             router.add_static("/xr/assets/", self.dist / "assets", append_version=False)
@@ -128,6 +133,16 @@ class XRHub:
         if not path.is_file():
             raise web.HTTPNotFound(text=f"no page {name!r} under /xr/")
         response = web.FileResponse(path, headers={"Cache-Control": "no-cache"})
+        return self._cookie(request, response)
+
+    async def _view_module(self, request):
+        if not self._allowed(request):
+            return lan.forbidden()
+        path = self.dist / "somview.js"
+        if not path.is_file():
+            return web.Response(status=503, text=NOT_BUILT, content_type="text/html")
+        response = web.FileResponse(path, headers={"Cache-Control": "no-cache",
+                                                   "Content-Type": "text/javascript; charset=utf-8"})
         return self._cookie(request, response)
 
     async def _not_built(self, request):
@@ -197,22 +212,26 @@ class XRHub:
             self._scheduled = False
         if frame is None:
             return
+        now = time.monotonic()
+        status = None
+        if now - self._last_status >= STATUS_PERIOD:
+            self._last_status = now
+            status = protocol.status_message(frame, self.session.frames_per_second)
         for client in list(self.clients.values()):
             self._send_frame(client, frame)
+            if status is not None:
+                client.push_text(status)
         self._sent_seq = frame.seq
-        self._check_grabs(frame)
+        self.gestures.prune(frame.n_controls)
 
-    def _check_grabs(self, frame) -> None:
-        stale = [i for i in self.grabs if i >= frame.n_controls]
-        if stale:  # controls removed (or a new preset): their grabs end
-            for i in stale:
-                del self.grabs[i]
-            self._broadcast_grabs()
+    @property
+    def grabs(self) -> dict[int, int]:
+        """Control index -> the id of the client holding it."""
+        return self.gestures.grabs
 
     def _broadcast_grabs(self) -> None:
         for c in self.clients.values():
-            c.push_text(json.dumps({"type": "grabs", "grabs": [{"index": i, "own": cid == c.id}
-                                                               for i, cid in sorted(self.grabs.items())]}))
+            c.push_text(self.gestures.message_for(c.id))
 
     async def _sender(self, client: _Client) -> None:
         period = 1.0 / self.max_fps if self.max_fps > 0 else 0.0
@@ -274,12 +293,7 @@ class XRHub:
                     break
         finally:
             self.clients.pop(client.id, None)
-            released = [i for i, cid in self.grabs.items() if cid == client.id]
-            for i in released:
-                del self.grabs[i]
-            if released:
-                self._broadcast_grabs()
-                self.session.end_gesture()  # a headset gone mid-grab: its drag is a completed step
+            self.gestures.drop(client.id)  # a client gone mid-grab: its drag is a completed step
             client.wake.set()
             sender.cancel()
             log.info("XR client %d disconnected (%d frames, %d bytes sent, %d refused)", client.id,
@@ -312,36 +326,14 @@ class XRHub:
             self._refuse(client, exc, intent.type)
 
     def _apply(self, client: _Client, intent: protocol.Intent) -> None:
-        kind, i = intent.type, intent.index
-        if kind == "ping":
-            client.push_text(json.dumps({"type": "pong", "t": intent.t}))
-        elif kind == "grab":
-            holder = self.grabs.get(i)
-            if holder is not None and holder != client.id:
-                raise ValueError(f"grab: control {i} is held by another client")
-            if holder is None:
-                self.session.begin_gesture()  # grab to release: one undo step
-            self.grabs[i] = client.id
-            self._broadcast_grabs()
-        elif kind in ("move", "release"):
-            if self.grabs.get(i) != client.id:
-                raise ValueError(f"{kind}: control {i} is not held by this client; send grab first")
-            if intent.position is not None:
-                self.session.move_control(i, list(intent.position))
-            if kind == "release":
-                del self.grabs[i]
-                self._broadcast_grabs()
-                self.session.end_gesture()
-        elif kind == "undo":
-            self.session.undo()
-        elif kind == "redo":
-            self.session.redo()
-        elif kind == "reset":
-            self.session.reset()
-        elif kind == "train":
-            self.session.train()
-        elif kind == "pause":
-            self.session.pause()
+        if intent.type == "hello":
+            client.generation = -1  # the topology again, then the latest frame
+            self._send_frame(client, self.session.frame)
+            client.push_text(self.gestures.message_for(client.id))
+            return
+        reply = self.gestures.apply(client.id, intent)
+        if reply is not None:
+            client.push_text(json.dumps(reply))
 
     async def close(self, *_):
         for c in list(self.clients.values()):

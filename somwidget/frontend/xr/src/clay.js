@@ -34,6 +34,7 @@ export class Clay {
     this.objects = [];
     this.lastFrame = null;
     this.sphere = new THREE.SphereGeometry(1, 24, 16);
+    this.onChange = null; // called whenever something drawn changed
   }
 
   get ready() {
@@ -180,6 +181,7 @@ export class Clay {
 
   // Positions, colours and highlights of the control spheres (local drags win over the server's positions).
   refreshControls() {
+    this.onChange?.();
     for (const m of this.controlMeshes) {
       const i = m.userData.original;
       let p = m.userData.server;
@@ -223,6 +225,21 @@ export class Clay {
     this.stage.updateWorldMatrix(true, true);
     const p = this.content.worldToLocal(v.clone());
     return [p.x, p.y, p.z];
+  }
+
+  // The world-space sphere around the drawn clay and every control (null before the first frame).
+  worldBounds() {
+    if (!this.lastFrame) return null;
+    const box = new THREE.Box3();
+    const a = this.positionAttr.array;
+    const v = new THREE.Vector3();
+    for (let o = 0; o < a.length; o += 3) box.expandByPoint(v.set(a[o], a[o + 1], a[o + 2]));
+    for (const m of this.controlMeshes) box.expandByPoint(m.position);
+    if (box.isEmpty()) return null;
+    const centre = box.getCenter(new THREE.Vector3());
+    const radius = Math.max(box.getSize(new THREE.Vector3()).length() / 2 + this.controlRadius * 1.6, 1e-6);
+    const c = centre.toArray();
+    return { center: this.modelToWorld(c), radius: radius * this.scale };
   }
 
   controlWorld(j, target = new THREE.Vector3()) {

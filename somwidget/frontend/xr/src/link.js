@@ -2,6 +2,15 @@
 
 import { parseFrame } from './protocol.js';
 
+// A JSON message from the server to the handler that takes it (shared by every transport).
+export function dispatchText(msg, handlers) {
+  if (msg.type === 'topology') handlers.onTopology?.(msg);
+  else if (msg.type === 'grabs') handlers.onGrabs?.(msg.grabs);
+  else if (msg.type === 'error') handlers.onError?.(msg);
+  else if (msg.type === 'pong') handlers.onPong?.(msg);
+  else if (msg.type === 'status') handlers.onServerStatus?.(msg);
+}
+
 export function socketURL(loc = window.location) {
   const scheme = loc.protocol === 'https:' ? 'wss:' : 'ws:';
   const base = loc.pathname.endsWith('/') ? loc.pathname : loc.pathname.replace(/[^/]*$/, '');
@@ -12,7 +21,7 @@ export function socketURL(loc = window.location) {
 export class Link {
   constructor(url, handlers) {
     this.url = url;
-    this.handlers = handlers; // {onTopology, onFrame, onGrabs, onError, onPong, onStatus}
+    this.handlers = handlers; // {onTopology, onFrame, onGrabs, onError, onPong, onStatus, onServerStatus}
     this.ws = null;
     this.connected = false;
     this.retry = 500;
@@ -67,10 +76,7 @@ export class Link {
     } catch {
       return;
     }
-    if (msg.type === 'topology') this.handlers.onTopology?.(msg);
-    else if (msg.type === 'grabs') this.handlers.onGrabs?.(msg.grabs);
-    else if (msg.type === 'error') this.handlers.onError?.(msg);
-    else if (msg.type === 'pong') this.handlers.onPong?.(msg);
+    dispatchText(msg, this.handlers);
   }
 
   send(obj) {

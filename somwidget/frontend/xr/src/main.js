@@ -1,14 +1,11 @@
 // somwidget XR: the clay on a headset (WebXR immersive-ar, else immersive-vr) and, without one, a desktop preview.
 // It shares the server's modelling session through the websocket /xr/ws (see protocol.js).
 
-import './colour.js';
 import * as THREE from 'three';
-import { Clay } from './clay.js';
-import { Desktop } from './desktop.js';
-import { Grabs } from './grabs.js';
 import { Link, socketURL } from './link.js';
 import { Menu } from './menu.js';
 import { intents } from './protocol.js';
+import { ClayView } from './view.js';
 import { XRApp } from './xr.js';
 
 const $ = (id) => document.getElementById(id);
@@ -17,78 +14,40 @@ const ui = {
   reset: $('reset'), title: $('title'), undo: $('undo'), redo: $('redo'),
 };
 
-const renderer = new THREE.WebGLRenderer({ antialias: true, alpha: true });
-renderer.outputColorSpace = THREE.LinearSRGBColorSpace;
-renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
-renderer.setSize(window.innerWidth, window.innerHeight);
-renderer.xr.enabled = true;
-document.body.appendChild(renderer.domElement);
+let link = null;
+const view = new ClayView($('view'), { send: (obj) => (link ? link.send(obj) : false), xr: true });
+const { renderer, scene, camera, clay, grabs, desktop } = view;
+const state = view.state;
+state.mode = null;
+state.xrFrames = 0;
+state.paused = false;
+state.running = false;
 
-const scene = new THREE.Scene();
-const desktopBackground = new THREE.Color(0xeef0f4);
-scene.background = desktopBackground;
-scene.add(new THREE.HemisphereLight(0xffffff, 0x667080, 2.2));
-const sun = new THREE.DirectionalLight(0xffffff, 1.6);
-sun.position.set(1.5, 3, 2);
-scene.add(sun);
-const camera = new THREE.PerspectiveCamera(50, window.innerWidth / window.innerHeight, 0.01, 100);
-
-const clay = new Clay();
-scene.add(clay.stage);
-
-const state = {
-  connected: false, topology: null, frame: null, frames: 0, fps: 0, errors: [], paused: false, running: false,
-  lastError: null, mode: null, digest: 0, xrFrames: 0, fpsCount: 0, fpsStart: performance.now(),
-};
-
-function digestOf(positions) {
-  // a cheap checksum of the positions (to tell a changed mesh from an unchanged one)
-  let s = 0;
-  const step = Math.max(1, Math.floor(positions.length / 4096));
-  for (let i = 0; i < positions.length; i += step) s = (s * 31 + positions[i] * 1000.5) % 1e9;
-  return s;
-}
-
-let grabs = null;
-const link = new Link(socketURL(), {
+const handlers = view.handlers;
+link = new Link(socketURL(), {
+  ...handlers,
   onStatus: (s) => {
-    state.connected = s === 'connected';
-    state.linkStatus = s;
+    handlers.onStatus(s);
     showStatus();
   },
-  onTopology: (t) => {
-    state.topology = t;
-    clay.setTopology(t);
-    if (xr.session) {
-      xr.wantPlace = true;
-    } else {
-      desktop.frame();
-    }
-    ui.title.textContent = `somwidget XR: ${t.title}`;
-  },
-  onFrame: (f) => {
-    if (!clay.applyFrame(f)) return;
-    state.frame = f;
-    state.frames += 1;
-    state.fpsCount += 1;
-    state.paused = f.paused;
-    state.running = f.running;
-    const d = digestOf(f.positions);
-    state.digest = d;
-    grabs.onFrame(f, d);
-  },
-  onGrabs: (list) => grabs.onGrabs(list),
   onError: (e) => {
-    state.lastError = e.message;
-    state.errors.push(e);
-    if (state.errors.length > 50) state.errors.shift();
+    handlers.onError(e);
     ui.error.textContent = e.message;
     ui.error.hidden = false;
-    clearTimeout(state.errorTimer);
-    state.errorTimer = setTimeout(() => { ui.error.hidden = true; }, 4000);
+    clearTimeout(state.hudErrorTimer);
+    state.hudErrorTimer = setTimeout(() => { ui.error.hidden = true; }, 4000);
   },
 });
-grabs = new Grabs(link, clay);
+view.transport = link;
+view.onTopology = (t) => { ui.title.textContent = `somwidget XR: ${t.title}`; };
+view.onFirstFrame = () => {
+  if (xr.session) xr.wantPlace = true;
+  else desktop.frame();
+};
+view.onFrame = (f) => {
+  state.paused = f.paused;
+  state.running = f.running;
+};
 
 function toggleTraining() {
   link.send(state.paused ? intents.train() : intents.pause());
@@ -110,14 +69,13 @@ const xr = new XRApp({
   onMode: (mode) => {
     state.mode = mode;
     if (!mode) {
-      scene.background = desktopBackground;
-      if (state.topology) desktop.frame();
+      scene.background = view.background;
+      if (state.frame) desktop.frame();
     }
     document.body.classList.toggle('immersive', !!mode);
     showStatus();
   },
 });
-const desktop = new Desktop({ renderer, camera, clay, grabs });
 
 ui.train.addEventListener('click', toggleTraining);
 ui.reset.addEventListener('click', () => link.send(intents.reset()));
@@ -170,31 +128,17 @@ function showStatus() {
     ? 'paused' : 'converged'}` : text);
 }
 
-function onResize() {
-  camera.aspect = window.innerWidth / window.innerHeight;
-  camera.updateProjectionMatrix();
-  if (!renderer.xr.isPresenting) renderer.setSize(window.innerWidth, window.innerHeight);
-}
-window.addEventListener('resize', onResize);
-
 let lastStatus = 0;
-renderer.setAnimationLoop((time, xrFrame) => {
+view.hooks.push((time, xrFrame) => {
   if (xrFrame) {
     xr.update(xrFrame);
     state.xrFrames += 1;
   }
-  grabs.flush();
   const now = performance.now();
-  if (now - state.fpsStart >= 1000) {
-    state.fps = (1000 * state.fpsCount) / (now - state.fpsStart);
-    state.fpsCount = 0;
-    state.fpsStart = now;
-  }
   if (now - lastStatus > 250) {
     lastStatus = now;
     showStatus();
   }
-  renderer.render(scene, camera);
 });
 
 // Read-only views of the page for tests, benchmarks and the console (nothing here sends an intent).

@@ -65,4 +65,5 @@ export const intents = {
   undo: () => ({ type: 'undo' }),
   redo: () => ({ type: 'redo' }),
   ping: (t) => ({ type: 'ping', t }),
+  hello: () => ({ type: 'hello' }),
 };

@@ -1,7 +1,9 @@
-"""The WebXR client's websocket protocol (/xr/ws): what the server sends, what it accepts, and how it checks it.
+"""The clay view's protocol: what a server sends every view, what it accepts from one, and how it checks it.
 
-Pure functions over numpy and the session's Frame: no aiohttp, no event loop (server.py does the I/O), so tests and
-benchmarks can encode and decode frames without a server. The JavaScript twin is src/protocol.js.
+One protocol for every view: the web app's page and the XR page over the websocket /xr/ws (xr/server.py), the
+notebook widget over the kernel's comm (widget.py; a frame there is a custom message {"type": "frame"} whose one
+binary buffer is the frame below). Pure functions over numpy and the session's Frame: no aiohttp, no event loop, so
+tests and benchmarks can encode and decode frames without a server. The JavaScript twin is xr/src/protocol.js.
 
 Server -> client
 ----------------
@@ -47,6 +49,9 @@ Server -> client
    {"type": "grabs", "grabs": [{"index": i, "own": bool}, ...]}   controls held now (own: by this client)
    {"type": "error", "message": "...", "intent": "move" | null}     a refused message (see below)
    {"type": "pong", "t": t}                                        the answer to a ping
+   {"type": "status", "cycle_ms": c, "fps": f}                     the engine's time per cycle and the frames
+                                                                   published per second (about twice a second
+                                                                   while frames flow)
 
 Client -> server: JSON text, one intent per message, at most MAX_MESSAGE_BYTES bytes
 ------------------------------------------------------------------------------------
@@ -57,6 +62,8 @@ Client -> server: JSON text, one intent per message, at most MAX_MESSAGE_BYTES b
                                                          its release is one undo step (one gesture)
    {"type": "reset"} | {"type": "train"} | {"type": "pause"} | {"type": "undo"} | {"type": "redo"}
    {"type": "ping", "t": number}
+   {"type": "hello"}                                     send the topology and the latest frame again (a new view
+                                                         on an existing connection: the notebook's outputs)
 
 Anything else is refused with an error message sent back (and logged) and changes nothing: binary messages,
 messages over the size limit, text that is not JSON (NaN and Infinity included), non-objects, unknown types,
@@ -73,8 +80,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...backend import io as _io
-from ...backend import presets as _presets
+from ..backend import io as _io
+from ..backend import presets as _presets
 
 PROTOCOL_VERSION = 1
 MAGIC = b"SOMF"
@@ -96,6 +103,7 @@ INTENT_FIELDS = {
     "undo": (set(), set()),
     "redo": (set(), set()),
     "ping": ({"t"}, set()),
+    "hello": (set(), set()),
 }
 
 
@@ -187,6 +195,11 @@ def error_message(message: str, intent: str | None = None) -> str:
     return json.dumps({"type": "error", "message": message, "intent": intent})
 
 
+def status_message(frame, frames_per_second: float) -> str:
+    return json.dumps({"type": "status", "cycle_ms": round(float(frame.cycle_time) * 1e3, 6),
+                       "fps": round(float(frames_per_second), 2)})
+
+
 # -- topology ----------------------------------------------------------------------------------------------------
 def display_of(session) -> dict:
     """The display geometry of the session's current preset: triangles, segments, points flag, n_vertices."""
@@ -224,7 +237,7 @@ def control_colours(frame, has_colour: bool) -> np.ndarray:
 
 def mirror_axes(session) -> list[bool]:
     """Which position axes (x, y, z) a mirrored copy negates, from the session's mirror dims."""
-    from ..session import default_mirror
+    from .session import default_mirror
 
     dims = set(default_mirror(session.preset))
     return [d in dims for d in session.layout.position]

@@ -1,0 +1,134 @@
+"""The clay view as a Jupyter widget (anywidget): the browser module xr/dist/somview.js drawing one Session's frames.
+
+Frames travel as binary buffers of custom messages over the kernel's comm (the widget protocol), intents come back
+the same way, both in the one protocol of protocol.py: no server, no port, no iframe, so it works wherever the
+notebook's widgets do (JupyterLab, Notebook 7, VS Code, Colab, marimo). Each output of the widget is its own view
+with its own camera; every widget of a session follows it.
+
+Threads: the session calls `_on_frame` on its training thread; a sender thread of the widget encodes the latest
+frame and sends it, at most `max_fps` a second (a slow kernel link skips frames, never queues them). Intents arrive
+on the kernel's thread (`_on_message`) and go to the Session through `Gestures`, as the websocket's do.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+
+import anywidget
+import traitlets
+
+from . import protocol
+from .gestures import Gestures
+from .xr.server import DIST
+
+log = logging.getLogger(__name__)
+
+#: Frames a second a widget sends at most.
+MAX_FPS = 60.0
+#: Seconds between status messages (cycle time, frames/s) while frames flow.
+STATUS_PERIOD = 0.5
+#: The one client of a widget's gestures (every output of a widget acts as one client).
+_CLIENT = "notebook"
+
+
+def _module() -> str:
+    path = DIST / "somview.js"
+    if not path.is_file():
+        raise RuntimeError(f"the clay view is not built ({path} is missing): run `bash scripts/setup.sh` (or "
+                           f"`npm ci && npm run build` in {DIST.parent})")
+    return path.read_text(encoding="utf-8")
+
+
+class ClayWidget(anywidget.AnyWidget):
+    """The live, draggable 3-D view of `session` in a notebook output."""
+
+    height = traitlets.Int(520).tag(sync=True)
+
+    def __init__(self, session, height: int = 520, max_fps: float = MAX_FPS, **kwargs):
+        super().__init__(_esm=_module(), height=int(height), **kwargs)
+        self.session = session
+        self.max_fps = float(max_fps)
+        self.gestures = Gestures(session, on_change=self._send_grabs)
+        self.frames_sent = 0
+        self.intents = 0
+        self.refused = 0
+        self._latest = None
+        self._wake = threading.Condition()
+        self._sent_seq = -1
+        self._sent_generation = -1
+        self._last_status = 0.0
+        self._closed = False
+        self.on_msg(self._on_message)
+        self._sender = threading.Thread(target=self._send_loop, name="somwidget-view", daemon=True)
+        self._sender.start()
+        session.add_listener(self._on_frame)
+
+    # -- session -> browser ------------------------------------------------------------------------------------
+    def _on_frame(self, frame) -> None:
+        with self._wake:
+            self._latest = frame
+            self._wake.notify()
+
+    def _send_loop(self) -> None:
+        period = 1.0 / self.max_fps
+        while True:
+            with self._wake:
+                while not self._closed and (self._latest is None or self._latest.seq == self._sent_seq):
+                    self._wake.wait()
+                if self._closed:
+                    return
+                frame = self._latest
+            t = time.monotonic()
+            try:
+                self._send_frame(frame)
+            except Exception:  # a closed comm, an odd frame: the next one tries again
+                log.debug("sending a frame to the notebook view failed", exc_info=True)
+            self._sent_seq = frame.seq
+            rest = period - (time.monotonic() - t)
+            if rest > 0:
+                time.sleep(rest)
+
+    def _send_frame(self, frame, topology: bool = False) -> None:
+        if self.session.generation != frame.generation:
+            return  # a newer preset is being installed; its own frames follow
+        if topology or frame.generation != self._sent_generation:
+            self.send(protocol.topology_message(self.session, frame))
+            self._sent_generation = frame.generation
+        self.send({"type": "frame"}, buffers=[protocol.encode_frame(frame, self.session)])
+        self.frames_sent += 1
+        now = time.monotonic()
+        if now - self._last_status >= STATUS_PERIOD:
+            self._last_status = now
+            self.send(json.loads(protocol.status_message(frame, self.session.frames_per_second)))
+        self.gestures.prune(frame.n_controls)
+
+    def _send_grabs(self) -> None:
+        self.send(json.loads(self.gestures.message_for(_CLIENT)))
+
+    # -- browser -> session ------------------------------------------------------------------------------------
+    def _on_message(self, _widget, content, _buffers) -> None:
+        try:
+            intent = protocol.parse_intent(json.dumps(content), self.session.n_controls)
+            if intent.type == "hello":  # a new output: the topology and the latest frame for it
+                self._send_frame(self.session.frame, topology=True)
+                self._send_grabs()
+                return
+            reply = self.gestures.apply(_CLIENT, intent)
+            self.intents += 1
+            if reply is not None:
+                self.send(reply)
+        except (ValueError, RuntimeError, TypeError) as exc:  # IntentError is a ValueError
+            self.refused += 1
+            self.send({"type": "error", "message": str(exc), "intent": getattr(exc, "intent", None)})
+
+    def close(self) -> None:
+        """Stop following the session (the session goes on) and close the widget."""
+        self.session.remove_listener(self._on_frame)
+        self.gestures.drop(_CLIENT)
+        with self._wake:
+            self._closed = True
+            self._wake.notify()
+        super().close()

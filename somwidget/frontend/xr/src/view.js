@@ -1,0 +1,319 @@
+// One clay view: a three.js scene of the session's clay inside any element, fed the protocol's topology and frames
+// (protocol.js) from any transport (the websocket in the web app and the XR page, the kernel's comm in a notebook)
+// and sending intents back through `send`. The browser draws; every view keeps its own camera.
+//
+// On the canvas: the controls as spheres labelled with their index (a mirrored copy with a prime), hover
+// highlight, the held one red and enlarged; orbit, pan, zoom; a fit-to-view button; a status line (iteration,
+// frames/s drawn here, the server's cycle time). The view refits when a control leaves it.
+
+import './colour.js';
+import * as THREE from 'three';
+import { Clay } from './clay.js';
+import { Desktop } from './desktop.js';
+import { Grabs } from './grabs.js';
+
+const CSS = `
+.somview { position: relative; overflow: hidden; background: #eef0f4; font-family: system-ui, sans-serif; }
+.somview canvas { display: block; touch-action: none; outline: none; }
+.somview-labels { position: absolute; inset: 0; pointer-events: none; overflow: hidden; }
+.somview-label { position: absolute; transform: translate(-50%, -130%); font-size: 11px; line-height: 1;
+  padding: 1px 3px; border-radius: 3px; background: rgba(255,255,255,0.8); color: #222; white-space: nowrap; }
+.somview-label.mirror { opacity: 0.6; }
+.somview-label.held { background: #d32f2f; color: white; }
+.somview-status { position: absolute; left: 6px; bottom: 4px; font-size: 11px; color: #445;
+  background: rgba(255,255,255,0.7); padding: 1px 5px; border-radius: 3px; pointer-events: none; }
+.somview-fit { position: absolute; right: 6px; top: 6px; font-size: 12px; padding: 2px 8px; cursor: pointer;
+  border: 1px solid #99a; border-radius: 4px; background: rgba(255,255,255,0.85); }
+.somview-error { position: absolute; left: 6px; top: 6px; right: 60px; font-size: 12px; padding: 3px 6px;
+  background: #fde2e2; color: #8a1010; border-radius: 4px; pointer-events: none; }
+`;
+
+function addStyle() {
+  if (document.getElementById('somview-style')) return;
+  const style = document.createElement('style');
+  style.id = 'somview-style';
+  style.textContent = CSS;
+  document.head.appendChild(style);
+}
+
+// A cheap checksum of the positions (to tell a changed mesh from an unchanged one).
+export function digestOf(positions) {
+  let s = 0;
+  const step = Math.max(1, Math.floor(positions.length / 4096));
+  for (let i = 0; i < positions.length; i += step) s = (s * 31 + positions[i] * 1000.5) % 1e9;
+  return s;
+}
+
+const FIT_CHECK_MS = 250;
+
+// A software rasteriser (SwiftShader, llvmpipe: a browser without a GPU) draws every pixel on the CPU that also
+// trains the clay: there the view skips multisampling and draws at one pixel per CSS pixel.
+let softwareGL = null;
+export function isSoftwareGL() {
+  if (softwareGL !== null) return softwareGL;
+  softwareGL = false;
+  try {
+    const gl = document.createElement('canvas').getContext('webgl2');
+    const info = gl && gl.getExtension('WEBGL_debug_renderer_info');
+    const name = info ? String(gl.getParameter(info.UNMASKED_RENDERER_WEBGL)) : '';
+    softwareGL = /swiftshader|llvmpipe|software/i.test(name);
+    gl?.getExtension('WEBGL_lose_context')?.loseContext();
+  } catch {
+    softwareGL = false;
+  }
+  return softwareGL;
+}
+
+export class ClayView {
+  // container: the element to fill; send(intent): deliver an intent object (false when it could not be sent);
+  // xr: let the renderer present immersive sessions (the XR page).
+  constructor(container, { send, xr = false, background = 0xeef0f4 } = {}) {
+    addStyle();
+    this.container = container;
+    container.classList.add('somview');
+    if (!container.style.height && container.clientHeight === 0) container.style.height = '480px';
+    this.link = { send: (obj) => (send ? send(obj) : false) };
+    const software = isSoftwareGL();
+    this.renderer = new THREE.WebGLRenderer({ antialias: !software, alpha: true });
+    this.renderer.outputColorSpace = THREE.LinearSRGBColorSpace;
+    this.renderer.setPixelRatio(software ? 1 : Math.min(window.devicePixelRatio, 2));
+    this.renderer.xr.enabled = xr;
+    container.appendChild(this.renderer.domElement);
+    this.scene = new THREE.Scene();
+    this.background = new THREE.Color(background);
+    this.scene.background = this.background;
+    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x667080, 2.2));
+    const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+    sun.position.set(1.5, 3, 2);
+    this.scene.add(sun);
+    this.camera = new THREE.PerspectiveCamera(45, 1, 0.01, 100);
+    this.clay = new Clay();
+    this.scene.add(this.clay.stage);
+    this.grabs = new Grabs(this.link, this.clay);
+    this.desktop = new Desktop({ renderer: this.renderer, camera: this.camera, clay: this.clay, grabs: this.grabs,
+      onDragEnd: () => this.desktop.keepControlsInView() });
+
+    this.labels = document.createElement('div');
+    this.labels.className = 'somview-labels';
+    this.statusLine = document.createElement('div');
+    this.statusLine.className = 'somview-status';
+    this.statusLine.textContent = 'connecting';
+    this.fitButton = document.createElement('button');
+    this.fitButton.className = 'somview-fit';
+    this.fitButton.textContent = 'Fit';
+    this.fitButton.title = 'Fit the clay and every control into the view';
+    this.fitButton.addEventListener('click', () => this.desktop.fit());
+    this.errorBox = document.createElement('div');
+    this.errorBox.className = 'somview-error';
+    this.errorBox.hidden = true;
+    container.append(this.labels, this.statusLine, this.fitButton, this.errorBox);
+    this.labelDivs = [];
+
+    this.state = { connected: false, topology: null, frame: null, frames: 0, fps: 0, fpsCount: 0,
+      fpsStart: performance.now(), digest: 0, errors: [], lastError: null, cycleMs: null, serverFps: null,
+      painted: 0, paintedDigest: 0 };
+    this.paints = []; // {digest, t}: when a changed mesh was first drawn (page clock, ms)
+    this.hooks = []; // (time, xrFrame) => void, run before each render
+    this.lastFitCheck = 0;
+    this.dirty = true; // draw on the next animation frame (only then: a software rasteriser shares the CPU)
+    this.clay.onChange = () => { this.dirty = true; };
+    this.desktop.orbit.addEventListener('change', () => { this.dirty = true; });
+    this.resize();
+    this.resizer = new ResizeObserver(() => this.resize());
+    this.resizer.observe(container);
+    this.renderer.setAnimationLoop((time, xrFrame) => this.tick(time, xrFrame));
+    container.somview = this;
+  }
+
+  // Handlers for a transport (Link in link.js, or a notebook comm): what arrives goes here.
+  get handlers() {
+    return {
+      onStatus: (s) => { this.state.connected = s === 'connected'; this.state.linkStatus = s; },
+      onTopology: (t) => this.setTopology(t),
+      onFrame: (f) => this.applyFrame(f),
+      onGrabs: (list) => this.grabs.onGrabs(list),
+      onError: (e) => this.showError(e),
+      onServerStatus: (s) => { this.state.cycleMs = s.cycle_ms; this.state.serverFps = s.fps; },
+    };
+  }
+
+  setTopology(t) {
+    this.state.topology = t;
+    this.clay.setTopology(t);
+    this.state.needsFrame = true;
+    this.onTopology?.(t);
+  }
+
+  applyFrame(f) {
+    if (!this.clay.applyFrame(f)) return false;
+    const s = this.state;
+    s.frame = f;
+    s.frames += 1;
+    s.fpsCount += 1;
+    s.connected = true;
+    s.digest = digestOf(f.positions);
+    this.grabs.onFrame(f, s.digest);
+    if (s.needsFrame) { // the first frame of a model: frame the camera on it
+      s.needsFrame = false;
+      this.onFirstFrame ? this.onFirstFrame() : this.desktop.frame();
+    }
+    this.onFrame?.(f);
+    return true;
+  }
+
+  showError(e) {
+    const s = this.state;
+    s.lastError = e.message;
+    s.errors.push(e);
+    if (s.errors.length > 50) s.errors.shift();
+    this.errorBox.textContent = e.message;
+    this.errorBox.hidden = false;
+    clearTimeout(s.errorTimer);
+    s.errorTimer = setTimeout(() => { this.errorBox.hidden = true; }, 4000);
+    this.onError?.(e);
+  }
+
+  resize() {
+    if (this.renderer.xr.isPresenting) return;
+    const w = Math.max(this.container.clientWidth, 1);
+    const h = Math.max(this.container.clientHeight, 1);
+    this.renderer.setSize(w, h);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.dirty = true;
+  }
+
+  tick(time, xrFrame) {
+    for (const hook of this.hooks) hook(time, xrFrame);
+    this.grabs.flush();
+    const now = performance.now();
+    const s = this.state;
+    if (now - s.fpsStart >= 1000) {
+      s.fps = (1000 * s.fpsCount) / (now - s.fpsStart);
+      s.fpsCount = 0;
+      s.fpsStart = now;
+    }
+    const presenting = this.renderer.xr.isPresenting;
+    if (!presenting) {
+      if (now - this.lastFitCheck > FIT_CHECK_MS && s.frame) {
+        this.lastFitCheck = now;
+        this.desktop.keepControlsInView();
+      }
+      this.updateStatus();
+      if (!this.dirty) return;
+      this.updateLabels();
+    }
+    this.dirty = false;
+    this.renderer.render(this.scene, this.camera);
+    if (s.frame && s.digest !== s.paintedDigest) { // a changed mesh is on screen from now on
+      s.paintedDigest = s.digest;
+      s.painted += 1;
+      this.paints.push({ digest: s.digest, t: now });
+      if (this.paints.length > 400) this.paints.splice(0, 200);
+    }
+  }
+
+  updateLabels() {
+    const clay = this.clay;
+    while (this.labelDivs.length < clay.kEff) {
+      const d = document.createElement('div');
+      d.className = 'somview-label';
+      this.labels.appendChild(d);
+      this.labelDivs.push(d);
+    }
+    const w = this.renderer.domElement.clientWidth;
+    const h = this.renderer.domElement.clientHeight;
+    const p = new THREE.Vector3();
+    this.camera.updateMatrixWorld();
+    for (let j = 0; j < this.labelDivs.length; j++) {
+      const d = this.labelDivs[j];
+      if (j >= clay.kEff) {
+        d.hidden = true;
+        continue;
+      }
+      const i = clay.originalOf(j);
+      const mirror = j >= clay.k;
+      const text = mirror ? `${i}\u2032` : `${i}`;
+      if (d.textContent !== text) d.textContent = text;
+      clay.controlWorld(j, p);
+      p.project(this.camera);
+      d.hidden = p.z > 1 || Math.abs(p.x) > 1.05 || Math.abs(p.y) > 1.05;
+      d.style.left = `${((p.x + 1) / 2) * w}px`;
+      d.style.top = `${((1 - p.y) / 2) * h}px`;
+      d.classList.toggle('mirror', mirror);
+      d.classList.toggle('held', clay.held.has(i) || clay.local.has(i));
+    }
+  }
+
+  updateStatus() {
+    const s = this.state;
+    const f = s.frame;
+    let text = s.connected ? 'connected' : (s.linkStatus || 'connecting');
+    if (f) {
+      const what = f.running ? 'training' : f.paused ? 'paused' : 'converged';
+      text = `iteration ${f.iteration} / ${f.iterations} \u00b7 ${what} \u00b7 ${s.fps.toFixed(0)} frames/s`;
+      if (s.cycleMs !== null && s.cycleMs !== undefined) text += ` \u00b7 cycle ${Number(s.cycleMs).toFixed(3)} ms`;
+    }
+    if (this.statusLine.textContent !== text) this.statusLine.textContent = text;
+  }
+
+  // Read-only facts for tests, benchmarks and the console (nothing here sends an intent).
+  describe() {
+    const s = this.state;
+    const clay = this.clay;
+    return {
+      connected: s.connected, hasTopology: !!s.topology, frames: s.frames, fps: s.fps, painted: s.painted,
+      seq: s.frame ? s.frame.seq : null, generation: s.frame ? s.frame.generation : null,
+      iteration: s.frame ? s.frame.iteration : null, paused: s.frame ? s.frame.paused : null,
+      running: s.frame ? s.frame.running : null, digest: s.digest, k: clay.k, kEff: clay.kEff,
+      held: [...clay.held], local: [...clay.local.keys()], hover: [...clay.hover],
+      errors: s.errors.map((e) => e.message), lastError: s.lastError, moves: this.grabs.moves,
+      latencies: [...this.grabs.latencies], controlLatencies: [...this.grabs.controlLatencies],
+      desktop: { ...this.desktop.stats }, status: this.statusLine.textContent,
+      labels: this.labelDivs.filter((d) => !d.hidden).map((d) => d.textContent),
+      camera: this.camera.position.toArray(), target: this.desktop.orbit.target.toArray(),
+      size: [this.renderer.domElement.clientWidth, this.renderer.domElement.clientHeight],
+    };
+  }
+
+  // Where effective control j is drawn, in page pixels (null when there is none).
+  controlScreen(j) {
+    const w = this.clay.controlWorld(j);
+    if (!w) return null;
+    const p = w.project(this.camera);
+    const r = this.renderer.domElement.getBoundingClientRect();
+    return [r.left + ((p.x + 1) / 2) * r.width, r.top + ((1 - p.y) / 2) * r.height];
+  }
+
+  controlModel(j) {
+    const m = this.clay.controlMeshes[j];
+    return m ? [m.position.x, m.position.y, m.position.z] : null;
+  }
+
+  controlLook(j) {
+    const m = this.clay.controlMeshes[j];
+    return m ? { colour: `#${m.material.color.getHexString()}`, scale: m.scale.x / this.clay.controlRadius } : null;
+  }
+
+  // Move -> changed mesh on screen, per answered move: ms from the move's send to the first paint of the frame.
+  moveToPaint() {
+    const out = [];
+    for (const e of this.grabs.latencyLog) {
+      const paint = this.paints.find((p) => p.t >= e.arrived);
+      if (paint) out.push(paint.t - e.sent);
+    }
+    return out;
+  }
+
+  positions(count = 12) {
+    return this.state.frame ? Array.from(this.state.frame.positions.slice(0, 3 * count)) : [];
+  }
+
+  dispose() {
+    this.renderer.setAnimationLoop(null);
+    this.resizer.disconnect();
+    this.renderer.dispose();
+    this.container.replaceChildren();
+    delete this.container.somview;
+  }
+}
