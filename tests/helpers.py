@@ -27,6 +27,20 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
 ANNOUNCED = re.compile(r"somwidget serving .* at (http)://(\S+?):(\d+)/|desktop: (https)://(\S+?):(\d+)/")
 
 
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def sync_playwright():
+    from playwright.sync_api import sync_playwright as start
+
+    return start()
+
+
 def wait_for(predicate, timeout: float = 20.0, what: str = "condition", interval: float = 0.05):
     """Poll `predicate` until it returns something true (returned) or `timeout` seconds pass (AssertionError)."""
     deadline = time.monotonic() + timeout

@@ -453,7 +453,7 @@ def test_two_pages_share_the_session(browser, server):
 
 def test_client_leaving_mid_drag_leaves_the_session_consistent(browser, server):
     page = open_page(browser, server)
-    st0 = server.idle()
+    server.idle()
     i = pick_control(page)
     start = control_on_screen(page, i)
     mouse_drag(page, start, toward_centre(page, start, 60), release=False)

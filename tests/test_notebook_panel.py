@@ -2,24 +2,22 @@
 
 ipywidgets objects work in plain Python, so most tests need no Jupyter frontend: they set a widget's value (as the
 frontend does when a person moves a slider) and check the session followed, or send an intent to the session and
-check the widgets after the next frame. Those tests show the protocol. `test_drag_in_the_view_updates_the_panel`
-shows the interaction: Chromium (Playwright) loads the widget's iframe, the mouse drags a control in the view, and
-the panel's iteration and gap follow. The sessions train the real Som on the CPU.
+check the widgets after the next frame. Those tests show the protocol, as does `test_clay_widget_protocol_over_the_comm`
+(the clay view's messages, sent by hand). `test_drag_in_the_jupyterlab_widget_moves_the_session` shows the
+interaction: a real JupyterLab runs the cell in Chromium (Playwright), the mouse drags a control inside the widget,
+and the panel and a second output of the widget follow. The sessions train the real Som on the CPU.
 """
 
 from __future__ import annotations
 
-import asyncio
 import functools
 import json
 import os
 import re
 import subprocess
 import sys
-import time
 import urllib.request
 
-import aiohttp
 import helpers
 import numpy as np
 import pytest
@@ -29,7 +27,7 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 pytest.importorskip("ipywidgets")
 
-from somwidget.frontend.notebook import NotebookServer, Panel, SomWidget, show  # noqa: E402
+from somwidget.frontend.notebook import Panel, SomWidget, show  # noqa: E402
 from somwidget.frontend.session import Session  # noqa: E402
 
 wait_for = functools.partial(helpers.wait_for, timeout=15.0, interval=0.02)
@@ -175,10 +173,16 @@ def _gap_of(panel: Panel, index: int) -> float:
     return float(cells[index].split("/")[0])
 
 
-# -- the widget show() returns: panel + the web app's view on its own server ----------------------------------
-def _get(url: str) -> bytes:
-    with urllib.request.urlopen(url, timeout=10) as r:
-        return r.read()
+# -- the widget show() returns: the panel beside the browser-drawn clay view (anywidget) ----------------------------
+class Recorder:
+    """What a ClayWidget sends to the browser, as the frontend would receive it (JSON content, binary buffers)."""
+
+    def __init__(self, widget):
+        self.messages = []
+        widget.send = lambda content, buffers=None: self.messages.append((content, buffers or []))
+
+    def of(self, kind: str) -> list:
+        return [(c, b) for c, b in self.messages if c.get("type") == kind]
 
 
 @pytest.fixture
@@ -190,160 +194,144 @@ def shown():
     session.close()
 
 
-def test_show_serves_the_web_app_of_the_same_session(shown):
+def test_show_puts_the_clay_view_beside_the_panel_and_opens_no_port(shown):
+    from somwidget.frontend.widget import ClayWidget
+
     assert isinstance(shown, SomWidget) and shown.children[0] is shown.panel
-    assert shown.url.startswith("http://127.0.0.1:") and shown.url.endswith("?ui=notebook_view")
-    assert f'src="{shown.url}"' in shown.view.value  # the iframe beside the panel
-    assert b"<html" in _get(shown.url).lower()
-    state = json.loads(_get(shown.server.base_url + "api/state"))  # a route of app.py: the same app
-    assert state["session"]["preset"] == "car"
-    again = show(shown.session)  # a second view of the session reuses its server
-    assert again.server is shown.server
-    again.close(stop_server=False)
-    port = shown.server.port
-    shown.server.stop()
-    with pytest.raises(OSError):
-        _get(f"http://127.0.0.1:{port}/api/state")
+    assert isinstance(shown.view, ClayWidget) and shown.children[1] is shown.view
+    assert "export default" in shown.view._esm or "as default" in shown.view._esm  # the built module itself
+    assert not hasattr(shown, "url") and not hasattr(shown, "server")  # no second server, no iframe
+    bundle = shown._repr_mimebundle_()
+    assert "application/vnd.jupyter.widget-view+json" in bundle
+    png = bundle["image/png"]  # what a saved notebook shows without a kernel
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
 
 
-def test_show_refuses_a_host_beyond_loopback(session):
-    """The notebook's server has no token and no TLS: a host other machines could reach is refused, pointing to
-    `somwidget serve --lan`; an empty host is an error too (not "every interface" by accident)."""
-    for host in ("0.0.0.0", "::", "192.168.1.20", "my-laptop.local"):
-        with pytest.raises(ValueError, match="somwidget serve --lan"):
-            show(session, host=host)
-        with pytest.raises(ValueError, match="somwidget serve --lan"):
-            NotebookServer(session, host=host)
-    with pytest.raises(ValueError, match="empty host"):
-        show(session, host="")
-    assert not session.closed
+def test_clay_widget_protocol_over_the_comm(shown):
+    """The protocol (not the interaction): a new output says hello and gets the topology and a frame as a binary
+    buffer; grab, move and release move the control as one undo step; a bad intent gets an error message."""
+    from somwidget.frontend import protocol
+
+    view, session = shown.view, shown.session
+    session.wait_idle(30)
+    rec = Recorder(view)
+    view._on_message(view, {"type": "hello"}, [])
+    (topo, _), = rec.of("topology")
+    assert topo["n_vertices"] == 602 and topo["n_controls"] == 9
+    (_, buffers), = rec.of("frame")
+    frame = protocol.decode_frame(bytes(buffers[0]))
+    np.testing.assert_allclose(frame["positions"], session.frame.positions, atol=1e-6)
+    history = session.history[0]
+    target = [float(v) for v in session.controls[2][:3] + np.array([0.1, 0.0, 0.2])]
+    for intent in ({"type": "grab", "index": 2}, {"type": "move", "index": 2, "position": target},
+                   {"type": "release", "index": 2}):
+        view._on_message(view, intent, [])
+    session.wait_idle(30)
+    np.testing.assert_allclose(session.controls[2][:3], target, atol=1e-6)
+    assert session.history[0] == history + 1
+    assert [c["grabs"] for c, _ in rec.of("grabs")][-1] == []
+    view._on_message(view, {"type": "move", "index": 99, "position": [0, 0, 0]}, [])
+    (err, _), = rec.of("error")
+    assert "out of range" in err["message"]
+    # frames keep coming from the sender thread as the session publishes them
+    rec.messages.clear()
+    session.reset()
+    wait_for(lambda: len(rec.of("frame")) >= 2, what="frames after a reset")
 
 
-def test_view_server_refuses_other_sites_and_host_names(shown):
-    """The view's server answers only loopback Host names and refuses websockets from pages of other sites; its own
-    pages (the iframe's, see the drag test) get in."""
-    port = shown.server.port
-    status, _ = helpers.request(shown.server.base_url + "api/state", headers={"Host": f"evil.example:{port}"})
-    assert status == 403
-    assert helpers.request(shown.server.base_url + "api/state", headers={"Host": f"localhost:{port}"})[0] == 200
-
-    async def main():
-        async with aiohttp.ClientSession() as cs:
-            for path in ("/ws", "/xr/ws"):
-                with pytest.raises(aiohttp.WSServerHandshakeError) as info:
-                    await cs.ws_connect(f"ws://127.0.0.1:{port}{path}", headers={"Origin": "http://evil.example"})
-                assert info.value.status == 403, path
-            async with cs.ws_connect(f"ws://127.0.0.1:{port}/xr/ws",
-                                     headers={"Origin": f"http://127.0.0.1:{port}"}) as ws:
-                assert json.loads((await ws.receive(timeout=20)).data)["type"] == "topology"
-
-    asyncio.run(main())
+def test_a_widget_of_a_closed_view_stops_following(session):
+    w = show(session)
+    view = w.view
+    w.close()
+    assert view._closed and not view._sender.is_alive() or view._sender.join(5) is None
+    assert session.frame is not None  # the session goes on
 
 
-def test_view_server_behind_a_proxy_keeps_the_origin_check(session, monkeypatch):
-    """Behind jupyter-server-proxy (SOMWIDGET_JUPYTER_URL) the browser's Host is the Jupyter server's: any Host is
-    answered, but a websocket still needs Origin == Host."""
-    monkeypatch.setenv("SOMWIDGET_JUPYTER_URL", "/proxy/{port}/")
-    widget = show(session)
+# -- in a real JupyterLab: Playwright's mouse drags a control inside the widget ----------------------------------
+JUPYTER = helpers.ROOT / ".venv" / "bin" / "jupyter"
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory):
+    pytest.importorskip("jupyterlab")
+    if not os.path.exists(CHROMIUM):
+        pytest.skip(f"{CHROMIUM} is missing")
+    root = tmp_path_factory.mktemp("lab")
+    cells = ["import somwidget\nview = somwidget.show('car', device='cpu')\nview",
+             "view  # a second output of the same widget"]
+    nb = {"cells": [{"cell_type": "code", "execution_count": None, "metadata": {}, "outputs": [], "source": c}
+                    for c in cells],
+          "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"}},
+          "nbformat": 4, "nbformat_minor": 5}
+    (root / "clay.ipynb").write_text(json.dumps(nb))
+    port = helpers.free_port()
+    env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(root / "data")}
+    log = open(root / "lab.log", "w")
+    proc = subprocess.Popen([sys.executable, "-m", "jupyterlab", "--allow-root", "--no-browser", f"--port={port}",
+                             "--ServerApp.ip=127.0.0.1", "--IdentityProvider.token=t0k",
+                             f"--ServerApp.root_dir={root}"], env=env, stdout=log, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}/lab/tree/clay.ipynb?token=t0k"
     try:
-        assert widget.url.startswith("/proxy/")
-        port = widget.server.port
-        hub = {"Host": "hub.example.org"}
-        assert helpers.request(f"http://127.0.0.1:{port}/api/state", headers=hub)[0] == 200
-
-        async def main():
-            async with aiohttp.ClientSession() as cs:
-                with pytest.raises(aiohttp.WSServerHandshakeError) as info:
-                    await cs.ws_connect(f"ws://127.0.0.1:{port}/ws",
-                                        headers={**hub, "Origin": "https://evil.example"})
-                assert info.value.status == 403
-                async with cs.ws_connect(f"ws://127.0.0.1:{port}/xr/ws",
-                                         headers={**hub, "Origin": "https://hub.example.org"}) as ws:
-                    assert json.loads((await ws.receive(timeout=20)).data)["type"] == "topology"
-
-        asyncio.run(main())
+        helpers.wait_for(lambda: _answers(f"http://127.0.0.1:{port}/api?token=t0k"), timeout=90,
+                         what="JupyterLab to start")
+        yield url
     finally:
-        widget.close()
-
-
-def test_stopping_the_view_detaches_its_app_and_xr_hub(shown):
-    """After the view's server stops, neither its app nor its XR hub hears the session any more, and the frame pump
-    is cancelled."""
-    session, app = shown.session, shown.server.app
-    hub = app.xr
-    assert hub is not None and app._pump_task is not None
-    assert session.wait_idle(30)
-    seq = hub._latest.seq if hub._latest is not None else -1
-    session.move_control(2, session.controls[2, :3] + np.float32([0.0, 0.0, 0.05]))
-    wait_for(lambda: hub._latest is not None and hub._latest.seq > seq, timeout=30,
-             what="the hub to get frames while the server runs")
-    shown.server.stop()
-    assert app._pump_task is None
-    before_hub, before_app = hub._latest, app._latest
-    session.move_control(2, session.controls[2, :3] - np.float32([0.0, 0.0, 0.05]))
-    assert session.wait_idle(30)
-    time.sleep(0.2)
-    assert hub._latest is before_hub and app._latest is before_app
-
-
-def test_show_makes_a_session_from_a_preset_name():
-    widget = show("torus", device="cpu", view=False)
-    try:
-        assert widget.session.preset.name == "torus" and widget.server is None and widget.owns_session
-    finally:
-        widget.close()
-    assert widget.session.closed
-
-
-@pytest.mark.skipif(not os.path.exists(CHROMIUM), reason=f"{CHROMIUM} is missing (apt-get install chromium)")
-def test_drag_in_the_view_updates_the_panel(shown):
-    """Interaction: the mouse drags the nose control in the widget's iframe; the panel's iteration and gap follow."""
-    sync_api = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
-    session, panel = shown.session, shown.panel
-    assert session.wait_idle(30)
-    session.pause()  # so that the restarted iteration stays visible
-    wait_for(lambda: "(paused)" in panel.status.value, what="the paused panel")
-    assert panel.progress.value == 1000
-    before = session.controls[2].copy()
-    gap_before = _gap_of(panel, 2)
-    with sync_api.sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        proc.terminate()
         try:
-            page = browser.new_page(viewport={"width": 1000, "height": 700})
-            page.set_content(f"<html><body style='margin:0'>{shown.view.value}</body></html>")  # the cell's iframe
-            image = page.frame_locator("iframe").locator("img").first
-            image.wait_for(state="visible", timeout=30000)
-            state = wait_for(lambda: _view_state(shown, image), timeout=30, what="the view to settle at its size")
-            box = image.bounding_box()
-            (w, h), (sx, sy) = state["window_size"], state["widget_screen"][2]
-            x0, y0 = box["x"] + sx * box["width"] / w, box["y"] + sy * box["height"] / h
-            page.mouse.move(x0, y0)
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        log.close()
+
+
+def _answers(url: str) -> bool:
+    try:
+        with urllib.request.urlopen(url, timeout=5):
+            return True
+    except OSError:
+        return False
+
+
+def test_drag_in_the_jupyterlab_widget_moves_the_session(lab):
+    """Interaction: JupyterLab runs the cell; the mouse drags control 2 inside the widget; the panel's controls
+    table (same output) shows the control moved and the second output of the widget draws it there too."""
+    views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
+    with helpers.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1400, "height": 1000})
+            page.goto(lab)
+            page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=90000)
+            page.get_by_text("| Idle").wait_for(timeout=90000)  # the kernel is up: a run is not dropped
+            page.locator(".jp-Cell").first.locator(".jp-InputArea-editor").click()
+            page.keyboard.press("Shift+Enter")
+            page.wait_for_timeout(500)
+            page.keyboard.press("Shift+Enter")
+            try:
+                page.wait_for_function(f"() => {{ const v = {views}; return v.length === 2 && v.every((x) => "
+                                       "x.describe().painted > 0); }", timeout=120000)
+            except Exception:
+                page.screenshot(path=str(helpers.ROOT / "lab-failure.png"))
+                raise
+            table = page.locator(".jp-OutputArea-output table").first
+            before = table.inner_text()
+            x, y = page.evaluate(f"() => {views}[0].controlScreen(2)")
+            page.mouse.move(x, y)
             page.mouse.down()
-            for i in range(1, 11):  # 80 px to the right, in steps, as a hand would
-                page.mouse.move(x0 + 8 * i, y0)
-                time.sleep(0.05)
+            for k in range(1, 21):
+                page.mouse.move(x + 4 * k, y - 2 * k)
+                page.wait_for_timeout(30)
             page.mouse.up()
-            wait_for(lambda: not np.allclose(session.controls[2], before), what="the session to get the drag")
-            time.sleep(0.3)  # the release's last move
+            page.wait_for_function(f"() => {views}[0].describe().local.length === 0", timeout=15000)
+            page.wait_for_function("(b) => document.querySelector('.jp-OutputArea-output table').innerText !== b",
+                                   arg=before, timeout=15000)
+            moved = page.evaluate(f"() => {views}[0].controlModel(2)")
+            other = page.evaluate(f"() => {views}[1].controlModel(2)")
+            np.testing.assert_allclose(other, moved, atol=1e-5)  # the second output follows the first
+            assert view_errors(page, views) == []
         finally:
             browser.close()
-    assert session.controls[2][0] > before[0] + 0.1  # dragged to the right: towards +x (the nose), in this view
-    position = ", ".join(f"{x:.2f}" for x in session.controls[2][:3])
-    wait_for(lambda: position in panel.controls_html.value and "iteration 920 / 1000 (paused)" in panel.status.value,
-             what="the panel to show the dragged control and the locally restarted schedule")
-    assert panel.progress.value == 920
-    gap_dragged = _gap_of(panel, 2)
-    assert gap_dragged > gap_before  # the clay has not followed (paused) ...
-    panel.train_button.click()  # ... until Train: the local restart closes most of the gap
-    wait_for(lambda: "converged" in panel.status.value and _gap_of(panel, 2) < 0.3 * gap_dragged, timeout=30,
-             what="training to close the gap")
 
 
-def _view_state(widget: SomWidget, image):
-    """The view's state once its render window has the image's size (the remote view resizes it on load)."""
-    view = json.loads(_get(widget.server.base_url + "api/state"))["view"]
-    box = image.bounding_box()
-    if box is None or not view["widget_screen"]:
-        return None
-    w, h = view["window_size"]
-    return view if abs(w - box["width"]) <= 2 and abs(h - box["height"]) <= 2 else None
+def view_errors(page, views: str) -> list:
+    return page.evaluate(f"() => {views}.flatMap((v) => v.describe().errors)")
