@@ -201,8 +201,52 @@ def status_message(frame, frames_per_second: float) -> str:
 
 
 # -- topology ----------------------------------------------------------------------------------------------------
+#: Most display vertices a frame streams: 32,768 x 15 bytes = 0.5 MB a frame, 15 MB/s at 30 frames/s, which a
+#: headset's Wi-Fi and a laptop's browser both take. A bigger clay is shown decimated (`decimate_display`).
+STREAM_LIMIT = 32768
+
+
+def decimate_display(points: np.ndarray, triangles: np.ndarray, segments: np.ndarray, limit: int = STREAM_LIMIT):
+    """A display mesh of at most `limit` of the nodes, for a clay too big to stream whole: the nodes are clustered on
+    a uniform grid over their start positions (one node stands for each occupied cell), and the triangles and
+    segments are mapped onto those nodes (the degenerate ones dropped). Every frame then sends the trained
+    positions of those nodes. Returns (nodes (m,), triangles (T, 3), segments (E, 2)) over 0..m-1."""
+    pts = np.asarray(points, np.float64)
+    lo, span = pts.min(axis=0), np.ptp(pts, axis=0)
+    span[span <= 0] = 1.0
+    cells = max(2, int(round(limit ** (1 / 3))))
+    for _ in range(40):  # grow the grid while it keeps under the limit (a surface fills ~cells^2 of cells^3)
+        key = np.minimum((pts - lo) / span * cells, cells - 1).astype(np.int64)
+        key = (key[:, 0] * cells + key[:, 1]) * cells + key[:, 2]
+        _, first, cluster = np.unique(key, return_index=True, return_inverse=True)
+        if len(first) > limit:
+            cells = max(2, int(cells / 1.15))
+            continue
+        finer = max(cells + 1, int(cells * min(1.5, (limit / len(first)) ** 0.5)))
+        key2 = np.minimum((pts - lo) / span * finer, finer - 1).astype(np.int64)
+        if len(np.unique((key2[:, 0] * finer + key2[:, 1]) * finer + key2[:, 2])) > limit:
+            break
+        cells = finer
+    cluster = cluster.ravel()
+
+    def remap(idx: np.ndarray, width: int) -> np.ndarray:
+        m = cluster[np.asarray(idx, np.int64).reshape(-1, width)]
+        distinct = np.ones(len(m), bool)
+        for i in range(width):
+            for j in range(i + 1, width):
+                distinct &= m[:, i] != m[:, j]
+        m = m[distinct]
+        return np.unique(np.sort(m, axis=1), axis=0) if width == 2 else m
+
+    return first.astype(np.int64), remap(triangles, 3), remap(segments, 2)
+
+
+_DECIMATED: dict[int, tuple] = {}  # id(topology) -> (topology, nodes, triangles, segments): one per start mesh
+
+
 def display_of(session) -> dict:
-    """The display geometry of the session's current preset: triangles, segments, points flag, n_vertices."""
+    """The display geometry of the session's current preset: triangles, segments, points flag, n_vertices, and
+    `nodes` (the nodes a frame streams, in order) when the clay is past STREAM_LIMIT and shown decimated."""
     preset = session.preset
     topo, display = preset.topology, preset.display
     n = topo.n_vertices
@@ -211,21 +255,36 @@ def display_of(session) -> dict:
         quads = np.stack([edges[:, 0], edges[:, 1], edges[:, 1] + n, edges[:, 0] + n], axis=1)
         tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
         segments = np.stack([np.arange(n), np.arange(n) + n], axis=1)
-        return {"display": "lines", "n_vertices": 2 * n, "triangles": tris, "segments": segments, "points": False}
-    if display == "surface" and topo.faces:
-        return {"display": "surface", "n_vertices": n, "triangles": _io.triangulate(topo.faces), "segments": edges,
-                "points": False}
-    return {"display": "points", "n_vertices": n, "triangles": np.zeros((0, 3), np.int64), "segments": edges,
-            "points": True}
+        return {"display": "lines", "n_vertices": 2 * n, "triangles": tris, "segments": segments, "points": False,
+                "nodes": None}
+    surface = display == "surface" and bool(topo.faces)
+    tris = _io.triangulate(topo.faces) if surface else np.zeros((0, 3), np.int64)
+    nodes = None
+    if n > STREAM_LIMIT:
+        cached = _DECIMATED.get(id(topo))
+        if cached is None or cached[0] is not topo:
+            start = _presets.positions_of(preset.weights, preset.layout)
+            cached = (topo, *decimate_display(start, tris, edges))
+            _DECIMATED.clear()
+            _DECIMATED[id(topo)] = cached
+        _, nodes, tris, edges = cached
+        n = len(nodes)
+    return {"display": "surface" if surface else "points", "n_vertices": n, "triangles": tris, "segments": edges,
+            "points": not surface, "nodes": nodes}
 
 
 def display_arrays(frame, session) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 3) float32 display positions and (n, 3) float32 colours of a frame (roots then tips for "lines")."""
+    """(n, 3) float32 display positions and (n, 3) float32 colours of a frame (roots then tips for "lines"; the
+    streamed nodes only for a decimated clay)."""
     preset = session.preset
     if preset.display == "lines":
         pts, _ = _presets.line_display_mesh(frame.weights, preset.topology, preset.layout)
         return pts, np.concatenate([frame.colours, frame.colours])
-    return np.asarray(frame.positions, np.float32), np.asarray(frame.colours, np.float32)
+    pos, col = np.asarray(frame.positions, np.float32), np.asarray(frame.colours, np.float32)
+    if preset.topology.n_vertices > STREAM_LIMIT:
+        nodes = display_of(session)["nodes"]
+        return pos[nodes], col[nodes]
+    return pos, col
 
 
 def control_colours(frame, has_colour: bool) -> np.ndarray:
