@@ -372,6 +372,52 @@ def test_panel_sets_schedule_and_refuses_bad_values(browser, server):
         page.close()
 
 
+def test_the_panel_comes_from_the_parameters_declaration_and_follows_a_change_made_elsewhere(browser, server):
+    """Every parameter field carries the declared help as its tooltip; a value set by another client (the set
+    intent on the views' websocket, as the XR page or a script sends it) shows in the page's field; a refused one
+    comes back to that client as an error and changes nothing."""
+    import aiohttp
+
+    from somwidget.frontend.parameters import PARAMETERS
+
+    page = open_page(browser, server)
+    try:
+        for p in PARAMETERS:  # a field for each, with its help as the tooltip
+            assert page.locator(f"#param-{p.name}").get_attribute("title") == p.help, p.name
+
+        async def send(*intents, expect_error=False):
+            async with aiohttp.ClientSession() as cs, cs.ws_connect(server.base.replace("http", "ws") + "/xr/ws",
+                                                                    headers={"Origin": server.base}) as ws:
+                for intent in intents:
+                    await ws.send_json(intent)
+                await ws.send_json({"type": "ping", "t": 1})  # answered after the intents before it
+                replies = []
+                while True:
+                    msg = await ws.receive(timeout=10)
+                    if msg.type != aiohttp.WSMsgType.TEXT:
+                        continue
+                    if '"error"' in msg.data:
+                        replies.append(msg.data)
+                    if '"pong"' in msg.data:
+                        return replies
+
+        def run(*intents):  # on a thread of its own: Playwright's sync API holds this thread's event loop
+            with concurrent.futures.ThreadPoolExecutor(1) as pool:
+                return pool.submit(lambda: asyncio.run(send(*intents))).result()
+
+        replies = run({"type": "set", "name": "smoothing", "value": 0.05}, {"type": "set", "name": "l_end", "value": 2})
+        assert replies and "l_end" in replies[0]
+        page.wait_for_function("() => document.querySelector('#field-smoothing').value === '0.05'",
+                               timeout=10000)
+        st = server.state()
+        assert st["session"]["parameters"]["smoothing"] == 0.05 and st["session"]["parameters"]["l_end"] == 0.03
+        run({"type": "set", "name": "smoothing", "value": 0})
+        server.wait(lambda s: s["session"]["parameters"]["smoothing"] == 0.0, what="smoothing back to 0")
+        server.idle()
+    finally:
+        page.close()
+
+
 def test_bad_upload_shows_an_error_and_the_session_goes_on(browser, server, tmp_path):
     page = open_page(browser, server)
     try:

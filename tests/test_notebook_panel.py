@@ -216,9 +216,11 @@ def test_clay_widget_protocol_over_the_comm(shown):
     session.wait_idle(30)
     rec = Recorder(view)
     view._on_message(view, {"type": "hello"}, [])
-    (topo, _), = rec.of("topology")
+    topo = rec.of("topology")[-1][0]  # (the sender thread may have sent its own first one too)
     assert topo["n_vertices"] == 602 and topo["n_controls"] == 9
-    (_, buffers), = rec.of("frame")
+    assert [p["name"] for p in topo["parameters"]] == ["iterations", "l_start", "l_end", "smoothing", "reach",
+                                                         "symmetry"]
+    _, buffers = rec.of("frame")[-1]
     frame = protocol.decode_frame(bytes(buffers[0]))
     np.testing.assert_allclose(frame["positions"], session.frame.positions, atol=1e-6)
     history = session.history[0]
@@ -231,8 +233,12 @@ def test_clay_widget_protocol_over_the_comm(shown):
     assert session.history[0] == history + 1
     assert [c["grabs"] for c, _ in rec.of("grabs")][-1] == []
     view._on_message(view, {"type": "move", "index": 99, "position": [0, 0, 0]}, [])
-    (err, _), = rec.of("error")
-    assert "out of range" in err["message"]
+    assert "out of range" in rec.of("error")[-1][0]["message"]
+    # a parameter by the declaration's name, checked against its bounds
+    view._on_message(view, {"type": "set", "name": "reach", "value": 0.2}, [])
+    assert session.parameters["reach"] == 0.2
+    view._on_message(view, {"type": "set", "name": "reach", "value": 1.5}, [])
+    assert "reach" in rec.of("error")[-1][0]["message"] and session.parameters["reach"] == 0.2
     # frames keep coming from the sender thread as the session publishes them
     rec.messages.clear()
     session.reset()

@@ -40,6 +40,8 @@ from wslink.websocket import LinkProtocol
 
 from ..backend import presets as _presets
 from . import lan as _lan
+from .parameters import BY_NAME as _PARAM
+from .parameters import GAP_HELP, METRIC_WEIGHT
 from .protocol import control_colours
 from .session import DEFAULT_MAX_VERTICES, REACH_HELP, Frame, Session, hex_colour
 from .xr import attach as attach_xr
@@ -91,6 +93,11 @@ if (!window.somwidgetMount) {
   window.somwidgetMount();
 }
 """
+
+
+def _state_key(name: str) -> str:
+    """The trame state key of a parameter's field."""
+    return "param_S" if name == "iterations" else f"param_{name}"
 
 
 def _fmt(x: float, digits: int = 3) -> str:
@@ -212,10 +219,8 @@ class SomApp:
         s.preset_name = sess.preset.name
         s.preset_title = sess.preset.title
         s.preset_description = sess.preset.description
-        s.param_S = str(p["iterations"])
-        s.param_l_start = _fmt(p["l_start"], 6)
-        s.param_l_end = _fmt(p["l_end"], 6)
-        s.param_smoothing = _fmt(p["smoothing"], 6)
+        for name in ("iterations", "l_start", "l_end", "smoothing"):
+            s[_state_key(name)] = str(p[name]) if name == "iterations" else _fmt(p[name], 6)
         s.param_reach = float(p["reach"])
         s.param_symmetry = bool(p["symmetry"])
         s.paused = sess.paused
@@ -674,26 +679,28 @@ class SomApp:
                          "{{ stats.k }} controls ({{ stats.k_eff }} with mirrors)", classes="text-caption",
                          id="speed-text")
 
-            # schedule
+            # schedule: the fields come from the parameters' declaration (parameters.py)
             html.Div("Schedule", classes="text-subtitle-2 mt-2")
             with v3.VRow(dense=True):
-                for key, name, label in (("param_S", "iterations", "S (iterations)"),
-                                         ("param_smoothing", "smoothing", "smoothing"),
-                                         ("param_l_start", "l_start", "l_start"),
-                                         ("param_l_end", "l_end", "l_end")):
-                    with v3.VCol(cols=6):
-                        v3.VTextField(v_model=(key,), label=label, density="compact", type="number",
+                for name in ("iterations", "smoothing", "l_start", "l_end"):
+                    p = _PARAM[name]
+                    with v3.VCol(cols=6), html.Div(id=f"param-{name}", title=p.help):
+                        v3.VTextField(v_model=(_state_key(name),), label=p.label, density="compact", type="number",
                                       error_messages=(f"param_errors['{name}'] || []",), hide_details="auto",
                                       id=f"field-{name}",
                                       raw_attrs=self._on_enter_or_change(
                                           f"trigger('set_param', ['{name}', $event.target.value])"))
-            v3.VSlider(v_model=("param_reach",), label=("'reach ' + Number(param_reach).toFixed(2)",), min=0.01,
-                       max=1.0, step=0.01, density="compact",
-                       hide_details=True, thumb_label=True, id="reach-slider", classes="mt-1",
-                       end="trigger('set_param', ['reach', $event])")
+            reach = _PARAM["reach"]
+            with html.Div(id="param-reach", title=reach.help):
+                v3.VSlider(v_model=("param_reach",), label=("'reach ' + Number(param_reach).toFixed(2)",),
+                           min=reach.slider[0], max=reach.slider[1], step=reach.slider[2], density="compact",
+                           hide_details="auto", thumb_label=True, id="reach-slider", classes="mt-1",
+                           error_messages=("param_errors['reach'] || []",),
+                           end="trigger('set_param', ['reach', $event])")
             html.Div("{{ reach_help }}", classes="text-caption", id="reach-help")
-            v3.VSwitch(v_model=("param_symmetry",), label="symmetry (mirror across the xz-plane)",
-                       density="compact", hide_details=True, color="primary", id="symmetry-switch")
+            with html.Div(id="param-symmetry", title=_PARAM["symmetry"].help):
+                v3.VSwitch(v_model=("param_symmetry",), label=_PARAM["symmetry"].label, density="compact",
+                           hide_details=True, color="primary", id="symmetry-switch")
 
             # features
             html.Div("Feature dimensions (metric weights)", classes="text-subtitle-2 mt-2")
@@ -705,13 +712,14 @@ class SomApp:
                         html.Td("{{ f.role }}", classes="text-caption")
                         with html.Td(style="width: 96px"):
                             v3.VTextField(model_value=("f.weight",), density="compact", type="number",
-                                          hide_details=True, variant="plain",
+                                          hide_details=True, variant="plain", title=METRIC_WEIGHT.help,
                                           raw_attrs=self._on_enter_or_change(
                                               "trigger('set_metric', [f.d, $event.target.value])"))
 
             # controls
             with html.Div(classes="d-flex align-center mt-2"):
-                html.Div("Controls (gap to the nearest node: original / mirror)", classes="text-subtitle-2")
+                html.Div("Controls (gap to the nearest node: original / mirror)", classes="text-subtitle-2",
+                         title=GAP_HELP)
                 v3.VSpacer()
                 v3.VBtn(icon="mdi-plus", size="small", variant="text", click="trigger('add_control')",
                         id="add-control", title="Add a control")

@@ -49,6 +49,8 @@ class Gestures:
                 del self.grabs[i]
                 self.on_change()
                 self.session.end_gesture()
+        elif kind == "set":
+            self.session.set_parameter(intent.name, intent.value)
         elif kind == "undo":
             self.session.undo()
         elif kind == "redo":

@@ -29,6 +29,8 @@ import ipywidgets as widgets  # noqa: E402
 
 from ..backend import presets as _presets  # noqa: E402
 from ..backend.presets import Preset  # noqa: E402
+from .parameters import BY_NAME as _PARAM  # noqa: E402
+from .parameters import GAP_HELP, METRIC_WEIGHT  # noqa: E402
 from .session import REACH_HELP, Frame, Session, hex_colour  # noqa: E402
 from .widget import ClayWidget  # noqa: E402
 
@@ -38,7 +40,7 @@ log = logging.getLogger(__name__)
 PANEL_HZ = 8
 #: The S slider's range and step (the session accepts any S >= 1 through `session.set_iterations`; the slider's
 #: range widens to show a larger one).
-S_SLIDER = (10, 5000, 10)
+S_SLIDER = _PARAM["iterations"].slider
 #: Text blocks: the notebook's default line height spreads small print apart.
 _BLOCK = '<div style="line-height:1.35">{}</div>'
 
@@ -90,20 +92,21 @@ class Panel(widgets.VBox):
         self.progress = widgets.IntProgress(min=0, max=1, value=0, description="progress", style=style,
                                             layout=wide)
         self.status = widgets.HTML()
-        self.S = widgets.IntSlider(description="S", min=S_SLIDER[0], max=S_SLIDER[1], step=S_SLIDER[2],
-                                   continuous_update=False,
-                                   style=style, layout=wide, tooltip="cycles in a run (iterations)")
-        self.l_start = widgets.FloatSlider(description="l_start", min=0.001, max=1.0, step=0.001,
-                                           readout_format=".3f", continuous_update=False, style=style,
-                                           layout=wide)
-        self.l_end = widgets.FloatSlider(description="l_end", min=0.001, max=1.0, step=0.001, readout_format=".3f",
-                                         continuous_update=False, style=style, layout=wide)
-        self.smoothing = widgets.FloatSlider(description="smoothing", min=0.0, max=1.0, step=0.01,
-                                             readout_format=".2f", continuous_update=False, style=style,
-                                             layout=wide)
-        self.reach = widgets.FloatSlider(description="reach", min=0.01, max=1.0, step=0.01, readout_format=".2f",
-                                         continuous_update=False, style=style, layout=wide)
-        self.symmetry = widgets.Checkbox(description="symmetry (mirror across the xz-plane)", indent=False)
+        # the sliders and their tooltips come from the parameters' declaration (parameters.py)
+        def slider(name: str, kind, digits: str | None = None, description: str | None = None):
+            p = _PARAM[name]
+            lo, hi, step = p.slider
+            extra = {"readout_format": digits} if digits else {}
+            return kind(description=description or p.label, min=lo, max=hi, step=step, continuous_update=False,
+                        style=style, layout=wide, tooltip=p.help, **extra)
+
+        self.S = slider("iterations", widgets.IntSlider, description="S")
+        self.l_start = slider("l_start", widgets.FloatSlider, ".3f")
+        self.l_end = slider("l_end", widgets.FloatSlider, ".3f")
+        self.smoothing = slider("smoothing", widgets.FloatSlider, ".2f")
+        self.reach = slider("reach", widgets.FloatSlider, ".2f")
+        self.symmetry = widgets.Checkbox(description=_PARAM["symmetry"].label, indent=False,
+                                         tooltip=_PARAM["symmetry"].help)
         self.features_box = widgets.VBox()
         self.metric: list[widgets.BoundedFloatText] = []
         self.controls_html = widgets.HTML()
@@ -121,8 +124,8 @@ class Panel(widgets.VBox):
             widgets.HTML(_BLOCK.format("<b>Feature dimensions</b> <small>(metric weights m<sub>j</sub> of the "
                                        "winner search)</small>")),
             self.features_box,
-            widgets.HTML(_BLOCK.format("<b>Controls</b> <small>(gap: distance to the nearest node, original / "
-                                       "mirror)</small>")),
+            widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(GAP_HELP)}">Controls</b> <small>(gap: distance to '
+                                       'the nearest node, original / mirror)</small>')),
             self.controls_html, self.error,
         ], layout=widgets.Layout(width="360px", min_width="360px", padding="4px"))
 
@@ -277,7 +280,8 @@ class Panel(widgets.VBox):
         weights = session.parameters["metric_weights"]
         metric, rows = [], []
         for d, name in enumerate(layout.names):
-            w = widgets.BoundedFloatText(value=float(weights[d]), min=0.0, max=1e6, step=0.1, description=name,
+            w = widgets.BoundedFloatText(value=float(weights[d]), min=METRIC_WEIGHT.low, max=METRIC_WEIGHT.high,
+                                         step=0.1, description=name, tooltip=METRIC_WEIGHT.help,
                                          style={"description_width": "70px"}, layout=widgets.Layout(width="170px"))
             w.observe(lambda change, d=d: self.set_metric_weight(d, change["new"]), names="value")
             metric.append(w)

@@ -64,6 +64,9 @@ Client -> server: JSON text, one intent per message, at most MAX_MESSAGE_BYTES b
    {"type": "ping", "t": number}
    {"type": "hello"}                                     send the topology and the latest frame again (a new view
                                                          on an existing connection: the notebook's outputs)
+   {"type": "set", "name": n, "value": v}                set a parameter declared in parameters.py (the topology
+                                                         message lists them: "parameters"), checked against its
+                                                         bounds
 
 Anything else is refused with an error message sent back (and logged) and changes nothing: binary messages,
 messages over the size limit, text that is not JSON (NaN and Infinity included), non-objects, unknown types,
@@ -82,6 +85,7 @@ import numpy as np
 
 from ..backend import io as _io
 from ..backend import presets as _presets
+from . import parameters as _parameters
 
 PROTOCOL_VERSION = 1
 MAGIC = b"SOMF"
@@ -104,6 +108,7 @@ INTENT_FIELDS = {
     "redo": (set(), set()),
     "ping": ({"t"}, set()),
     "hello": (set(), set()),
+    "set": ({"name", "value"}, set()),
 }
 
 
@@ -121,6 +126,8 @@ class Intent:
     index: int | None = None
     position: tuple[float, float, float] | None = None
     t: float | None = None
+    name: str | None = None
+    value: float | bool | None = None
 
 
 # -- intents ---------------------------------------------------------------------------------------------------
@@ -188,7 +195,20 @@ def parse_intent(message, n_controls: int) -> Intent:
         position = xyz
     if "t" in data:
         t = _number(data["t"], "t", kind)
-    return Intent(kind, index, position, t)
+    name = value = None
+    if kind == "set":
+        name, value = data["name"], data["value"]
+        if not isinstance(name, str) or name not in _parameters.BY_NAME:
+            raise IntentError(f"set: unknown parameter {json.dumps(name)[:40]}; known: "
+                              f"{', '.join(_parameters.BY_NAME)}", kind)
+        declared = _parameters.BY_NAME[name]
+        if declared.kind != "bool":
+            value = _number(value, name, kind)
+        try:
+            value = declared.check(value)
+        except ValueError as exc:
+            raise IntentError(f"set: {exc}", kind) from None
+    return Intent(kind, index, position, t, name, value)
 
 
 def error_message(message: str, intent: str | None = None) -> str:
@@ -323,6 +343,7 @@ def topology_message(session, frame, client_id: int | None = None) -> dict:
         "control_radius": 0.035 * span, "colour_space": session.layout.colour_space,
         "feature_names": list(session.layout.names), "max_coordinate": MAX_COORDINATE,
         "max_message_bytes": MAX_MESSAGE_BYTES, "client": client_id,
+        "parameters": [p.describe() for p in _parameters.PARAMETERS],
     }
 
 

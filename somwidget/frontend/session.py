@@ -60,11 +60,11 @@ from ..backend.presets import hex_colour, parse_hex_colour, rgb_to_colour_dims  
 from ..backend.som import _MAX_TABLE_ENTRIES
 from . import storage
 from .history import History, Step
+from .parameters import BY_NAME as _PARAM
+from .parameters import MAX_ITERATIONS, METRIC_WEIGHT
 
 log = logging.getLogger(__name__)
 
-#: Bounds the session puts on parameters coming from a view (the engine has its own, wider checks).
-MAX_ITERATIONS = 1_000_000
 #: The engine's cap on its learning table, S x (d_max + 1) float32 entries (2 GiB): backend/som.py, _build_table.
 #: A mesh with a long grid diameter allows fewer than MAX_ITERATIONS cycles (`Session.max_iterations`).
 MAX_TABLE_ENTRIES = _MAX_TABLE_ENTRIES
@@ -75,10 +75,9 @@ DEFAULT_MAX_VERTICES = 16384
 #: Largest |value| accepted for a control coordinate or feature.
 MAX_ABS_VALUE = 1e6
 
-PARAMETERS = ("iterations", "l_start", "l_end", "smoothing", "reach", "symmetry", "metric_weights")
+PARAMETERS = (*_PARAM, "metric_weights")  # declared in parameters.py
 #: The line every panel shows under its reach slider.
-REACH_HELP = ("How far a moved control's pull spreads when the clay follows it: small keeps the rest of your shape, "
-              "1 regrows the whole mesh.")
+REACH_HELP = _PARAM["reach"].help
 #: Setting the same parameter again within this many seconds joins the previous undo step (a slider's drag).
 PARAMETER_STEP_SECONDS = 1.5
 #: While training, the autosave writes at most this often (it always writes when training settles).
@@ -1065,7 +1064,7 @@ class Session:
 
     def set_iterations(self, value) -> None:
         """S: cycles in a run. Restarts the schedule locally from the latest weights."""
-        s = checks.integer_text("S (iterations)", value, 1, MAX_ITERATIONS)
+        s = _PARAM["iterations"].check(value)
         with self._step("parameter:iterations"), self._lock:
             limit = self.max_iterations
             if s > limit:
@@ -1077,20 +1076,19 @@ class Session:
             self._enqueue("iterations", s)
 
     def set_l_start(self, value) -> None:
-        x = checks.real("l_start", value, 0.0, 1.0, low_open=True)
+        x = _PARAM["l_start"].check(value)
         with self._step("parameter:l_start"), self._lock:
             self._params["l_start"] = x
             self._enqueue("l_start", x)
 
     def set_l_end(self, value) -> None:
-        x = checks.real("l_end", value, 0.0, 1.0, low_open=True)
+        x = _PARAM["l_end"].check(value)
         with self._step("parameter:l_end"), self._lock:
             self._params["l_end"] = x
             self._enqueue("l_end", x)
 
     def set_learning_rates(self, l_start, l_end) -> None:
-        a = checks.real("l_start", l_start, 0.0, 1.0, low_open=True)
-        b = checks.real("l_end", l_end, 0.0, 1.0, low_open=True)
+        a, b = _PARAM["l_start"].check(l_start), _PARAM["l_end"].check(l_end)
         with self._step("parameter:rates"), self._lock:
             self._params["l_start"], self._params["l_end"] = a, b
             self._enqueue("l_start", a)
@@ -1098,7 +1096,7 @@ class Session:
 
     def set_smoothing(self, value) -> None:
         """lambda of one Laplacian step per cycle, in [0, 1]; 0 is off."""
-        x = checks.real("smoothing", value, 0.0, 1.0)
+        x = _PARAM["smoothing"].check(value)
         with self._step("parameter:smoothing"), self._lock:
             self._params["smoothing"] = x
             self._enqueue("smoothing", x)
@@ -1106,7 +1104,7 @@ class Session:
     def set_reach(self, value) -> None:
         """How far a moved control's pull reaches when the clay follows it: the neighbourhood radius a restart
         begins with, as a share of the whole mesh's (0, 1]; small keeps the rest of the shape, 1 regrows it all."""
-        x = checks.real("reach", value, 0.0, 1.0, low_open=True)
+        x = _PARAM["reach"].check(value)
         with self._step("parameter:reach"), self._lock:
             self._params["reach"] = x
             self._enqueue("reach", x)
@@ -1134,7 +1132,8 @@ class Session:
         with self._lock:
             d = checks.integer_text("feature dimension", dim, 0, self._layout.n_dims - 1)
             m = list(self._params["metric_weights"])
-            m[d] = checks.real(f"metric weight of {self._layout.names[d]}", value, 0.0, MAX_ABS_VALUE)
+            m[d] = checks.real(f"{METRIC_WEIGHT.label} of {self._layout.names[d]}", value, METRIC_WEIGHT.low,
+                               METRIC_WEIGHT.high)
         self.set_metric_weights(m)
 
     # -- intents: run control ------------------------------------------------------------------------------

@@ -66,4 +66,5 @@ export const intents = {
   redo: () => ({ type: 'redo' }),
   ping: (t) => ({ type: 'ping', t }),
   hello: () => ({ type: 'hello' }),
+  set: (name, value) => ({ type: 'set', name, value }),
 };
