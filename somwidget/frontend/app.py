@@ -43,7 +43,7 @@ from . import lan as _lan
 from .parameters import BY_NAME as _PARAM
 from .parameters import GAP_HELP, METRIC_WEIGHT
 from .protocol import control_colours
-from .session import DEFAULT_MAX_VERTICES, REACH_HELP, Frame, Session, hex_colour
+from .session import REACH_HELP, Frame, Session, hex_colour, max_vertices_for
 from .xr import attach as attach_xr
 
 log = logging.getLogger(__name__)
@@ -786,7 +786,7 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
     if mesh is not None:
         from ..backend import io as sw_io
 
-        start = sw_io.load_mesh(mesh, max_vertices=DEFAULT_MAX_VERTICES)
+        start = sw_io.load_mesh(mesh, max_vertices=max_vertices_for(device))
         start.name = f"mesh:{start.name}"
     session = None if fresh else Session.recover(device=device, start=False)
     if session is not None:

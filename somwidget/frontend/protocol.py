@@ -261,13 +261,25 @@ def decimate_display(points: np.ndarray, triangles: np.ndarray, segments: np.nda
     return first.astype(np.int64), remap(triangles, 3), remap(segments, 2)
 
 
-_DECIMATED: dict[int, tuple] = {}  # id(topology) -> (topology, nodes, triangles, segments): one per start mesh
+_DISPLAYS: dict[int, tuple] = {}  # id(preset) -> (preset, display): the latest few presets' display geometry
 
 
 def display_of(session) -> dict:
     """The display geometry of the session's current preset: triangles, segments, points flag, n_vertices, and
-    `nodes` (the nodes a frame streams, in order) when the clay is past STREAM_LIMIT and shown decimated."""
+    `nodes` (the nodes a frame streams, in order) when the clay is past STREAM_LIMIT and shown decimated. Made once
+    per preset (a million-vertex mesh takes seconds to triangulate and decimate), then kept."""
     preset = session.preset
+    cached = _DISPLAYS.get(id(preset))
+    if cached is not None and cached[0] is preset:
+        return cached[1]
+    display = _display_geometry(preset)
+    if len(_DISPLAYS) >= 4:
+        _DISPLAYS.clear()
+    _DISPLAYS[id(preset)] = (preset, display)
+    return display
+
+
+def _display_geometry(preset) -> dict:
     topo, display = preset.topology, preset.display
     n = topo.n_vertices
     edges = np.asarray(topo.edges, np.int64).reshape(-1, 2)
@@ -281,13 +293,7 @@ def display_of(session) -> dict:
     tris = _io.triangulate(topo.faces) if surface else np.zeros((0, 3), np.int64)
     nodes = None
     if n > STREAM_LIMIT:
-        cached = _DECIMATED.get(id(topo))
-        if cached is None or cached[0] is not topo:
-            start = _presets.positions_of(preset.weights, preset.layout)
-            cached = (topo, *decimate_display(start, tris, edges))
-            _DECIMATED.clear()
-            _DECIMATED[id(topo)] = cached
-        _, nodes, tris, edges = cached
+        nodes, tris, edges = decimate_display(_presets.positions_of(preset.weights, preset.layout), tris, edges)
         n = len(nodes)
     return {"display": "surface" if surface else "points", "n_vertices": n, "triangles": tris, "segments": edges,
             "points": not surface, "nodes": nodes}

@@ -53,6 +53,7 @@ import numpy as np
 
 from ..backend import checks
 from ..backend import presets as _presets
+from ..backend import device as _device
 from ..backend.metrics import nearest_distances
 from ..backend.presets import FeatureLayout, Preset
 # The colour helpers live with the layouts; importable from here for the views that already do.
@@ -70,8 +71,12 @@ log = logging.getLogger(__name__)
 MAX_TABLE_ENTRIES = _MAX_TABLE_ENTRIES
 #: The engine's limit on effective controls (originals plus mirrored copies).
 MAX_CONTROLS = _presets.MAX_CONTROLS
-#: Largest mesh a session accepts by default: the dense distance table is N^2 uint16 (16384 -> 512 MiB).
+#: Largest mesh a session on the CPU accepts by default: the dense distance table is N^2 uint16 (16384 -> 512 MiB),
+#: built and searched on the CPU's cores.
 DEFAULT_MAX_VERTICES = 16384
+#: Largest mesh a session on a GPU accepts by default: past 65,536 neurons the engine computes distance rows for the
+#: current winners on demand instead of a table, and the views stream a decimated display mesh past 32,768.
+GPU_MAX_VERTICES = 4_194_304
 #: Largest |value| accepted for a control coordinate or feature.
 MAX_ABS_VALUE = 1e6
 
@@ -202,6 +207,13 @@ def _check_index(name: str, value, count: int) -> int:
     return i
 
 
+def max_vertices_for(device: str | None) -> int:
+    """The largest mesh a session on `device` takes by default: the engine's on a GPU, the dense table's on the
+    CPU."""
+    on_gpu = _device.resolve(None if device in (None, "auto") else device).startswith("cuda")
+    return GPU_MAX_VERTICES if on_gpu else DEFAULT_MAX_VERTICES
+
+
 def default_mirror(preset: Preset) -> tuple[int, ...]:
     """Dims negated by symmetry: the preset's own, else position y (and direction y where there is one)."""
     if preset.mirror:
@@ -228,11 +240,13 @@ class Session:
 
     def __init__(self, preset: str | Preset | None = "car", device: str | None = "auto", frame_rate: float = 60.0,
                  step_fraction: float = 0.6, start: bool = True, paused: bool = False,
-                 max_vertices: int = DEFAULT_MAX_VERTICES, autosave: bool = True):
+                 max_vertices: int | None = None, autosave: bool = True):
         self.frame_rate = checks.real("frame_rate", frame_rate, 0.0, 1000.0, low_open=True)
         self.step_fraction = checks.real("step_fraction", step_fraction, 0.0, 1.0, low_open=True)
-        self.max_vertices = checks.integer_text("max_vertices", max_vertices, 1, 65536)
         self.device = "auto" if device is None else device
+        if max_vertices is None:
+            max_vertices = max_vertices_for(self.device)
+        self.max_vertices = checks.integer_text("max_vertices", max_vertices, 1, GPU_MAX_VERTICES)
         self.recovered: dict | None = None  # set by `recover()`: where the state came from and when it was saved
         self._lock = threading.RLock()  # the session's own state: controls, parameters, op queue
         self._wake = threading.Condition(self._lock)
@@ -279,7 +293,8 @@ class Session:
             raise ValueError(f"preset: expected a preset name or a Preset, got {type(preset).__name__}")
         if preset.n_vertices > self.max_vertices:
             raise ValueError(f"mesh has {preset.n_vertices} vertices; this session accepts at most "
-                             f"{self.max_vertices} (the distance table grows as N^2)")
+                             f"{self.max_vertices} on its device ({self.device}; on the CPU the distance table "
+                             f"grows as N^2, a GPU session takes up to {GPU_MAX_VERTICES:,})")
         if preset.controls.shape[0] < 1:
             raise ValueError(f"preset {preset.name!r} has no controls; at least one is needed")
         device = None if self.device in (None, "auto") else self.device
@@ -569,7 +584,18 @@ class Session:
 
     @staticmethod
     def _gaps(nodes: np.ndarray, points: np.ndarray) -> np.ndarray:
-        return nearest_distances(points, nodes).astype(np.float32)
+        """The distance from each point (a control) to its nearest node, in float32 one coordinate at a time: a
+        million nodes and 18 controls take a few tens of ms, not the float64 blocks' half second."""
+        if len(nodes) <= 4096:
+            return nearest_distances(points, nodes).astype(np.float32)
+        cols = [np.ascontiguousarray(nodes[:, a], np.float32) for a in range(nodes.shape[1])]
+        out = np.empty(len(points), np.float32)
+        for i, p in enumerate(np.asarray(points, np.float32)):
+            d = np.square(cols[0] - p[0])
+            for a in range(1, len(cols)):
+                d += np.square(cols[a] - p[a])
+            out[i] = np.sqrt(d.min())
+        return out
 
     def _publish(self, frame: Frame) -> None:
         with self._wake:
@@ -923,7 +949,7 @@ class Session:
         from ..backend import io as sw_io
 
         start = options.pop("start", True)
-        max_vertices = options.get("max_vertices", DEFAULT_MAX_VERTICES)
+        max_vertices = options.get("max_vertices") or max_vertices_for(options.get("device"))
         for path in storage.crashed():
             try:
                 state = sw_io.load_session(path, max_vertices=max_vertices)

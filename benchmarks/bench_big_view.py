@@ -1,0 +1,140 @@
+"""Big meshes in the clay view, measured where they train (a GPU machine, no browser): what the views' server side
+does per frame for an open W x W grid shown as it is, with its 6 controls on it.
+
+For each size it reports:
+  topology   the topology message (the decimated display mesh past protocol.STREAM_LIMIT nodes): time, bytes
+  frame      encoding one frame for the views: time, bytes (what every view receives per frame)
+  training   frames the session publishes per second during a full run (Reset), and cycles per second
+  drag       a drag of one control, a move every 1/30 s for 2 s inside one gesture: frames published per second,
+             and move -> first published frame showing the control there (median, 90th percentile)
+
+Usage:
+    PYTHONPATH=. python benchmarks/bench_big_view.py [--sides 256,1000] [--device cuda:0] [--json out.json]
+
+Needs numpy and warp-lang only (the Session and the protocol import nothing else), so it runs on the GPU machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import threading
+import time
+
+import numpy as np
+
+from somwidget.backend.presets import XYZ, Preset, controls_on, open_grid
+from somwidget.backend.topology import Topology
+from somwidget.frontend import protocol
+from somwidget.frontend.session import Session
+
+
+def grid(side: int) -> Preset:
+    faces, pts = open_grid(side, side)
+    return Preset(name=f"grid-{side}", title=f"Grid {side} x {side}", description="an open quad sheet",
+                  topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
+                  reach=0.06)
+
+
+class Watch:
+    """Frames the session publishes, with their arrival times."""
+
+    def __init__(self, session: Session):
+        self.frames: list[tuple[float, object]] = []
+        self.lock = threading.Lock()
+        session.add_listener(self.on_frame, replay=False)
+
+    def on_frame(self, frame) -> None:
+        with self.lock:
+            self.frames.append((time.perf_counter(), frame))
+
+    def since(self, t0: float) -> list:
+        with self.lock:
+            return [(t, f) for t, f in self.frames if t >= t0]
+
+
+def measure(side: int, device: str) -> dict:
+    t = time.perf_counter()
+    preset = grid(side)
+    session = Session(preset, device=device, autosave=False)
+    made = time.perf_counter() - t
+    try:
+        session.wait_idle(600)
+        frame = session.frame
+        t = time.perf_counter()
+        topo = protocol.topology_message(session, frame)
+        topo_s = time.perf_counter() - t
+        topo_bytes = len(json.dumps(topo))
+        t = time.perf_counter()
+        for _ in range(10):
+            data = protocol.encode_frame(frame, session)
+        encode_s = (time.perf_counter() - t) / 10
+        watch = Watch(session)
+        t0 = time.perf_counter()
+        session.reset()  # the whole schedule from the start mesh
+        session.wait_idle(600)
+        run = watch.since(t0)
+        run_s = run[-1][0] - t0 if run else float("nan")
+        cycles = session.frame.iterations
+        i = 2
+        start = np.array(session.controls[i][:3], np.float64)
+        moves, latencies = [], []
+        with session.gesture():
+            t0 = time.perf_counter()
+            for k in range(1, 61):
+                p = start + np.array([0.004 * k, 0.0, 0.006 * k])
+                sent = time.perf_counter()
+                session.move_control(i, p.tolist())
+                moves.append((sent, p.astype(np.float32)))
+                time.sleep(max(0.0, t0 + k / 30.0 - time.perf_counter()))
+            session.wait_idle(600)
+        drag_frames = [(tf, f) for tf, f in watch.since(t0) if tf <= moves[-1][0] + 0.05]
+        for sent, p in moves:
+            for tf, f in watch.since(sent):
+                if np.allclose(np.asarray(f.controls)[i, :3], p, atol=1e-6):
+                    latencies.append(tf - sent)
+                    break
+        span = (drag_frames[-1][0] - drag_frames[0][0]) if len(drag_frames) > 1 else float("nan")
+        lat = np.array(latencies) * 1e3
+        return {
+            "side": side, "nodes": side * side, "device": session.device, "session_seconds": made,
+            "display_nodes": int(topo["n_vertices"]), "topology_ms": topo_s * 1e3, "topology_bytes": topo_bytes,
+            "frame_bytes": len(data), "encode_ms": encode_s * 1e3,
+            "training_frames_per_s": len(run) / run_s if run_s == run_s and run_s > 0 else None,
+            "training_cycles_per_s": cycles / run_s if run_s > 0 else None,
+            "drag_frames_per_s": (len(drag_frames) - 1) / span if span == span and span > 0 else None,
+            "move_to_frame_median_ms": float(np.median(lat)) if len(lat) else None,
+            "move_to_frame_p90_ms": float(np.percentile(lat, 90)) if len(lat) else None,
+            "answered_moves": len(lat),
+        }
+    finally:
+        session.close()
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sides", default="256,1000")
+    ap.add_argument("--device", default="cuda:0")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    out = {"machine": platform.node(), "date": time.strftime("%Y-%m-%d"), "results": []}
+    for side in (int(s) for s in args.sides.split(",")):
+        r = measure(side, args.device)
+        out["results"].append(r)
+        print(f"{r['nodes']:,} nodes on {r['device']}: display {r['display_nodes']:,} nodes, frame "
+              f"{r['frame_bytes'] / 1e6:.2f} MB encoded in {r['encode_ms']:.1f} ms, topology "
+              f"{r['topology_bytes'] / 1e6:.2f} MB in {r['topology_ms']:.0f} ms; training "
+              f"{r['training_frames_per_s'] or 0:.1f} frames/s; drag {r['drag_frames_per_s'] or 0:.1f} frames/s, "
+              f"move -> frame {r['move_to_frame_median_ms'] or 0:.1f} / {r['move_to_frame_p90_ms'] or 0:.1f} ms "
+              f"(median / p90, {r['answered_moves']} moves); session made in {r['session_seconds']:.1f} s",
+              flush=True)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
