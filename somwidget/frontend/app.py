@@ -137,6 +137,7 @@ class SomApp:
         self._latest_lock = threading.Lock()
         self._generation_seen = session.frame.generation
         self._history_seen = session.frame.history
+        self._params_seen = session.parameters
         self._last_panel = 0.0
         self._panel_seq = -1
         self._pump_task = None
@@ -177,9 +178,12 @@ class SomApp:
             frame = self._latest
         if frame is None:
             return
-        if frame.generation != self._generation_seen or frame.history != self._history_seen:
-            # a new preset, an undo, a redo or a new step (from any view): the panel's fields follow
-            self._generation_seen, self._history_seen = frame.generation, frame.history
+        params = self.session.parameters
+        if (frame.generation != self._generation_seen or frame.history != self._history_seen
+                or params != self._params_seen):
+            # a new preset, an undo, a redo, a new step or a parameter set from any view (a repeat within
+            # PARAMETER_STEP_SECONDS joins its step, so the history alone does not tell): the panel's fields follow
+            self._generation_seen, self._history_seen, self._params_seen = frame.generation, frame.history, params
             with self.state:
                 self._sync_session_state()
         now = time.monotonic()

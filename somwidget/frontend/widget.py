@@ -57,6 +57,7 @@ class ClayWidget(anywidget.AnyWidget):
         self.refused = 0
         self._latest = None
         self._wake = threading.Condition()
+        self._send_lock = threading.Lock()  # the sender thread and the kernel's thread (a hello) both send frames
         self._sent_seq = -1
         self._sent_generation = -1
         self._last_status = 0.0
@@ -92,6 +93,10 @@ class ClayWidget(anywidget.AnyWidget):
                 time.sleep(rest)
 
     def _send_frame(self, frame, topology: bool = False) -> None:
+        with self._send_lock:
+            self._send_frame_locked(frame, topology)
+
+    def _send_frame_locked(self, frame, topology: bool) -> None:
         if self.session.generation != frame.generation:
             return  # a newer preset is being installed; its own frames follow
         if topology or frame.generation != self._sent_generation:
