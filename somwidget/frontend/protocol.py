@@ -358,8 +358,22 @@ def _rgb8(colours: np.ndarray) -> np.ndarray:
     return np.clip(np.round(np.asarray(colours, np.float32) * 255.0), 0, 255).astype(np.uint8)
 
 
+_encoded: tuple = (None, None, b"")  # (frame, session, bytes): the latest encoding, shared by every view
+
+
 def encode_frame(frame, session) -> bytes:
-    """The binary frame message for `frame` (layout in the module docstring)."""
+    """The binary frame message for `frame` (layout in the module docstring). Encoded once per published frame:
+    the websocket hub and every notebook widget of the session get the same bytes."""
+    global _encoded
+    last = _encoded  # one read of one tuple: a thread that replaces it meanwhile cannot mix two frames
+    if last[0] is frame and last[1] is session:
+        return last[2]
+    data = _encode(frame, session)
+    _encoded = (frame, session, data)
+    return data
+
+
+def _encode(frame, session) -> bytes:
     pos, col = display_arrays(frame, session)
     cpos = np.asarray(frame.effective_positions, np.float32).reshape(-1, 3)
     ccol = control_colours(frame, session.layout.colour_space != "none")
