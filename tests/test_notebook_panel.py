@@ -2,10 +2,11 @@
 
 ipywidgets objects work in plain Python, so most tests need no Jupyter frontend: they set a widget's value (as the
 frontend does when a person moves a slider) and check the session followed, or send an intent to the session and
-check the widgets after the next frame. Those tests show the protocol, as does `test_clay_widget_protocol_over_the_comm`
-(the clay view's messages, sent by hand). `test_drag_in_the_jupyterlab_widget_moves_the_session` shows the
-interaction: a real JupyterLab runs the cell in Chromium (Playwright), the mouse drags a control inside the widget,
-and the panel and a second output of the widget follow. The sessions train the real Som on the CPU.
+check the widgets after the next frame. Those tests show the protocol, as does
+`test_clay_widget_protocol_over_the_comm` (the clay view's messages, sent by hand).
+`test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session` shows the interaction: a real JupyterLab 4
+and a real Notebook 7 run the cells in Chromium (Playwright), the mouse drags a control inside the widget, and the
+panel and a second output of the widget follow. The sessions train the real Som on the CPU.
 """
 
 from __future__ import annotations
@@ -257,9 +258,11 @@ def test_a_widget_of_a_closed_view_stops_following(session):
 JUPYTER = helpers.ROOT / ".venv" / "bin" / "jupyter"
 
 
-@pytest.fixture(scope="module")
-def lab(tmp_path_factory):
-    pytest.importorskip("jupyterlab")
+@pytest.fixture(scope="module", params=["jupyterlab", "notebook"])
+def lab(request, tmp_path_factory):
+    """A notebook with the widget's cells, opened in a real JupyterLab 4 or Notebook 7 server; yields its URL."""
+    app = request.param
+    pytest.importorskip(app)
     if not os.path.exists(CHROMIUM):
         pytest.skip(f"{CHROMIUM} is missing")
     root = tmp_path_factory.mktemp("lab")
@@ -273,10 +276,11 @@ def lab(tmp_path_factory):
     port = helpers.free_port()
     env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(root / "data")}
     log = open(root / "lab.log", "w")
-    proc = subprocess.Popen([sys.executable, "-m", "jupyterlab", "--allow-root", "--no-browser", f"--port={port}",
+    proc = subprocess.Popen([sys.executable, "-m", app, "--allow-root", "--no-browser", f"--port={port}",
                              "--ServerApp.ip=127.0.0.1", "--IdentityProvider.token=t0k",
                              f"--ServerApp.root_dir={root}"], env=env, stdout=log, stderr=subprocess.STDOUT)
-    url = f"http://127.0.0.1:{port}/lab/tree/clay.ipynb?token=t0k"
+    page = "lab/tree" if app == "jupyterlab" else "notebooks"
+    url = f"http://127.0.0.1:{port}/{page}/clay.ipynb?token=t0k"
     try:
         helpers.wait_for(lambda: _answers(f"http://127.0.0.1:{port}/api?token=t0k"), timeout=90,
                          what="JupyterLab to start")
@@ -298,9 +302,10 @@ def _answers(url: str) -> bool:
         return False
 
 
-def test_drag_in_the_jupyterlab_widget_moves_the_session(lab):
-    """Interaction: JupyterLab runs the cell; the mouse drags control 2 inside the widget; the panel's controls
-    table (same output) shows the control moved and the second output of the widget draws it there too."""
+def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
+    """Interaction, in JupyterLab 4 and in Notebook 7: the page runs the cells; the mouse drags control 2 inside the
+    widget; the panel's controls table (same output) shows the control moved and the second output of the widget
+    draws it there too."""
     views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
     with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
@@ -308,11 +313,8 @@ def test_drag_in_the_jupyterlab_widget_moves_the_session(lab):
             page = browser.new_page(viewport={"width": 1400, "height": 1000})
             page.goto(lab)
             page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=90000)
-            page.get_by_text("| Idle").wait_for(timeout=90000)  # the kernel is up: a run is not dropped
-            page.locator(".jp-Cell").first.locator(".jp-InputArea-editor").click()
-            page.keyboard.press("Shift+Enter")
-            page.wait_for_timeout(500)
-            page.keyboard.press("Shift+Enter")
+            run_cell(page, 0)
+            run_cell(page, 1)
             try:
                 page.wait_for_function(f"() => {{ const v = {views}; return v.length === 2 && v.every((x) => "
                                        "x.describe().painted > 0); }", timeout=120000)
@@ -337,6 +339,23 @@ def test_drag_in_the_jupyterlab_widget_moves_the_session(lab):
             assert view_errors(page, views) == []
         finally:
             browser.close()
+
+
+def run_cell(page, index: int, tries: int = 20) -> None:
+    """Shift+Enter in cell `index`, again until its prompt shows it queued or run (a press before the kernel is
+    connected is dropped, and the page gives no sign of when it is)."""
+    cell = page.locator(".jp-Notebook .jp-Cell").nth(index)
+    prompt = cell.locator(".jp-InputPrompt")
+    for _ in range(tries):
+        cell.locator(".jp-InputArea-editor").click()
+        page.keyboard.press("Shift+Enter")
+        try:
+            page.wait_for_function("(el) => /\\[(\\*|\\d+)\\]/.test(el.innerText)", arg=prompt.element_handle(),
+                                   timeout=3000)
+            return
+        except Exception:  # not queued: the kernel was not there yet
+            continue
+    raise AssertionError(f"cell {index} never ran")
 
 
 def view_errors(page, views: str) -> list:
