@@ -7,6 +7,7 @@
 import * as THREE from 'three';
 
 const HELD = new THREE.Color(0xff2020);
+const WIREFRAME_LIMIT = 16384; // display vertices above which a surface is drawn without its edges
 const HOVER_EMISSIVE = new THREE.Color(0x555555);
 const NO_EMISSIVE = new THREE.Color(0x000000);
 const HELD_EMISSIVE = new THREE.Color(0x660000);
@@ -78,7 +79,9 @@ export class Clay {
       this.surface = m;
       this.objects.push(m);
     }
-    if (t.segments.length) {
+    // the mesh's edges as lines: the synapses of a point display, the wireframe of a surface (not of a big one,
+    // where thousands of lines are noise on screen and the costliest thing to draw)
+    if (t.segments.length && (t.points || lines || n <= WIREFRAME_LIMIT)) {
       const g = new THREE.BufferGeometry();
       g.setAttribute('position', pos);
       g.setAttribute('color', col);
