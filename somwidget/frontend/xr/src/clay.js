@@ -8,6 +8,7 @@ import * as THREE from 'three';
 
 const HELD = new THREE.Color(0xff2020);
 const WIREFRAME_LIMIT = 16384; // display vertices above which a surface is drawn without its edges
+const LIGHT_SEGMENTS = 4096; // synapses above which a drag on a software rasteriser shows the points alone
 const HOVER_EMISSIVE = new THREE.Color(0x555555);
 const NO_EMISSIVE = new THREE.Color(0x000000);
 const HELD_EMISSIVE = new THREE.Color(0x660000);
@@ -36,6 +37,7 @@ export class Clay {
     this.lastFrame = null;
     this.sphere = new THREE.SphereGeometry(1, 24, 16);
     this.onChange = null; // called whenever something drawn changed
+    this.segments = null;
   }
 
   get ready() {
@@ -49,6 +51,7 @@ export class Clay {
       o.material?.dispose?.();
     }
     this.objects = [];
+    this.segments = null;
     for (const m of this.controlMeshes) {
       this.content.remove(m);
       m.material.dispose();
@@ -90,6 +93,7 @@ export class Clay {
         ? { vertexColors: true }
         : { color: 0x303040, transparent: true, opacity: t.points ? 0.3 : 0.35 }));
       m.name = 'clay-segments';
+      this.segments = m;
       this.objects.push(m);
     }
     if (t.points) {
@@ -114,6 +118,17 @@ export class Clay {
     this.controlRadius = t.control_radius;
     this.content.position.copy(this.centre).multiplyScalar(-1);
     this.mirrorAxes = t.mirror_axes || [false, false, false];
+  }
+
+  // While the person drags on a software rasteriser, a point display with many synapses draws its points only
+  // (thousands of lines are what such a rasteriser draws slowest, on the cores that also train): the lines come
+  // back on release.
+  setLight(light) {
+    const drop = light && this.topology?.points && this.topology.segments.length / 2 > LIGHT_SEGMENTS;
+    if (this.segments && this.segments.visible === drop) {
+      this.segments.visible = !drop;
+      this.onChange?.();
+    }
   }
 
   // Scale so that the model's bounding radius is `worldRadius` (metres in XR, scene units on the desktop).

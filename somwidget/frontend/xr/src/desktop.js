@@ -10,11 +10,12 @@ const MARGIN = 1.0; // the fitted sphere (around the box of clay and controls) j
 const INSIDE = 0.96; // a control projected beyond this share of the half-view is about to leave it
 
 export class Desktop {
-  constructor({ renderer, camera, clay, grabs, onDragEnd }) {
+  constructor({ renderer, camera, clay, grabs, onDragStart, onDragEnd }) {
     this.renderer = renderer;
     this.camera = camera;
     this.clay = clay;
     this.grabs = grabs;
+    this.onDragStart = onDragStart;
     this.onDragEnd = onDragEnd;
     this.orbit = new OrbitControls(camera, renderer.domElement);
     this.orbit.enableDamping = false;
@@ -100,6 +101,7 @@ export class Desktop {
     this.renderer.domElement.style.cursor = 'grabbing';
     this.grabs.begin(i);
     this.stats.drags += 1;
+    this.onDragStart?.();
   }
 
   move(ev) {

@@ -90,8 +90,13 @@ export class ClayView {
     this.clay = new Clay();
     this.scene.add(this.clay.stage);
     this.grabs = new Grabs(this.link, this.clay);
+    this.software = software;
     this.desktop = new Desktop({ renderer: this.renderer, camera: this.camera, clay: this.clay, grabs: this.grabs,
-      onDragEnd: () => this.desktop.keepControlsInView() });
+      onDragStart: () => this.clay.setLight(this.software),
+      onDragEnd: () => {
+        this.clay.setLight(false);
+        this.desktop.keepControlsInView();
+      } });
 
     this.labels = document.createElement('div');
     this.labels.className = 'somview-labels';
@@ -269,7 +274,8 @@ export class ClayView {
       held: [...clay.held], local: [...clay.local.keys()], hover: [...clay.hover],
       errors: s.errors.map((e) => e.message), lastError: s.lastError, moves: this.grabs.moves,
       latencies: [...this.grabs.latencies], controlLatencies: [...this.grabs.controlLatencies],
-      desktop: { ...this.desktop.stats }, status: this.statusLine.textContent,
+      desktop: { ...this.desktop.stats }, status: this.statusLine.textContent, software: this.software,
+      synapsesShown: this.clay.segments ? this.clay.segments.visible : null,
       labels: this.labelDivs.filter((d) => !d.hidden).map((d) => d.textContent),
       camera: this.camera.position.toArray(), target: this.desktop.orbit.target.toArray(),
       size: [this.renderer.domElement.clientWidth, this.renderer.domElement.clientHeight],
