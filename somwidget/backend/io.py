@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
+from struct import error as struct_error
 
 import numpy as np
 
@@ -29,6 +30,19 @@ SESSION_FORMAT_VERSION = 1
 # --------------------------------------------------------------------------------------------------------------
 # Import
 # --------------------------------------------------------------------------------------------------------------
+def _reader_reason(exc: Exception) -> str:
+    """What went wrong reading a file, in words (a reader's own message where it wrote one for people; never a
+    Python exception's internals)."""
+    if isinstance(exc, IndexError):
+        return "a face refers to a vertex that does not exist"
+    if isinstance(exc, (EOFError, UnicodeDecodeError, struct_error)):
+        return "the file is cut short or is not in the format its name says"
+    message = str(exc).strip()
+    if isinstance(exc, ValueError) and message and "\n" not in message and len(message) < 160:
+        return message
+    return "the file is damaged or is not in the format its name says"
+
+
 def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
     """A `Preset` (3-D nodes, display "surface") from any mesh file trimesh reads: OBJ, PLY, STL, OFF, GLB...
 
@@ -59,7 +73,7 @@ def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
         if not isinstance(geoms, (list, tuple)):
             geoms = [geoms]
     except Exception as exc:  # each format's reader raises its own kinds of error
-        raise ValueError(f"{label}: cannot be read as a mesh ({type(exc).__name__}: {exc})") from None
+        raise ValueError(f"{label}: cannot be read as a mesh: {_reader_reason(exc)}") from None
 
     meshes = [g for g in geoms if isinstance(g, trimesh.Trimesh) and len(g.faces)]
     if not meshes:
@@ -300,7 +314,12 @@ def load_session(path, *, max_vertices: int = MAX_VERTICES) -> dict:
         with z:
             data = {k: z[k] for k in z.files}
     except Exception as exc:  # zipfile, zlib, numpy format errors, pickled data refused...
-        raise ValueError(f"{label}: not a readable somwidget session ({type(exc).__name__}: {exc})") from None
+        import zipfile
+
+        why = ("it is not an .npz archive (a session file is what Save session writes)"
+               if isinstance(exc, (zipfile.BadZipFile, OSError)) or "pickle" in str(exc) or "npy" in str(exc)
+               else "the archive is damaged")
+        raise ValueError(f"{label}: not a readable somwidget session: {why}") from None
 
     def get(key: str) -> np.ndarray:
         if key not in data:

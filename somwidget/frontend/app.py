@@ -38,6 +38,7 @@ from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 from wslink.websocket import LinkProtocol
 
+from ..backend import device as _device
 from ..backend import presets as _presets
 from . import lan as _lan
 from .parameters import BY_NAME as _PARAM
@@ -49,7 +50,7 @@ from .xr import attach as attach_xr
 log = logging.getLogger(__name__)
 
 #: Largest file the upload fields accept (a mesh or a session).
-MAX_UPLOAD_BYTES = 50 * 1024 * 1024
+MAX_UPLOAD_BYTES = 50_000_000  # "50 MB", as the README and the messages say
 #: Panel numbers (iteration, gaps, cycle time) refresh at most this often per second.
 PANEL_HZ = 8
 MIME = {"obj": "text/plain", "ply": "application/octet-stream", "glb": "model/gltf-binary"}
@@ -93,6 +94,40 @@ if (!window.somwidgetMount) {
   window.somwidgetMount();
 }
 """
+
+
+#: Uploads are written to tempfile's folder as somwidget-upload-<pid>-*: a server killed mid-upload leaves its
+#: folder behind, and the next server start (and every exit) removes the folders of processes that are gone.
+UPLOAD_PREFIX = "somwidget-upload-"
+
+
+def _upload_prefix() -> str:
+    return f"{UPLOAD_PREFIX}{os.getpid()}-"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+def sweep_uploads(own: bool = False) -> list[str]:
+    """Remove upload folders left by servers that are gone (and this process's own with `own`); returns them."""
+    import shutil
+
+    removed = []
+    root = Path(tempfile.gettempdir())
+    for folder in root.glob(f"{UPLOAD_PREFIX}*"):
+        pid = folder.name[len(UPLOAD_PREFIX):].split("-", 1)[0]
+        mine = pid == str(os.getpid())
+        if folder.is_dir() and ((own and mine) or (not mine and (not pid.isdigit() or not _pid_alive(int(pid))))):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(str(folder))
+    return removed
 
 
 def _state_key(name: str) -> str:
@@ -145,6 +180,7 @@ class SomApp:
         self._uploaded: dict[str, object] = {}  # name -> Preset of the meshes loaded in this server's life
         if session.preset.name not in _presets.PRESETS:  # started from `somwidget serve --mesh FILE`
             self._remember_upload(session.preset)
+        sweep_uploads()  # what servers killed mid-upload left behind
         self._init_state()
         self._build_ui()
         self._register()
@@ -152,6 +188,7 @@ class SomApp:
 
     def close(self) -> None:
         """Detach from the session (the app and its hub; call on the server's thread, after it stopped)."""
+        sweep_uploads(own=True)
         self.session.remove_listener(self._on_frame)
         if self.xr is not None:
             self.xr.detach()
@@ -295,7 +332,7 @@ class SomApp:
 
     def set_metric(self, dim, value) -> None:
         try:
-            self.session.set_metric_weight(int(dim), value)
+            self.session.set_metric_weight(dim, value)  # the session checks dim: no truncation here
             self.state.error_message = ""
         except (ValueError, TypeError) as exc:
             self._error(str(exc))
@@ -304,7 +341,7 @@ class SomApp:
 
     def set_colour(self, index, colour) -> None:
         try:
-            self.session.set_control_colour(int(index), colour)
+            self.session.set_control_colour(index, colour)
         except (ValueError, TypeError) as exc:
             self._error(str(exc))
 
@@ -316,7 +353,7 @@ class SomApp:
 
     def remove_control(self, index) -> None:
         try:
-            self.session.remove_control(int(index))
+            self.session.remove_control(index)  # "0" or 1.9 are refused there, not truncated
         except (ValueError, TypeError) as exc:
             self._error(str(exc))
 
@@ -377,6 +414,11 @@ class SomApp:
 
     async def choose_preset(self, name) -> None:
         """Load a preset chosen in the menu (the current one again: `reload_preset`)."""
+        if not isinstance(name, str):
+            self._error(f"unknown preset: expected a preset's name, got {type(name).__name__}")
+            with self.state:
+                self.state.preset_name = self.session.preset.name
+            return
         if not name or name == self.session.preset.name:
             return
         if name in self._uploaded:
@@ -490,7 +532,7 @@ class SomApp:
                 self._error(f"upload: {name!r} is not a mesh file this app reads; use "
                             f"{', '.join(x[1:].upper() for x in MESH_SUFFIXES)}")
                 return
-            with tempfile.TemporaryDirectory(prefix="somwidget-upload-") as folder:
+            with tempfile.TemporaryDirectory(prefix=_upload_prefix()) as folder:
                 path = Path(folder) / f"upload{suffix}"
                 path.write_bytes(content)
                 ok = await self._replace(lambda: self._load_mesh(path, name), scrub={str(path): name})
@@ -514,7 +556,7 @@ class SomApp:
             if got is None:
                 return
             name, content = got
-            with tempfile.TemporaryDirectory(prefix="somwidget-session-") as folder:
+            with tempfile.TemporaryDirectory(prefix=_upload_prefix()) as folder:
                 path = Path(folder) / "upload.npz"
                 path.write_bytes(content)
                 ok = await self._replace(lambda: self.session.load(path), scrub={str(path): name})
@@ -808,10 +850,12 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
         bound = app.server.port
         if lan_cfg is not None:
             print(_lan.announcement(lan_cfg, bound), flush=True)
+            print(f"somwidget: training on {_device.describe(session.training_device)}", flush=True)
             return
         shown = f"[{host}]" if ":" in host else host
         print(f"somwidget serving {session.preset.name!r} at http://{shown}:{bound}/ "
-              f"(WebXR page: http://{shown}:{bound}/xr/)", flush=True)
+              f"(WebXR page: http://{shown}:{bound}/xr/); training on "
+              f"{_device.describe(session.training_device)}", flush=True)
 
     app.ctrl.on_server_ready.add(announce)
     argv = sys.argv

@@ -414,6 +414,19 @@ def _session_of(what, device, paused: bool) -> tuple[Session, bool]:
     raise ValueError(f"show: expected a preset name, a Preset, a mesh path or a Session, got {type(what).__name__}")
 
 
+_DEVICES_SAID: set[str] = set()
+
+
+def _say_device(session: Session) -> None:
+    """Say once per kernel and device, in plain words, where the map trains."""
+    from ..backend import device as _device
+
+    where = session.training_device
+    if where not in _DEVICES_SAID:
+        _DEVICES_SAID.add(where)
+        print(f"somwidget: training on {_device.describe(where)}")
+
+
 def show(what="car", *, device: str | None = "auto", paused: bool = False, view: bool = True,
          height: int = 520) -> SomWidget:
     """An interactive SOM in a notebook cell: the panel beside the live, draggable 3-D view of one Session.
@@ -430,6 +443,7 @@ def show(what="car", *, device: str | None = "auto", paused: bool = False, view:
     The view draws in the browser from frames the kernel sends over the widget's comm: no server, no port.
     """
     session, owned = _session_of(what, device, paused)
+    _say_device(session)
     try:
         panel = Panel(session)
         clay = ClayWidget(session, height=height) if view else None

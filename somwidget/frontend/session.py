@@ -736,6 +736,12 @@ class Session:
         """The latest failure (a refused intent, a failed step), or why the training thread stopped."""
         return self._thread_error or self._error
 
+    @property
+    def training_device(self) -> str:
+        """The Warp device the map trains on: "cpu" or "cuda:N" (what `device="auto"` chose)."""
+        with self._som_lock:
+            return str(self._som.device)
+
     def state(self, positions: bool = False) -> dict:
         """A JSON-friendly summary (for debug routes and tests); `positions` adds every node's x, y, z."""
         frame = self.frame
