@@ -30,6 +30,29 @@ SESSION_FORMAT_VERSION = 1
 # --------------------------------------------------------------------------------------------------------------
 # Import
 # --------------------------------------------------------------------------------------------------------------
+#: A scene may hold at most this many times the vertex limit before it is flattened (instances do not merge, but a
+#: glTF splits vertices at seams, so the count before merging runs above the count after).
+SCENE_VERTEX_FACTOR = 8
+
+
+class _TooBig(Exception):
+    """A file that would expand past the limits: refused before it is expanded."""
+
+
+def _check_instances(scene, label: str, max_vertices: int) -> None:
+    """Count a scene's vertices over every placed instance before flattening it: a small GLB can place one mesh
+    thousands of times (5 million vertices and 2 GB from 150 KB)."""
+    total = 0
+    for node in scene.graph.nodes_geometry:
+        _, name = scene.graph[node]
+        total += len(getattr(scene.geometry.get(name), "vertices", ()))
+        if total > SCENE_VERTEX_FACTOR * max_vertices:
+            instances = len(scene.graph.nodes_geometry)
+            raise _TooBig(f"{label}: the scene places its meshes {instances:,} times, more than "
+                          f"{SCENE_VERTEX_FACTOR * max_vertices:,} vertices in all, past the limit of "
+                          f"{max_vertices:,} vertices; export the one mesh you want to model")
+
+
 def _reader_reason(exc: Exception) -> str:
     """What went wrong reading a file, in words (a reader's own message where it wrote one for people; never a
     Python exception's internals)."""
@@ -69,9 +92,13 @@ def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
         raise ValueError(f"{label}: not a file")
     try:
         loaded = trimesh.load(str(p), process=False)
+        if isinstance(loaded, trimesh.Scene):
+            _check_instances(loaded, label, max_vertices)
         geoms = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
         if not isinstance(geoms, (list, tuple)):
             geoms = [geoms]
+    except _TooBig as exc:
+        raise ValueError(str(exc)) from None
     except Exception as exc:  # each format's reader raises its own kinds of error
         raise ValueError(f"{label}: cannot be read as a mesh: {_reader_reason(exc)}") from None
 
@@ -280,24 +307,44 @@ def save_session(path, state: dict) -> None:
         raise
 
 
+#: The members a session archive may hold (np.savez names each key.npy): any other is refused unread.
+SESSION_MEMBERS = frozenset({
+    "format_version", "preset", "display", "weights", "start_weights", "controls", "n_vertices", "edges",
+    "iterations", "iteration", "l_start", "l_end", "smoothing", "reach", "smooth_dims", "smooth_dims_default",
+    "metric_weights", "metric_weights_default", "mirror", "layout_names", "layout_position", "layout_colour",
+    "layout_colour_space", "layout_direction", "layout_length", "topology_kind", "face_indices", "face_sizes"})
+
+
 def _check_archive_sizes(p: Path, label: str, max_vertices: int) -> None:
-    """Refuse an archive whose members would unpack beyond what a session of `max_vertices` vertices needs."""
+    """Refuse an archive whose members would unpack beyond what a session of `max_vertices` vertices needs: each
+    member, and all of them together, are bounded, and a member the format does not define is refused unread."""
     import zipfile
 
-    # the largest member: (N, 32) weights at 8 bytes a value (256 B a vertex), or face indices (~100 B a vertex)
+    # the largest member: (N, 32) weights at 8 bytes a value (256 B a vertex), or face indices (~100 B a vertex);
+    # all of them: two weight arrays, edges and faces, ~1 KB a vertex at most
     limit = max(512 * max_vertices, 1 << 20)
+    total_limit = max(1024 * max_vertices, 4 << 20)
     try:
         with zipfile.ZipFile(p) as archive:
+            total = 0
             for info in archive.infolist():
+                key = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+                if key not in SESSION_MEMBERS:
+                    raise ValueError(f"{label}: member {info.filename[:60]!r} is not part of a somwidget session")
                 if info.file_size > limit:
                     raise ValueError(f"{label}: member {info.filename!r} unpacks to {info.file_size:,} bytes, more "
                                      f"than a session of at most {max_vertices:,} vertices holds ({limit:,})")
+                total += info.file_size
+                if total > total_limit:
+                    raise ValueError(f"{label}: the archive unpacks to more than {total_limit:,} bytes, more than a "
+                                     f"session of at most {max_vertices:,} vertices holds")
     except zipfile.BadZipFile:
         return  # not a zip: np.load below reports what it is
 
 
-def load_session(path, *, max_vertices: int = MAX_VERTICES) -> dict:
+def load_session(path, *, max_vertices: int = MAX_VERTICES, max_iterations: int | None = None) -> dict:
     """Read a session written by `save_session`; ValueError naming the file and the missing or bad key.
+    `max_iterations`: the largest S to accept (a Session passes its panel's cap), checked before anything is built.
 
     The archive's members are size-checked before they are read, so a small file cannot unpack into gigabytes,
     and a topology of more than `max_vertices` vertices is refused before anything is built.
@@ -312,7 +359,7 @@ def load_session(path, *, max_vertices: int = MAX_VERTICES) -> dict:
         if not isinstance(z, np.lib.npyio.NpzFile):
             raise ValueError("a single .npy array, not an .npz archive")
         with z:
-            data = {k: z[k] for k in z.files}
+            data = {k: z[k] for k in z.files if k in SESSION_MEMBERS}
     except Exception as exc:  # zipfile, zlib, numpy format errors, pickled data refused...
         import zipfile
 
@@ -350,6 +397,10 @@ def load_session(path, *, max_vertices: int = MAX_VERTICES) -> dict:
     n_vertices = scalar("n_vertices", "i")
     if not 1 <= n_vertices <= max_vertices:
         raise ValueError(f"{label}: key 'n_vertices': expected 1 to {max_vertices:,} vertices, got {n_vertices:,}")
+    iterations = scalar("iterations", "i")
+    if max_iterations is not None and not 1 <= iterations <= max_iterations:
+        raise ValueError(f"{label}: key 'iterations': S = {iterations:,} is more than this session allows "
+                         f"(1 to {max_iterations:,})")
     kind = scalar("topology_kind", "s")
     try:
         if kind == "faces":

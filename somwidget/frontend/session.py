@@ -958,7 +958,7 @@ class Session:
         max_vertices = options.get("max_vertices") or max_vertices_for(options.get("device"))
         for path in storage.crashed():
             try:
-                state = sw_io.load_session(path, max_vertices=max_vertices)
+                state = sw_io.load_session(path, max_vertices=max_vertices, max_iterations=MAX_ITERATIONS)
                 saved = path.stat().st_mtime
             except (ValueError, OSError) as exc:
                 log.warning("autosave %s cannot be read (%s): discarded", path, exc)
@@ -1279,7 +1279,7 @@ class Session:
         next intent; one undo step. ValueError for a bad file, session unchanged."""
         from ..backend import io as sw_io
 
-        self.restore(sw_io.load_session(path, max_vertices=self.max_vertices))
+        self.restore(sw_io.load_session(path, max_vertices=self.max_vertices, max_iterations=MAX_ITERATIONS))
 
     def restore(self, state: dict) -> None:
         """Rebuild the session from a loaded session state: its start mesh, controls and settings, its weights
