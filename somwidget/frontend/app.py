@@ -45,6 +45,7 @@ from .parameters import BY_NAME as _PARAM
 from .parameters import GAP_HELP, METRIC_WEIGHT
 from .protocol import control_colours
 from .session import REACH_HELP, Frame, Session, hex_colour, max_vertices_for
+from .client_state import guard_state_updates
 from .ws_limits import bound_messages
 from .xr import attach as attach_xr
 
@@ -646,6 +647,8 @@ class SomApp:
         wslink_server.app.middlewares.append(_lan.request_guard(check_host=self.check_host and loopback))
         if not bound_messages(wslink_server):
             log.warning("could not bound the page's websocket messages (wslink's handlers not found)")
+        if not guard_state_updates(wslink_server):
+            log.warning("could not guard the page's state updates (trame's state.update not found)")
         wslink_server.app.router.add_get("/api/state", self._api_state)
         self.xr = attach_xr(wslink_server, self.session, token=self.xr_token)
 

@@ -1,0 +1,107 @@
+"""What a browser may write into the web app's trame state: the keys its own widgets bind, with the types they
+send. trame takes any key from any client and pushes it to every other tab (the page template included), so the
+app puts `filter_changes` in front of trame's "trame.state.update": anything else is dropped and logged, and the
+session and the other tabs carry on.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+log = logging.getLogger(__name__)
+
+MAX_TEXT = 200  # characters in a field's text or a preset name
+
+
+def _text(value) -> bool:
+    return isinstance(value, str) and len(value) <= MAX_TEXT
+
+
+def _number_or_text(value) -> bool:
+    if isinstance(value, bool):
+        return False
+    if isinstance(value, (int, float)):
+        return math.isfinite(value)
+    return _text(value)
+
+
+def _flag(value) -> bool:
+    return isinstance(value, bool)
+
+
+def _cleared(value) -> bool:
+    """A message a tab may only clear (its close button), never write."""
+    return value == ""
+
+
+def _file(value) -> bool:
+    """A file input's value: nothing, or trame's file dict(s) (name, size, type, content); the app checks the rest."""
+    if value is None:
+        return True
+    items = value if isinstance(value, list) else [value]
+    return len(items) <= 1 and all(isinstance(v, dict) and len(v) <= 8 and all(isinstance(k, str) for k in v)
+                                   for v in items)
+
+
+def _reach(value) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+
+
+#: key -> check of the value a client may send for it
+WRITABLE = {
+    "main_drawer": _flag,
+    "preset_name": _text,
+    "mesh_upload": _file,
+    "session_upload": _file,
+    "param_S": _number_or_text,
+    "param_l_start": _number_or_text,
+    "param_l_end": _number_or_text,
+    "param_smoothing": _number_or_text,
+    "param_reach": _reach,
+    "param_symmetry": _flag,
+    "error_message": _cleared,
+    "info_message": _cleared,
+    "recovered_message": _cleared,
+}
+
+
+def filter_changes(changes) -> tuple[list[dict], list[str]]:
+    """(the changes a client may make, the keys refused) from trame's [{"key": k, "value": v}, ...]."""
+    allowed, refused = [], []
+    if not isinstance(changes, list):
+        return allowed, ["<not a list>"]
+    for change in changes:
+        key = change.get("key") if isinstance(change, dict) else None
+        check = WRITABLE.get(key) if isinstance(key, str) else None
+        if check is not None and check(change.get("value")):
+            allowed.append(change)
+        else:
+            refused.append(str(key)[:60])
+    return allowed, refused
+
+
+def guard_state_updates(wslink_server) -> bool:
+    """Put `filter_changes` in front of trame's "trame.state.update" on every websocket handler of the wslink
+    server (what trame's `on_server_bind` passes). False where there is none to guard (wslink's internals moved:
+    the tests' attack then fails)."""
+    handlers = getattr(wslink_server, "_ws_handlers", None) or []
+    guarded = False
+    for handler in handlers:
+        table = getattr(handler, "functionMap", None)
+        entry = table.get("trame.state.update") if isinstance(table, dict) else None
+        if entry is None:
+            continue
+        obj, update = entry
+
+        def filtered(self, changes, _update=update):
+            allowed, refused = filter_changes(changes)
+            if refused:
+                log.warning("refused a client's state update for %s", ", ".join(refused))
+            if allowed:
+                return _update(self, allowed)
+            return None
+
+        table["trame.state.update"] = (obj, filtered)
+        guarded = True
+    return guarded
