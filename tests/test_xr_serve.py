@@ -15,6 +15,7 @@ import time
 
 import aiohttp
 import numpy as np
+
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, insecure_context
 
@@ -23,6 +24,15 @@ from somwidget.frontend.xr.server import DIST
 
 NOT_WIRED = ("`somwidget serve` does not serve /xr/: app.py must call somwidget.frontend.xr.attach(wslink_server, "
              "session, token=...) from ctrl.on_server_bind (see the XR helper's report)")
+
+async def next_binary(ws) -> bytes:
+    """The next frame on the socket (replies such as "grabs" go out before frames)."""
+    import aiohttp
+
+    while True:
+        msg = await ws.receive(timeout=20)
+        if msg.type == aiohttp.WSMsgType.BINARY:
+            return msg.data
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +54,7 @@ def test_serve_has_the_xr_page_and_socket(serve):
         async with aiohttp.ClientSession() as cs:
             async with cs.ws_connect(serve.base + "/xr/ws") as ws:
                 topo = json.loads((await ws.receive(timeout=20)).data)
-                frame = protocol.decode_frame((await ws.receive(timeout=20)).data)
+                frame = protocol.decode_frame(await next_binary(ws))
         return topo, frame
 
     topo, frame = asyncio.run(main())
@@ -133,7 +143,7 @@ def test_serve_lan_https_token(tmp_path):
                     assert info.value.status == 403
                 async with cs.ws_connect(wss + "/xr/ws", params={"token": token}) as ws:
                     topo = json.loads((await ws.receive(timeout=20)).data)
-                    frame = protocol.decode_frame((await ws.receive(timeout=20)).data)
+                    frame = protocol.decode_frame(await next_binary(ws))
                 return topo, frame
 
         topo, frame = asyncio.run(main())

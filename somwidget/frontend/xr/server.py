@@ -8,13 +8,16 @@ tab, the trame panel and a headset all see each other's moves.
 
 Threads: the session calls `XRHub._on_frame` on its training thread; that only stores the frame and wakes the
 event loop. Everything else (encoding, sending, intents) happens on the event loop's thread. Each client has a
-small outbox in which frames coalesce: a slow client gets the latest frame, never a backlog.
+slot for the latest frame and a bounded queue of JSON messages, sent first: a slow client gets the latest frame,
+never a backlog, and its replies never wait behind frames. A client whose queue overflows, or that stops reading
+(a send that does not finish within SEND_TIMEOUT), is dropped.
 """
 
 from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import json
 import logging
 import threading
@@ -35,8 +38,10 @@ MAX_FPS = 60.0
 #: Refused messages a client may send within ERROR_WINDOW seconds before the server closes its socket.
 MAX_ERRORS = 200
 ERROR_WINDOW = 10.0
-#: JSON messages waiting for one client beyond which it is dropped as too slow.
-MAX_OUTBOX = 512
+#: JSON messages waiting for one client beyond which it is dropped as too slow (frames do not queue: one slot).
+MAX_TEXTS = 512
+#: Seconds one send may take before the client counts as not reading and is dropped.
+SEND_TIMEOUT = 5.0
 #: Seconds between status messages (cycle time, frames/s) while frames flow.
 STATUS_PERIOD = 0.5
 NOT_BUILT = """<!doctype html><meta charset="utf-8"><title>somwidget XR: not built</title>
@@ -49,7 +54,8 @@ class _Client:
         self.id = cid
         self.ws = ws
         self.remote = remote
-        self.outbox: collections.deque = collections.deque()  # ("text", str) | ("frame", bytes)
+        self.texts: collections.deque = collections.deque()  # JSON messages, sent before any frame
+        self.frame: bytes | None = None  # the latest frame not yet sent (a newer one replaces it)
         self.wake = asyncio.Event()
         self.generation = -1
         self.errors: collections.deque = collections.deque()
@@ -57,16 +63,25 @@ class _Client:
         self.frames_sent = 0
         self.bytes_sent = 0
         self.closed = False
+        self.close_reason = b""
+        self.transport = None  # the connection, to cut when the client stops reading
 
     def push_text(self, text: str) -> None:
-        self.outbox.append(("text", text))
+        if len(self.texts) >= MAX_TEXTS:  # it does not read what it asked for: drop it, keep no more
+            self.drop(b"too slow")
+            return
+        self.texts.append(text)
         self.wake.set()
 
     def push_frame(self, data: bytes) -> None:
-        if self.outbox and self.outbox[-1][0] == "frame":
-            self.outbox[-1] = ("frame", data)  # not sent yet: the newer frame replaces it
-        else:
-            self.outbox.append(("frame", data))
+        self.frame = data  # not sent yet: the newer frame replaces it
+        self.wake.set()
+
+    def drop(self, reason: bytes) -> None:
+        self.closed = True
+        self.close_reason = self.close_reason or reason
+        self.texts.clear()
+        self.frame = None
         self.wake.set()
 
 
@@ -234,30 +249,43 @@ class XRHub:
             c.push_text(self.gestures.message_for(c.id))
 
     async def _sender(self, client: _Client) -> None:
+        """Sends the client's JSON messages first, then its latest frame at most max_fps a second; a send that
+        does not finish within SEND_TIMEOUT drops the client (it stopped reading)."""
         period = 1.0 / self.max_fps if self.max_fps > 0 else 0.0
         last_frame = 0.0
         ws = client.ws
         try:
-            while not ws.closed:
+            while not ws.closed and not client.closed:
                 await client.wake.wait()
                 client.wake.clear()
-                while client.outbox and not ws.closed:
-                    kind, data = client.outbox[0]
-                    if kind == "frame":
-                        wait = last_frame + period - time.monotonic()
-                        if wait > 0:
-                            await asyncio.sleep(wait)
-                            continue  # a newer frame may have replaced this one meanwhile
-                        client.outbox.popleft()
-                        await ws.send_bytes(data)
-                        last_frame = time.monotonic()
-                        client.frames_sent += 1
-                    else:
-                        client.outbox.popleft()
-                        await ws.send_str(data)
+                while not ws.closed and not client.closed and (client.texts or client.frame is not None):
+                    if client.texts:
+                        text = client.texts.popleft()
+                        await asyncio.wait_for(ws.send_str(text), SEND_TIMEOUT)
+                        client.bytes_sent += len(text)
+                        continue
+                    wait = last_frame + period - time.monotonic()
+                    if wait > 0:  # paced; a reply that comes meanwhile goes out at once
+                        client.wake.clear()
+                        with contextlib.suppress(asyncio.TimeoutError):
+                            await asyncio.wait_for(client.wake.wait(), wait)
+                        continue
+                    data, client.frame = client.frame, None
+                    await asyncio.wait_for(ws.send_bytes(data), SEND_TIMEOUT)
+                    last_frame = time.monotonic()
+                    client.frames_sent += 1
                     client.bytes_sent += len(data)
+        except asyncio.TimeoutError:
+            log.warning("XR client %d stopped reading (a send took over %g s); dropping it", client.id, SEND_TIMEOUT)
+            client.drop(b"not reading")
+            if client.transport is not None:  # a close frame would wait behind the unread data: cut it
+                client.transport.abort()
+            return
         except (ConnectionError, RuntimeError, asyncio.CancelledError):
             pass
+        if client.closed and not ws.closed:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(ws.close(code=1008, message=client.close_reason), SEND_TIMEOUT)
 
     # -- websocket -----------------------------------------------------------------------------------------------
     async def _websocket(self, request):
@@ -269,6 +297,7 @@ class XRHub:
         if self._loop is None:
             self._loop = asyncio.get_running_loop()
         client = _Client(self._next_id, ws, request.remote)
+        client.transport = request.transport
         self._next_id += 1
         self.clients[client.id] = client
         log.info("XR client %d connected from %s", client.id, request.remote)
@@ -283,13 +312,9 @@ class XRHub:
                     self._handle(client, msg.data)
                 elif msg.type == WSMsgType.ERROR:
                     break
-                if len(client.outbox) > MAX_OUTBOX:
-                    log.warning("XR client %d: too slow (%d messages waiting); closing", client.id,
-                                len(client.outbox))
-                    await ws.close(code=1008, message=b"too slow")
-                    break
                 if client.closed:
-                    await ws.close(code=1008, message=b"too many refused messages")
+                    log.warning("XR client %d dropped: %s", client.id, client.close_reason.decode())
+                    await ws.close(code=1008, message=client.close_reason)
                     break
         finally:
             self.clients.pop(client.id, None)
@@ -311,7 +336,7 @@ class XRHub:
             log.warning("XR client %d: refused a message (%d so far): %s", client.id, client.refused, exc)
         client.push_text(protocol.error_message(str(exc), intent))
         if len(client.errors) > MAX_ERRORS:
-            client.closed = True
+            client.drop(b"too many refused messages")
 
     def _handle(self, client: _Client, data) -> None:
         try:
