@@ -149,7 +149,11 @@ BAD_MESSAGES = [
     ("{}", "unknown intent type missing"),
     ('{"type": "explode"}', "unknown intent type"),
     ('{"type": 7}', "unknown intent type"),
-    ('{"type": "grab"}', "missing field"),
+    ('{"type": "grab"}', "one of the two"),
+    ('{"type": "grab", "index": 0, "id": 0}', "one of the two"),
+    ('{"type": "grab", "id": "3"}', "id must be a control's id"),
+    ('{"type": "grab", "id": -1}', "id must be a control's id"),
+    ('{"type": "move", "id": 77, "position": [0, 0, 0]}', "not held by this client"),
     ('{"type": "grab", "index": 0, "colour": "red"}', "unknown field"),
     ('{"type": "grab", "index": "0"}', "must be an integer"),
     ('{"type": "grab", "index": 1.5}', "must be an integer"),
@@ -287,7 +291,7 @@ def test_two_clients_share_the_session_and_grabs(srv, session):
             b = await connect(cs, srv)
             await a.send({"type": "grab", "index": 3})
             await b.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [
-                {"index": 3, "own": False}])
+                {"index": 3, "id": 3, "own": False}])
             err = await b.error_for({"type": "grab", "index": 3})
             assert "held by another client" in err["message"]
             err = await b.error_for({"type": "move", "index": 3, "position": [0, 0, 0]})
@@ -301,7 +305,7 @@ def test_two_clients_share_the_session_and_grabs(srv, session):
             await b.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [])
             await b.send({"type": "grab", "index": 3})
             await b.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [
-                {"index": 3, "own": True}])
+                {"index": 3, "id": 3, "own": True}])
             await b.send({"type": "release", "index": 3})
             await b.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [])
             await b.ws.close()
@@ -450,3 +454,36 @@ def test_a_clay_past_the_streaming_limit_streams_a_decimated_mesh_on_its_trained
     frame = SimpleNamespace(positions=trained.astype(np.float32), colours=np.zeros_like(trained, np.float32))
     pos, col = protocol.display_arrays(frame, session)
     np.testing.assert_array_equal(pos, trained.astype(np.float32)[geo["nodes"]])
+
+
+def test_a_control_removed_elsewhere_does_not_redirect_a_held_drag(srv, session):
+    """The attack of issue 17 (item 4): a headset holds control 3 (by its id, as the clients send it); the desktop
+    removes control 0. The headset's next move moves the same control (now at index 2), never the one that slid
+    into index 3; when the desktop then removes the held control itself, the grab ends with a message."""
+    async def main():
+        async with aiohttp.ClientSession() as cs:
+            a = await connect(cs, srv)
+            ids = list(session.control_ids)
+            held_id = ids[3]
+            await a.send({"type": "grab", "id": held_id})
+            await a.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"]
+                          and m["grabs"][0]["id"] == held_id)
+            before = session.controls.copy()
+            session.remove_control(0)  # the desktop, meanwhile
+            session.wait_idle(30)
+            await a.until(lambda m: m.get("type") == "controls" and m["ids"].index(held_id) == 2)
+            target = [-1.5, 0.4, 0.6]
+            await a.send({"type": "move", "id": held_id, "position": target})
+            await a.until(lambda m: "control_positions" in m and np.allclose(m["control_positions"][2], target))
+            after = session.controls
+            np.testing.assert_allclose(after[2, :3], target, atol=1e-6)  # the held control, at its new place
+            np.testing.assert_array_equal(after[3], before[4])  # the one that slid into index 3: untouched
+            # an old client naming the place instead of the id is refused, not redirected
+            err = await a.error_for({"type": "move", "index": 3, "position": [0, 0, 0]})
+            assert "not held by this client" in err["message"]
+            session.remove_control(2)  # the held control itself goes
+            m = await a.until(lambda m: m.get("type") == "error" and "was removed while you held" in m["message"])
+            assert str(held_id) in m["message"]
+            assert {"type": "grabs", "grabs": []} in a.messages  # and every client saw the grab end
+
+    run(main())

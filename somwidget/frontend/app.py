@@ -175,6 +175,7 @@ class SomApp:
         self._generation_seen = session.frame.generation
         self._history_seen = session.frame.history
         self._params_seen = session.parameters
+        self._params_synced: dict = {}
         self._last_panel = 0.0
         self._panel_seq = -1
         self._pump_task = None
@@ -218,11 +219,14 @@ class SomApp:
         if frame is None:
             return
         params = self.session.parameters
-        if (frame.generation != self._generation_seen or frame.history != self._history_seen
-                or params != self._params_seen):
-            # a new preset, an undo, a redo, a new step or a parameter set from any view (a repeat within
-            # PARAMETER_STEP_SECONDS joins its step, so the history alone does not tell): the panel's fields follow
+        if frame.generation != self._generation_seen:  # a new preset (from any view): every field
             self._generation_seen, self._history_seen, self._params_seen = frame.generation, frame.history, params
+            with self.state:
+                self._sync_session_state(force=True)
+        elif frame.history != self._history_seen or params != self._params_seen:
+            # an undo, a redo, a new step or a parameter set elsewhere (a repeat within PARAMETER_STEP_SECONDS joins
+            # its step, so the history alone does not tell): the fields whose values changed follow
+            self._history_seen, self._params_seen = frame.history, params
             with self.state:
                 self._sync_session_state()
         now = time.monotonic()
@@ -255,17 +259,22 @@ class SomApp:
         self._sync_session_state()
         self._update_panel(self.session.frame)
 
-    def _sync_session_state(self) -> None:
-        """Panel fields that change with the preset or a parameter intent (not every frame)."""
+    def _sync_session_state(self, force: bool = False) -> None:
+        """Panel fields that change with the preset or a parameter intent (not every frame). A parameter's field
+        is written only when its value changed since the last sync (or with `force`): a field someone is typing in
+        is not reset by another view's step."""
         s, sess = self.state, self.session
         p = sess.parameters
+        last = {} if force else self._params_synced
         s.preset_name = sess.preset.name
         s.preset_title = sess.preset.title
         s.preset_description = sess.preset.description
-        for name in ("iterations", "l_start", "l_end", "smoothing"):
-            s[_state_key(name)] = str(p[name]) if name == "iterations" else _fmt(p[name], 6)
-        s.param_reach = float(p["reach"])
-        s.param_symmetry = bool(p["symmetry"])
+        for name in ("iterations", "l_start", "l_end", "smoothing", "reach", "symmetry"):
+            if force or p[name] != last.get(name):
+                value = p[name]
+                s[_state_key(name)] = (str(value) if name == "iterations" else float(value) if name == "reach"
+                                       else bool(value) if name == "symmetry" else _fmt(value, 6))
+        self._params_synced = p
         s.paused = sess.paused
         layout = sess.layout
         roles = {}

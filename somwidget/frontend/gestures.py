@@ -1,8 +1,10 @@
 """Who holds which control, and what a client's intent does to the Session: shared by every transport of the clay
 view (the websocket of the web app and the XR page, the notebook widget's comm).
 
-A grab begins a gesture (one undo step) and its release ends it; a control is held by one client at a time; a
-client that goes away mid-grab ends its gestures. Intents arrive already checked by `protocol.parse_intent`.
+Controls are held by their stable id (`Session.control_ids`), not by their place: a control removed elsewhere
+cannot turn a drag into a drag of another control. A grab begins a gesture (one undo step) and its release ends
+it; a control is held by one client at a time; a client that goes away mid-grab ends its gestures; a held control
+that disappears ends its grab, and the holder is told (`prune`). Intents arrive checked by `protocol.parse_intent`.
 """
 
 from __future__ import annotations
@@ -19,36 +21,51 @@ class Gestures:
     def __init__(self, session, on_change: Callable[[], None] | None = None):
         self.session = session
         self.on_change = on_change or (lambda: None)
-        self.grabs: dict[int, Hashable] = {}  # control index -> client
+        self.grabs: dict[int, Hashable] = {}  # control id -> client
 
     def message_for(self, client: Hashable) -> str:
-        """The "grabs" message as `client` sees it (own: held by this client)."""
-        return json.dumps({"type": "grabs", "grabs": [{"index": i, "own": cid == client}
-                                                      for i, cid in sorted(self.grabs.items())]})
+        """The "grabs" message as `client` sees it (own: held by this client), with each control's index now."""
+        ids = self.session.control_ids
+        held = [{"index": ids.index(cid), "id": cid, "own": who == client}
+                for cid, who in sorted(self.grabs.items()) if cid in ids]
+        return json.dumps({"type": "grabs", "grabs": held})
+
+    def _control_of(self, intent: protocol.Intent) -> int:
+        if intent.control_id is not None:
+            self.session.index_of_control(intent.control_id)  # ValueError when it is gone
+            return intent.control_id
+        ids = self.session.control_ids
+        if not 0 <= intent.index < len(ids):
+            raise ValueError(f"{intent.type}: control index {intent.index} is out of range")
+        return ids[intent.index]
 
     def apply(self, client: Hashable, intent: protocol.Intent) -> dict | None:
         """Do what `intent` asks for `client`; returns a reply to send back to that client alone (a pong), or None.
         ValueError (or the Session's RuntimeError) when the session refuses it."""
-        kind, i = intent.type, intent.index
+        kind = intent.type
         if kind == "ping":
             return {"type": "pong", "t": intent.t}
         if kind == "grab":
-            holder = self.grabs.get(i)
+            cid = self._control_of(intent)
+            holder = self.grabs.get(cid)
             if holder is not None and holder != client:
-                raise ValueError(f"grab: control {i} is held by another client")
+                raise ValueError(f"grab: control {cid} is held by another client")
             if holder is None:
                 self.session.begin_gesture()  # grab to release: one undo step
-            self.grabs[i] = client
+            self.grabs[cid] = client
             self.on_change()
         elif kind in ("move", "release"):
-            if self.grabs.get(i) != client:
-                raise ValueError(f"{kind}: control {i} is not held by this client; send grab first")
-            if intent.position is not None:
-                self.session.move_control(i, list(intent.position))
-            if kind == "release":
-                del self.grabs[i]
-                self.on_change()
-                self.session.end_gesture()
+            cid = intent.control_id if intent.control_id is not None else self._control_of(intent)
+            if self.grabs.get(cid) != client:
+                raise ValueError(f"{kind}: control {cid} is not held by this client; send grab first")
+            try:
+                if intent.position is not None:
+                    self.session.move_control_id(cid, list(intent.position))
+            finally:
+                if kind == "release":
+                    del self.grabs[cid]
+                    self.on_change()
+                    self.session.end_gesture()
         elif kind == "set":
             self.session.set_parameter(intent.name, intent.value)
         elif kind == "undo":
@@ -65,17 +82,22 @@ class Gestures:
 
     def drop(self, client: Hashable) -> None:
         """`client` went away: its grabs end, each drag a completed step."""
-        released = [i for i, cid in self.grabs.items() if cid == client]
-        for i in released:
-            del self.grabs[i]
+        released = [cid for cid, who in self.grabs.items() if who == client]
+        for cid in released:
+            del self.grabs[cid]
         if released:
             self.on_change()
             self.session.end_gesture()
 
-    def prune(self, n_controls: int) -> None:
-        """Controls removed (or a new preset): their grabs end."""
-        stale = [i for i in self.grabs if i >= n_controls]
-        for i in stale:
-            del self.grabs[i]
-        if stale:
+    def prune(self, control_ids) -> list[tuple[Hashable, str]]:
+        """Grabs of controls that are gone (removed, or the controls replaced) end; returns (client, message)
+        for each client whose held control went, to tell it."""
+        present = set(control_ids)
+        gone = [(cid, who) for cid, who in self.grabs.items() if cid not in present]
+        for cid, _ in gone:
+            del self.grabs[cid]
+        if gone:
             self.on_change()
+            self.session.end_gesture()
+        return [(who, protocol.error_message(f"control {cid} was removed while you held it: the drag ended",
+                                             "grab")) for cid, who in gone]

@@ -46,7 +46,10 @@ Server -> client
    Total: 32 + 15 (n + k_eff) rounded up to 4. The float arrays come first so they are 4-byte aligned.
 
 3. Text, JSON, as things happen:
-   {"type": "grabs", "grabs": [{"index": i, "own": bool}, ...]}   controls held now (own: by this client)
+   {"type": "grabs", "grabs": [{"index": i, "id": c, "own": bool}, ...]}   controls held now (own: this client)
+   {"type": "controls", "ids": [c, ...]}                           each control's stable id, in index order:
+                                                                   sent (before the frame) whenever they change
+                                                                   (a control added or removed, new controls)
    {"type": "error", "message": "...", "intent": "move" | null}     a refused message (see below)
    {"type": "pong", "t": t}                                        the answer to a ping
    {"type": "status", "cycle_ms": c, "fps": f}                     the engine's time per cycle and the frames
@@ -55,11 +58,15 @@ Server -> client
 
 Client -> server: JSON text, one intent per message, at most MAX_MESSAGE_BYTES bytes
 ------------------------------------------------------------------------------------
-   {"type": "grab", "index": i}                          hold control i (0 <= i < k); refused while another
-                                                         client holds it
-   {"type": "move", "index": i, "position": [x, y, z]}   move a held control (model units)
-   {"type": "release", "index": i}                       let go (optionally with a last "position"); a grab to
-                                                         its release is one undo step (one gesture)
+   {"type": "grab", "id": c}                             hold the control whose id is c (the topology's
+                                                         "control_ids", then "controls" messages); refused while
+                                                         another client holds it. "index": i (0 <= i < k) instead
+                                                         of "id" names a control by its place now
+   {"type": "move", "id": c, "position": [x, y, z]}      move a held control (model units)
+   {"type": "release", "id": c}                          let go (optionally with a last "position"); a grab to
+                                                         its release is one undo step (one gesture). A held control
+                                                         that is removed (elsewhere) ends the grab, with an error
+                                                         message to the client that held it
    {"type": "reset"} | {"type": "train"} | {"type": "pause"} | {"type": "undo"} | {"type": "redo"}
    {"type": "ping", "t": number}
    {"type": "hello"}                                     send the topology and the latest frame again (a new view
@@ -98,9 +105,9 @@ MAX_MESSAGE_BYTES = 2048
 MAX_COORDINATE = 1e4
 
 INTENT_FIELDS = {
-    "grab": ({"index"}, set()),
-    "move": ({"index", "position"}, set()),
-    "release": ({"index"}, {"position"}),
+    "grab": (set(), {"index", "id"}),
+    "move": ({"position"}, {"index", "id"}),
+    "release": (set(), {"index", "id", "position"}),
     "reset": (set(), set()),
     "train": (set(), set()),
     "pause": (set(), set()),
@@ -128,6 +135,7 @@ class Intent:
     t: float | None = None
     name: str | None = None
     value: float | bool | None = None
+    control_id: int | None = None
 
 
 # -- intents ---------------------------------------------------------------------------------------------------
@@ -176,7 +184,14 @@ def parse_intent(message, n_controls: int) -> Intent:
     missing = sorted(required - fields)
     if missing:
         raise IntentError(f"{kind}: missing field(s) {', '.join(missing)}", kind)
-    index = position = t = None
+    index = position = t = control_id = None
+    if kind in ("grab", "move", "release") and ("index" in data) == ("id" in data):
+        raise IntentError(f"{kind}: give the control's \"id\" (or its \"index\"), one of the two", kind)
+    if "id" in data:
+        control_id = data["id"]
+        if isinstance(control_id, bool) or not isinstance(control_id, int) or not 0 <= control_id < 2**31:
+            raise IntentError(f"{kind}: id must be a control's id (an integer >= 0), got "
+                              f"{json.dumps(control_id)[:40]}", kind)
     if "index" in data:
         index = data["index"]
         if isinstance(index, bool) or not isinstance(index, int):
@@ -208,7 +223,7 @@ def parse_intent(message, n_controls: int) -> Intent:
             value = declared.check(value)
         except ValueError as exc:
             raise IntentError(f"set: {exc}", kind) from None
-    return Intent(kind, index, position, t, name, value)
+    return Intent(kind, index, position, t, name, value, control_id)
 
 
 def error_message(message: str, intent: str | None = None) -> str:
@@ -350,7 +365,13 @@ def topology_message(session, frame, client_id: int | None = None) -> dict:
         "feature_names": list(session.layout.names), "max_coordinate": MAX_COORDINATE,
         "max_message_bytes": MAX_MESSAGE_BYTES, "client": client_id,
         "parameters": [p.describe() for p in _parameters.PARAMETERS],
+        "control_ids": [int(i) for i in frame.control_ids],
     }
+
+
+def controls_message(control_ids) -> str:
+    """The ids of the controls, in index order: sent before the first frame whose controls they name."""
+    return json.dumps({"type": "controls", "ids": [int(i) for i in control_ids]})
 
 
 # -- frames ----------------------------------------------------------------------------------------------------

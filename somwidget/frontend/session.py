@@ -126,6 +126,7 @@ class Frame:
                         when the frame was made; intents are numbered from 1 as they are queued
     held:               nothing trains until the next intent (after an undo, a redo, a loaded or recovered session)
     history:            (undo steps, redo steps) available
+    control_ids:        a stable id for each control (k,): an id stays with its control while others come and go
     """
 
     seq: int
@@ -151,6 +152,7 @@ class Frame:
     applied: int = 0
     held: bool = False
     history: tuple[int, int] = (0, 0)
+    control_ids: tuple[int, ...] = ()
 
     @property
     def layout(self) -> FeatureLayout:
@@ -276,6 +278,7 @@ class Session:
         self._last_step: tuple[str, float] = ("", 0.0)  # kind and time of the latest recorded step
         self._unsaved = True  # a change the autosave has not written yet (a new session: its first state)
         self._saved_at = 0.0
+        self._next_control_id = 0
         self._install(self._build(preset))
         self._frame = self._make_frame(0)
         self._autosave = storage.Autosave() if autosave else None
@@ -303,12 +306,19 @@ class Session:
             som.restore(preset.weights, som.iterations)
         return preset, som
 
+    def _fresh_ids(self, k: int) -> tuple[int, ...]:
+        """k new control ids, never used before in this session."""
+        first = self._next_control_id
+        self._next_control_id += k
+        return tuple(range(first, first + k))
+
     def _install(self, built: tuple[Preset, object]) -> None:
         preset, som = built
         self._preset = preset
         self._som = som
         self._layout = preset.layout
         self._controls = np.array(som.controls, dtype=np.float32)
+        self._control_ids = self._applied_ids = self._fresh_ids(len(self._controls))
         self._mirror_dims = default_mirror(preset)
         self._params = {
             "iterations": int(som.iterations), "l_start": float(som.l_start), "l_end": float(som.l_end),
@@ -473,6 +483,9 @@ class Session:
                 with self._lock:
                     self._hold = False  # the person acted: training goes on
             self._apply(som, kind, payload)
+            if kind == "controls":
+                with self._lock:
+                    self._applied_ids = payload[2]  # the ids of the controls the Som now holds
         except Exception as exc:
             log.warning("intent %s refused by the engine: %s", kind, exc)
             with self._lock:
@@ -488,6 +501,7 @@ class Session:
         # caller holds self._lock
         if kind == "controls":
             self._controls = np.array(som.controls, dtype=np.float32)
+            self._control_ids = self._applied_ids
         elif kind in ("iterations", "l_start", "l_end", "smoothing", "reach"):
             self._params[kind] = type(self._params[kind])(getattr(som, kind))
         elif kind == "mirror":
@@ -506,7 +520,7 @@ class Session:
     @staticmethod
     def _apply(som, kind: str, payload) -> None:
         if kind == "controls":
-            controls, base = payload  # base: in a drag, the Som that anchored the shape it began with
+            controls, base, _ids = payload  # base: in a drag, the Som that anchored the shape it began with
             som.set_controls(controls, from_anchor=base is som)  # each frame of the drag restarts from that shape
         elif kind == "iterations":
             som.iterations = payload
@@ -537,7 +551,7 @@ class Session:
         """Queue new controls (caller holds self._lock). Inside a gesture they carry the weights the gesture began
         from: each frame of a drag is the local restart from that shape, so a long drag does not wear down the rest
         of the shape restart after restart (it ends as one move would)."""
-        self._enqueue("controls", (controls, self._gesture_base if self._gesture else None))
+        self._enqueue("controls", (controls, self._gesture_base if self._gesture else None, self._control_ids))
 
     def _enqueue(self, kind: str, payload=None, intent: bool = True) -> None:
         """Queue an op for the training thread (caller holds self._lock). An intent gets the next number; the
@@ -571,6 +585,9 @@ class Session:
             held = self._hold
             applied = self._applied
             history = (self._history.undo_count, self._history.redo_count)
+            ids = self._applied_ids
+            if len(ids) != len(controls):  # cannot happen: the ids travel with the controls they name
+                ids = self._applied_ids = self._fresh_ids(len(controls))
         s, S = int(som.iteration), int(som.iterations)
         return Frame(
             seq=seq, generation=self._generation, iteration=s, iterations=S,
@@ -580,7 +597,8 @@ class Session:
             control_colours=_readonly(_presets.colours_of(controls, layout)), effective_controls=_readonly(eff),
             effective_colours=_readonly(_presets.colours_of(eff, layout)), control_positions=_readonly(cpos),
             effective_positions=_readonly(epos), cycle_time=float(self._cycle_time), step_cycles=int(cycles),
-            gaps=_readonly(gaps), preset=self._preset, applied=applied, held=held, history=history)
+            gaps=_readonly(gaps), preset=self._preset, applied=applied, held=held, history=history,
+            control_ids=tuple(ids))
 
     @staticmethod
     def _gaps(nodes: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -894,6 +912,9 @@ class Session:
         som.restore(step.weights, step.iteration)
         with self._lock:
             self._controls = np.array(step.controls, np.float32)
+            if len(self._controls) != len(self._control_ids):  # a control added or removed: new ids (a grab on
+                self._control_ids = self._fresh_ids(len(self._controls))  # an id that is gone ends)
+            self._applied_ids = self._control_ids
             self._params = dict(p, metric_weights=list(p["metric_weights"]))
             self._hold = True
             self._error = None
@@ -993,11 +1014,12 @@ class Session:
             raise ValueError(f"controls: at most {MAX_CONTROLS} controls counting mirrored copies; "
                              f"{k} controls{' with symmetry' if symmetry else ''} is too many")
 
-    def move_control(self, index: int, position) -> None:
+    def move_control(self, index: int | None, position, *, control_id: int | None = None) -> None:
         """Move control `index` to `position`: 3 numbers (x, y, z; the other features stay) or all n features."""
         n = self._layout.n_dims
         with self._step("controls"), self._lock:
-            i = _check_index("control", index, self._controls.shape[0])
+            i = (_check_index("control", index, self._controls.shape[0]) if control_id is None
+                 else self.index_of_control(control_id))
             length = len(position) if hasattr(position, "__len__") and not isinstance(position, str) else -1
             if length == n:
                 values = _finite_vector(f"control {i}", position, n)
@@ -1009,6 +1031,30 @@ class Session:
             controls[i] = values
             self._controls = controls
             self._enqueue_controls(controls.copy())
+
+    @property
+    def control_ids(self) -> tuple[int, ...]:
+        """The stable id of each control, in index order (an id stays with its control; a new control gets a new
+        one). Views hold controls by id (`index_of_control`), so a removal elsewhere cannot redirect a drag."""
+        with self._lock:
+            return tuple(self._control_ids)
+
+    def index_of_control(self, control_id) -> int:
+        """The index of the control with this id now; ValueError when it is gone (removed, or a preset, undo or
+        load replaced the controls)."""
+        if isinstance(control_id, bool) or not isinstance(control_id, (int, np.integer)):
+            raise ValueError(f"control id: expected an integer, got {control_id!r}")
+        with self._lock:
+            try:
+                return self._control_ids.index(int(control_id))
+            except ValueError:
+                raise ValueError(f"control {int(control_id)} no longer exists (it was removed, or the controls "
+                                 "were replaced)") from None
+
+    def move_control_id(self, control_id, position) -> None:
+        """`move_control` for the control with this id (ValueError when it is gone), in one step with the lookup:
+        a control removed meanwhile cannot make the move edit another one."""
+        self.move_control(None, position, control_id=control_id)
 
     def set_control_feature(self, index: int, dim: int, value) -> None:
         """Set one feature dim of control `index`."""
@@ -1033,6 +1079,8 @@ class Session:
                 raise ValueError(f"controls: expected shape (k, {n}), got {arr.shape}")
             self._check_controls(arr)
             self._controls = arr.copy()
+            if len(arr) != len(self._control_ids):
+                self._control_ids = self._fresh_ids(len(arr))
             self._enqueue_controls(arr)
 
     def set_control_colour(self, index: int, colour) -> None:
@@ -1062,6 +1110,7 @@ class Session:
             controls = np.concatenate([self._controls, v[None, :]]).astype(np.float32)
             self._check_controls(controls)
             self._controls = controls
+            self._control_ids = (*self._control_ids, *self._fresh_ids(1))
             self._enqueue_controls(controls.copy())
             return controls.shape[0] - 1
 
@@ -1072,6 +1121,7 @@ class Session:
                 raise ValueError("controls: cannot remove the last control")
             controls = np.delete(self._controls, i, axis=0)
             self._controls = controls
+            self._control_ids = self._control_ids[:i] + self._control_ids[i + 1:]
             self._enqueue_controls(controls.copy())
 
     # -- intents: parameters -----------------------------------------------------------------------------------

@@ -60,6 +60,7 @@ class ClayWidget(anywidget.AnyWidget):
         self._send_lock = threading.Lock()  # the sender thread and the kernel's thread (a hello) both send frames
         self._sent_seq = -1
         self._sent_generation = -1
+        self._sent_ids: tuple = ()
         self._last_status = 0.0
         self._closed = False
         self.on_msg(self._on_message)
@@ -102,13 +103,18 @@ class ClayWidget(anywidget.AnyWidget):
         if topology or frame.generation != self._sent_generation:
             self.send(protocol.topology_message(self.session, frame))
             self._sent_generation = frame.generation
+            self._sent_ids = frame.control_ids
+        elif frame.control_ids != self._sent_ids:  # a control added or removed: the ids before the frame
+            self.send(json.loads(protocol.controls_message(frame.control_ids)))
+            self._sent_ids = frame.control_ids
         self.send({"type": "frame"}, buffers=[protocol.encode_frame(frame, self.session)])
         self.frames_sent += 1
         now = time.monotonic()
         if now - self._last_status >= STATUS_PERIOD:
             self._last_status = now
             self.send(json.loads(protocol.status_message(frame, self.session.frames_per_second)))
-        self.gestures.prune(frame.n_controls)
+        for _holder, message in self.gestures.prune(frame.control_ids):
+            self.send(json.loads(message))
 
     def _send_grabs(self) -> None:
         self.send(json.loads(self.gestures.message_for(_CLIENT)))

@@ -65,6 +65,7 @@ class _Client:
         self.closed = False
         self.close_reason = b""
         self.transport = None  # the connection, to cut when the client stops reading
+        self.control_ids: tuple = ()  # the control ids this client was last told
 
     def push_text(self, text: str) -> None:
         if len(self.texts) >= MAX_TEXTS:  # it does not read what it asked for: drop it, keep no more
@@ -218,7 +219,11 @@ class XRHub:
             return
         if client.generation != frame.generation:
             client.generation = frame.generation
+            client.control_ids = frame.control_ids
             client.push_text(json.dumps({**topo, "client": client.id}))
+        elif client.control_ids != frame.control_ids:  # a control added or removed: the ids before the frame
+            client.control_ids = frame.control_ids
+            client.push_text(protocol.controls_message(frame.control_ids))
         client.push_frame(data)
 
     def _broadcast(self) -> None:
@@ -237,12 +242,15 @@ class XRHub:
             if status is not None:
                 client.push_text(status)
         self._sent_seq = frame.seq
-        self.gestures.prune(frame.n_controls)
+        for holder, message in self.gestures.prune(frame.control_ids):
+            if holder in self.clients:
+                self.clients[holder].push_text(message)
 
     @property
     def grabs(self) -> dict[int, int]:
-        """Control index -> the id of the client holding it."""
-        return self.gestures.grabs
+        """Control index (now) -> the id of the client holding it."""
+        ids = self.session.control_ids
+        return {ids.index(c): who for c, who in self.gestures.grabs.items() if c in ids}
 
     def _broadcast_grabs(self) -> None:
         for c in self.clients.values():

@@ -38,6 +38,7 @@ export class Clay {
     this.sphere = new THREE.SphereGeometry(1, 24, 16);
     this.onChange = null; // called whenever something drawn changed
     this.segments = null;
+    this.controlIds = []; // each control's stable id, in index order (what intents name)
   }
 
   get ready() {
@@ -60,6 +61,7 @@ export class Clay {
     this.kEff = 0;
     this.local.clear();
     this.topology = t;
+    this.controlIds = t.control_ids || [];
     const n = t.n_vertices;
     const pos = new THREE.BufferAttribute(new Float32Array(3 * n), 3);
     pos.setUsage(THREE.DynamicDrawUsage);

@@ -32,10 +32,11 @@ export class Grabs {
     if (this.active.has(i)) return false;
     const m = this.clay.controlMeshes[i];
     const p = m ? [m.position.x, m.position.y, m.position.z] : [0, 0, 0];
-    this.active.set(i, { pos: p, lastSent: 0, pending: null, sentPos: p.map(round6) });
+    const id = this.clay.controlIds[i] ?? i;
+    this.active.set(i, { id, pos: p, lastSent: 0, pending: null, sentPos: p.map(round6) });
     this.settling.delete(i);
     this.clay.setLocal(i, p);
-    this.link.send(intents.grab(i));
+    this.link.send(intents.grab(id));
     return true;
   }
 
@@ -58,7 +59,7 @@ export class Grabs {
     g.pending = null;
     g.lastSent = now;
     g.sentPos = p;
-    if (this.link.send(intents.move(i, p))) {
+    if (this.link.send(intents.move(g.id, p))) {
       this.moves += 1;
       this.pendingMoves.push({ t: now, index: i, pos: p.map(Math.fround), digest: this.lastDigest });
       if (this.pendingMoves.length > 64) this.pendingMoves.shift();
@@ -82,7 +83,7 @@ export class Grabs {
     this.active.delete(i);
     const p = g.pos.map(round6);
     const now = performance.now();
-    if (this.link.send(intents.release(i, p))) {
+    if (this.link.send(intents.release(g.id, p))) {
       this.pendingMoves.push({ t: now, index: i, pos: p.map(Math.fround), digest: this.lastDigest });
     }
     this.settling.set(i, { pos: p.map(Math.fround), until: now + SETTLE_MS });
@@ -92,6 +93,23 @@ export class Grabs {
     this.active.delete(i);
     this.settling.delete(i);
     this.clay.clearLocal(i);
+  }
+
+  // The controls' ids changed (one added or removed elsewhere): our drags follow their controls to their new
+  // places; a drag whose control is gone ends (the server says so too).
+  onControls(ids) {
+    const moved = new Map();
+    for (const [i, g] of this.active) {
+      const j = ids.indexOf(g.id);
+      this.clay.local.delete(i);
+      if (j >= 0) moved.set(j, g);
+      this.onMoved?.(i, j, ids.length); // j < 0: gone
+    }
+    this.active = moved;
+    for (const [j, g] of moved) this.clay.local.set(j, g.pos);
+    this.settling.clear();
+    this.clay.controlIds = ids;
+    this.clay.refreshControls();
   }
 
   // The server says who holds what: a control we drag that another client holds is not ours.

@@ -9,6 +9,7 @@ export function dispatchText(msg, handlers) {
   else if (msg.type === 'error') handlers.onError?.(msg);
   else if (msg.type === 'pong') handlers.onPong?.(msg);
   else if (msg.type === 'status') handlers.onServerStatus?.(msg);
+  else if (msg.type === 'controls') handlers.onControls?.(msg.ids);
 }
 
 export function socketURL(loc = window.location) {
@@ -21,7 +22,7 @@ export function socketURL(loc = window.location) {
 export class Link {
   constructor(url, handlers) {
     this.url = url;
-    this.handlers = handlers; // {onTopology, onFrame, onGrabs, onError, onPong, onStatus, onServerStatus}
+    this.handlers = handlers; // {onTopology, onFrame, onGrabs, onError, onPong, onStatus, onServerStatus, onControls}
     this.ws = null;
     this.connected = false;
     this.retry = 500;

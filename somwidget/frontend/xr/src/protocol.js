@@ -56,9 +56,10 @@ export function parseFrame(buffer) {
 
 // Intents (client -> server), one JSON object per message.
 export const intents = {
-  grab: (index) => ({ type: 'grab', index }),
-  move: (index, position) => ({ type: 'move', index, position }),
-  release: (index, position) => (position ? { type: 'release', index, position } : { type: 'release', index }),
+  // controls are named by their stable id (the topology's control_ids, then "controls" messages)
+  grab: (id) => ({ type: 'grab', id }),
+  move: (id, position) => ({ type: 'move', id, position }),
+  release: (id, position) => (position ? { type: 'release', id, position } : { type: 'release', id }),
   reset: () => ({ type: 'reset' }),
   train: () => ({ type: 'train' }),
   pause: () => ({ type: 'pause' }),

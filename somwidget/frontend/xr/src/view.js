@@ -98,6 +98,16 @@ export class ClayView {
         this.desktop.keepControlsInView();
       } });
 
+    this.grabs.onMoved = (i, j, k) => { // a control this view drags changed place (or went): the drag follows it
+      const drag = this.desktop.drag;
+      if (!drag || drag.i !== i) return;
+      if (j < 0) {
+        this.desktop.drag = null;
+        return;
+      }
+      drag.j = drag.j === drag.i ? j : j + k;
+      drag.i = j;
+    };
     this.labels = document.createElement('div');
     this.labels.className = 'somview-labels';
     this.statusLine = document.createElement('div');
@@ -139,6 +149,7 @@ export class ClayView {
       onGrabs: (list) => this.grabs.onGrabs(list),
       onError: (e) => this.showError(e),
       onServerStatus: (s) => { this.state.cycleMs = s.cycle_ms; this.state.serverFps = s.fps; },
+      onControls: (ids) => this.grabs.onControls(ids),
     };
   }
 
