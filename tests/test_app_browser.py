@@ -346,6 +346,8 @@ def test_panel_sets_schedule_and_refuses_bad_values(browser, server):
         weight.press("Enter")
         page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('metric weight')")
         assert server.state()["session"]["parameters"]["metric_weights"][3] == 2.5
+        # and at the field that caused it
+        page.locator("#features-table tr").nth(3).locator(".v-messages").get_by_text("metric weight").wait_for()
         weight.fill("1")
         weight.press("Enter")
         page.locator("#train-button").click()

@@ -342,13 +342,18 @@ class SomApp:
                 self._sync_session_state()
 
     def set_metric(self, dim, value) -> None:
+        key = f"metric_weights_{dim}" if isinstance(dim, int) and not isinstance(dim, bool) else "metric_weights"
         try:
             self.session.set_metric_weight(dim, value)  # the session checks dim: no truncation here
             self.state.error_message = ""
+            failed = None
         except (ValueError, TypeError) as exc:
-            self._error(str(exc))
+            failed = str(exc)
+            self._error(failed)
         with self.state:
             self._sync_session_state()
+            if failed is not None:  # at the field that caused it (the sync above cleared the others)
+                self.state.param_errors = {**(self.state.param_errors or {}), key: failed}
 
     def set_colour(self, index, colour) -> None:
         try:
@@ -773,7 +778,8 @@ class SomApp:
                         html.Td("{{ f.role }}", classes="text-caption")
                         with html.Td(style="width: 96px"):
                             v3.VTextField(model_value=("f.weight",), density="compact", type="number",
-                                          hide_details=True, variant="plain", title=METRIC_WEIGHT.help,
+                                          hide_details="auto", variant="plain", title=METRIC_WEIGHT.help,
+                                          error_messages=("param_errors['metric_weights_' + f.d] || []",),
                                           raw_attrs=self._on_enter_or_change(
                                               "trigger('set_metric', [f.d, $event.target.value])"))
 
