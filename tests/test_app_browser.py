@@ -565,6 +565,45 @@ def test_another_tab_closing_leaves_the_drag_alone(browser, server):
         a.close()
 
 
+def test_a_drag_goes_on_with_its_control_when_another_tab_removes_one_before_it(browser, server):
+    """Interaction in two tabs: tab A holds a control with the mouse; tab B removes control 0 from its panel. A's
+    mouse keeps moving the same control (now one place earlier), never the one that slid into its place, and A's
+    release lets it go."""
+    a = open_page(browser, server)
+    b = open_page(browser, server)
+    try:
+        st0 = server.idle()
+        i = pick_control(a, prefer=(3, 5, 6, 4, 2, 7, 1, 8))
+        assert i > 0
+        start = control_on_screen(a, i)
+        delta = toward_centre(a, start, 100)
+        mouse_drag(a, start, (delta[0] / 3, delta[1] / 3), steps=8, release=False)
+        server.wait(lambda s: held(s) == [i], what="A's grab")
+        before = np.array(server.state()["session"]["controls"])
+        b.locator("#controls-table tr").nth(0).locator("button").click()  # tab B removes control 0
+        server.wait(lambda s: len(s["session"]["controls"]) == 8 and held(s) == [i - 1],
+                    what="control 0 removed, A's control now one place earlier")
+        x, y = start[0] + delta[0] / 3, start[1] + delta[1] / 3
+        for k in range(1, 13):
+            a.mouse.move(x + 2 * delta[0] / 3 * k / 12, y + 2 * delta[1] / 3 * k / 12)
+            time.sleep(0.03)
+        a.mouse.up()
+        st = server.wait(lambda s: not held(s), what="A's release")
+        st = server.idle()
+        after = np.array(st["session"]["controls"])
+        assert np.linalg.norm(after[i - 1, :3] - before[i, :3]) > 0.1, "A's control stopped following the mouse"
+        np.testing.assert_array_equal(after[i], before[i + 1])  # the control that slid into A's place: untouched
+        # what happened during the drag is one step (the gesture's): one undo brings the car back
+        a.locator("#undo-button").click()
+        server.wait(lambda s: len(s["session"]["controls"]) == 9, what="the removed control back")
+        server.idle()
+        np.testing.assert_allclose(np.array(server.state()["session"]["controls"]),
+                                   np.array(st0["session"]["controls"]), atol=1e-6)
+    finally:
+        a.close()
+        b.close()
+
+
 def test_preset_chooser_lines_and_export(browser, server, tmp_path):
     page = open_page(browser, server)
     try:

@@ -22,18 +22,26 @@ export class Grabs {
     this.latencyLog = []; // {sent, arrived, index, seq} (page clock, ms) for the latencies above
     this.moves = 0;
     this.lastDigest = 0;
+    this.renamed = new Map(); // index a drag began at -> its control's index now
+  }
+
+  // A drag begun at index i whose control has since moved to another index (a control removed elsewhere): the
+  // callers (mouse, hands) go on naming the index they began with.
+  current(i) {
+    return this.renamed.has(i) ? this.renamed.get(i) : i;
   }
 
   holds(i) {
-    return this.active.has(i);
+    return this.active.has(this.current(i));
   }
 
   begin(i) {
     if (this.active.has(i)) return false;
+    this.renamed.delete(i);
     const m = this.clay.controlMeshes[i];
     const p = m ? [m.position.x, m.position.y, m.position.z] : [0, 0, 0];
     const id = this.clay.controlIds[i] ?? i;
-    this.active.set(i, { id, pos: p, lastSent: 0, pending: null, sentPos: p.map(round6) });
+    this.active.set(i, { id, began: i, pos: p, lastSent: 0, pending: null, sentPos: p.map(round6) });
     this.settling.delete(i);
     this.clay.setLocal(i, p);
     this.link.send(intents.grab(id));
@@ -41,6 +49,7 @@ export class Grabs {
   }
 
   update(i, pos) {
+    i = this.current(i);
     const g = this.active.get(i);
     if (!g) return;
     g.pos = pos;
@@ -78,6 +87,9 @@ export class Grabs {
   }
 
   end(i) {
+    const began = i;
+    i = this.current(i);
+    this.renamed.delete(began);
     const g = this.active.get(i);
     if (!g) return;
     this.active.delete(i);
@@ -99,12 +111,15 @@ export class Grabs {
   // places; a drag whose control is gone ends (the server says so too).
   onControls(ids) {
     const moved = new Map();
+    const renamed = new Map();
     for (const [i, g] of this.active) {
       const j = ids.indexOf(g.id);
       this.clay.local.delete(i);
       if (j >= 0) moved.set(j, g);
-      this.onMoved?.(i, j, ids.length); // j < 0: gone
+      if (j !== g.began) renamed.set(g.began, j); // -1: its control is gone (the server ends the grab)
+      this.onMoved?.(i, j, ids.length);
     }
+    this.renamed = renamed;
     this.active = moved;
     for (const [j, g] of moved) this.clay.local.set(j, g.pos);
     this.settling.clear();

@@ -98,15 +98,9 @@ export class ClayView {
         this.desktop.keepControlsInView();
       } });
 
-    this.grabs.onMoved = (i, j, k) => { // a control this view drags changed place (or went): the drag follows it
+    this.grabs.onMoved = (i, j, k) => { // a control this view drags changed place: its mirror test follows
       const drag = this.desktop.drag;
-      if (!drag || drag.i !== i) return;
-      if (j < 0) {
-        this.desktop.drag = null;
-        return;
-      }
-      drag.j = drag.j === drag.i ? j : j + k;
-      drag.i = j;
+      if (drag && this.grabs.current(drag.i) === i && j >= 0) drag.j = drag.j === i ? j : j + k;
     };
     this.labels = document.createElement('div');
     this.labels.className = 'somview-labels';
