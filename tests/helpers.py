@@ -35,6 +35,21 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def proc_status_mb(pid: int, field: str) -> float:
+    """A memory figure of a process from /proc/PID/status in MB: "VmRSS" (now) or "VmHWM" (its peak)."""
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith(f"{field}:"):
+                return int(line.split()[1]) / 1024
+    raise AssertionError(f"no {field} for process {pid}")
+
+
+def wslink_chunk(mid: int, payload: bytes = b"", total: int | None = None, offset: int = 0) -> bytes:
+    """One chunk of a wslink websocket message: a 12-byte header (id, offset, total size) and the content."""
+    total = len(payload) if total is None else total
+    return mid.to_bytes(4, "little") + offset.to_bytes(4, "little") + total.to_bytes(4, "little") + payload
+
+
 def sync_playwright():
     from playwright.sync_api import sync_playwright as start
 

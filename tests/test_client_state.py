@@ -21,10 +21,6 @@ if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
 VIEW = "document.getElementById('clay-view')?.somview"
 
 
-def _chunk(mid: int, payload: bytes) -> bytes:
-    return mid.to_bytes(4, "little") + (0).to_bytes(4, "little") + len(payload).to_bytes(4, "little") + payload
-
-
 async def crafted_client(base: str, changes: list) -> None:
     import aiohttp
 
@@ -35,7 +31,7 @@ async def crafted_client(base: str, changes: list) -> None:
                     {"wslink": "1.0", "id": "rpc:c0:1", "method": "trame.state.update", "args": [changes],
                      "kwargs": {}}]
         for mid, msg in enumerate(messages, start=1):
-            await ws.send_bytes(_chunk(mid, msgpack.packb(msg)))
+            await ws.send_bytes(helpers.wslink_chunk(mid, msgpack.packb(msg)))
             await ws.receive(timeout=10)
 
 

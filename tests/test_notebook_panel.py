@@ -250,8 +250,12 @@ def test_a_widget_of_a_closed_view_stops_following(session):
     w = show(session)
     view = w.view
     w.close()
-    assert view._closed and not view._sender.is_alive() or view._sender.join(5) is None
-    assert session.frame is not None  # the session goes on
+    view._sender.join(5)
+    assert view._closed and not view._sender.is_alive(), "the widget's sender thread still runs"
+    assert view._on_frame not in session._listeners  # it no longer follows the session
+    seq = session.frame.seq
+    session.reset()  # the session goes on without it
+    wait_for(lambda: session.frame.seq > seq, what="a frame after the widget closed")
 
 
 # -- in a real JupyterLab: Playwright's mouse drags a control inside the widget ----------------------------------

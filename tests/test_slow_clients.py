@@ -18,14 +18,6 @@ import pytest
 pytest.importorskip("aiohttp")
 
 
-def _rss_mb(pid: int) -> float:
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    raise AssertionError("no VmRSS")
-
-
 def passive_socket(port: int) -> socket.socket:
     """A websocket handshake by hand, then nothing read, ever: the server's sends to it stall once buffers fill."""
     s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -106,7 +98,7 @@ def test_a_passive_a_bursty_and_a_normal_client_at_once():
         alone: dict = {}
         serve_port = serve.port
         asyncio.run(normal_client(serve.base, 3.0, alone))
-        before = _rss_mb(serve.proc.pid)
+        before = helpers.proc_status_mb(serve.proc.pid, "VmRSS")
         passive = [passive_socket(serve_port) for _ in range(3)]
         seconds = 14.0
 
@@ -116,7 +108,7 @@ def test_a_passive_a_bursty_and_a_normal_client_at_once():
             return normal, bursty
 
         normal, bursty = asyncio.run(together())
-        grown = _rss_mb(serve.proc.pid) - before
+        grown = helpers.proc_status_mb(serve.proc.pid, "VmRSS") - before
         status = json.loads(serve.get("/xr/status")[1])
         for s in passive:
             s.close()

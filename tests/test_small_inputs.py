@@ -137,18 +137,6 @@ print(t.nbytes / 2**20, extra)
     assert extra_mb < table_mb + 60, (table_mb, extra_mb)  # the float32 table and one block, not 4 x float64
 
 
-def _vm_peak_mb(pid: int) -> float:
-    with open(f"/proc/{pid}/status") as f:
-        for line in f:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024
-    raise AssertionError("no VmHWM")
-
-
-def _chunk(mid: int, offset: int, total: int, content: bytes = b"") -> bytes:
-    return mid.to_bytes(4, "little") + offset.to_bytes(4, "little") + total.to_bytes(4, "little") + content
-
-
 @pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="reads the server's peak memory from /proc")
 def test_a_chunk_header_claiming_256_mb_on_the_page_websocket_allocates_nothing():
     import aiohttp
@@ -156,19 +144,19 @@ def test_a_chunk_header_claiming_256_mb_on_the_page_websocket_allocates_nothing(
     serve = helpers.Serve()
     try:
         serve.idle()
-        before = _vm_peak_mb(serve.proc.pid)
+        before = helpers.proc_status_mb(serve.proc.pid, "VmHWM")
 
         async def attack():
             async with aiohttp.ClientSession() as cs, cs.ws_connect(serve.base.replace("http", "ws") + "/ws",
                                                                     headers={"Origin": serve.base}) as ws:
                 hello = msgpack.packb({"wslink": "1.0", "id": "system:c0:0", "method": "wslink.hello",
                                        "args": [{"secret": "wslink-secret"}], "kwargs": {}})
-                await ws.send_bytes(_chunk(1, 0, len(hello), hello))
+                await ws.send_bytes(helpers.wslink_chunk(1, hello))
                 reply = await ws.receive(timeout=10)
                 assert reply.type == aiohttp.WSMsgType.BINARY
                 t = time.perf_counter()
                 for mid in range(2, 10):  # eight headers, 256 MB each, no content
-                    await ws.send_bytes(_chunk(mid, 0, 256 * 2**20))
+                    await ws.send_bytes(helpers.wslink_chunk(mid, total=256 * 2**20))
                 closed = False
                 try:
                     while True:
@@ -182,7 +170,7 @@ def test_a_chunk_header_claiming_256_mb_on_the_page_websocket_allocates_nothing(
 
         closed, seconds = asyncio.run(attack())
         time.sleep(0.5)
-        extra = _vm_peak_mb(serve.proc.pid) - before
+        extra = helpers.proc_status_mb(serve.proc.pid, "VmHWM") - before
         assert extra < LIMIT_MB, f"the server's peak memory grew by {extra:.0f} MB"
         assert closed and seconds < LIMIT_S, (closed, seconds)
         # the session carries on: a move from the views' websocket is applied

@@ -99,6 +99,10 @@ MAGIC = b"SOMF"
 HEADER = struct.Struct("<4sHHIIIIIHH")
 HEADER_SIZE = HEADER.size  # 32
 FLAG_RUNNING, FLAG_PAUSED, FLAG_MIRRORED, FLAG_CAN_UNDO, FLAG_CAN_REDO = 1, 2, 4, 8, 16
+#: Frames a second a view is sent at most (the websocket hub and the notebook widget alike).
+MAX_FPS = 60.0
+#: Seconds between status messages (cycle time, frames/s) while frames flow.
+STATUS_PERIOD = 0.5
 #: Longest intent message accepted (bytes of UTF-8 text).
 MAX_MESSAGE_BYTES = 2048
 #: Largest |coordinate| a move may carry (model units; the presets span a few units, meshes are normalised).

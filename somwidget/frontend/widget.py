@@ -26,10 +26,6 @@ from .xr.server import DIST
 
 log = logging.getLogger(__name__)
 
-#: Frames a second a widget sends at most.
-MAX_FPS = 60.0
-#: Seconds between status messages (cycle time, frames/s) while frames flow.
-STATUS_PERIOD = 0.5
 #: The one client of a widget's gestures (every output of a widget acts as one client).
 _CLIENT = "notebook"
 
@@ -47,7 +43,7 @@ class ClayWidget(anywidget.AnyWidget):
 
     height = traitlets.Int(520).tag(sync=True)
 
-    def __init__(self, session, height: int = 520, max_fps: float = MAX_FPS, **kwargs):
+    def __init__(self, session, height: int = 520, max_fps: float = protocol.MAX_FPS, **kwargs):
         super().__init__(_esm=_module(), height=int(height), **kwargs)
         self.session = session
         self.max_fps = float(max_fps)
@@ -110,7 +106,7 @@ class ClayWidget(anywidget.AnyWidget):
         self.send({"type": "frame"}, buffers=[protocol.encode_frame(frame, self.session)])
         self.frames_sent += 1
         now = time.monotonic()
-        if now - self._last_status >= STATUS_PERIOD:
+        if now - self._last_status >= protocol.STATUS_PERIOD:
             self._last_status = now
             self.send(json.loads(protocol.status_message(frame, self.session.frames_per_second)))
         for _holder, message in self.gestures.prune(frame.control_ids):

@@ -33,8 +33,6 @@ log = logging.getLogger(__name__)
 
 HERE = Path(__file__).resolve().parent
 DIST = HERE / "dist"
-#: Frames a second sent to one client at most (the session publishes about 30 while it trains).
-MAX_FPS = 60.0
 #: Refused messages a client may send within ERROR_WINDOW seconds before the server closes its socket.
 MAX_ERRORS = 200
 ERROR_WINDOW = 10.0
@@ -42,8 +40,6 @@ ERROR_WINDOW = 10.0
 MAX_TEXTS = 512
 #: Seconds one send may take before the client counts as not reading and is dropped.
 SEND_TIMEOUT = 5.0
-#: Seconds between status messages (cycle time, frames/s) while frames flow.
-STATUS_PERIOD = 0.5
 NOT_BUILT = """<!doctype html><meta charset="utf-8"><title>somwidget XR: not built</title>
 <p>The WebXR client is not built. Run <code>npm ci &amp;&amp; npm run build</code> in
 <code>somwidget/frontend/xr</code> (<code>bash scripts/setup.sh</code> does it), then reload.</p>"""
@@ -89,7 +85,7 @@ class _Client:
 class XRHub:
     """The /xr/ routes and their clients, for one Session."""
 
-    def __init__(self, session, token: str | None = None, dist: Path | None = None, max_fps: float = MAX_FPS):
+    def __init__(self, session, token: str | None = None, dist: Path | None = None, max_fps: float = protocol.MAX_FPS):
         self.session = session
         self.token = token or None
         self.dist = Path(dist) if dist is not None else DIST
@@ -234,7 +230,7 @@ class XRHub:
             return
         now = time.monotonic()
         status = None
-        if now - self._last_status >= STATUS_PERIOD:
+        if now - self._last_status >= protocol.STATUS_PERIOD:
             self._last_status = now
             status = protocol.status_message(frame, self.session.frames_per_second)
         for client in list(self.clients.values()):
