@@ -1,0 +1,133 @@
+"""Batched variants against single runs, in one run: `PYTHONPATH=. python benchmarks/bench_variants.py [--device cuda]`.
+
+For the car (1,024 variants, S = 1000) and the space grid (256 variants): the batched engine's time (training alone,
+and all in: set-up, tables, upload, training, weights back), the same variants run one after another on one `Som`
+(reset, then train), the ratio, how far the batch's weights are from the single runs', and the figures' floors: the
+arithmetic the cycles must do over the GPU's float32 rate, and the bytes that must cross its memory at least once.
+numpy and warp-lang only.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+if __name__ == "__main__":
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import warp as wp  # noqa: E402
+
+from somwidget.backend import batch, presets  # noqa: E402
+from somwidget.backend.device import resolve  # noqa: E402
+from somwidget.backend.som import Som  # noqa: E402
+from somwidget.backend.variants import plan_variants  # noqa: E402
+
+#: float32 rate (non-tensor) and memory bandwidth of the GPUs these figures are taken on (their data sheets).
+PEAKS = {"H200": (67e12, 4.8e12), "H100": (67e12, 3.35e12)}
+
+
+def plan_for(name: str, n: int, seed: int = 0):
+    p = presets.get_preset(name)
+    base = {"iterations": p.iterations, "l_start": p.l_start, "l_end": p.l_end, "smoothing": p.smoothing,
+            "reach": p.reach}
+    return p, plan_variants(p.topology, p.weights, p.controls, base, n, jitter=0.05, seed=seed, mirror=p.mirror,
+                            smooth_dims=p.smooth_dims, metric_weights=p.metric_weights,
+                            position_dims=p.layout.position)
+
+
+def make_batch(p, plan, device):
+    s = plan.schedules
+    return batch.BatchSom(p.topology, plan.start, plan.controls, iterations=s["iterations"], l_start=s["l_start"],
+                          l_end=s["l_end"], smoothing=s["smoothing"], reach=s["reach"], smooth_dims=plan.smooth_dims,
+                          metric_weights=plan.metric_weights, mirror=plan.mirror, device=device)
+
+
+def floors(p, plan, device) -> tuple[float, float, float]:
+    """(flops, bytes, seconds at the floor): winner search 3n flops per neuron and control, a move 3n per neuron
+    and control (a pair 8n for two), smoothing 3n per neuron and edge end; bytes: weights in and out once, the
+    distance table and the learning tables read once."""
+    n_dims, N, k = plan.start.shape[1], p.n_vertices, len(p.controls)
+    k_eff = k * (2 if p.mirror else 1)
+    S = plan.schedules["iterations"].astype(np.float64)
+    per_cycle = N * k_eff * 3 * n_dims + (N * k * 8 * n_dims if p.mirror else N * k_eff * 3 * n_dims)
+    smooth = (plan.schedules["smoothing"] > 0) * (len(p.topology.neighbors) * 3 * n_dims + N * 4 * n_dims)
+    flops = float(((per_cycle + smooth) * S).sum())
+    nbytes = 2.0 * plan.n_variants * N * n_dims * 4 + N * N * 2 + S.sum() * (p.topology.d_max + 1) * 4
+    name = wp.get_device(device).name if device != "cpu" else ""
+    peak = next((v for key, v in PEAKS.items() if key in name), None)
+    floor = max(flops / peak[0], nbytes / peak[1]) if peak else float("nan")
+    return flops, nbytes, floor
+
+
+def bench(name: str, n: int, device: str, singles: int, threads: list[int]) -> None:
+    p, plan = plan_for(name, n)
+    sync = (lambda: wp.synchronize_device(device)) if device != "cpu" else (lambda: None)
+    make_batch(p, plan.part(0, 2), device).train()  # compile
+    print(f"\n{name}: {n} variants of N = {p.n_vertices}, S = {p.iterations}, {len(p.controls)} controls"
+          f"{' (mirrored)' if p.mirror else ''}, smoothing {p.smoothing} on {device} ({wp.get_device(device).name})")
+    best = None
+    default = batch.block_threads(p.n_vertices)
+    for t in ([default] + [x for x in threads if x != default]) if device != "cpu" else [1]:
+        batch.block_threads = lambda n_neurons, t=t: t
+        som = make_batch(p, plan, device)
+        sync()
+        t0 = time.perf_counter()
+        som.train()
+        sync()
+        train = time.perf_counter() - t0
+        print(f"  batched, {t:4d} threads a variant: training {train * 1e3:8.2f} ms")
+        if best is None or train < best[1]:
+            best = (t, train)
+    batch.block_threads = lambda n_neurons, t=best[0]: t
+    sync()
+    t0 = time.perf_counter()
+    som = make_batch(p, plan, device)
+    som.train()
+    weights = som.weights
+    whole = time.perf_counter() - t0
+    print(f"  batched, all in (set-up, upload, training, weights back; {best[0]} threads): {whole * 1e3:.2f} ms")
+
+    count = min(singles, n)
+    single = Som(p.topology, p.weights, plan.controls[0], iterations=p.iterations, l_start=p.l_start, l_end=p.l_end,
+                 smoothing=p.smoothing, smooth_dims=p.smooth_dims, metric_weights=p.metric_weights, mirror=p.mirror,
+                 device=device, reach=p.reach)
+    single.train()  # compile and capture
+    diff = 0.0
+    sync()
+    t0 = time.perf_counter()
+    for i in range(count):
+        single.set_controls(plan.controls[i])
+        single.reset()
+        single.train()
+        if i < 8:
+            diff = max(diff, float(np.abs(single.weights - weights[i]).max()))
+    sync()
+    singles_time = time.perf_counter() - t0
+    scaled = singles_time * n / count
+    print(f"  {count} single runs one after another: {singles_time * 1e3:.1f} ms"
+          + (f" (x {n / count:.0f}: {scaled * 1e3:.0f} ms for {n})" if count < n else ""))
+    print(f"  batched / single runs: {scaled / best[1]:.0f} x faster (training); largest weight difference "
+          f"from the single runs (first 8): {diff:.2e}")
+    flops, nbytes, floor = floors(p, plan, device)
+    print(f"  floors: {flops / 1e9:.1f} GFLOP, {nbytes / 1e6:.1f} MB once through memory -> {floor * 1e3:.2f} ms "
+          f"at the data-sheet peaks; training runs at {floor / best[1] * 100:.1f}% of that floor")
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--car", type=int, default=1024, help="car variants (default 1024)")
+    parser.add_argument("--grid", type=int, default=256, help="space-grid variants (default 256)")
+    parser.add_argument("--singles", type=int, default=None, help="single runs to time (default: all)")
+    parser.add_argument("--threads", default="64,128,256,512,1024", help="block sizes to try on CUDA")
+    args = parser.parse_args(argv)
+    device = resolve(args.device)
+    threads = [int(x) for x in args.threads.split(",") if x]
+    bench("car", args.car, device, args.singles or args.car, threads)
+    bench("space-grid", args.grid, device, args.singles or args.grid, threads)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,295 @@
+"""B variants of one mesh trained together: the same algorithm as `Som` (som.py), B runs in the same launches.
+
+Each variant has its own weights, controls and schedule (S, l_start, l_end, smoothing, reach); the topology, the
+feature count, the mirror, smooth_dims and the metric weights are shared. Variant b equals the single run
+`Som(topology, weights[b], controls[b], S[b], l_start[b], l_end[b], smoothing[b], ..., reach=reach[b])` driven the
+same way: `train()` after construction is a whole run from the given weights; `restart()` first makes it the local
+restart a move of the controls would be (from s0 = floor((1 - reach) S)).
+
+On CUDA a block of threads runs one variant's whole schedule (batch_kernels.py): a cycle of a mesh of a few
+thousand neurons is too short to fill a GPU, B of them side by side do. On the CPU the variants are shared among
+the cores, each running its variants one after another.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import warp as wp
+from numpy.typing import ArrayLike
+
+from . import checks
+from .batch_kernels import MAX_KEYS, variants_kernel
+from .device import resolve, warp_exclusive, warp_lock
+from .schedule import learning_table
+from .som import MAX_CONTROLS, MAX_DIMS, restart_iteration
+from .topology import Topology
+
+#: Learning-table entries (rows of every distinct schedule x (d_max + 1), float32) a batch may hold: 2 GiB.
+MAX_TABLE_ENTRIES = 1 << 29
+#: Meshes a batch takes: its dense distance table (N x N uint16) is shared by every variant.
+MAX_BATCH_NEURONS = 16384
+#: Threads of a variant's block on CUDA, by mesh size: a thread per neuron up to 1024 (a multiple of 32), else
+#: 1024 threads with several neurons each.
+_MOST_THREADS = 1024
+SCHEDULE_KEYS = ("iterations", "l_start", "l_end", "smoothing", "reach")
+
+
+def _per_variant(name: str, value, n: int, kind: str, low: float, high: float | None = None,
+                 low_open: bool = False) -> np.ndarray:
+    """A scalar or n values of one schedule parameter, each checked as Som checks it."""
+    values = np.asarray(value, dtype=np.float64)
+    if values.ndim == 0:
+        values = np.full(n, values)
+    if values.shape != (n,):
+        raise ValueError(f"{name}: expected one value or {n} (one per variant), got shape {values.shape}")
+    for i, x in enumerate(values.tolist()):
+        label = f"{name}[{i}]"
+        if kind == "int":
+            checks.integer(label, int(x) if float(x).is_integer() else x, int(low))
+        else:
+            checks.real(label, x, low, high, low_open=low_open)
+    return values
+
+
+class BatchSom:
+    """B variants of one mesh (see the module's docstring).
+
+    weights: (N, n) shared start weights, or (B, N, n); controls: (B, k, n), the same k for every variant.
+    iterations, l_start, l_end, smoothing, reach: one value for all or one per variant. device: "cpu", "cuda:N" or
+    None (the GPU when there is one). cpu_cores: cores the CPU shares the variants among (None: those this process
+    may use, at most 8).
+    """
+
+    @warp_exclusive
+    def __init__(
+        self,
+        topology: Topology,
+        weights: ArrayLike,
+        controls: ArrayLike,
+        iterations: int | ArrayLike = 1000,
+        l_start: float | ArrayLike = 0.25,
+        l_end: float | ArrayLike = 0.03,
+        smoothing: float | ArrayLike = 0.0,
+        reach: float | ArrayLike = 0.08,
+        smooth_dims: Sequence[int] | None = None,
+        metric_weights: ArrayLike | None = None,
+        mirror: Sequence[int] = (),
+        device: str | None = None,
+        *,
+        cpu_cores: int | None = None,
+    ):
+        if not isinstance(topology, Topology):
+            raise ValueError(f"topology: expected a Topology, got {type(topology).__name__}")
+        if topology.n_vertices > MAX_BATCH_NEURONS:
+            raise ValueError(f"topology: a batch takes meshes of at most {MAX_BATCH_NEURONS:,} vertices (every "
+                             f"variant reads one dense distance table), this one has {topology.n_vertices:,}")
+        self.device = resolve(device)
+        self.topology = topology
+        c = np.asarray(controls, dtype=np.float64) if not isinstance(controls, np.ndarray) else controls
+        if c.ndim != 3:
+            raise ValueError(f"controls: expected an array (variants, controls, dims), got shape {np.shape(c)}")
+        if c.shape[0] < 1:
+            raise ValueError("controls: expected at least one variant, got 0")
+        c = checks.finite_array("controls", c.reshape(c.shape[0], -1), 2).reshape(c.shape)
+        self.n_variants, k, n = c.shape
+        if not 1 <= n <= MAX_DIMS:
+            raise ValueError(f"controls: expected 1 to {MAX_DIMS} feature dimensions, got {n}")
+        self.n_neurons, self.n_dims = topology.n_vertices, n
+        w = np.asarray(weights)
+        w = checks.finite_array("weights", w.reshape(-1, w.shape[-1]) if w.ndim >= 2 else w, 2)
+        if w.shape[1] != n:
+            raise ValueError(f"weights: expected {n} feature dimensions like the controls, got {w.shape[1]}")
+        if w.shape[0] == self.n_neurons:
+            w = np.broadcast_to(w, (self.n_variants, self.n_neurons, n))
+        elif w.shape[0] == self.n_variants * self.n_neurons:
+            w = w.reshape(self.n_variants, self.n_neurons, n)
+        else:
+            raise ValueError(f"weights: expected ({self.n_neurons}, {n}) shared weights or ({self.n_variants}, "
+                             f"{self.n_neurons}, {n}), one set per variant; got {np.shape(weights)}")
+        self._start = np.ascontiguousarray(w, dtype=np.float32)
+        self._mirror = checks.dims("mirror", mirror, n)
+        k_eff = k * (2 if self._mirror else 1)
+        if k < 1 or k_eff > min(MAX_CONTROLS, MAX_KEYS):
+            raise ValueError(f"controls: expected 1 to {MAX_CONTROLS} controls counting mirrored copies, got {k} "
+                             f"({k_eff} with mirroring)")
+        self._controls = c.astype(np.float32)
+        B = self.n_variants
+        self._iterations = _per_variant("iterations", iterations, B, "int", 1).astype(np.int64)
+        self._l_start = _per_variant("l_start", l_start, B, "real", 0.0, 1.0, low_open=True)
+        self._l_end = _per_variant("l_end", l_end, B, "real", 0.0, 1.0, low_open=True)
+        self._smoothing = _per_variant("smoothing", smoothing, B, "real", 0.0, 1.0)
+        self._reach = _per_variant("reach", reach, B, "real", 0.0, 1.0, low_open=True)
+        smooth = tuple(range(min(3, n))) if smooth_dims is None else checks.dims("smooth_dims", smooth_dims, n)
+        metric = np.ones(n, np.float32) if metric_weights is None else checks.finite_array(
+            "metric_weights", metric_weights, 1)
+        if metric.shape != (n,) or (metric < 0).any() or not (metric > 0).any():
+            raise ValueError(f"metric_weights: expected {n} weights >= 0, at least one positive; got "
+                             f"{np.asarray(metric).tolist()}")
+        self._metric = metric.astype(np.float32)
+        mask = np.zeros(n, np.float32)
+        mask[list(smooth)] = 1.0
+        self._smooth_dims = smooth
+
+        dev = self.device
+        self._tables, rows = self._build_tables()
+        vec = wp.types.vector(length=n, dtype=wp.float32)
+        self._kernel = variants_kernel(n, bool(self._mirror), self.device != "cpu")
+        self._distances = topology.distance_table(dev)
+        self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=dev)
+        neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
+        self._neighbors = wp.array(neighbors, dtype=wp.int32, device=dev)
+        self._w = wp.array(self._start, dtype=vec, device=dev)
+        self._moved = wp.empty_like(self._w) if (self._smoothing > 0).any() else wp.empty((B, 1), dtype=vec,
+                                                                                           device=dev)
+        self._c = wp.array(self._effective(self._controls), dtype=vec, device=dev)
+        self._k_eff = k_eff
+        self._m = wp.array(self._metric[None, :], dtype=vec, device=dev)
+        self._mask = wp.array(mask[None, :], dtype=vec, device=dev)
+        self._table_row = wp.array(rows, dtype=wp.int32, device=dev)
+        self._lam = wp.array(self._smoothing.astype(np.float32), dtype=wp.float32, device=dev)
+        self._keys = wp.zeros(B * 3 * k_eff if dev == "cpu" else 1, dtype=wp.uint64, device=dev)
+        self._s = np.zeros(B, np.int64)
+        self._cores = self._plan_cores(cpu_cores)
+
+    # -- set-up -------------------------------------------------------------------------------------------
+    def _effective(self, controls: np.ndarray) -> np.ndarray:
+        """(B, k_eff, n): with mirroring each original next to its copy (the mirror dims negated), as pairs."""
+        if not self._mirror:
+            return np.ascontiguousarray(controls, np.float32)
+        copies = controls.copy()
+        copies[:, :, list(self._mirror)] *= -1.0
+        B, k, n = controls.shape
+        return np.ascontiguousarray(np.stack([controls, copies], axis=2).reshape(B, 2 * k, n), np.float32)
+
+    def _build_tables(self) -> tuple[wp.array, np.ndarray]:
+        """One learning table per distinct (S, l_start, l_end), stacked; each variant's first row in it."""
+        d_max = self.topology.d_max
+        distinct: dict[tuple, int] = {}
+        first = np.empty(self.n_variants, np.int64)
+        order = []
+        total = 0
+        for b in range(self.n_variants):
+            key = (int(self._iterations[b]), float(self._l_start[b]), float(self._l_end[b]))
+            if key not in distinct:
+                distinct[key] = total
+                order.append(key)
+                total += key[0]
+            first[b] = distinct[key]
+        if total * (d_max + 1) > MAX_TABLE_ENTRIES:
+            raise ValueError(f"iterations: the variants' {len(order)} distinct schedules need {total:,} table rows of "
+                             f"{d_max + 1} entries, past the batch's {MAX_TABLE_ENTRIES:,}; run fewer variants at "
+                             f"once or vary l_start, l_end and iterations over fewer values")
+        if total >= 2**31:
+            raise ValueError(f"iterations: {total:,} table rows in all, past 2^31")
+        table = np.empty((total, d_max + 1), np.float32)
+        for key in order:
+            S, l_start, l_end = key
+            table[distinct[key]: distinct[key] + S] = learning_table(S, d_max, l_start, l_end)
+        return wp.array(table, dtype=wp.float32, device=self.device), first.astype(np.int32)
+
+    def _plan_cores(self, cpu_cores: int | None) -> int:
+        if self.device != "cpu":
+            return 1
+        if cpu_cores is not None:
+            return min(checks.integer("cpu_cores", cpu_cores, 1, 64), self.n_variants)
+        try:
+            available = len(os.sched_getaffinity(0))
+        except AttributeError:  # pragma: no cover - not Linux
+            available = os.cpu_count() or 1
+        return max(1, min(available, 8, self.n_variants))
+
+    # -- state --------------------------------------------------------------------------------------------
+    @property
+    def iteration(self) -> np.ndarray:
+        """(B,) each variant's s."""
+        return self._s.copy()
+
+    @property
+    def iterations(self) -> np.ndarray:
+        return self._iterations.copy()
+
+    @property
+    def controls(self) -> np.ndarray:
+        """(B, k, n) each variant's controls (originals; mirrored copies are implied by `mirror`)."""
+        return self._controls.copy()
+
+    @property
+    def mirror(self) -> tuple[int, ...]:
+        return self._mirror
+
+    @property
+    def params(self) -> list[dict]:
+        """Each variant's schedule: iterations, l_start, l_end, smoothing, reach."""
+        return [{"iterations": int(self._iterations[b]), "l_start": float(self._l_start[b]),
+                 "l_end": float(self._l_end[b]), "smoothing": float(self._smoothing[b]),
+                 "reach": float(self._reach[b])} for b in range(self.n_variants)]
+
+    @property
+    @warp_exclusive
+    def weights(self) -> np.ndarray:
+        """(B, N, n) float32 host copy."""
+        return self._w.numpy().reshape(self.n_variants, self.n_neurons, self.n_dims)
+
+    def restart(self) -> None:
+        """Every variant continues from its current weights at s0 = floor((1 - reach) S): the local restart that a
+        move of its controls (or a change of its schedule) makes in a Som."""
+        self._s = np.array([restart_iteration(float(r), int(S)) for r, S in zip(self._reach, self._iterations)],
+                           np.int64)
+
+    def reset(self) -> None:
+        """The start weights and s = 0: the whole schedule again."""
+        with warp_lock:
+            self._w.assign(self._start)
+        self._s[:] = 0
+
+    # -- training -----------------------------------------------------------------------------------------
+    def step(self, n: int = 1) -> int:
+        """Run up to n cycles of every variant (none past its S); returns the most cycles any variant ran."""
+        n = checks.integer("n", n, 0)
+        to = np.minimum(self._s + n, self._iterations)
+        ran = int((to - self._s).max(initial=0))
+        if ran:
+            self._launch(to)
+        return ran
+
+    def train(self) -> int:
+        """Run every variant to the end of its schedule; returns the most cycles any variant ran."""
+        return self.step(int(self._iterations.max()))
+
+    @warp_exclusive
+    def _launch(self, to: np.ndarray) -> None:
+        dev, B = self.device, self.n_variants
+        s_from = wp.array(self._s.astype(np.int32), dtype=wp.int32, device=dev)
+        s_to = wp.array(to.astype(np.int32), dtype=wp.int32, device=dev)
+
+        def inputs(first: int) -> list:
+            return [self._w, self._moved, self._c, self._k_eff, self._m, self._mask, self._tables, self._table_row,
+                    self._lam, s_from, s_to, self._distances, self._offsets, self._neighbors, self._keys, first]
+
+        if dev == "cpu":
+            bounds = np.linspace(0, B, self._cores + 1).astype(int)
+            parts = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:]) if hi > lo]
+
+            def run(part):
+                lo, hi = part
+                wp.launch_tiled(self._kernel, dim=[hi - lo], block_dim=1, device=dev, inputs=inputs(lo))
+
+            if len(parts) == 1:
+                run(parts[0])
+            else:
+                with ThreadPoolExecutor(len(parts), thread_name_prefix="som-variants") as pool:
+                    list(pool.map(run, parts))
+        else:
+            wp.launch_tiled(self._kernel, dim=[B], block_dim=block_threads(self.n_neurons), device=dev,
+                            inputs=inputs(0))
+            wp.synchronize_device(dev)
+        self._s = to.astype(np.int64)
+
+
+def block_threads(n_neurons: int) -> int:
+    """Threads of a variant's block on CUDA: one per neuron, rounded up to whole warps, at most 1024."""
+    return min(_MOST_THREADS, max(32, (n_neurons + 31) // 32 * 32))

@@ -1,0 +1,176 @@
+"""The batched engine's kernel (batch.py): B variants of one mesh, a block of threads per variant, a whole run in
+one launch.
+
+A variant's cycles depend on each other only through its own weights, so one block can run all of them with block
+barriers in between, and B blocks run side by side with no host work and no grid-wide step. A cycle is the
+algorithm's three steps (DESIGN.md, "One iteration s"; the same arithmetic as kernels.py):
+
+1. winners: each thread scans its neurons (v = t, t + T, ...) for each control, the block takes the least winner
+   key (distance bits << 32 | index: the lowest index on a tie) with a warp reduction and one atomic min a warp in
+   shared memory; a barrier;
+2. move: each thread moves its neurons by the controls in list order, W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v), or
+   a mirrored pair at once (`move_pair`, scaled by 1 / max(1, l1 + l2));
+3. smoothing (a variant with lambda > 0): the moved weights go to a scratch array, a barrier, then one Jacobi step.
+
+Winner keys rotate through three buffers (cycle s fills buffer s % 3 and clears buffer s + 1), so one barrier a
+cycle is enough without smoothing. On the CPU, where Warp runs a block as one thread, the keys live in a global
+array instead of shared memory and the warp reduction is the thread's own minimum.
+"""
+
+
+import functools
+
+import warp as wp
+
+from .kernels import INDEX_MASK, KEY_NONE, UNREACHABLE, sync_block, winner_key
+
+#: Winner keys a block holds in shared memory: three buffers of up to 256 effective controls, uint64 each.
+MAX_KEYS = 256
+_SHARED_WORDS = 3 * MAX_KEYS * 2
+_SHARED = "extern __shared__ char dynamic_smem_base[]; unsigned long long* shared_keys = " \
+          "(unsigned long long*)dynamic_smem_base; "
+
+
+@wp.func_native("#if defined(__CUDA_ARCH__)\n" + _SHARED + """
+unsigned long long least = (unsigned long long)key;
+for (int offset = 16; offset > 0; offset >>= 1) {
+    unsigned long long other = __shfl_xor_sync(0xffffffffu, least, offset);
+    least = other < least ? other : least;
+}
+if ((threadIdx.x & 31) == 0) atomicMin(shared_keys + slot, least);
+#else
+if (key < keys.data[base + slot]) keys.data[base + slot] = key;
+#endif
+""")
+def offer_key(keys: wp.array(dtype=wp.uint64), base: int, slot: int, key: wp.uint64):
+    """The block's winner key of `slot` becomes the least of it and every thread's `key` (all 32 lanes of each warp
+    call this: T is a multiple of 32)."""
+    ...
+
+
+@wp.func_native("#if defined(__CUDA_ARCH__)\n" + _SHARED + "return shared_keys[slot];\n#else\n"
+                "return keys.data[base + slot];\n#endif\n")
+def read_key(keys: wp.array(dtype=wp.uint64), base: int, slot: int) -> wp.uint64: ...
+
+
+@wp.func_native("#if defined(__CUDA_ARCH__)\n" + _SHARED + "shared_keys[slot] = ~0ull;\n#else\n"
+                "keys.data[base + slot] = ~0ull;\n#endif\n")
+def clear_key(keys: wp.array(dtype=wp.uint64), base: int, slot: int): ...
+
+
+@wp.func
+def rate(tables: wp.array2d(dtype=wp.float32), row: int, hops: wp.uint16) -> wp.float32:
+    """L[s, d] from the variant's table row; 0 for a neuron the winner cannot reach."""
+    if hops == UNREACHABLE:
+        return wp.float32(0.0)
+    return tables[row, int(hops)]
+
+
+@functools.cache
+def variants_kernel(n_dims: int, pairs: bool, cuda: bool):
+    """The kernel for weights of n_dims features; with `pairs` the effective controls come as mirrored pairs, each
+    original next to its copy. `cuda`: the keys in shared memory (on the CPU Warp's shared tiles are one static
+    buffer, which concurrent launches on several cores would share)."""
+    vec = wp.types.vector(length=n_dims, dtype=wp.float32)
+
+    @wp.func
+    def distance(target: vec, w: vec, metric: vec) -> wp.float32:
+        diff = target - w
+        return wp.dot(wp.cw_mul(diff, metric), diff)
+
+    @wp.func
+    def move_pair(w: vec, l1: wp.float32, l2: wp.float32, a: vec, b: vec) -> vec:
+        """W + (l1 (A - W) + l2 (B - W)) / max(1, l1 + l2), in the mirror-exact form of kernels.cycle_kernels."""
+        m = wp.float32(0.5) * (l1 + l2)
+        h = wp.float32(0.5) * (l1 - l2)
+        step = m * ((a + b) - wp.float32(2.0) * w) + h * (a - b)
+        return w + step / wp.max(wp.float32(1.0), l1 + l2)
+
+    @wp.func
+    def winner(keys: wp.array(dtype=wp.uint64), base: int, slot: int) -> int:
+        return int(read_key(keys, base, slot) & INDEX_MASK)
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def train_variants(
+        weights: wp.array2d(dtype=vec),
+        moved: wp.array2d(dtype=vec),
+        controls: wp.array2d(dtype=vec),
+        n_controls: int,
+        metric: wp.array(dtype=vec),
+        mask: wp.array(dtype=vec),
+        tables: wp.array2d(dtype=wp.float32),
+        table_row: wp.array(dtype=wp.int32),
+        smoothing: wp.array(dtype=wp.float32),
+        s_from: wp.array(dtype=wp.int32),
+        s_to: wp.array(dtype=wp.int32),
+        distances: wp.array2d(dtype=wp.uint16),
+        offsets: wp.array(dtype=wp.int32),
+        neighbors: wp.array(dtype=wp.int32),
+        keys: wp.array(dtype=wp.uint64),
+        first: int,
+    ):
+        """Cycles s_from[b] .. s_to[b] - 1 of variant b = first + block (weights[b], controls[b], its table from row
+        table_row[b], its smoothing). `moved` is scratch for smoothing; `keys` holds the winner keys on the CPU."""
+        block, t = wp.tid()
+        b = first + block
+        threads = wp.block_dim()
+        if wp.static(cuda):
+            reserved = wp.tile_zeros(shape=(_SHARED_WORDS,), dtype=wp.int32, storage="shared")  # noqa: F841 (keys)
+        n = weights.shape[1]
+        k = n_controls
+        base = b * 3 * k  # the variant's keys in `keys` (CPU only)
+        m = metric[0]
+        lam = smoothing[b]
+        pull = lam * mask[0]
+        s0 = s_from[b]
+        if t == 0:
+            for c in range(k):
+                clear_key(keys, base, (s0 % 3) * k + c)
+        sync_block()
+        for s in range(s0, s_to[b]):
+            buf = (s % 3) * k
+            if t == 0:
+                for c in range(k):
+                    clear_key(keys, base, ((s + 1) % 3) * k + c)
+            # 1. winners from W(s)
+            for c in range(k):
+                target = controls[b, c]
+                best = KEY_NONE
+                for v in range(t, n, threads):
+                    key = winner_key(distance(target, weights[b, v], m), v)
+                    best = wp.min(best, key)
+                offer_key(keys, base, buf + c, best)
+            sync_block()
+            # 2. every neuron applies the controls in list order (pairs at once)
+            row = table_row[b] + s
+            for v in range(t, n, threads):
+                w = weights[b, v]
+                if wp.static(pairs):
+                    for c in range(0, k, 2):
+                        l1 = rate(tables, row, distances[winner(keys, base, buf + c), v])
+                        l2 = rate(tables, row, distances[winner(keys, base, buf + c + 1), v])
+                        w = move_pair(w, l1, l2, controls[b, c], controls[b, c + 1])
+                else:
+                    for c in range(k):
+                        r = rate(tables, row, distances[winner(keys, base, buf + c), v])
+                        w = w + r * (controls[b, c] - w)
+                if lam > wp.float32(0.0):
+                    moved[b, v] = w
+                else:
+                    weights[b, v] = w
+            # 3. one Jacobi step of Laplacian smoothing from the moved weights
+            if lam > wp.float32(0.0):
+                sync_block()
+                for v in range(t, n, threads):
+                    w = moved[b, v]
+                    lo = offsets[v]
+                    hi = offsets[v + 1]
+                    if hi > lo:
+                        total = vec()
+                        for e in range(lo, hi):
+                            total += moved[b, neighbors[e]]
+                        w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
+                    weights[b, v] = w
+
+    return train_variants
+

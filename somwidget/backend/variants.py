@@ -1,0 +1,234 @@
+"""Design variants: what a sweep runs (`VariantPlan`), how its variants are drawn from a seed (`plan_variants`), and
+running them in batches here or on a Dask cluster (`run_plan`), with the figures that compare them (`figures`).
+
+numpy and Warp only: a Dask worker needs nothing else. A plan carries the mesh as an edge list, so it pickles small;
+a worker rebuilds the topology once per mesh.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from . import checks, metrics
+from .batch import MAX_TABLE_ENTRIES, SCHEDULE_KEYS, BatchSom
+from .topology import Topology
+
+#: What each schedule parameter may be (Som's checks): (low, high, whole numbers).
+PARAMETER_BOUNDS = {"iterations": (1, 1_000_000, True), "l_start": (0.0, 1.0, False), "l_end": (0.0, 1.0, False),
+                    "smoothing": (0.0, 1.0, False), "reach": (0.0, 1.0, False)}
+FIGURES = ("gap", "spike", "symmetry", "size")
+
+
+@dataclass(frozen=True)
+class VariantPlan:
+    """n variants of one mesh: their controls (n, k, dims) and schedules (each key of SCHEDULE_KEYS: (n,)).
+
+    restart False: each variant is a whole run from `start` (as `Som.reset()` then `train()`); True: each is a local
+    restart from `start` (a session's current weights), as a move of its controls would be."""
+
+    n_vertices: int
+    edges: np.ndarray
+    start: np.ndarray
+    controls: np.ndarray
+    schedules: dict
+    restart: bool = False
+    mirror: tuple[int, ...] = ()
+    smooth_dims: tuple[int, ...] | None = None
+    metric_weights: np.ndarray | None = None
+    position_dims: tuple[int, ...] = (0, 1, 2)
+    mesh_key: str = field(default="", compare=False)
+
+    @property
+    def n_variants(self) -> int:
+        return len(self.controls)
+
+    def part(self, lo: int, hi: int) -> VariantPlan:
+        """Variants lo .. hi - 1 as a plan of their own."""
+        return replace(self, controls=self.controls[lo:hi],
+                       schedules={key: values[lo:hi] for key, values in self.schedules.items()})
+
+    def params(self, i: int) -> dict:
+        """Variant i's schedule as a dict (iterations an int)."""
+        return {key: (int(v[i]) if key == "iterations" else float(v[i])) for key, v in self.schedules.items()}
+
+
+def _draw(name: str, spec, base, n: int, rng: np.random.Generator) -> np.ndarray:
+    """n values of one parameter: the base value (spec None), uniform in a (low, high) range, or drawn from a list."""
+    low, high, whole = PARAMETER_BOUNDS[name]
+
+    def check(x):
+        if whole:
+            return checks.integer(f"params[{name!r}]", x, max(1, int(low)), int(high))
+        return checks.real(f"params[{name!r}]", x, low, high, low_open=name in ("l_start", "l_end", "reach"))
+
+    if spec is None:
+        return np.full(n, check(base), np.float64)
+    if isinstance(spec, tuple):
+        if len(spec) != 2:
+            raise ValueError(f"params[{name!r}]: a range is (low, high), got {spec!r}")
+        lo, hi = check(spec[0]), check(spec[1])
+        if lo > hi:
+            raise ValueError(f"params[{name!r}]: the range's low {lo} is above its high {hi}")
+        if whole:
+            return rng.integers(lo, hi + 1, n).astype(np.float64)
+        return rng.uniform(lo, hi, n)
+    if isinstance(spec, (list, np.ndarray)):
+        values = [check(x) for x in list(spec)]
+        if not values:
+            raise ValueError(f"params[{name!r}]: the list of values is empty")
+        return np.asarray(values, np.float64)[rng.integers(0, len(values), n)]
+    return np.full(n, check(spec), np.float64)
+
+
+def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: int, jitter: float = 0.05,
+                  params: Mapping | None = None, seed: int = 0, restart: bool = False, mirror: Sequence[int] = (),
+                  smooth_dims=None, metric_weights=None, position_dims: Sequence[int] = (0, 1, 2)) -> VariantPlan:
+    """n variants around one design. Each control moves by up to `jitter` times the model's size (its bounding
+    diagonal), in a direction and by a share drawn uniformly in a ball; `params` maps a schedule parameter to a
+    (low, high) range, a list of values or one value (the others keep `base_params`). The same seed gives the same
+    variants."""
+    n = checks.integer("n", n, 1, 1_000_000)
+    jitter = checks.real("jitter", jitter, 0.0, 1.0)
+    params = dict(params or {})
+    unknown = sorted(set(params) - set(SCHEDULE_KEYS))
+    if unknown:
+        raise ValueError(f"params: unknown parameter(s) {unknown}; expected some of {list(SCHEDULE_KEYS)}")
+    start = checks.finite_array("weights", start, 2)
+    base = checks.finite_array("controls", controls, 2)
+    dims = [d for d in position_dims if d < start.shape[1]]
+    size = metrics.bounding_diagonal(start[:, dims]) or 1.0
+    rng = np.random.default_rng(checks.integer("seed", seed, 0))
+    k = len(base)
+    direction = rng.normal(size=(n, k, len(dims)))
+    direction /= np.maximum(np.linalg.norm(direction, axis=2, keepdims=True), 1e-12)
+    radius = jitter * size * rng.uniform(size=(n, k, 1)) ** (1.0 / max(1, len(dims)))
+    out = np.repeat(base[None].astype(np.float64), n, axis=0)
+    out[:, :, dims] += direction * radius
+    schedules = {key: _draw(key, params.get(key), base_params[key], n, rng) for key in SCHEDULE_KEYS}
+    schedules["iterations"] = schedules["iterations"].astype(np.int64)
+    edges = np.ascontiguousarray(np.asarray(topology.edges, np.int32).reshape(-1, 2))
+    key = hashlib.sha1(edges.tobytes() + str(topology.n_vertices).encode()).hexdigest()
+    return VariantPlan(n_vertices=topology.n_vertices, edges=edges, start=start, controls=out.astype(np.float32),
+                       schedules=schedules, restart=bool(restart), mirror=tuple(mirror),
+                       smooth_dims=None if smooth_dims is None else tuple(smooth_dims),
+                       metric_weights=None if metric_weights is None else np.asarray(metric_weights, np.float32),
+                       position_dims=tuple(dims), mesh_key=key)
+
+
+@functools.lru_cache(maxsize=4)
+def _topology(key: str, n_vertices: int, edges_bytes: bytes) -> Topology:
+    edges = np.frombuffer(edges_bytes, np.int32).reshape(-1, 2)
+    return Topology.from_edges(edges, n_vertices)
+
+
+def topology_of(plan: VariantPlan) -> Topology:
+    """The plan's mesh, built once per process (a Dask worker keeps it for the next batch)."""
+    return _topology(plan.mesh_key, plan.n_vertices, plan.edges.tobytes())
+
+
+def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray, dict]:
+    """Train every variant of `plan` in one batch on `device` (None: this process's GPU when there is one):
+    (weights (n, N, dims) float32, figures: each of FIGURES an (n,) array)."""
+    s = plan.schedules
+    som = BatchSom(topology_of(plan), plan.start, plan.controls, iterations=s["iterations"], l_start=s["l_start"],
+                   l_end=s["l_end"], smoothing=s["smoothing"], reach=s["reach"], smooth_dims=plan.smooth_dims,
+                   metric_weights=plan.metric_weights, mirror=plan.mirror, device=device)
+    if plan.restart:
+        som.restart()
+    som.train()
+    weights = som.weights
+    return weights, figures(plan, weights)
+
+
+def figures(plan: VariantPlan, weights: np.ndarray) -> dict:
+    """Per variant, over the model's size where a length: `gap` the largest distance from a control (mirrored copies
+    included) to its nearest node, `spike` the largest spike figure of the winners (median edge lengths;
+    metrics.spike_figures), `symmetry` the mirror error (metrics.symmetry_error; 0 without a mirrored position
+    dim), `size` the bounding diagonal."""
+    dims = list(plan.position_dims)
+    topology = topology_of(plan)
+    mirror_dims = [dims.index(m) for m in plan.mirror if m in dims]
+    pairing = metrics.mirror_map(plan.start[:, dims], mirror_dims[0]) if mirror_dims else None
+    out = {name: np.zeros(len(weights)) for name in FIGURES}
+    for i, w in enumerate(weights):
+        p = w[:, dims].astype(np.float64)
+        size = metrics.bounding_diagonal(p) or 1.0
+        controls = plan.controls[i].astype(np.float64)
+        if plan.mirror:
+            image = controls.copy()
+            image[:, list(plan.mirror)] *= -1.0
+            controls = np.concatenate([controls, image])
+        targets = controls[:, dims]
+        diff = targets[:, None, :] - p[None, :, :]
+        nearest = np.einsum("knd,knd->kn", diff, diff).argmin(axis=1)
+        out["gap"][i] = float(np.linalg.norm(targets - p[nearest], axis=1).max()) / size
+        out["spike"][i] = float(metrics.spike_figures(p, topology, np.unique(nearest)).max(initial=0.0))
+        out["symmetry"][i] = metrics.symmetry_error(p, pairing, mirror_dims[0]) if pairing is not None else 0.0
+        out["size"][i] = size
+    return out
+
+
+def batch_size_for(plan: VariantPlan, device: str) -> int:
+    """Variants a batch holds: on a GPU as many as the table limit allows (the whole plan, mostly); on the CPU a few
+    per core, so that progress shows."""
+    per_variant = int(plan.schedules["iterations"].max()) * (int(topology_of(plan).d_max) + 1)
+    most = max(1, MAX_TABLE_ENTRIES // max(1, per_variant))
+    return min(most, 4096 if device != "cpu" else 32)
+
+
+Progress = Callable[[int, int], None]
+
+
+def run_plan(plan: VariantPlan, device: str | None = None, client=None, batch_size: int | None = None,
+             progress: Progress | None = None) -> tuple[np.ndarray, dict]:
+    """Every variant of `plan`, in batches: here on `device`, or with a `dask.distributed.Client` on its workers
+    (each batch one task; a worker trains on its own GPU when it has one, unless `device` says otherwise). The
+    results are the same either way. progress(done, total) is called as variants finish."""
+    from .device import resolve
+
+    n = plan.n_variants
+    if client is None:
+        device = resolve(device)
+    size = batch_size or (batch_size_for(plan, device) if client is None else _dask_batch(plan, client))
+    size = checks.integer("batch_size", size, 1)
+    bounds = [(lo, min(n, lo + size)) for lo in range(0, n, size)]
+    weights = np.empty((n, plan.n_vertices, plan.start.shape[1]), np.float32)
+    figs = {name: np.zeros(n) for name in FIGURES}
+    done = 0
+
+    def collect(lo: int, result) -> None:
+        nonlocal done
+        w, f = result
+        weights[lo:lo + len(w)] = w
+        for name in FIGURES:
+            figs[name][lo:lo + len(w)] = f[name]
+        done += len(w)
+        if progress is not None:
+            progress(done, n)
+
+    if client is None:
+        for lo, hi in bounds:
+            collect(lo, run_batch(plan.part(lo, hi), device))
+        return weights, figs
+    from distributed import as_completed
+
+    futures = {client.submit(run_batch, plan.part(lo, hi), device, pure=False): lo for lo, hi in bounds}
+    try:
+        for future in as_completed(futures):
+            collect(futures[future], future.result())
+    finally:
+        for future in futures:
+            future.cancel()
+    return weights, figs
+
+
+def _dask_batch(plan: VariantPlan, client) -> int:
+    """Four batches a worker (at least one variant each), so a slow worker does not hold the end up."""
+    workers = max(1, len(client.scheduler_info().get("workers", {})))
+    return max(1, math.ceil(plan.n_variants / (4 * workers)))
