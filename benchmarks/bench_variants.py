@@ -121,7 +121,7 @@ def main(argv=None) -> None:
     parser.add_argument("--car", type=int, default=1024, help="car variants (default 1024)")
     parser.add_argument("--grid", type=int, default=256, help="space-grid variants (default 256)")
     parser.add_argument("--singles", type=int, default=None, help="single runs to time (default: all)")
-    parser.add_argument("--threads", default="64,128,256,512,1024", help="block sizes to try on CUDA")
+    parser.add_argument("--threads", default="128,256,512,1024", help="block sizes to try on CUDA")
     args = parser.parse_args(argv)
     device = resolve(args.device)
     threads = [int(x) for x in args.threads.split(",") if x]

@@ -137,7 +137,7 @@ class BatchSom:
         dev = self.device
         self._tables, rows = self._build_tables()
         vec = wp.types.vector(length=n, dtype=wp.float32)
-        self._kernel = variants_kernel(n, bool(self._mirror), self.device != "cpu")
+        self._pairs = bool(self._mirror)
         self._distances = topology.distance_table(dev)
         self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=dev)
         neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
@@ -273,10 +273,11 @@ class BatchSom:
         if dev == "cpu":
             bounds = np.linspace(0, B, self._cores + 1).astype(int)
             parts = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:]) if hi > lo]
+            kernel = variants_kernel(self.n_dims, self._pairs, False)
 
             def run(part):
                 lo, hi = part
-                wp.launch_tiled(self._kernel, dim=[hi - lo], block_dim=1, device=dev, inputs=inputs(lo))
+                wp.launch_tiled(kernel, dim=[hi - lo], block_dim=1, device=dev, inputs=inputs(lo))
 
             if len(parts) == 1:
                 run(parts[0])
@@ -284,8 +285,9 @@ class BatchSom:
                 with ThreadPoolExecutor(len(parts), thread_name_prefix="som-variants") as pool:
                     list(pool.map(run, parts))
         else:
-            wp.launch_tiled(self._kernel, dim=[B], block_dim=block_threads(self.n_neurons), device=dev,
-                            inputs=inputs(0))
+            threads = block_threads(self.n_neurons)
+            kernel = variants_kernel(self.n_dims, self._pairs, True, threads)
+            wp.launch_tiled(kernel, dim=[B], block_dim=threads, device=dev, inputs=inputs(0))
             wp.synchronize_device(dev)
         self._s = to.astype(np.int64)
 

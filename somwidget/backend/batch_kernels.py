@@ -66,12 +66,20 @@ def rate(tables: wp.array2d(dtype=wp.float32), row: int, hops: wp.uint16) -> wp.
     return tables[row, int(hops)]
 
 
+#: Controls whose rates a thread looks up at once (their loads overlap), and whose winners it searches for at once.
+GATHER = 8
+SEARCH = 4
+
+
 @functools.cache
-def variants_kernel(n_dims: int, pairs: bool, cuda: bool):
+def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024):
     """The kernel for weights of n_dims features; with `pairs` the effective controls come as mirrored pairs, each
     original next to its copy. `cuda`: the keys in shared memory (on the CPU Warp's shared tiles are one static
-    buffer, which concurrent launches on several cores would share)."""
+    buffer, which concurrent launches on several cores would share), blocks of at most `threads` threads."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
+    rates = wp.types.vector(length=GATHER, dtype=wp.float32)
+    keys4 = wp.types.vector(length=SEARCH, dtype=wp.uint64)
+    options = {"max_unroll": 32}
 
     @wp.func
     def distance(target: vec, w: vec, metric: vec) -> wp.float32:
@@ -87,10 +95,42 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool):
         return w + step / wp.max(wp.float32(1.0), l1 + l2)
 
     @wp.func
-    def winner(keys: wp.array(dtype=wp.uint64), base: int, slot: int) -> int:
-        return int(read_key(keys, base, slot) & INDEX_MASK)
+    def search(weights: wp.array2d(dtype=vec), controls: wp.array2d(dtype=vec), b: int, c0: int, k: int, m: vec,
+               t: int, threads: int, keys: wp.array(dtype=wp.uint64), base: int, buf: int):
+        """Step 1 for controls c0 .. c0 + SEARCH - 1 (past k: the last one again) over this thread's neurons."""
+        best = keys4()
+        for g in range(SEARCH):
+            best[g] = KEY_NONE
+        for v in range(t, weights.shape[1], threads):
+            w = weights[b, v]
+            for g in range(SEARCH):
+                best[g] = wp.min(best[g], winner_key(distance(controls[b, wp.min(c0 + g, k - 1)], w, m), v))
+        for g in range(SEARCH):
+            if c0 + g < k:
+                offer_key(keys, base, buf + c0 + g, best[g])
 
-    @wp.kernel(enable_backward=False, module="unique")
+    @wp.func
+    def moved_weight(w: vec, v: int, b: int, controls: wp.array2d(dtype=vec), k: int,
+                     tables: wp.array2d(dtype=wp.float32), row: int, distances: wp.array2d(dtype=wp.uint16),
+                     keys: wp.array(dtype=wp.uint64), base: int, buf: int) -> vec:
+        """Step 2 for neuron v: the controls in list order (pairs at once), their rates looked up GATHER at a time
+        (past k a rate of 0, which leaves w as it is)."""
+        for c0 in range(0, k, GATHER):
+            r = rates()
+            for g in range(GATHER):
+                c = wp.min(c0 + g, k - 1)
+                hops = distances[int(read_key(keys, base, buf + c) & INDEX_MASK), v]
+                r[g] = wp.where(c0 + g < k, rate(tables, row, hops), wp.float32(0.0))
+            if wp.static(pairs):
+                for g in range(0, GATHER, 2):
+                    w = move_pair(w, r[g], r[g + 1], controls[b, wp.min(c0 + g, k - 1)],
+                                  controls[b, wp.min(c0 + g + 1, k - 1)])
+            else:
+                for g in range(GATHER):
+                    w = w + r[g] * (controls[b, wp.min(c0 + g, k - 1)] - w)
+        return w
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options, launch_bounds=(threads, 1))
     def train_variants(
         weights: wp.array2d(dtype=vec),
         moved: wp.array2d(dtype=vec),
@@ -133,27 +173,13 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool):
                 for c in range(k):
                     clear_key(keys, base, ((s + 1) % 3) * k + c)
             # 1. winners from W(s)
-            for c in range(k):
-                target = controls[b, c]
-                best = KEY_NONE
-                for v in range(t, n, threads):
-                    key = winner_key(distance(target, weights[b, v], m), v)
-                    best = wp.min(best, key)
-                offer_key(keys, base, buf + c, best)
+            for c0 in range(0, k, SEARCH):
+                search(weights, controls, b, c0, k, m, t, threads, keys, base, buf)
             sync_block()
             # 2. every neuron applies the controls in list order (pairs at once)
             row = table_row[b] + s
             for v in range(t, n, threads):
-                w = weights[b, v]
-                if wp.static(pairs):
-                    for c in range(0, k, 2):
-                        l1 = rate(tables, row, distances[winner(keys, base, buf + c), v])
-                        l2 = rate(tables, row, distances[winner(keys, base, buf + c + 1), v])
-                        w = move_pair(w, l1, l2, controls[b, c], controls[b, c + 1])
-                else:
-                    for c in range(k):
-                        r = rate(tables, row, distances[winner(keys, base, buf + c), v])
-                        w = w + r * (controls[b, c] - w)
+                w = moved_weight(weights[b, v], v, b, controls, k, tables, row, distances, keys, base, buf)
                 if lam > wp.float32(0.0):
                     moved[b, v] = w
                 else:
@@ -173,4 +199,3 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool):
                     weights[b, v] = w
 
     return train_variants
-
