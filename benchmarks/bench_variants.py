@@ -61,33 +61,36 @@ def floors(p, plan, device) -> tuple[float, float, float]:
     return flops, nbytes, floor
 
 
-def bench(name: str, n: int, device: str, singles: int, threads: list[int]) -> None:
+def bench(name: str, n: int, device: str, singles: int, configs: list[tuple]) -> None:
     p, plan = plan_for(name, n)
     sync = (lambda: wp.synchronize_device(device)) if device != "cpu" else (lambda: None)
     make_batch(p, plan.part(0, 2), device).train()  # compile
     print(f"\n{name}: {n} variants of N = {p.n_vertices}, S = {p.iterations}, {len(p.controls)} controls"
           f"{' (mirrored)' if p.mirror else ''}, smoothing {p.smoothing} on {device} ({wp.get_device(device).name})")
     best = None
-    default = batch.block_threads(p.n_vertices)
-    for t in ([default] + [x for x in threads if x != default]) if device != "cpu" else [1]:
-        batch.block_threads = lambda n_neurons, t=t: t
+    shapes = [batch.cuda_shape(p.n_vertices)] + [dict(zip(("threads", "min_blocks", "gather", "searched"), c))
+                                                   for c in configs] if device != "cpu" else [{"threads": 1}]
+    default_shape = batch.cuda_shape
+    for shape in shapes:
+        batch.cuda_shape = lambda n_neurons, shape=shape: shape
+        make_batch(p, plan.part(0, 2), device).train()  # compile this shape
         som = make_batch(p, plan, device)
         sync()
         t0 = time.perf_counter()
         som.train()
         sync()
         train = time.perf_counter() - t0
-        print(f"  batched, {t:4d} threads a variant: training {train * 1e3:8.2f} ms")
+        print(f"  batched, {shape}: training {train * 1e3:8.2f} ms")
         if best is None or train < best[1]:
-            best = (t, train)
-    batch.block_threads = lambda n_neurons, t=best[0]: t
+            best = (shape, train)
+    batch.cuda_shape = lambda n_neurons, shape=best[0]: shape
     sync()
     t0 = time.perf_counter()
     som = make_batch(p, plan, device)
     som.train()
     weights = som.weights
     whole = time.perf_counter() - t0
-    print(f"  batched, all in (set-up, upload, training, weights back; {best[0]} threads): {whole * 1e3:.2f} ms")
+    print(f"  batched, all in (set-up, upload, training, weights back; {best[0]}): {whole * 1e3:.2f} ms")
 
     count = min(singles, n)
     single = Som(p.topology, p.weights, plan.controls[0], iterations=p.iterations, l_start=p.l_start, l_end=p.l_end,
@@ -110,6 +113,7 @@ def bench(name: str, n: int, device: str, singles: int, threads: list[int]) -> N
           + (f" (x {n / count:.0f}: {scaled * 1e3:.0f} ms for {n})" if count < n else ""))
     print(f"  batched / single runs: {scaled / best[1]:.0f} x faster (training); largest weight difference "
           f"from the single runs (first 8): {diff:.2e}")
+    batch.cuda_shape = default_shape
     flops, nbytes, floor = floors(p, plan, device)
     print(f"  floors: {flops / 1e9:.1f} GFLOP, {nbytes / 1e6:.1f} MB once through memory -> {floor * 1e3:.2f} ms "
           f"at the data-sheet peaks; training runs at {floor / best[1] * 100:.1f}% of that floor")
@@ -121,12 +125,13 @@ def main(argv=None) -> None:
     parser.add_argument("--car", type=int, default=1024, help="car variants (default 1024)")
     parser.add_argument("--grid", type=int, default=256, help="space-grid variants (default 256)")
     parser.add_argument("--singles", type=int, default=None, help="single runs to time (default: all)")
-    parser.add_argument("--threads", default="128,256,512,1024", help="block sizes to try on CUDA")
+    parser.add_argument("--shapes", default="",
+                        help="CUDA kernel shapes to try beside the default: threads:min_blocks:gather:searched,...")
     args = parser.parse_args(argv)
     device = resolve(args.device)
-    threads = [int(x) for x in args.threads.split(",") if x]
-    bench("car", args.car, device, args.singles or args.car, threads)
-    bench("space-grid", args.grid, device, args.singles or args.grid, threads)
+    configs = [tuple(int(v) for v in x.split(":")) for x in args.shapes.split(",") if x]
+    bench("car", args.car, device, args.singles or args.car, configs)
+    bench("space-grid", args.grid, device, args.singles or args.grid, configs)
 
 
 if __name__ == "__main__":

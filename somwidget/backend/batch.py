@@ -22,7 +22,7 @@ import warp as wp
 from numpy.typing import ArrayLike
 
 from . import checks
-from .batch_kernels import MAX_KEYS, variants_kernel
+from .batch_kernels import GATHER, MAX_KEYS, SEARCH, variants_kernel
 from .device import resolve, warp_exclusive, warp_lock
 from .schedule import learning_table
 from .som import MAX_CONTROLS, MAX_DIMS, restart_iteration
@@ -285,13 +285,15 @@ class BatchSom:
                 with ThreadPoolExecutor(len(parts), thread_name_prefix="som-variants") as pool:
                     list(pool.map(run, parts))
         else:
-            threads = block_threads(self.n_neurons)
-            kernel = variants_kernel(self.n_dims, self._pairs, True, threads)
-            wp.launch_tiled(kernel, dim=[B], block_dim=threads, device=dev, inputs=inputs(0))
+            shape = cuda_shape(self.n_neurons)
+            kernel = variants_kernel(self.n_dims, self._pairs, True, **shape)
+            wp.launch_tiled(kernel, dim=[B], block_dim=shape["threads"], device=dev, inputs=inputs(0))
             wp.synchronize_device(dev)
         self._s = to.astype(np.int64)
 
 
-def block_threads(n_neurons: int) -> int:
-    """Threads of a variant's block on CUDA: one per neuron, rounded up to whole warps, at most 1024."""
-    return min(_MOST_THREADS, max(32, (n_neurons + 31) // 32 * 32))
+def cuda_shape(n_neurons: int) -> dict:
+    """The CUDA kernel's shape for a mesh (batch_kernels.variants_kernel's arguments): a thread per neuron, rounded
+    up to whole warps, at most 1024; the block sizes and groupings chosen by measurement (BENCHMARKS.md)."""
+    return {"threads": min(_MOST_THREADS, max(32, (n_neurons + 31) // 32 * 32)), "min_blocks": 1,
+            "gather": GATHER, "searched": SEARCH}

@@ -72,13 +72,15 @@ SEARCH = 4
 
 
 @functools.cache
-def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024):
+def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, min_blocks: int = 1,
+                    gather: int = GATHER, searched: int = SEARCH):
     """The kernel for weights of n_dims features; with `pairs` the effective controls come as mirrored pairs, each
     original next to its copy. `cuda`: the keys in shared memory (on the CPU Warp's shared tiles are one static
-    buffer, which concurrent launches on several cores would share), blocks of at most `threads` threads."""
+    buffer, which concurrent launches on several cores would share), blocks of at most `threads` threads of which
+    `min_blocks` fit an SM at once (the compiler's register budget); `gather`, `searched`: GATHER, SEARCH."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
-    rates = wp.types.vector(length=GATHER, dtype=wp.float32)
-    keys4 = wp.types.vector(length=SEARCH, dtype=wp.uint64)
+    rates = wp.types.vector(length=gather, dtype=wp.float32)
+    keys4 = wp.types.vector(length=searched, dtype=wp.uint64)
     options = {"max_unroll": 32}
 
     @wp.func
@@ -92,20 +94,22 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024):
         m = wp.float32(0.5) * (l1 + l2)
         h = wp.float32(0.5) * (l1 - l2)
         step = m * ((a + b) - wp.float32(2.0) * w) + h * (a - b)
-        return w + step / wp.max(wp.float32(1.0), l1 + l2)
+        if l1 + l2 > wp.float32(1.0):  # else a division by 1, which changes no bit
+            step = step / (l1 + l2)
+        return w + step
 
     @wp.func
     def search(weights: wp.array2d(dtype=vec), controls: wp.array2d(dtype=vec), b: int, c0: int, k: int, m: vec,
                t: int, threads: int, keys: wp.array(dtype=wp.uint64), base: int, buf: int):
-        """Step 1 for controls c0 .. c0 + SEARCH - 1 (past k: the last one again) over this thread's neurons."""
+        """Step 1 for controls c0 .. c0 + searched - 1 (past k: the last one again) over this thread's neurons."""
         best = keys4()
-        for g in range(SEARCH):
+        for g in range(searched):
             best[g] = KEY_NONE
         for v in range(t, weights.shape[1], threads):
             w = weights[b, v]
-            for g in range(SEARCH):
+            for g in range(searched):
                 best[g] = wp.min(best[g], winner_key(distance(controls[b, wp.min(c0 + g, k - 1)], w, m), v))
-        for g in range(SEARCH):
+        for g in range(searched):
             if c0 + g < k:
                 offer_key(keys, base, buf + c0 + g, best[g])
 
@@ -113,24 +117,24 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024):
     def moved_weight(w: vec, v: int, b: int, controls: wp.array2d(dtype=vec), k: int,
                      tables: wp.array2d(dtype=wp.float32), row: int, distances: wp.array2d(dtype=wp.uint16),
                      keys: wp.array(dtype=wp.uint64), base: int, buf: int) -> vec:
-        """Step 2 for neuron v: the controls in list order (pairs at once), their rates looked up GATHER at a time
+        """Step 2 for neuron v: the controls in list order (pairs at once), their rates looked up gather at a time
         (past k a rate of 0, which leaves w as it is)."""
-        for c0 in range(0, k, GATHER):
+        for c0 in range(0, k, gather):
             r = rates()
-            for g in range(GATHER):
+            for g in range(gather):
                 c = wp.min(c0 + g, k - 1)
                 hops = distances[int(read_key(keys, base, buf + c) & INDEX_MASK), v]
                 r[g] = wp.where(c0 + g < k, rate(tables, row, hops), wp.float32(0.0))
             if wp.static(pairs):
-                for g in range(0, GATHER, 2):
+                for g in range(0, gather, 2):
                     w = move_pair(w, r[g], r[g + 1], controls[b, wp.min(c0 + g, k - 1)],
                                   controls[b, wp.min(c0 + g + 1, k - 1)])
             else:
-                for g in range(GATHER):
+                for g in range(gather):
                     w = w + r[g] * (controls[b, wp.min(c0 + g, k - 1)] - w)
         return w
 
-    @wp.kernel(enable_backward=False, module="unique", module_options=options, launch_bounds=(threads, 1))
+    @wp.kernel(enable_backward=False, module="unique", module_options=options, launch_bounds=(threads, min_blocks))
     def train_variants(
         weights: wp.array2d(dtype=vec),
         moved: wp.array2d(dtype=vec),
@@ -173,7 +177,7 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024):
                 for c in range(k):
                     clear_key(keys, base, ((s + 1) % 3) * k + c)
             # 1. winners from W(s)
-            for c0 in range(0, k, SEARCH):
+            for c0 in range(0, k, searched):
                 search(weights, controls, b, c0, k, m, t, threads, keys, base, buf)
             sync_block()
             # 2. every neuron applies the controls in list order (pairs at once)
