@@ -293,7 +293,9 @@ class BatchSom:
 
 
 def cuda_shape(n_neurons: int) -> dict:
-    """The CUDA kernel's shape for a mesh (batch_kernels.variants_kernel's arguments): a thread per neuron, rounded
-    up to whole warps, at most 1024; the block sizes and groupings chosen by measurement (BENCHMARKS.md)."""
-    return {"threads": min(_MOST_THREADS, max(32, (n_neurons + 31) // 32 * 32)), "min_blocks": 1,
-            "gather": GATHER, "searched": SEARCH}
+    """The CUDA kernel's shape for a mesh (batch_kernels.variants_kernel's arguments), chosen by measurement on an
+    H200 (BENCHMARKS.md, "Variants"): up to 1,024 neurons small blocks of 128 threads, twelve to an SM (faster
+    for the car than a thread per neuron); past that 1,024 threads a block (the space grid)."""
+    if n_neurons <= 1024:
+        return {"threads": 128, "min_blocks": 12, "gather": GATHER, "searched": SEARCH}
+    return {"threads": _MOST_THREADS, "min_blocks": 1, "gather": GATHER, "searched": SEARCH}

@@ -81,6 +81,7 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     rates = wp.types.vector(length=gather, dtype=wp.float32)
     keys4 = wp.types.vector(length=searched, dtype=wp.uint64)
+    targets_of = wp.types.matrix(shape=(searched, n_dims), dtype=wp.float32)
     options = {"max_unroll": 32}
 
     @wp.func
@@ -103,12 +104,14 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
                t: int, threads: int, keys: wp.array(dtype=wp.uint64), base: int, buf: int):
         """Step 1 for controls c0 .. c0 + searched - 1 (past k: the last one again) over this thread's neurons."""
         best = keys4()
+        targets = targets_of()
         for g in range(searched):
             best[g] = KEY_NONE
+            targets[g] = controls[b, wp.min(c0 + g, k - 1)]
         for v in range(t, weights.shape[1], threads):
             w = weights[b, v]
             for g in range(searched):
-                best[g] = wp.min(best[g], winner_key(distance(controls[b, wp.min(c0 + g, k - 1)], w, m), v))
+                best[g] = wp.min(best[g], winner_key(distance(targets[g], w, m), v))
         for g in range(searched):
             if c0 + g < k:
                 offer_key(keys, base, buf + c0 + g, best[g])
