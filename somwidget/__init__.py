@@ -27,6 +27,18 @@ def render(what, path=None, **kwargs):
     return _render(what, path, **kwargs)
 
 
+def sweep(preset_or_session="car", n: int = 64, jitter: float = 0.05, params=None, seed: int = 0, device=None,
+          client=None, **kwargs):
+    """Train n design variants at once (batched on the GPU, or over a Dask cluster with `client`) and return them as
+    `Variants`: controls, weights, params, metrics, picture(), apply(i) / session(i).
+
+    See somwidget.frontend.variants.sweep for the arguments."""
+    from .frontend.variants import sweep as _sweep
+
+    return _sweep(preset_or_session, n=n, jitter=jitter, params=params, seed=seed, device=device, client=client,
+                  **kwargs)
+
+
 def serve(preset: str | None = None, mesh=None, host: str | None = None, port: int = 8080, device: str = "auto",
           open_browser: bool = False, lan: bool = False, fresh: bool = False):
     """Run the web app (what `somwidget serve` runs) until interrupted; see somwidget.frontend.app.run_server."""
@@ -36,4 +48,4 @@ def serve(preset: str | None = None, mesh=None, host: str | None = None, port: i
                       lan=lan, fresh=fresh)
 
 
-__all__ = ["Som", "Topology", "presets", "serve", "show", "render"]
+__all__ = ["Som", "Topology", "presets", "serve", "show", "render", "sweep"]

@@ -1,4 +1,5 @@
-"""Command line: ``somwidget serve`` (the web app) and ``somwidget bench`` (engine benchmarks).
+"""Command line: ``somwidget serve`` (the web app), ``somwidget sweep`` (design variants) and ``somwidget bench``
+(engine benchmarks).
 
 Heavy imports (warp, trame, pyvista) happen inside the subcommands, so ``somwidget --help`` is fast.
 """
@@ -96,7 +97,96 @@ def _build_parser() -> argparse.ArgumentParser:
                        "(default: the engine chooses: one for small meshes)")
     bench.add_argument("--no-baseline", action="store_true",
                        help="skip the numpy baseline (the ratio columns then read n/a)")
+
+    sweep = sub.add_parser(
+        "sweep",
+        help="train many design variants at once and write their arrays and a gallery",
+        description="Draw N variants of a design (its controls moved by up to JITTER of its size, schedule "
+        "parameters varied with --vary), train them batched on the GPU (or the CPU, or a Dask cluster), and write "
+        "their arrays (.npz) and a gallery picture of the first 16 (.png beside it).",
+    )
+    what = sweep.add_mutually_exclusive_group()
+    what.add_argument("--preset", metavar="NAME", default=None, help="a built-in preset (default: car)")
+    what.add_argument("--mesh", metavar="FILE", help="a mesh file (OBJ, PLY, STL, OFF, GLB, glTF) with six controls")
+    sweep.add_argument("--n", type=int, default=64, help="how many variants (default: %(default)s)")
+    sweep.add_argument("--jitter", type=float, default=0.05,
+                       help="each control moves by up to this share of the model's size (default: %(default)s)")
+    sweep.add_argument("--vary", action="append", default=[], metavar="NAME=LOW:HIGH|NAME=A,B,...",
+                       help="vary a schedule parameter (iterations, l_start, l_end, smoothing, reach) over a range "
+                       "or a list; may be given several times")
+    sweep.add_argument("--seed", type=int, default=0, help="the same seed gives the same variants (default: 0)")
+    sweep.add_argument("--out", default="variants.npz", metavar="FILE.npz",
+                       help="where the arrays go (default: %(default)s); the gallery goes beside it as .png")
+    sweep.add_argument("--device", type=device_name, metavar="{auto,cpu,cuda,cuda:N}", default="auto",
+                       help="where to train here (default: %(default)s); with --scheduler, on the workers")
+    sweep.add_argument("--scheduler", metavar="ADDRESS",
+                       help="a Dask scheduler (tcp://host:8786) whose workers train the batches (pip install "
+                       "somwidget[dask])")
+    sweep.add_argument("--no-gallery", action="store_true", help="write the arrays only")
     return parser
+
+
+def parse_vary(items: list[str]) -> dict:
+    """--vary NAME=LOW:HIGH (a range) or NAME=A,B,... (a list) or NAME=VALUE -> sweep's params."""
+    out = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or not text.strip():
+            raise ValueError(f"--vary {item!r}: expected NAME=LOW:HIGH or NAME=A,B,...")
+        try:
+            if ":" in text:
+                low, high = text.split(":", 1)
+                out[name] = (float(low), float(high))
+            elif "," in text:
+                out[name] = [float(x) for x in text.split(",") if x.strip()]
+            else:
+                out[name] = float(text)
+        except ValueError:
+            raise ValueError(f"--vary {item!r}: {text!r} is not a number, a LOW:HIGH range or a list") from None
+    return out
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    import os
+
+    import numpy as np
+
+    from somwidget.backend import io as sw_io
+    from somwidget.frontend.variants import sweep
+
+    params = parse_vary(args.vary)
+    if not args.out.endswith(".npz"):
+        raise ValueError(f"--out {args.out!r}: expected a file name ending in .npz")
+    design = sw_io.load_mesh(args.mesh) if args.mesh else (args.preset or "car")
+    client = None
+    if args.scheduler:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise ValueError("--scheduler needs Dask: pip install somwidget[dask]") from None
+        client = Client(args.scheduler, timeout="30s")
+    device = None if args.device == "auto" else args.device
+    try:
+        variants = sweep(design, n=args.n, jitter=args.jitter, params=params, seed=args.seed, device=device,
+                         client=client)
+    finally:
+        if client is not None:
+            client.close()
+    arrays = {"controls": variants.controls, "weights": variants.weights,
+              **{f"param_{key}": variants.plan.schedules[key] for key in variants.plan.schedules},
+              **{f"metric_{key}": value for key, value in variants.metrics.items()},
+              "edges": variants.plan.edges, "seed": np.int64(args.seed), "jitter": np.float64(args.jitter)}
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    np.savez_compressed(args.out, **arrays)
+    print(f"wrote {args.out}: {len(variants)} variants of {variants.preset.title}")
+    if not args.no_gallery:
+        png = args.out[:-4] + ".png"
+        variants.picture(png)
+        print(f"wrote {png}: the first {min(16, len(variants))}")
+    best = variants.best("gap")
+    print(f"closest to its controls: variant {best} (gap {variants.metrics['gap'][best]:.4f} of its size)")
+    return 0
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -144,6 +234,8 @@ def main(argv: list[str] | None = None) -> int:
             return _serve(args)
         if args.command == "bench":
             return _bench(args)
+        if args.command == "sweep":
+            return _sweep(args)
     except (ValueError, FileNotFoundError) as exc:
         print(f"somwidget: error: {exc}", file=sys.stderr)
         return 2

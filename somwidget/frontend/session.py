@@ -1350,6 +1350,39 @@ class Session:
         with self._step("session"):
             self._replace(built, hold=True)
 
+    def apply_variant(self, controls, parameters: dict, weights) -> None:
+        """Make a design variant (somwidget.sweep) the current state: its controls, its schedule (iterations,
+        l_start, l_end, smoothing, reach) and its trained weights, at the end of its schedule, nothing training
+        until the next intent; one undo step. ValueError if it does not fit this session's mesh."""
+        w = checks.finite_array("weights", weights, 2)
+        if w.shape != self._preset.weights.shape:
+            raise ValueError(f"weights: expected shape {self._preset.weights.shape} (this session's mesh), got "
+                             f"{w.shape}")
+        c = checks.finite_array("controls", controls, 2)
+        if c.shape[1] != self.n_dims or not len(c):
+            raise ValueError(f"controls: expected (k, {self.n_dims}) with k >= 1, got {c.shape}")
+        unknown = sorted(set(parameters) - {"iterations", "l_start", "l_end", "smoothing", "reach"})
+        if unknown:
+            raise ValueError(f"parameters: unknown {unknown}")
+        iterations = checks.integer("iterations", parameters.get("iterations", self.parameters["iterations"]), 1,
+                                    MAX_ITERATIONS)
+        for name in ("l_start", "l_end", "reach"):
+            if name in parameters:
+                checks.real(name, parameters[name], 0.0, 1.0, low_open=True)
+        if "smoothing" in parameters:
+            checks.real("smoothing", parameters["smoothing"], 0.0, 1.0)
+        with self._step("variant"):
+            with self._som_lock:
+                self._drain()
+                with self._lock:
+                    current = self._capture()
+                params = dict(current.parameters, **{key: value for key, value in parameters.items()})
+                params["iterations"] = iterations
+                self._apply_step(Step(preset=self._preset, controls=c, parameters=params, weights=w,
+                                      iteration=iterations))
+            with self._lock:
+                self._enqueue("publish", intent=False)
+
 
 __all__ = ["Frame", "Session", "PARAMETERS", "default_mirror", "rgb_to_colour_dims", "parse_hex_colour",
            "hex_colour"]
