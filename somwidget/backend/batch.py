@@ -61,7 +61,7 @@ class BatchSom:
     weights: (N, n) shared start weights, or (B, N, n); controls: (B, k, n), the same k for every variant.
     iterations, l_start, l_end, smoothing, reach: one value for all or one per variant. device: "cpu", "cuda:N" or
     None (the GPU when there is one). cpu_cores: cores the CPU shares the variants among (None: those this process
-    may use, at most 8).
+    may use, at most 8 and at most OMP_NUM_THREADS where that is set).
     """
 
     @warp_exclusive
@@ -200,6 +200,10 @@ class BatchSom:
             available = len(os.sched_getaffinity(0))
         except AttributeError:  # pragma: no cover - not Linux
             available = os.cpu_count() or 1
+        # a thread cap the process was given (a Dask worker's nanny sets OMP_NUM_THREADS=1: one core a worker)
+        cap = os.environ.get("OMP_NUM_THREADS", "")
+        if cap.isdigit() and int(cap) > 0:
+            available = min(available, int(cap))
         return max(1, min(available, 8, self.n_variants))
 
     # -- state --------------------------------------------------------------------------------------------

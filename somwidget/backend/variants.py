@@ -148,30 +148,55 @@ def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray,
 
 def figures(plan: VariantPlan, weights: np.ndarray) -> dict:
     """Per variant, over the model's size where a length: `gap` the largest distance from a control (mirrored copies
-    included) to its nearest node, `spike` the largest spike figure of the winners (median edge lengths;
-    metrics.spike_figures), `symmetry` the mirror error (metrics.symmetry_error; 0 without a mirrored position
-    dim), `size` the bounding diagonal."""
+    included) to its nearest node, `spike` the largest spike figure of those nearest nodes (metrics.spike_figures:
+    the distance to the mean of the one-ring over the median edge length), `symmetry` the mirror error
+    (metrics.symmetry_error; 0 without a mirrored position dim), `size` the bounding diagonal. All variants at once,
+    in float64."""
     dims = list(plan.position_dims)
     topology = topology_of(plan)
     mirror_dims = [dims.index(m) for m in plan.mirror if m in dims]
     pairing = metrics.mirror_map(plan.start[:, dims], mirror_dims[0]) if mirror_dims else None
-    out = {name: np.zeros(len(weights)) for name in FIGURES}
-    for i, w in enumerate(weights):
-        p = w[:, dims].astype(np.float64)
-        size = metrics.bounding_diagonal(p) or 1.0
-        controls = plan.controls[i].astype(np.float64)
-        if plan.mirror:
-            image = controls.copy()
-            image[:, list(plan.mirror)] *= -1.0
-            controls = np.concatenate([controls, image])
-        targets = controls[:, dims]
-        diff = targets[:, None, :] - p[None, :, :]
-        nearest = np.einsum("knd,knd->kn", diff, diff).argmin(axis=1)
-        out["gap"][i] = float(np.linalg.norm(targets - p[nearest], axis=1).max()) / size
-        out["spike"][i] = float(metrics.spike_figures(p, topology, np.unique(nearest)).max(initial=0.0))
-        out["symmetry"][i] = metrics.symmetry_error(p, pairing, mirror_dims[0]) if pairing is not None else 0.0
-        out["size"][i] = size
-    return out
+    p = np.asarray(weights, np.float64)[:, :, dims]
+    n = len(p)
+    size = np.linalg.norm(p.max(axis=1) - p.min(axis=1), axis=1)
+    size = np.where(size > 0, size, 1.0)
+    controls = plan.controls.astype(np.float64)
+    if plan.mirror:
+        image = controls.copy()
+        image[:, :, list(plan.mirror)] *= -1.0
+        controls = np.concatenate([controls, image], axis=1)
+    targets = controls[:, :, dims]
+    rows = np.arange(n)[:, None]
+    gap = np.zeros(n)
+    nearest = np.zeros(targets.shape[:2], np.int64)
+    block = max(1, 8_000_000 // max(1, targets.shape[1] * p.shape[1]))
+    for lo in range(0, n, block):
+        diff = targets[lo:lo + block, :, None, :] - p[lo:lo + block, None, :, :]
+        nearest[lo:lo + block] = np.einsum("bknd,bknd->bkn", diff, diff).argmin(axis=2)
+    gap = np.linalg.norm(targets - p[rows, nearest], axis=2).max(axis=1) / size
+    spike = np.zeros(n)
+    edges = np.asarray(topology.edges, np.int64).reshape(-1, 2)
+    degree = np.diff(topology.offsets)
+    if len(edges):
+        median_edge = np.median(np.linalg.norm(p[:, edges[:, 0]] - p[:, edges[:, 1]], axis=2), axis=1)
+        median_edge = np.where(median_edge > 0, median_edge, 1.0)
+        # the one-rings of the nearest nodes only, padded to the largest degree among them
+        ring_degree = degree[nearest]
+        width = max(1, int(ring_degree.max()))
+        slot = np.arange(width)
+        index = topology.offsets[nearest][..., None] + np.minimum(slot, np.maximum(ring_degree[..., None] - 1, 0))
+        ring = topology.neighbors[np.minimum(index, max(0, len(topology.neighbors) - 1))]
+        inside = slot < ring_degree[..., None]
+        ring_points = p[rows[:, :, None], ring] * inside[..., None]
+        ring_mean = ring_points.sum(axis=2) / np.maximum(ring_degree, 1)[..., None]
+        offset = np.where(ring_degree > 0, np.linalg.norm(p[rows, nearest] - ring_mean, axis=2), 0.0)
+        spike = offset.max(axis=1) / median_edge
+    symmetry = np.zeros(n)
+    if pairing is not None:
+        image = p.copy()
+        image[:, :, mirror_dims[0]] *= -1.0
+        symmetry = np.linalg.norm(image - p[:, pairing], axis=2).max(axis=1) / size
+    return {"gap": gap, "spike": spike, "symmetry": symmetry, "size": size}
 
 
 def batch_size_for(plan: VariantPlan, device: str) -> int:
