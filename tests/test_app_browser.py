@@ -744,3 +744,38 @@ def test_session_upload_handler_clears_the_field(local_app, tmp_path):
     assert app.state.session_upload is None and os.listdir(tmp_path / "tmp") == []
     _upload(app, "empty.npz", b"", field="session_upload")
     assert "is empty" in app.state.error_message and app.state.session_upload is None
+
+
+def test_variants_gallery_and_picking_one_is_an_undo_step(browser, server):
+    """The panel's Variants section: a sweep of six variants shows six thumbnails (each a drawn clay, not a blank),
+    clicking one makes it the session's shape in the view, and Undo brings the shape before it back."""
+    page = open_page(browser, server)
+    try:
+        st0 = server.idle()
+        page.locator("#variants-n").fill("6")
+        page.locator("#variants-jitter").fill("0.08")
+        page.wait_for_timeout(300)
+        page.locator("#sweep").click()
+        page.wait_for_function("() => document.querySelectorAll('#variants-gallery img').length === 6",
+                               timeout=120000)
+        thumbs = page.locator("#variants-gallery img")
+        from PIL import Image
+
+        shots = [np.asarray(Image.open(io.BytesIO(thumbs.nth(i).screenshot())).convert("RGB")).astype(int)
+                 for i in range(6)]
+        for shot in shots:  # each thumbnail shows a clay on the background, not an empty tile
+            assert (np.abs(shot - shot[3, -3]).sum(axis=2) > 60).mean() > 0.05
+        before_image = view_image(page)
+        thumbs.nth(4).click()
+        st1 = server.idle()
+        assert st1["session"]["history"][0] == st0["session"]["history"][0] + 1
+        assert st1["session"]["controls"] != st0["session"]["controls"]
+        assert not st1["session"]["frame"]["running"]  # a variant is shown as trained: nothing regrows
+        shows(page, st1)
+        assert float((np.abs(view_image(page) - before_image).sum(axis=2) > 30).mean()) > 0.002
+        page.locator("#undo-button").click()
+        st2 = server.idle()
+        assert st2["session"]["controls"] == st0["session"]["controls"]
+        assert st2["session"]["frame"]["centroid"] == pytest.approx(st0["session"]["frame"]["centroid"], abs=1e-6)
+    finally:
+        page.close()

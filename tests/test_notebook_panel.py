@@ -107,6 +107,31 @@ def test_undo_redo_reload_and_reach_from_the_panel(panel, session):
     assert session.parameters["reach"] == session.preset.reach
 
 
+def test_the_variants_section_sweeps_shows_a_gallery_and_a_pick_is_one_undo_step(panel, session):
+    assert session.wait_idle(60)
+    shape = session.frame.weights.copy()
+    section = panel.variants
+    assert section.pick(0) is False and "no variants yet" in panel.error.value  # nothing swept yet
+    section.count.value = 4
+    section.jitter.value = 0.08
+    section.vary.value = ("l_start",)
+    assert section.sweep() is True
+    variants = section.result
+    assert len(variants) == 4 and len(section.gallery.children) == 4
+    assert section.progress.value == 4
+    l_start = session.parameters["l_start"]
+    assert all(0.7 * l_start - 1e-9 <= p["l_start"] <= 1.3 * l_start + 1e-9 for p in variants.params)
+    png = section.gallery.children[2].children[0].value
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 2000
+    undo_before = session.history[0]
+    section.gallery.children[2].children[1].click()  # "use #2"
+    assert session.history[0] == undo_before + 1
+    np.testing.assert_array_equal(session.frame.weights, variants.weights[2])
+    assert session.parameters["l_start"] == variants.params[2]["l_start"]
+    panel.undo_button.click()
+    np.testing.assert_array_equal(session.frame.weights, shape)
+
+
 def test_refused_value_shows_the_message_and_reverts(panel, session):
     for w in panel.metric[:-1]:
         w.value = 0.0

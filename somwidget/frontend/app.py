@@ -38,6 +38,7 @@ from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 from wslink.websocket import LinkProtocol
 
+from ..backend import checks
 from ..backend import device as _device
 from ..backend import presets as _presets
 from . import lan as _lan
@@ -45,6 +46,8 @@ from .parameters import BY_NAME as _PARAM
 from .parameters import GAP_HELP, METRIC_WEIGHT
 from .protocol import control_colours
 from .session import REACH_HELP, Frame, Session, hex_colour, max_vertices_for
+from .variants import MAX_GALLERY_VARIANTS, VARIANTS_HELP, VARIED, vary_around
+from .variants import sweep as sweep_variants
 from .client_state import guard_state_updates
 from .ws_limits import bound_messages
 from .xr import attach as attach_xr
@@ -55,6 +58,18 @@ log = logging.getLogger(__name__)
 MAX_UPLOAD_BYTES = 50_000_000  # "50 MB", as the README and the messages say
 #: Panel numbers (iteration, gaps, cycle time) refresh at most this often per second.
 PANEL_HZ = 8
+def _png_data_url(img) -> str:
+    """An (H, W, 3) uint8 image as a PNG data URL (a thumbnail the page shows as it is)."""
+    import base64
+    import io
+
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(img).save(buffer, format="PNG")
+    return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
+
+
 MIME = {"obj": "text/plain", "ply": "application/octet-stream", "glb": "model/gltf-binary"}
 #: Mesh files the upload field takes (by the suffix of the browser's file name).
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -256,6 +271,12 @@ class SomApp:
         s.param_errors = {}
         s.reach_help = REACH_HELP
         s.recovered_message = self._recovered_message()
+        s.variants_n = 12
+        s.variants_jitter = 0.05
+        s.variants_vary = []
+        s.variants_gallery = []
+        s.variants_progress = 0
+        self._variants = None
         self._sync_session_state()
         self._update_panel(self.session.frame)
 
@@ -609,6 +630,64 @@ class SomApp:
             os.remove(tmp)
 
     # -- wiring ----------------------------------------------------------------------------------------------------
+    async def sweep_variants(self) -> None:
+        """Train the Variants section's design variants of the current design (a local restart each, batched on the
+        session's device) and show them as a gallery of thumbnails."""
+        s = self.state
+        try:
+            n = checks.integer_text("variants: how many", s.variants_n, 1, MAX_GALLERY_VARIANTS)
+            jitter = checks.real("variants: jitter", float(s.variants_jitter), 0.0, 1.0)
+        except (TypeError, ValueError) as exc:
+            self._error(str(exc))
+            return
+        vary = [name for name in (s.variants_vary or []) if name in VARIED]
+        params = vary_around(vary, self.session.parameters)
+
+        def run():
+            variants = sweep_variants(self.session, n=n, jitter=jitter, params=params, progress=progress,
+                                      device=self.session.training_device)
+            thumbs = [_png_data_url(image) for image in variants.thumbnails()]
+            return variants, thumbs
+
+        loop = asyncio.get_running_loop()
+
+        def progress(done, total):
+            loop.call_soon_threadsafe(self._set_variants_progress, 100.0 * done / max(1, total))
+
+        with self.state:
+            s.busy = True
+            s.variants_progress = 0
+        try:
+            variants, thumbs = await loop.run_in_executor(None, run)
+        except (ValueError, RuntimeError) as exc:
+            self._error(f"variants: {exc}")
+            return
+        finally:
+            with self.state:
+                s.busy = False
+        self._variants = variants
+        with self.state:
+            s.variants_gallery = [
+                {"i": i, "src": thumbs[i], "title": f"#{i}: gap {variants.metrics['gap'][i]:.3f}, spike "
+                 f"{variants.metrics['spike'][i]:.2f}" + "".join(f", {k} {_fmt(v)}" for k, v in
+                                                              variants.params[i].items() if k in vary)}
+                for i in range(len(variants))]
+            s.variants_progress = 100
+
+    def _set_variants_progress(self, value: float) -> None:
+        with self.state:
+            self.state.variants_progress = value
+
+    def pick_variant(self, i) -> None:
+        """Make gallery variant i the session's current state (one undo step)."""
+        variants = self._variants
+        try:
+            if variants is None:
+                raise ValueError("no variants yet: press Sweep first")
+            variants.apply(i, self.session)
+        except ValueError as exc:
+            self._error(f"variants: {exc}")
+
     def _register(self) -> None:
         server, state, ctrl = self.server, self.state, self.ctrl
         server.trigger("set_param")(self.set_param)
@@ -624,6 +703,8 @@ class SomApp:
         server.trigger("reload_preset")(self.reload_preset)
         server.trigger("export_mesh")(self.export_mesh)
         server.trigger("save_session")(self.save_session)
+        server.trigger("sweep_variants")(self.sweep_variants)
+        server.trigger("pick_variant")(self.pick_variant)
 
         @state.change("preset_name")
         async def _preset_changed(preset_name, **_):
@@ -804,6 +885,32 @@ class SomApp:
                         with html.Td():
                             v3.VBtn(icon="mdi-close", size="x-small", variant="text",
                                     click="trigger('remove_control', [c.i])", title="Remove")
+
+            # design variants
+            html.Div("Variants", classes="text-subtitle-2 mt-2", title=VARIANTS_HELP)
+            with v3.VRow(dense=True):
+                with v3.VCol(cols=6):
+                    v3.VTextField(v_model=("variants_n",), label="how many", density="compact", type="number",
+                                  hide_details=True, id="variants-n", title="Variants to train at once (at most "
+                                  f"{MAX_GALLERY_VARIANTS} here; somwidget.sweep takes thousands)")
+                with v3.VCol(cols=6):
+                    v3.VTextField(v_model=("variants_jitter",), label="jitter", density="compact", type="number",
+                                  hide_details=True, id="variants-jitter",
+                                  title="Each control moves by up to this share of the model's size")
+            with v3.VChipGroup(v_model=("variants_vary",), multiple=True, column=True, id="variants-vary"):
+                for name in VARIED:
+                    v3.VChip(name, value=name, size="small", filter=True, variant="outlined",
+                             title=f"vary {name} around its value")
+            with html.Div(classes="d-flex align-center ga-2 mb-1"):
+                v3.VBtn("Sweep", size="small", variant="tonal", prepend_icon="mdi-view-grid-plus", id="sweep",
+                        click="trigger('sweep_variants')", disabled=("busy",))
+                v3.VProgressLinear(model_value=("variants_progress",), height=4, color="primary",
+                                   v_if="variants_gallery.length || busy", id="variants-progress")
+            with html.Div(classes="d-flex flex-wrap ga-1 mb-2", id="variants-gallery"):
+                html.Img(v_for="v in variants_gallery", key="v.i", src=("v.src",), title=("v.title",),
+                         classes="variant-thumb", style="width: 96px; height: 77px; cursor: pointer; "
+                         "border: 1px solid #ccd; border-radius: 4px",
+                         click="trigger('pick_variant', [v.i])")
 
             # files out
             html.Div("Export and sessions", classes="text-subtitle-2 mt-2")

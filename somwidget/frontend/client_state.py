@@ -60,6 +60,10 @@ WRITABLE = {
     "param_smoothing": _number_or_text,
     "param_reach": _reach,
     "param_symmetry": _flag,
+    "variants_n": _number_or_text,
+    "variants_jitter": _number_or_text,
+    "variants_vary": lambda value: isinstance(value, list) and len(value) <= 5 and all(
+        isinstance(v, str) and len(v) <= 16 for v in value),
     "error_message": _cleared,
     "info_message": _cleared,
     "recovered_message": _cleared,

@@ -32,6 +32,8 @@ from ..backend.presets import Preset  # noqa: E402
 from .parameters import BY_NAME as _PARAM  # noqa: E402
 from .parameters import GAP_HELP, METRIC_WEIGHT  # noqa: E402
 from .session import REACH_HELP, Frame, Session, hex_colour  # noqa: E402
+from .variants import MAX_GALLERY_VARIANTS, VARIANTS_HELP, VARIED, vary_around  # noqa: E402
+from .variants import sweep as sweep_variants  # noqa: E402
 from .widget import ClayWidget  # noqa: E402
 
 log = logging.getLogger(__name__)
@@ -111,6 +113,7 @@ class Panel(widgets.VBox):
         self.metric: list[widgets.BoundedFloatText] = []
         self.controls_html = widgets.HTML()
         self.error = widgets.HTML()
+        self.variants = VariantsSection(session, self._intent)
 
         super().__init__([
             self.title, widgets.HBox([self.preset, self.reload_button]),
@@ -126,7 +129,7 @@ class Panel(widgets.VBox):
             self.features_box,
             widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(GAP_HELP)}">Controls</b> <small>(gap: distance to '
                                        'the nearest node, original / mirror)</small>')),
-            self.controls_html, self.error,
+            self.controls_html, self.variants, self.error,
         ], layout=widgets.Layout(width="360px", min_width="360px", padding="4px"))
 
         for w, setter in ((self.S, session.set_iterations), (self.l_start, session.set_l_start),
@@ -304,9 +307,94 @@ class Panel(widgets.VBox):
         self.session.remove_listener(self._on_frame)
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(2.0)
+        self.variants.close()
         for w in [*self.children, *self.metric, *self.features_box.children]:
             w.close()
         super().close()
+
+
+class VariantsSection(widgets.VBox):
+    """The panel's Variants section: how many, how much jitter, which schedule parameters to vary; Sweep trains them
+    from the session's current shape (somwidget.sweep) and shows a gallery; a thumbnail's Use button makes that
+    variant the session's state (one undo step, through `intent`)."""
+
+    def __init__(self, session: Session, intent):
+        self.session = session
+        self._intent = intent
+        self.result = None  # the latest Variants
+        style = {"description_width": "70px"}
+        self.count = widgets.BoundedIntText(value=12, min=1, max=MAX_GALLERY_VARIANTS, description="how many",
+                                            style=style, layout=widgets.Layout(width="170px"))
+        self.jitter = widgets.BoundedFloatText(value=0.05, min=0.0, max=1.0, step=0.01, description="jitter",
+                                               style=style, layout=widgets.Layout(width="170px"),
+                                               tooltip="each control moves by up to this share of the model's size")
+        self.vary = widgets.SelectMultiple(options=list(VARIED), value=(), description="vary", rows=len(VARIED),
+                                           style=style, layout=widgets.Layout(width="250px"))
+        self.sweep_button = widgets.Button(description="Sweep", icon="th", tooltip=VARIANTS_HELP,
+                                           layout=widgets.Layout(width="100px"))
+        self.progress = widgets.IntProgress(min=0, max=1, value=0, layout=widgets.Layout(width="220px"))
+        self.gallery = widgets.GridBox(layout=widgets.Layout(grid_template_columns="repeat(3, 108px)",
+                                                             grid_gap="2px"))
+        self.sweep_button.on_click(lambda _b: self.sweep())
+        super().__init__([
+            widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(VARIANTS_HELP)}">Variants</b> <small>(many '
+                                       'designs at once; pick one to go on from it)</small>')),
+            widgets.HBox([self.count, self.jitter]), self.vary, widgets.HBox([self.sweep_button, self.progress]),
+            self.gallery,
+        ])
+
+    def sweep(self) -> bool:
+        """Train the variants (in this thread) and show them; False (the message in the panel) if refused."""
+        def run():
+            params = vary_around(list(self.vary.value), self.session.parameters)
+            self.progress.max, self.progress.value = int(self.count.value), 0
+            self.result = sweep_variants(self.session, n=int(self.count.value), jitter=float(self.jitter.value),
+                                         params=params, device=self.session.training_device,
+                                         progress=lambda done, total: setattr(self.progress, "value", done))
+            self._show(self.result)
+
+        self.sweep_button.disabled = True
+        try:
+            return self._intent(run)
+        finally:
+            self.sweep_button.disabled = False
+
+    def _show(self, variants) -> None:
+        cells = []
+        for i, image in enumerate(variants.thumbnails(size=(104, 84))):
+            picture = widgets.Image(value=_png_bytes(image), format="png", layout=widgets.Layout(width="104px"))
+            use = widgets.Button(description=f"use #{i}", layout=widgets.Layout(width="104px", height="24px"),
+                                 tooltip=f"gap {variants.metrics['gap'][i]:.3f}, spike "
+                                         f"{variants.metrics['spike'][i]:.2f}")
+            use.on_click(lambda _b, i=i: self.pick(i))
+            cells.append(widgets.VBox([picture, use]))
+        for old in self.gallery.children:
+            old.close()
+        self.gallery.children = cells
+
+    def pick(self, i: int) -> bool:
+        """Make variant i of the latest sweep the session's state (one undo step)."""
+        def apply():
+            if self.result is None:
+                raise ValueError("no variants yet: press Sweep first")
+            self.result.apply(i, self.session)
+
+        return self._intent(apply)
+
+    def close(self) -> None:
+        for w in [*self.gallery.children, *self.children]:
+            w.close()
+        super().close()
+
+
+def _png_bytes(image) -> bytes:
+    import io
+
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(image).save(buffer, format="PNG")
+    return buffer.getvalue()
 
 
 def _set(widget, value) -> None:

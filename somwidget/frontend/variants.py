@@ -22,9 +22,32 @@ from ..backend import presets as _presets
 from ..backend.batch import SCHEDULE_KEYS
 from ..backend.presets import Preset
 from ..backend.variants import FIGURES, VariantPlan, plan_variants, run_plan
+from .parameters import MAX_ITERATIONS
 
 #: Thumbnails a gallery shows when no indices are given.
 GALLERY_COUNT = 16
+#: The apps' Variants sections: how many variants a sweep there trains at most (each gets a thumbnail), and the
+#: range each varied schedule parameter takes around its current value.
+MAX_GALLERY_VARIANTS = 48
+VARIED = {
+    "l_start": lambda v: (max(0.01, 0.7 * v), min(1.0, 1.3 * v)),
+    "l_end": lambda v: (max(0.005, 0.7 * v), min(1.0, 1.3 * v)),
+    "iterations": lambda v: (max(1, int(0.5 * v)), min(MAX_ITERATIONS, int(1.5 * v))),
+    "smoothing": lambda v: (0.0, min(1.0, max(0.05, 2.0 * v))),
+    "reach": lambda v: (max(0.01, 0.5 * v), min(1.0, 2.0 * v)),
+}
+VARIANTS_HELP = ("Design variants: each control moved at random by up to the jitter (a share of the model's size), "
+                 "the chosen schedule parameters varied around their values, all trained at once from the current "
+                 "shape. Pick one to continue from it (Undo goes back).")
+
+
+def vary_around(names, parameters: Mapping) -> dict:
+    """sweep's params for the apps' Variants sections: each named parameter over its VARIED range around its value
+    in `parameters` (a session's)."""
+    unknown = sorted(set(names) - set(VARIED))
+    if unknown:
+        raise ValueError(f"vary: unknown parameter(s) {unknown}; expected some of {list(VARIED)}")
+    return {name: VARIED[name](parameters[name]) for name in names}
 
 
 class Variants:
@@ -80,12 +103,16 @@ class Variants:
         sheet = np.full((rows * height, columns * width, 3), 255, np.uint8)
         for slot, i in enumerate(chosen):
             shown = dataclasses.replace(self.preset, controls=self.controls[i])
-            img = render(shown, weights=self.weights[i], size=(width, height), title=f"#{i}")
+            img = render(shown, weights=self.weights[i], size=(width, height), title=f"#{i}", zoom=1.25)
             r, c = divmod(slot, columns)
             sheet[r * height:(r + 1) * height, c * width:(c + 1) * width] = img[:height, :width]
         if path is not None:
             save_image(path, sheet)
         return sheet
+
+    def thumbnails(self, size: tuple[int, int] = (150, 120)) -> list[np.ndarray]:
+        """One small picture per variant (the apps' galleries), (H, W, 3) uint8 each."""
+        return [self.picture(indices=[i], columns=1, size=size) for i in range(len(self))]
 
     def apply(self, i: int, session=None) -> None:
         """Make variant i the current state of `session` (default: the session it was swept from): its controls,
@@ -168,4 +195,4 @@ def sweep(preset_or_session="car", n: int = 64, jitter: float = 0.05, params: Ma
     return Variants(plan, weights, figures, preset, source)
 
 
-__all__ = ["Variants", "sweep", "GALLERY_COUNT"]
+__all__ = ["Variants", "sweep", "vary_around", "GALLERY_COUNT", "MAX_GALLERY_VARIANTS", "VARIED"]
