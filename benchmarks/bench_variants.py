@@ -111,12 +111,16 @@ def bench(name: str, n: int, device: str, singles: int, configs: list[tuple]) ->
     scaled = singles_time * n / count
     print(f"  {count} single runs one after another: {singles_time * 1e3:.1f} ms"
           + (f" (x {n / count:.0f}: {scaled * 1e3:.0f} ms for {n})" if count < n else ""))
-    print(f"  batched / single runs: {scaled / best[1]:.0f} x faster (training); largest weight difference "
+    print(f"  batched / single runs: {scaled / best[1]:.1f} x faster (training); largest weight difference "
           f"from the single runs (first 8): {diff:.2e}")
     batch.cuda_shape = default_shape
     flops, nbytes, floor = floors(p, plan, device)
-    print(f"  floors: {flops / 1e9:.1f} GFLOP, {nbytes / 1e6:.1f} MB once through memory -> {floor * 1e3:.2f} ms "
-          f"at the data-sheet peaks; training runs at {floor / best[1] * 100:.1f}% of that floor")
+    if np.isnan(floor):
+        print(f"  floors: {flops / 1e9:.1f} GFLOP, {nbytes / 1e6:.1f} MB once through memory (no data-sheet peaks "
+              f"for this device)")
+    else:
+        print(f"  floors: {flops / 1e9:.1f} GFLOP, {nbytes / 1e6:.1f} MB once through memory -> {floor * 1e3:.2f} "
+              f"ms at the data-sheet peaks; training runs at {floor / best[1] * 100:.1f}% of that floor")
 
 
 def main(argv=None) -> None:
