@@ -11,7 +11,7 @@ import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
 from somwidget import benchmark  # noqa: E402
-from somwidget.backend import kernels, som  # noqa: E402
+from somwidget.backend import cycle_kernels, som  # noqa: E402
 
 DEV = "cuda:0"
 
@@ -30,8 +30,8 @@ def per_cycle(engine) -> float:
 
 
 for size in (32, 64, 128):  # whole warps: the tile primitives of the winner search need them
-    kernels.CUDA_BLOCK = som.CUDA_BLOCK = wp.constant(size)
-    kernels.cycle_kernels.cache_clear()
+    cycle_kernels.CUDA_BLOCK = som.CUDA_BLOCK = wp.constant(size)
+    cycle_kernels.cycle_kernels.cache_clear()
     row = []
     for case in ("space-grid", "space-grid-smooth", "car", "big"):
         engine, _ = benchmark._make(case, DEV, 1000)

@@ -17,7 +17,7 @@ from reference import lattice_edges
 from somwidget import Som, Topology
 from somwidget.backend import dependent_launch
 from somwidget.backend import som as som_module
-from somwidget.backend.kernels import SHARED_TABLE_WORDS
+from somwidget.backend.spread_kernels import SHARED_TABLE_WORDS
 
 pytestmark = pytest.mark.skipif(not HAS_CUDA, reason="warp reports no CUDA device on this machine")
 

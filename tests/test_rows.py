@@ -91,7 +91,7 @@ def test_row_search_methods_match_reference(device, name):
     block."""
     import warp as wp
 
-    from somwidget.backend import kernels
+    from somwidget.backend import distance_kernels
 
     n, edges = GRAPHS[name]
     topo = Topology.from_edges(edges, n)
@@ -116,7 +116,7 @@ def test_row_search_methods_match_reference(device, name):
         b = search._buffer()
         rows = wp.full((len(sources) + 1, n), 7, dtype=wp.int32, device=device)
         search.run(sources, [2, 0, 4, 1], rows, n)  # fills the batch's buffers
-        wp.launch(kernels.bfs_row_blocks, dim=len(sources), device="cpu",
+        wp.launch(distance_kernels.bfs_row_blocks, dim=len(sources), device="cpu",
                   inputs=[search._offsets, search._neighbors, b["sources"], b["first"], b["slots"], rows, b["queue"],
                           b["size"], b["far"]])
         np.testing.assert_array_equal(rows.numpy()[[2, 0, 4, 1]], expected)

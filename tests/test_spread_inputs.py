@@ -1,4 +1,4 @@
-"""The raw-pointer parameters of the spread cycle kernels (kernels.spread_cycle_inputs and
+"""The raw-pointer parameters of the spread cycle kernels (spread_kernels.spread_cycle_inputs and
 spread_smoothing_cycle_inputs): each pointer and size in the kernel's order, and a clear error for an array the
 kernels cannot read as a plain block of memory. Runs on the CPU: nothing here launches a kernel."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 import warp as wp
 
-from somwidget.backend.kernels import spread_cycle_inputs, spread_smoothing_cycle_inputs
+from somwidget.backend.spread_kernels import spread_cycle_inputs, spread_smoothing_cycle_inputs
 
 N, K = 70, 5
 

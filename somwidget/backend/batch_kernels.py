@@ -3,7 +3,7 @@ one launch.
 
 A variant's cycles depend on each other only through its own weights, so one block can run all of them with block
 barriers in between, and B blocks run side by side with no host work and no grid-wide step. A cycle is the
-algorithm's three steps (DESIGN.md, "One iteration s"; the same arithmetic as kernels.py):
+algorithm's three steps (DESIGN.md, "One iteration s"; the same arithmetic as cycle_kernels.py):
 
 1. winners: each thread scans its neurons (v = t, t + T, ...) for each control, the block takes the least winner
    key (distance bits << 32 | index: the lowest index on a tie) with a warp reduction and one atomic min a warp in
@@ -22,7 +22,7 @@ import functools
 
 import warp as wp
 
-from .kernels import INDEX_MASK, KEY_NONE, UNREACHABLE, sync_block, winner_key
+from .primitives import INDEX_MASK, KEY_NONE, UNREACHABLE, sync_block, winner_key
 
 #: Winner keys a block holds in shared memory: three buffers of up to 256 effective controls, uint64 each.
 MAX_KEYS = 256
@@ -91,7 +91,7 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
 
     @wp.func
     def move_pair(w: vec, l1: wp.float32, l2: wp.float32, a: vec, b: vec) -> vec:
-        """W + (l1 (A - W) + l2 (B - W)) / max(1, l1 + l2), in the mirror-exact form of kernels.cycle_kernels."""
+        """W + (l1 (A - W) + l2 (B - W)) / max(1, l1 + l2), in the mirror-exact form of cycle_kernels.py."""
         m = wp.float32(0.5) * (l1 + l2)
         h = wp.float32(0.5) * (l1 - l2)
         step = m * ((a + b) - wp.float32(2.0) * w) + h * (a - b)

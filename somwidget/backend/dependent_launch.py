@@ -1,8 +1,8 @@
 """Programmatic dependent launch (CUDA, compute capability 9.0+): a kernel launched so that its blocks start while
-the kernel before it in the stream is still running. Each such kernel calls `kernels.wait_for_previous_grid`
+the kernel before it in the stream is still running. Each such kernel calls `primitives.wait_for_previous_grid`
 before it reads anything the previous kernel writes, so only the launch itself overlaps; the results are those of
 an ordinary launch. The next kernel is launched once every block of the one before has ended or called
-`kernels.let_next_grid_launch`. Warp has no launch option for this, so the launch goes through the driver's
+`primitives.let_next_grid_launch`. Warp has no launch option for this, so the launch goes through the driver's
 cuLaunchKernelEx with Warp's own compiled kernel and packed arguments.
 """
 

@@ -1,4 +1,4 @@
-"""Block halos for the one-kernel smoothing cycle on CUDA (`kernels.spread_smoothing_cycle_kernel`).
+"""Block halos for the one-kernel smoothing cycle on CUDA (`spread_kernels.spread_smoothing_cycle_kernel`).
 
 A block owns 32 neurons (block b: b * 32 .. b * 32 + 31). Smoothing neuron v needs the moved weights of v's
 neighbours, some of which other blocks own; rather than wait for every block (a second kernel), each block also

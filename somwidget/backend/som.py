@@ -10,7 +10,7 @@ back as they were (an undo, a loaded session) and restarts nothing.
 
 Mirrored pairs. With mirroring each control has a copy with the `mirror` dims negated, and the two act together
 at the pair's place in the list: both rates from the same weights, l1 = L[s, D[u_c, v]] and l2 = L[s, D[u_c', v]],
-W <- W + (l1 (C - W) + l2 (C' - W)) / max(1, l1 + l2) (`kernels.move_pair`), so a symmetric mesh stays exactly
+W <- W + (l1 (C - W) + l2 (C' - W)) / max(1, l1 + l2) (`cycle_kernels.move_pair`), so a symmetric mesh stays exactly
 symmetric. The device holds each original next to its copy.
 """
 
@@ -34,9 +34,11 @@ except ImportError:  # pragma: no cover - another Warp layout: wp.copy then
 from . import checks, dependent_launch
 from .device import resolve, warp_exclusive
 from .halos import block_halos
-from .kernels import (CUDA_BLOCK, PAIRS, SCALED_PAIRS, SHARED_TABLE_WORDS, SINGLES, assign_slots, barrier,
-                      cycle_kernels, sched_yield_address, spread_cycle_inputs, spread_cycle_kernel,
-                      spread_smoothing_cycle_inputs, spread_smoothing_cycle_kernel)
+from .cycle_kernels import CUDA_BLOCK, PAIRS, SCALED_PAIRS, SINGLES, cycle_kernels
+from .distance_kernels import assign_slots
+from .primitives import barrier, sched_yield_address
+from .spread_kernels import (SHARED_TABLE_WORDS, spread_cycle_inputs, spread_cycle_kernel,
+                             spread_smoothing_cycle_inputs, spread_smoothing_cycle_kernel)
 from .schedule import learning_table
 from .topology import MAX_DENSE_NEURONS, RowSearch, Topology
 
@@ -516,8 +518,8 @@ class Som:
 
     @property
     def _pairs(self) -> int:
-        """How step 2 applies the controls (kernels.SINGLES, PAIRS, SCALED_PAIRS): in mirrored pairs with mirroring,
-        scaled only where the table has a rate above 0.5 (two rates may then sum past 1)."""
+        """How step 2 applies the controls (cycle_kernels.SINGLES, PAIRS, SCALED_PAIRS): in mirrored pairs with
+        mirroring, scaled only where the table has a rate above 0.5 (two rates may then sum past 1)."""
         if not self._mirror:
             return SINGLES
         return SCALED_PAIRS if self._table_max > 0.5 else PAIRS

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
-from . import checks, kernels
+from . import checks, distance_kernels
 from .device import resolve, warp_exclusive
 
 #: Vertices a topology may have (int32 CSR indices; rows mode trains meshes of millions of vertices).
@@ -160,7 +160,7 @@ class Topology:
             sources = wp.array(np.arange(n, dtype=np.int32), device=device)
             for start in range(0, n, batch):
                 stop = min(n, start + batch)
-                wp.launch(kernels.bfs_rows, dim=stop - start, device=device,
+                wp.launch(distance_kernels.bfs_rows, dim=stop - start, device=device,
                           inputs=[offsets, neighbors, sources[start:stop], table[start:stop], queue, far[start:stop]])
         elif method == "block":
             threads = threads or self._block_threads()
@@ -169,7 +169,7 @@ class Topology:
             hops = wp.full((blocks, n), -1, dtype=wp.int32, device=device)
             queue = wp.empty((blocks, n), dtype=wp.int32, device=device)
             size = wp.zeros((blocks, 3), dtype=wp.int32, device=device)
-            wp.launch(kernels.bfs_blocks, dim=blocks * threads, block_dim=threads, device=device,
+            wp.launch(distance_kernels.bfs_blocks, dim=blocks * threads, block_dim=threads, device=device,
                       inputs=[offsets, neighbors, table, hops, queue, size, far])
         else:
             raise ValueError(f"method: expected None, 'thread' or 'block', got {method!r}")
@@ -253,12 +253,12 @@ class RowSearch:
         method = self.method(levels)
         if method == "shared":
             words, cap = self._shared
-            kernel = kernels.shared_row_search(words, cap, _SHARED_THREADS)
+            kernel = distance_kernels.shared_row_search(words, cap, _SHARED_THREADS)
             wp.launch_tiled(kernel, dim=[count], block_dim=_SHARED_THREADS, device=self.device,
                             inputs=[self._ell, self._offsets, self._neighbors, b["sources"], b["first"], b["slots"],
                                     rows, b["queue"], b["far"]])
         elif method == "block":
-            wp.launch(kernels.bfs_row_blocks, dim=count * _ROW_BLOCK_THREADS, block_dim=_ROW_BLOCK_THREADS,
+            wp.launch(distance_kernels.bfs_row_blocks, dim=count * _ROW_BLOCK_THREADS, block_dim=_ROW_BLOCK_THREADS,
                       device=self.device, inputs=[self._offsets, self._neighbors, b["sources"], b["first"], b["slots"],
                                                   rows, b["queue"], b["size"], b["far"]])
         elif method == "levels":
@@ -271,19 +271,19 @@ class RowSearch:
                 graph = self._graphs[key] = capture.graph
             wp.capture_launch(graph)
         else:
-            wp.launch(kernels.bfs_wide, dim=count, device=self.device,
+            wp.launch(distance_kernels.bfs_wide, dim=count, device=self.device,
                       inputs=[self._offsets, self._neighbors, b["sources"], b["first"], b["slots"], rows, b["queue"],
                               b["far"]])
         return b["far"].numpy()[:count] if far else None
 
     def _record_levels(self, rows: wp.array, levels: int) -> None:
         b, dev = self._buffers, self.device
-        wp.launch(kernels.bfs_clear, dim=self.n, device=dev, inputs=[rows, b["slots"], b["count"]])
-        wp.launch(kernels.bfs_seed, dim=self.batch, device=dev,
+        wp.launch(distance_kernels.bfs_clear, dim=self.n, device=dev, inputs=[rows, b["slots"], b["count"]])
+        wp.launch(distance_kernels.bfs_seed, dim=self.batch, device=dev,
                   inputs=[b["sources"], b["first"], b["slots"], b["count"], rows, b["queue"], b["base"], b["size"],
                           b["far"]])
         for level in range(levels):
-            wp.launch(kernels.bfs_level, dim=(self.batch, _LEVEL_THREADS), device=dev,
+            wp.launch(distance_kernels.bfs_level, dim=(self.batch, _LEVEL_THREADS), device=dev,
                       inputs=[self._offsets, self._neighbors, b["slots"], b["count"], rows, b["queue"], b["base"],
                               b["size"], b["far"], level, _LEVEL_THREADS])
 
@@ -342,7 +342,7 @@ def _components(topology: Topology) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     neighbors = wp.array(topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32), dtype=wp.int32,
                          device="cpu")
     out = [wp.empty(n, dtype=wp.int32, device="cpu") for _ in range(3)]
-    wp.launch(kernels.label_components, dim=1, device="cpu", inputs=[offsets, neighbors, *out])
+    wp.launch(distance_kernels.label_components, dim=1, device="cpu", inputs=[offsets, neighbors, *out])
     return tuple(a.numpy() for a in out)
 
 
