@@ -38,7 +38,8 @@ def test_car_variants_equal_their_single_runs(device):
     controls = _jittered(p.controls, 4, 0.03, 1)
     schedule = {"iterations": [300, 200, 250, 120], "l_start": [0.25, 0.3, 0.2, 0.6], "l_end": [0.03, 0.05, 0.02, 0.03],
                 "reach": [0.08, 0.2, 0.05, 1.0]}
-    som = BatchSom(p.topology, p.weights, controls, mirror=p.mirror, metric_weights=p.metric_weights,
+    metric = np.float32([1.0, 1.0, 1.0, 0.5, 2.0])  # colour dims weighed apart (the unit-metric path: below)
+    som = BatchSom(p.topology, p.weights, controls, mirror=p.mirror, metric_weights=metric,
                    smooth_dims=p.smooth_dims, device=device, **schedule)
     assert som.step(0) == 0 and som.train() == 300
     assert som.iteration.tolist() == schedule["iterations"]
@@ -47,7 +48,7 @@ def test_car_variants_equal_their_single_runs(device):
     for b in range(4):
         one = {key: values[b] for key, values in schedule.items()}
         _match(device, weights[b], _single(p.topology, p.weights, controls[b], device, mirror=p.mirror,
-                                           metric_weights=p.metric_weights, smooth_dims=p.smooth_dims, **one))
+                                           metric_weights=metric, smooth_dims=p.smooth_dims, **one))
     assert som.params[3] == {"iterations": 120, "l_start": 0.6, "l_end": 0.03, "smoothing": 0.0, "reach": 1.0}
 
 

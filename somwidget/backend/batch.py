@@ -130,6 +130,7 @@ class BatchSom:
             raise ValueError(f"metric_weights: expected {n} weights >= 0, at least one positive; got "
                              f"{np.asarray(metric).tolist()}")
         self._metric = metric.astype(np.float32)
+        self._unit_metric = bool((self._metric == 1.0).all())
         mask = np.zeros(n, np.float32)
         mask[list(smooth)] = 1.0
         self._smooth_dims = smooth
@@ -277,7 +278,7 @@ class BatchSom:
         if dev == "cpu":
             bounds = np.linspace(0, B, self._cores + 1).astype(int)
             parts = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:]) if hi > lo]
-            kernel = variants_kernel(self.n_dims, self._pairs, False)
+            kernel = variants_kernel(self.n_dims, self._pairs, False, unit_metric=self._unit_metric)
 
             def run(part):
                 lo, hi = part
@@ -290,7 +291,7 @@ class BatchSom:
                     list(pool.map(run, parts))
         else:
             shape = cuda_shape(self.n_neurons)
-            kernel = variants_kernel(self.n_dims, self._pairs, True, **shape)
+            kernel = variants_kernel(self.n_dims, self._pairs, True, unit_metric=self._unit_metric, **shape)
             wp.launch_tiled(kernel, dim=[B], block_dim=shape["threads"], device=dev, inputs=inputs(0))
             wp.synchronize_device(dev)
         self._s = to.astype(np.int64)

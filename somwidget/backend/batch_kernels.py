@@ -73,11 +73,12 @@ SEARCH = 4
 
 @functools.cache
 def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, min_blocks: int = 1,
-                    gather: int = GATHER, searched: int = SEARCH):
+                    gather: int = GATHER, searched: int = SEARCH, unit_metric: bool = False):
     """The kernel for weights of n_dims features; with `pairs` the effective controls come as mirrored pairs, each
     original next to its copy. `cuda`: the keys in shared memory (on the CPU Warp's shared tiles are one static
     buffer, which concurrent launches on several cores would share), blocks of at most `threads` threads of which
-    `min_blocks` fit an SM at once (the compiler's register budget); `gather`, `searched`: GATHER, SEARCH."""
+    `min_blocks` fit an SM at once (the compiler's register budget); `gather`, `searched`: GATHER, SEARCH.
+    `unit_metric`: every metric weight is 1, so the winner search skips multiplying by them (the same bits)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     rates = wp.types.vector(length=gather, dtype=wp.float32)
     keys4 = wp.types.vector(length=searched, dtype=wp.uint64)
@@ -87,6 +88,8 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
     @wp.func
     def distance(target: vec, w: vec, metric: vec) -> wp.float32:
         diff = target - w
+        if wp.static(unit_metric):
+            return wp.dot(diff, diff)
         return wp.dot(wp.cw_mul(diff, metric), diff)
 
     @wp.func
