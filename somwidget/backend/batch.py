@@ -299,8 +299,9 @@ class BatchSom:
 
 def cuda_shape(n_neurons: int) -> dict:
     """The CUDA kernel's shape for a mesh (batch_kernels.variants_kernel's arguments), chosen by measurement on an
-    H200 (BENCHMARKS.md, "Variants"): up to 1,024 neurons small blocks of 128 threads, twelve to an SM, rates
-    looked up four controls at a time (the car); past that 1,024 threads a block (the space grid)."""
+    H200 (BENCHMARKS.md, "Variants"): up to 1,024 neurons small blocks of 64 threads, twelve to an SM in the
+    launch bounds, rates looked up six controls at a time and winners searched three at a time (the car); past that
+    1,024 threads a block (the space grid)."""
     if n_neurons <= 1024:
-        return {"threads": 128, "min_blocks": 12, "gather": 4, "searched": SEARCH}
+        return {"threads": 64, "min_blocks": 12, "gather": 6, "searched": 3}
     return {"threads": _MOST_THREADS, "min_blocks": 1, "gather": GATHER, "searched": SEARCH}
