@@ -907,10 +907,13 @@ class SomApp:
                 v3.VProgressLinear(model_value=("variants_progress",), height=4, color="primary",
                                    v_if="variants_gallery.length || busy", id="variants-progress")
             with html.Div(classes="d-flex flex-wrap ga-1 mb-2", id="variants-gallery"):
-                html.Img(v_for="v in variants_gallery", key="v.i", src=("v.src",), title=("v.title",),
-                         classes="variant-thumb", style="width: 96px; height: 77px; cursor: pointer; "
-                         "border: 1px solid #ccd; border-radius: 4px",
-                         click="trigger('pick_variant', [v.i])")
+                with html.Div(v_for="v in variants_gallery", key="v.i", style="position: relative"):
+                    html.Img(src=("v.src",), title=("v.title",), classes="variant-thumb",
+                             style="width: 96px; height: 77px; cursor: pointer; border: 1px solid #ccd; "
+                                   "border-radius: 4px; display: block",
+                             click="trigger('pick_variant', [v.i])")
+                    html.Span("#{{ v.i }}", classes="text-caption",
+                              style="position: absolute; left: 4px; top: 1px; pointer-events: none")
 
             # files out
             html.Div("Export and sessions", classes="text-subtitle-2 mt-2")

@@ -111,8 +111,11 @@ class Variants:
         return sheet
 
     def thumbnails(self, size: tuple[int, int] = (150, 120)) -> list[np.ndarray]:
-        """One small picture per variant (the apps' galleries), (H, W, 3) uint8 each."""
-        return [self.picture(indices=[i], columns=1, size=size) for i in range(len(self))]
+        """One small picture per variant, uncaptioned (the apps' galleries label them), (H, W, 3) uint8 each."""
+        from .picture import render
+
+        return [render(dataclasses.replace(self.preset, controls=self.controls[i]), weights=self.weights[i],
+                       size=size) for i in range(len(self))]
 
     def apply(self, i: int, session=None) -> None:
         """Make variant i the current state of `session` (default: the session it was swept from): its controls,
