@@ -68,10 +68,8 @@ def bench(name: str, n: int, device: str, singles: int, configs: list[tuple]) ->
     print(f"\n{name}: {n} variants of N = {p.n_vertices}, S = {p.iterations}, {len(p.controls)} controls"
           f"{' (mirrored)' if p.mirror else ''}, smoothing {p.smoothing} on {device} ({wp.get_device(device).name})")
     best = None
-    keys = ("threads", "min_blocks", "gather", "searched", "held")
-    shapes = [batch.cuda_shape(p.n_vertices)] + [{"held": 0, **dict(zip(keys, c))} for c in configs
-                                                   if len(c) < 5 or c[4] * c[0] >= p.n_vertices] \
-        if device != "cpu" else [{"threads": 1}]
+    shapes = [batch.cuda_shape(p.n_vertices)] + [dict(zip(("threads", "min_blocks", "gather", "searched"), c))
+                                                   for c in configs] if device != "cpu" else [{"threads": 1}]
     default_shape = batch.cuda_shape
     for shape in shapes:
         batch.cuda_shape = lambda n_neurons, shape=shape: shape
@@ -132,8 +130,7 @@ def main(argv=None) -> None:
     parser.add_argument("--grid", type=int, default=256, help="space-grid variants (default 256)")
     parser.add_argument("--singles", type=int, default=None, help="single runs to time (default: all)")
     parser.add_argument("--shapes", default="",
-                        help="CUDA kernel shapes to try beside the default: threads:min_blocks:gather:searched[:held]"
-                        ",... (held: neurons a thread keeps in registers, held x threads >= N)")
+                        help="CUDA kernel shapes to try beside the default: threads:min_blocks:gather:searched,...")
     args = parser.parse_args(argv)
     device = resolve(args.device)
     configs = [tuple(int(v) for v in x.split(":")) for x in args.shapes.split(",") if x]

@@ -303,5 +303,5 @@ def cuda_shape(n_neurons: int) -> dict:
     launch bounds, rates looked up six controls at a time and winners searched three at a time (the car); past that
     1,024 threads a block (the space grid)."""
     if n_neurons <= 1024:
-        return {"threads": 64, "min_blocks": 12, "gather": 6, "searched": 3, "held": 0}
-    return {"threads": _MOST_THREADS, "min_blocks": 1, "gather": GATHER, "searched": SEARCH, "held": 0}
+        return {"threads": 64, "min_blocks": 12, "gather": 6, "searched": 3}
+    return {"threads": _MOST_THREADS, "min_blocks": 1, "gather": GATHER, "searched": SEARCH}

@@ -73,19 +73,16 @@ SEARCH = 4
 
 @functools.cache
 def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, min_blocks: int = 1,
-                    gather: int = GATHER, searched: int = SEARCH, unit_metric: bool = False, held: int = 0):
+                    gather: int = GATHER, searched: int = SEARCH, unit_metric: bool = False):
     """The kernel for weights of n_dims features; with `pairs` the effective controls come as mirrored pairs, each
     original next to its copy. `cuda`: the keys in shared memory (on the CPU Warp's shared tiles are one static
     buffer, which concurrent launches on several cores would share), blocks of at most `threads` threads of which
     `min_blocks` fit an SM at once (the compiler's register budget); `gather`, `searched`: GATHER, SEARCH.
-    `unit_metric`: every metric weight is 1, so the winner search skips multiplying by them (the same bits).
-    `held` > 0 (CUDA, held x threads >= N): each thread keeps the weights of its `held` neurons in registers for the
-    whole run (`train_variants_held`), so a cycle without smoothing reads and writes no weights in memory."""
+    `unit_metric`: every metric weight is 1, so the winner search skips multiplying by them (the same bits)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     rates = wp.types.vector(length=gather, dtype=wp.float32)
     keys4 = wp.types.vector(length=searched, dtype=wp.uint64)
     targets_of = wp.types.matrix(shape=(searched, n_dims), dtype=wp.float32)
-    held_of = wp.types.matrix(shape=(max(1, held), n_dims), dtype=wp.float32)
     options = {"max_unroll": 32}
 
     @wp.func
@@ -211,92 +208,4 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
                         w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
                     weights[b, v] = w
 
-    @wp.kernel(enable_backward=False, module="unique", module_options=options, launch_bounds=(threads, min_blocks))
-    def train_variants_held(
-        weights: wp.array2d(dtype=vec),
-        moved: wp.array2d(dtype=vec),
-        controls: wp.array2d(dtype=vec),
-        n_controls: int,
-        metric: wp.array(dtype=vec),
-        mask: wp.array(dtype=vec),
-        tables: wp.array2d(dtype=wp.float32),
-        table_row: wp.array(dtype=wp.int32),
-        smoothing: wp.array(dtype=wp.float32),
-        s_from: wp.array(dtype=wp.int32),
-        s_to: wp.array(dtype=wp.int32),
-        distances: wp.array2d(dtype=wp.uint16),
-        offsets: wp.array(dtype=wp.int32),
-        neighbors: wp.array(dtype=wp.int32),
-        keys: wp.array(dtype=wp.uint64),
-        first: int,
-    ):
-        """`train_variants` with the weights of neurons t, t + T, ... (`held` of them) in registers from the first
-        cycle to the last; only smoothing goes through memory (`moved`: each neuron's moved weights, which its
-        neighbours read after a barrier)."""
-        block, t = wp.tid()
-        b = first + block
-        threads = wp.block_dim()
-        reserved = wp.tile_zeros(shape=(_SHARED_WORDS,), dtype=wp.int32, storage="shared")  # noqa: F841 (keys)
-        n = weights.shape[1]
-        k = n_controls
-        m = metric[0]
-        lam = smoothing[b]
-        pull = lam * mask[0]
-        s0 = s_from[b]
-        ws = held_of()
-        for j in range(held):
-            ws[j] = weights[b, wp.min(t + j * threads, n - 1)]
-        if t == 0:
-            for c in range(k):
-                clear_key(keys, 0, (s0 % 3) * k + c)
-        sync_block()
-        for s in range(s0, s_to[b]):
-            buf = (s % 3) * k
-            if t == 0:
-                for c in range(k):
-                    clear_key(keys, 0, ((s + 1) % 3) * k + c)
-            # 1. winners from W(s)
-            for c0 in range(0, k, searched):
-                best = keys4()
-                targets = targets_of()
-                for g in range(searched):
-                    best[g] = KEY_NONE
-                    targets[g] = controls[b, wp.min(c0 + g, k - 1)]
-                for j in range(held):
-                    v = t + j * threads
-                    if v < n:
-                        for g in range(searched):
-                            best[g] = wp.min(best[g], winner_key(distance(targets[g], ws[j], m), v))
-                for g in range(searched):
-                    if c0 + g < k:
-                        offer_key(keys, 0, buf + c0 + g, best[g])
-            sync_block()
-            # 2. every neuron applies the controls in list order (pairs at once)
-            row = table_row[b] + s
-            for j in range(held):
-                v = t + j * threads
-                if v < n:
-                    ws[j] = moved_weight(ws[j], v, b, controls, k, tables, row, distances, keys, 0, buf)
-                    if lam > wp.float32(0.0):
-                        moved[b, v] = ws[j]
-            # 3. one Jacobi step of Laplacian smoothing from the moved weights
-            if lam > wp.float32(0.0):
-                sync_block()
-                for j in range(held):
-                    v = t + j * threads
-                    if v < n:
-                        lo = offsets[v]
-                        hi = offsets[v + 1]
-                        if hi > lo:
-                            total = vec()
-                            for e in range(lo, hi):
-                                total += moved[b, neighbors[e]]
-                            ws[j] = ws[j] + wp.cw_mul(pull, total / wp.float32(hi - lo) - ws[j])
-        for j in range(held):
-            v = t + j * threads
-            if v < n:
-                weights[b, v] = ws[j]
-
-    if held > 0:
-        return train_variants_held
     return train_variants
