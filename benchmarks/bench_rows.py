@@ -21,7 +21,7 @@ import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
 from somwidget import Som, Topology  # noqa: E402
-from somwidget.backend import som as som_module  # noqa: E402
+from somwidget.backend import rows_path  # noqa: E402
 from somwidget.backend.topology import RowSearch  # noqa: E402
 from device_timing import device_timer  # noqa: E402 (beside this script)
 
@@ -179,14 +179,14 @@ def big():
           f"{np.mean(np.array(new) > 0):.2f}; hops moved mean {drift.mean():.2f}, <= 1 hop {np.mean(drift <= 1):.2f}",
           flush=True)
     # without misses: a cache that holds a whole run's winner rows (none searched ahead), run again from reset
-    rings, som_module._PREFETCH_RINGS = som_module._PREFETCH_RINGS, 0
+    rings, rows_path._PREFETCH_RINGS = rows_path._PREFETCH_RINGS, 0
     som = make(S=200, cache_rows=8000)
     cache = som._cache
     som.train()
     som.reset()
     c0, s0 = cache.computed, cache.stalls
     dt, _ = timed(som.train)
-    som_module._PREFETCH_RINGS = rings
+    rows_path._PREFETCH_RINGS = rings
     print(f"  no misses (S=200, cache 8000 rows, second run): {dt / 200 * 1e6:.1f} us/cycle; rows searched "
           f"{cache.computed - c0}, stalls {cache.stalls - s0}", flush=True)
     # one miss: rows for neurons not cached

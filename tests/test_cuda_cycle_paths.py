@@ -16,7 +16,7 @@ from reference import lattice_edges
 
 from somwidget import Som, Topology
 from somwidget.backend import dependent_launch
-from somwidget.backend import som as som_module
+from somwidget.backend import cuda_path
 from somwidget.backend.spread_kernels import SHARED_TABLE_WORDS
 
 pytestmark = pytest.mark.skipif(not HAS_CUDA, reason="warp reports no CUDA device on this machine")
@@ -36,7 +36,7 @@ def _trained(topology, weights, controls, **kw) -> Som:
 
 
 def _general_path(monkeypatch) -> None:
-    monkeypatch.setattr(som_module, "SMALL_MESH", 0)
+    monkeypatch.setattr(cuda_path, "SMALL_MESH", 0)
     monkeypatch.setattr(dependent_launch, "available", lambda device: False)
 
 

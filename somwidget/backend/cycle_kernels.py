@@ -23,6 +23,10 @@ import warp as wp
 from .primitives import FLOAT_MAX, INDEX_MASK, KEY_NONE, UNREACHABLE, wait_for_previous_grid, winner_key
 
 
+#: Effective controls a cycle takes (originals plus mirrored copies): the winner keys' buffers hold this many.
+MAX_CONTROLS = 256
+#: Cycles in the longest captured graph; runs are split into powers of two.
+LONGEST_GRAPH = 512
 #: Threads per block on CUDA, a whole warp or more (the winner search shares the block's weights through a tile):
 #: a thread per control scans the block's neurons.
 CUDA_BLOCK = wp.constant(32)

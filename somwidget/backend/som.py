@@ -12,13 +12,16 @@ Mirrored pairs. With mirroring each control has a copy with the `mirror` dims ne
 at the pair's place in the list: both rates from the same weights, l1 = L[s, D[u_c, v]] and l2 = L[s, D[u_c', v]],
 W <- W + (l1 (C - W) + l2 (C' - W)) / max(1, l1 + l2) (`cycle_kernels.move_pair`), so a symmetric mesh stays exactly
 symmetric. The device holds each original next to its copy.
+
+Execution paths. `Som` holds the state (weights, controls, counters, learning table, on its device) and the public
+API; how a run of cycles executes lives beside it, one module a path: cpu_path.py (each core replays its share),
+cuda_path.py (captured graphs of one kernel a cycle, spread kernels for small meshes), rows_path.py (distance rows
+past the dense table). batch.py runs B variants of one mesh at once.
 """
 
 from __future__ import annotations
 
 import functools
-import os
-from collections import OrderedDict
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 
@@ -31,41 +34,17 @@ try:  # Warp's internals, for `_copy` (warp-lang is pinned to 1.19.x in pyprojec
 except ImportError:  # pragma: no cover - another Warp layout: wp.copy then
     _warp_context = None
 
-from . import checks, dependent_launch
+from . import checks
 from .device import resolve, warp_exclusive
-from .halos import block_halos
-from .cycle_kernels import CUDA_BLOCK, PAIRS, SCALED_PAIRS, SINGLES, cycle_kernels
-from .distance_kernels import assign_slots
-from .primitives import barrier, sched_yield_address
-from .spread_kernels import (SHARED_TABLE_WORDS, spread_cycle_inputs, spread_cycle_kernel,
-                             spread_smoothing_cycle_inputs, spread_smoothing_cycle_kernel)
+from .cpu_path import CpuPath
+from .cuda_path import CudaPath
+from .cycle_kernels import CUDA_BLOCK, LONGEST_GRAPH, MAX_CONTROLS, PAIRS, SCALED_PAIRS, SINGLES, cycle_kernels
+from .rows_path import RowCache, RowsPath
 from .schedule import learning_table
-from .topology import MAX_DENSE_NEURONS, RowSearch, Topology
+from .topology import MAX_DENSE_NEURONS, Topology
 
 MAX_DIMS = 32
-MAX_CONTROLS = 256  # counts the effective list: originals plus mirrored copies
 _KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
-#: Cycles in the longest captured graph; runs are split into powers of two.
-_LONGEST_GRAPH = 512
-#: Meshes up to this many neurons have latency-bound cycles on CUDA (a block per 32 neurons leaves most of the GPU
-#: idle). With at most 32 controls a block spreads the controls over up to eight warps (`spread_cycle_kernel`; with
-#: smoothing, and the dense table, `spread_smoothing_cycle_kernel`, where each block also moves the neighbours of
-#: its neurons that other blocks own: at most _SPREAD_MOST_WARPS chunks of 32, neurons of at most
-#: _SMOOTHING_MOST_NEIGHBOURS neighbours); otherwise the move kernel looks up the rates of all controls at once, up
-#: to 32 (measured on an H200, BENCHMARKS.md).
-SMALL_MESH = 16384
-_SPREAD_MOST_WARPS = 8
-_SPREAD_MOST_CONTROLS = 32
-_SMOOTHING_MOST_NEIGHBOURS = 16
-_YIELD = sched_yield_address()
-#: Neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each).
-_PAIRS_PER_EXTRA_CORE = 1 << 18
-#: Distance rows mode: the cache's default size in bytes (int32 rows of N), at least 2 x MAX_CONTROLS rows: on the
-#: CPU 1 GiB, on a GPU a sixteenth of its memory up to 8 GiB.
-_CACHE_BYTES = {"cpu": 1 << 30, "cuda": 8 << 30}
-_CACHE_MOST_ROWS = 4096
-#: Distance rows mode on CUDA: rings of neurons around the winners whose rows a search brings along (see _around).
-_PREFETCH_RINGS = 8
 #: Learning table entries (S x (d_max + 1) float32) a Som may hold: 2 GiB.
 _MAX_TABLE_ENTRIES = 1 << 29
 #: The neighbourhood radius a restart begins with, as a share of the full radius sigma (Restarts, above). Chosen
@@ -81,7 +60,7 @@ def restart_iteration(reach: float, iterations: int) -> int:
     return min(int(np.floor((1.0 - reach) * iterations)), iterations - 1)
 
 
-class Som:
+class Som(CpuPath, CudaPath, RowsPath):
     """A SOM whose neurons are the vertices of `topology`, trained towards `controls`.
 
     weights (N, n) and controls (k, n) share the n feature dimensions (1..32). State stays on `device`
@@ -148,10 +127,10 @@ class Som:
         self._pool: ThreadPoolExecutor | None = None
         self._rows_mode = self._check_distances(distances)
         size = None if cache_rows is None else checks.integer("cache_rows", cache_rows, 1)
-        self._cache: _RowCache | None = None
+        self._cache: RowCache | None = None
         # the cycle kernels read D[u_c, v] from the dense table or from the cache's rows (through slot_of)
         if self._rows_mode:
-            self._cache = _RowCache(topology, dev, size)
+            self._cache = RowCache(topology, dev, size)
             self._distances, self._slot_of = self._cache.rows, self._cache.slot_of
         else:
             self._distances = topology.distance_table(dev)
@@ -467,7 +446,7 @@ class Som:
         n = min(n, self._iterations - self._s)
         done = 0
         while done < n:
-            chunk = min(_LONGEST_GRAPH, 1 << ((n - done).bit_length() - 1))
+            chunk = min(LONGEST_GRAPH, 1 << ((n - done).bit_length() - 1))
             self._run(chunk)
             done += chunk
         return n
@@ -524,16 +503,6 @@ class Som:
             return SINGLES
         return SCALED_PAIRS if self._table_max > 0.5 else PAIRS
 
-    def _plan_cores(self) -> None:
-        """Split the CPU cycle: neuron ranges for the move and smoothing, a thread per extra core."""
-        cores = min(self._cpu_cores or _cpu_cores(self.n_neurons, self._k_eff), self.n_neurons)
-        bounds = np.linspace(0, self.n_neurons, cores + 1).astype(int)
-        self._ranges = list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
-        if cores > 1 and self._pool is None:
-            self._pool = ThreadPoolExecutor(63, thread_name_prefix="som-core")
-        if cores != self._cores:
-            self._meet.zero_()  # barrier generations count in multiples of the core count
-        self._cores = cores
 
     def _restart(self, s: int | None = None) -> None:
         """Continue the schedule from cycle s (default: s0, a local restart) with the winners found afresh."""
@@ -608,220 +577,6 @@ class Som:
             held = self._graphs[key] = (capture.graph, records)
         return held[0]
 
-    def _run_cpu(self, cycles: int, fresh: bool, smoothing: bool) -> None:
-        graphs = [self._graph((cycles, fresh, smoothing, core), lambda core=core: self._record_cpu(core, cycles, fresh,
-                                                                                                smoothing))
-                  for core in range(self._cores)]
-        self._replay_cpu(graphs)
-
-    def _replay_cpu(self, graphs: list) -> None:
-        """Each core's graph on its own thread (the first on this one)."""
-        others = [self._pool.submit(wp.capture_launch, g) for g in graphs[1:]] if self._pool else []
-        wp.capture_launch(graphs[0])
-        for job in others:
-            job.result()
-        if self._cores > 1 and self._meet_failed.numpy()[0]:
-            self._meet_failed.zero_()
-            self._meet.zero_()
-            raise RuntimeError("Som: a CPU core did not reach the cycle barrier (was a worker thread stopped?)")
-
-    def _record_cpu(self, core: int, cycles: int, fresh: bool, smoothing: bool) -> None:
-        """One core's share: move and smooth its neurons, find the winners of its controls, meet between phases.
-        Without `fresh` the winners of the first cycle are known (always so in distance rows mode)."""
-        kern, cores, (lo, hi), counter = self._kernels, self._cores, self._ranges[core], self._cycle[core]
-        move_part = self._movers().move_part
-        stalled = self._stalled
-
-        def meet():
-            if cores > 1:
-                wp.launch(barrier, dim=1, device="cpu", inputs=[self._meet, cores, _YIELD, self._meet_failed])
-
-        find = [self._w, self._c, self._k_eff, self._m, self._keys, counter, core, cores]
-        if fresh:
-            wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 0, stalled])
-            meet()
-        moved = self._w_moved if smoothing else self._w
-        for _ in range(cycles):
-            wp.launch(move_part, dim=1, device="cpu",
-                      inputs=[self._w, moved, self._c, 0, self._k_eff, self._table, self._distances, self._slot_of,
-                              self._keys, counter, lo, hi, stalled])
-            meet()
-            if smoothing:
-                wp.launch(kern.smooth_part, dim=1, device="cpu", inputs=[moved, self._w, self._offsets, self._neighbors,
-                                                                      self._mask, self._smoothing, lo, hi, stalled])
-                meet()
-            wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 1, stalled])
-            meet()
-
-    def _record_cuda(self, cycles: int, fresh: bool, parity: int, smoothing: bool, anchored: bool = False) -> list:
-        """A kernel a cycle (move + next winners), or two with smoothing (move; smooth + next winners). Without
-        `fresh` the winners of the first cycle are known (always so in distance rows mode); `anchored` starts with
-        the anchored weights copied back (`set_controls(..., from_anchor=True)`). Returns the packed arguments of
-        the dependent launches, which the graph needs as long as it lives."""
-        dev, threads, k = self.device, int(CUDA_BLOCK), self._k_eff
-        dependent = dependent_launch.available(dev)
-        after_kernel = False
-        records = []
-
-        def launch(kernel, inputs, threads=threads):
-            nonlocal after_kernel
-            if dependent and after_kernel:
-                records.append(dependent_launch.launch_tiled_after_kernel(kernel, self._blocks, threads, inputs, dev))
-            else:
-                wp.launch_tiled(kernel, dim=[self._blocks], block_dim=threads, device=dev, inputs=inputs)
-            after_kernel = True
-
-        pairs = self._pairs
-        move, move_threads, spread = self._movers().move, threads, False
-        shared_table = self._table.shape[1] <= SHARED_TABLE_WORDS
-        halos = self._smoothing_in_one_kernel() if smoothing else None
-        if self.n_neurons <= SMALL_MESH:
-            if k <= _SPREAD_MOST_CONTROLS and not smoothing:
-                warps, per_warp = _spread_shape(k, 1, pairs != SINGLES)
-                move = spread_cycle_kernel(self.n_dims, warps, per_warp, shared_table, self._rows_mode, pairs)
-                move_threads, spread = 32 * warps, True
-            else:
-                move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8)), pairs).move
-
-        if anchored:
-            wp.copy(self._w, self._w_anchor)
-        if fresh:
-            self._launch_find()
-            after_kernel = True
-        if halos is not None:  # a kernel a cycle from one weights array to the other, then back in self._w
-            warps, per_warp = _spread_shape(k, halos.chunks, pairs != SINGLES)
-            kernel = spread_smoothing_cycle_kernel(self.n_dims, warps, per_warp, shared_table, halos.chunks,
-                                                   halos.width, pairs)
-            pair = (self._w, self._w_moved)
-            for i in range(cycles):
-                p = (parity + i) % 2
-                launch(kernel, spread_smoothing_cycle_inputs(
-                    pair[i % 2], pair[1 - i % 2], self._c, k, self._m, self._table, self._distances, self._keys,
-                    self._cycle[p], self._cycle[1 - p], halos.neurons, halos.local, self._offsets, self._mask,
-                    self._smoothing), 32 * warps)
-            if cycles % 2:
-                wp.copy(self._w, self._w_moved)
-            return records
-        p = parity
-        for _ in range(cycles):
-            c_in, c_out = self._cycle[p], self._cycle[1 - p]
-            moved = self._w_moved if smoothing else self._w
-            if spread:
-                launch(move, spread_cycle_inputs(self._w, moved, self._c, k, self._m, self._table, self._distances,
-                                                 self._slot_of, self._keys, c_in, c_out, self._stalled),
-                       move_threads)
-            else:
-                launch(move, [self._w, moved, self._c, 0, k, k, self._m, self._table, self._distances,
-                              self._slot_of, self._keys, c_in, c_out, int(not smoothing), self._stalled], move_threads)
-            if smoothing:
-                launch(self._kernels.smooth, [self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
-                                              self._smoothing, self._c, k, self._m, self._keys, c_out, c_in,
-                                              self._stalled])
-            else:
-                p = 1 - p
-        return records
-
-    def _movers(self):
-        """The kernels of step 2 for the current controls: pair by pair when mirrored."""
-        return cycle_kernels(self.n_dims, 8, self._pairs)
-
-    def _block_halos(self) -> _DeviceHalos | None:
-        """The block halos of the one-kernel smoothing cycle on CUDA (dense table, small mesh), uploaded once here,
-        never inside a graph capture; None where it does not apply or they do not fit."""
-        if self.device == "cpu" or self._rows_mode or self.n_neurons > SMALL_MESH:
-            return None
-        found = block_halos(self.topology.offsets, self.topology.neighbors, self.n_neurons)
-        if found.chunks > _SPREAD_MOST_WARPS or found.width > _SMOOTHING_MOST_NEIGHBOURS:
-            return None
-        return _DeviceHalos(found, self.device)
-
-    def _smoothing_in_one_kernel(self) -> _DeviceHalos | None:
-        """The block halos where a smoothing cycle runs as one kernel (at most 32 controls), else None."""
-        return self._halos if self._k_eff <= _SPREAD_MOST_CONTROLS else None
-
-    # -- distance rows mode -------------------------------------------------------------------------------
-    def _run_rows(self, cycles: int) -> None:
-        """`cycles` cycles reading distance rows: the winners' rows are fetched, then a graph runs until done or a
-        cycle stalls on a winner without a row (it then leaves everything as it was); the host fetches that cycle's
-        rows and goes on from it. A cycle whose distinct winners outnumber the cache rows runs in parts."""
-        target = self._s + cycles
-        smoothing = self._smoothing > 0.0
-        while self._s < target:
-            self._find_winners_now()
-            winners = self._current_winners()
-            distinct = list(dict.fromkeys(winners.tolist()))
-            if len(distinct) > self._cache.size:
-                self._cycle_in_parts(winners, smoothing)
-                continue
-            self._cache.fetch(distinct, self._d_max)
-            left = target - self._s
-            chunk = min(self._cache.span, 1 << (left.bit_length() - 1))
-            if self.device == "cpu":
-                self._replay_cpu([self._graph(("rows", chunk, smoothing, core),
-                                              lambda core=core: self._record_cpu(core, chunk, False, smoothing))
-                                  for core in range(self._cores)])
-                reached = int(self._cycle[0].numpy()[0])
-            else:  # every graph starts from counter 0 (one graph per length), which then gets the last one's count
-                wp.capture_launch(self._graph(("rows", chunk, smoothing),
-                                              lambda: self._record_cuda(chunk, False, 0, smoothing)))
-                last = 0 if smoothing else chunk % 2
-                reached = int(self._cycle[last].numpy()[0])
-                if last:
-                    self._cycle[0].fill_(reached)
-            if reached < self._s + chunk:  # stalled: the graph's later cycles did nothing, try shorter ones
-                self._stalled.zero_()
-                self._cache.stalls += 1
-                self._cache.span = max(1, self._cache.span // 4)
-            else:
-                self._cache.span = min(_LONGEST_GRAPH, self._cache.span * 2)
-            self._s = reached
-            self._winners_valid = True
-
-    def _cycle_in_parts(self, winners: np.ndarray, smoothing: bool) -> None:
-        """One cycle in consecutive runs of controls whose winners fit in the cache (each neuron still applies the
-        controls in list order)."""
-        parts, lo, seen = [], 0, set()
-        unit = 2 if self._mirror else 1  # a mirrored pair moves together: never split between parts
-        for c in range(0, len(winners), unit):
-            group = set(winners[c:c + unit].tolist())
-            if len(seen | group) > self._cache.size:
-                parts.append((lo, c))
-                lo, seen = c, set()
-            seen |= group
-        parts.append((lo, len(winners)))
-        kern, dev, cache = self._kernels, self.device, self._cache
-        movers = self._movers()
-        moved = self._w_moved if smoothing else self._w
-        source = self._w
-        c_in, c_out = self._cycle[0], self._cycle[1]
-        for i, (lo, hi) in enumerate(parts):
-            cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), self._d_max)
-            if dev == "cpu":
-                wp.launch(movers.move_part, dim=1, device=dev,
-                          inputs=[source, moved, self._c, lo, hi, self._table, self._distances, self._slot_of,
-                                  self._keys, c_in, 0, self.n_neurons, self._stalled])
-            else:
-                find_next = int(not smoothing and i == len(parts) - 1)
-                wp.launch_tiled(movers.move, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
-                                inputs=[source, moved, self._c, lo, hi, self._k_eff, self._m, self._table,
-                                        self._distances, self._slot_of, self._keys, c_in, c_out, find_next,
-                                        self._stalled])
-            source = moved
-        if dev == "cpu":
-            if smoothing:
-                wp.launch(kern.smooth_part, dim=1, device=dev,
-                          inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing, 0,
-                                  self.n_neurons, self._stalled])
-            wp.launch(kern.find_part, dim=1, device=dev,
-                      inputs=[self._w, self._c, self._k_eff, self._m, self._keys, c_in, 0, 1, 1, self._stalled])
-        elif smoothing:
-            wp.launch_tiled(kern.smooth, dim=[self._blocks], block_dim=int(CUDA_BLOCK), device=dev,
-                            inputs=[moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing,
-                                    self._c, self._k_eff, self._m, self._keys, c_out, c_in, self._stalled])
-        self._s += 1
-        self._set_cycle()
-        self._winners_valid = True
-
 
 @functools.cache
 def _memcpy(name: str):
@@ -843,112 +598,3 @@ def _copy(dest: wp.array, src: wp.array) -> None:
         raise RuntimeError(f"Som: a copy to {device} failed")
 
 
-def _spread_shape(controls: int, least_warps: int, paired: bool = False) -> tuple[int, int]:
-    """(warps, controls a warp) of a spread cycle kernel: at most _SPREAD_MOST_WARPS warps, at least least_warps;
-    with `paired` an even number of slots (warps x per_warp), so that no pair lacks its second slot."""
-    per_warp = -(-controls // _SPREAD_MOST_WARPS)
-    warps = max(-(-controls // per_warp), least_warps)
-    per_warp = -(-controls // warps)
-    if paired and (warps * per_warp) % 2:
-        warps += 1  # odd x odd: warps < _SPREAD_MOST_WARPS (8 is even), so one more warp still fits
-    return warps, per_warp
-
-
-class _DeviceHalos:
-    """BlockHalos (halos.py) on a device."""
-
-    def __init__(self, halos, device: str):
-        self.chunks, self.width = halos.chunks, halos.width
-        self.neurons = wp.array(halos.neurons, dtype=wp.int32, device=device)
-        self.local = wp.array(halos.local, dtype=wp.int32, device=device)
-
-
-class _RowCache:
-    """Distance rows (int32 hops, -1 = unreachable) from recent winners, kept on the Som's device; the least
-    recently used row makes way for a new one. slot_of[v] is the row of neuron v, -1 when it has none."""
-
-    def __init__(self, topology: Topology, device: str, size: int | None):
-        n = topology.n_vertices
-        if size is None:
-            budget = _CACHE_BYTES["cpu"] if device == "cpu" else min(_CACHE_BYTES["cuda"],
-                                                                     wp.get_device(device).total_memory // 16)
-            size = max(2 * MAX_CONTROLS, min(_CACHE_MOST_ROWS, budget // (4 * n)))
-        self.size = min(max(size, 2), n)  # two at least: a mirrored pair's winners move in the same part
-        self.device = device
-        self.rows = wp.empty((self.size, n), dtype=wp.int32, device=device)
-        self.slot_of = wp.full(n, -1, dtype=wp.int32, device=device)
-        self._search = RowSearch(topology, device)
-        self._offsets, self._neighbors = topology.offsets, topology.neighbors
-        self._lru: OrderedDict[int, int] = OrderedDict()  # neuron -> row, least recently used first
-        self._free = list(range(self.size - 1, -1, -1))
-        self.computed = 0  # rows searched so far for winners
-        self.prefetched = 0  # rows searched ahead for their neighbours
-        self.stalls = 0  # graphs that stopped on a missing row
-        self.span = _LONGEST_GRAPH  # cycles in the next graph: fewer while winners keep lacking rows
-
-    def fetch(self, neurons: list[int], levels: int) -> None:
-        """Rows for `neurons` (distinct, at most `size`), searching those not kept; levels: the deepest search."""
-        missing = []
-        for u in neurons:
-            if u in self._lru:
-                self._lru.move_to_end(u)
-            else:
-                missing.append(u)
-        if not missing:
-            return
-        asked = len(missing)
-        missing = self._around(missing, neurons) + missing  # least recent first: asked-for rows stay longest
-        slots, evicted = [], []
-        for u in missing:  # the neurons asked for are the most recent: the oldest row is never one of them
-            if self._free:
-                slot = self._free.pop()
-            else:
-                old, slot = self._lru.popitem(last=False)
-                evicted.append(old)
-            self._lru[u] = slot
-            slots.append(slot)
-        self._search.run([[u] for u in missing], slots, self.rows, levels)
-        neurons_changed = wp.array(np.array(evicted + missing, dtype=np.int32), device=self.device)
-        values = wp.array(np.array([-1] * len(evicted) + slots, dtype=np.int32), device=self.device)
-        wp.launch(assign_slots, dim=len(neurons_changed), device=self.device,
-                  inputs=[self.slot_of, neurons_changed, values])
-        self.computed += asked
-        self.prefetched += len(missing) - asked
-
-    def _around(self, missing: list[int], neurons: list[int]) -> list[int]:
-        """On CUDA, uncached neurons around the winners, ring by ring (one hop from each winner, those lacking rows
-        first, then two hops...), as many as the search runs alongside the missing rows at little extra time and
-        at most a sixteenth of the cache (so that rows still in use stay). A winner moves one hop or less in most
-        cycles and keeps drifting the same way, so rows searched ahead spare later searches."""
-        room = min(self._search.alongside - len(missing), self.size // 16, self.size - len(neurons))
-        if self.device == "cpu" or room <= 0:
-            return []
-        centres = missing + [u for u in neurons if u not in missing]
-        taken = dict.fromkeys(centres)
-        rings = [[u] for u in centres]
-        extra: list[int] = []
-        for _ in range(_PREFETCH_RINGS):
-            if len(extra) >= room or not any(rings):
-                break
-            for i, ring in enumerate(rings):
-                following = []
-                for u in ring:
-                    for w in self._neighbors[self._offsets[u]: self._offsets[u + 1]].tolist():
-                        if w not in taken:
-                            taken[w] = None
-                            following.append(w)
-                rings[i] = following
-                extra += [w for w in following if w not in self._lru]
-        return extra[:room][::-1]  # the farthest least recent
-
-
-def _cpu_cores(n_neurons: int, n_controls: int) -> int:
-    """Cores for a CPU Som: one for small cycles (a barrier costs more than it saves on a busy machine), else
-    those this process may use, at most 8."""
-    if n_neurons * n_controls < _PAIRS_PER_EXTRA_CORE:
-        return 1
-    try:
-        available = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        available = os.cpu_count() or 1
-    return max(1, min(available, 8, n_neurons * n_controls // _PAIRS_PER_EXTRA_CORE))
