@@ -61,13 +61,10 @@ PANEL_HZ = 8
 def _png_data_url(img) -> str:
     """An (H, W, 3) uint8 image as a PNG data URL (a thumbnail the page shows as it is)."""
     import base64
-    import io
 
-    from PIL import Image
+    from .picture import png_bytes
 
-    buffer = io.BytesIO()
-    Image.fromarray(img).save(buffer, format="PNG")
-    return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
+    return "data:image/png;base64," + base64.b64encode(png_bytes(img)).decode("ascii")
 
 
 MIME = {"obj": "text/plain", "ply": "application/octet-stream", "glb": "model/gltf-binary"}

@@ -360,9 +360,11 @@ class VariantsSection(widgets.VBox):
             self.sweep_button.disabled = False
 
     def _show(self, variants) -> None:
+        from .picture import png_bytes
+
         cells = []
         for i, image in enumerate(variants.thumbnails(size=(104, 84))):
-            picture = widgets.Image(value=_png_bytes(image), format="png", layout=widgets.Layout(width="104px"))
+            picture = widgets.Image(value=png_bytes(image), format="png", layout=widgets.Layout(width="104px"))
             use = widgets.Button(description=f"use #{i}", layout=widgets.Layout(width="104px", height="24px"),
                                  tooltip=f"gap {variants.metrics['gap'][i]:.3f}, spike "
                                          f"{variants.metrics['spike'][i]:.2f}")
@@ -385,16 +387,6 @@ class VariantsSection(widgets.VBox):
         for w in [*self.gallery.children, *self.children]:
             w.close()
         super().close()
-
-
-def _png_bytes(image) -> bytes:
-    import io
-
-    from PIL import Image
-
-    buffer = io.BytesIO()
-    Image.fromarray(image).save(buffer, format="PNG")
-    return buffer.getvalue()
 
 
 def _set(widget, value) -> None:
@@ -466,15 +458,9 @@ class SomWidget(widgets.HBox):
 
 def picture_png(session: Session, size=(640, 420)) -> bytes:
     """The session's latest frame as a PNG (pyvista, off screen)."""
-    import io
+    from .picture import png_bytes, render
 
-    from PIL import Image  # pyvista's own dependency
-
-    from .picture import render
-
-    buf = io.BytesIO()
-    Image.fromarray(render(session, size=size)).save(buf, format="PNG")
-    return buf.getvalue()
+    return png_bytes(render(session, size=size))
 
 
 def _session_of(what, device, paused: bool) -> tuple[Session, bool]:

@@ -217,6 +217,17 @@ def _place_camera(pl, points: np.ndarray, camera, zoom: float) -> None:
     pl.reset_camera_clipping_range()
 
 
+def png_bytes(img: np.ndarray) -> bytes:
+    """An (H, W, 3) uint8 image as PNG bytes."""
+    import io
+
+    from PIL import Image  # pyvista's own dependency
+
+    buffer = io.BytesIO()
+    Image.fromarray(np.asarray(img, np.uint8)).save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
 def save_image(path, img: np.ndarray) -> None:
     """Write an (H, W, 3) uint8 image; the format follows the extension (PNG, JPEG, BMP, TIFF...)."""
     from PIL import Image  # pyvista's own dependency
@@ -225,4 +236,4 @@ def save_image(path, img: np.ndarray) -> None:
     Image.fromarray(np.asarray(img, np.uint8)).save(os.fspath(path))
 
 
-__all__ = ["render", "picture_of", "Picture", "default_layout", "save_image", "CAMERAS"]
+__all__ = ["render", "picture_of", "Picture", "default_layout", "save_image", "png_bytes", "CAMERAS"]
