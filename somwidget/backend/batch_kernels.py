@@ -83,6 +83,8 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
     rates = wp.types.vector(length=gather, dtype=wp.float32)
     keys4 = wp.types.vector(length=searched, dtype=wp.uint64)
     targets_of = wp.types.matrix(shape=(searched, n_dims), dtype=wp.float32)
+    group_of = wp.types.matrix(shape=(gather, n_dims), dtype=wp.float32)
+    group_ints = wp.types.vector(length=gather, dtype=wp.int32)
     options = {"max_unroll": 32}
 
     @wp.func
@@ -120,25 +122,37 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
                 offer_key(keys, base, buf + c0 + g, best[g])
 
     @wp.func
-    def moved_weight(w: vec, v: int, b: int, controls: wp.array2d(dtype=vec), k: int,
-                     tables: wp.array2d(dtype=wp.float32), row: int, distances: wp.array2d(dtype=wp.uint16),
-                     keys: wp.array(dtype=wp.uint64), base: int, buf: int) -> vec:
-        """Step 2 for neuron v: the controls in list order (pairs at once), their rates looked up gather at a time
-        (past k a rate of 0, which leaves w as it is)."""
-        for c0 in range(0, k, gather):
+    def move_group(weights: wp.array2d(dtype=vec), moved: wp.array2d(dtype=vec), into_moved: int, c0: int, b: int,
+                   controls: wp.array2d(dtype=vec), k: int, tables: wp.array2d(dtype=wp.float32), row: int,
+                   distances: wp.array2d(dtype=wp.uint16), keys: wp.array(dtype=wp.uint64), base: int, buf: int,
+                   t: int, threads: int):
+        """Step 2 for controls c0 .. c0 + gather - 1 on this thread's neurons (past k a rate of 0, which leaves a
+        weight as it is): their winners and places read once, then each neuron's rates looked up together and
+        applied in list order (pairs at once). The first group reads `weights`; the result goes to `moved` with
+        `into_moved` (smoothing follows), else back to `weights`."""
+        winners = group_ints()
+        places = group_of()
+        for g in range(gather):
+            c = wp.min(c0 + g, k - 1)
+            winners[g] = int(read_key(keys, base, buf + c) & INDEX_MASK)
+            places[g] = controls[b, c]
+        for v in range(t, weights.shape[1], threads):
+            w = weights[b, v]
+            if into_moved != 0 and c0 > 0:
+                w = moved[b, v]
             r = rates()
             for g in range(gather):
-                c = wp.min(c0 + g, k - 1)
-                hops = distances[int(read_key(keys, base, buf + c) & INDEX_MASK), v]
-                r[g] = wp.where(c0 + g < k, rate(tables, row, hops), wp.float32(0.0))
+                r[g] = wp.where(c0 + g < k, rate(tables, row, distances[winners[g], v]), wp.float32(0.0))
             if wp.static(pairs):
                 for g in range(0, gather, 2):
-                    w = move_pair(w, r[g], r[g + 1], controls[b, wp.min(c0 + g, k - 1)],
-                                  controls[b, wp.min(c0 + g + 1, k - 1)])
+                    w = move_pair(w, r[g], r[g + 1], places[g], places[g + 1])
             else:
                 for g in range(gather):
-                    w = w + r[g] * (controls[b, wp.min(c0 + g, k - 1)] - w)
-        return w
+                    w = w + r[g] * (places[g] - w)
+            if into_moved != 0:
+                moved[b, v] = w
+            else:
+                weights[b, v] = w
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options, launch_bounds=(threads, min_blocks))
     def train_variants(
@@ -188,12 +202,10 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
             sync_block()
             # 2. every neuron applies the controls in list order (pairs at once)
             row = table_row[b] + s
-            for v in range(t, n, threads):
-                w = moved_weight(weights[b, v], v, b, controls, k, tables, row, distances, keys, base, buf)
-                if lam > wp.float32(0.0):
-                    moved[b, v] = w
-                else:
-                    weights[b, v] = w
+            into_moved = int(lam > wp.float32(0.0))
+            for c0 in range(0, k, gather):
+                move_group(weights, moved, into_moved, c0, b, controls, k, tables, row, distances, keys, base, buf,
+                           t, threads)
             # 3. one Jacobi step of Laplacian smoothing from the moved weights
             if lam > wp.float32(0.0):
                 sync_block()
