@@ -32,9 +32,6 @@ from .topology import Topology
 MAX_TABLE_ENTRIES = 1 << 29
 #: Meshes a batch takes: its dense distance table (N x N uint16) is shared by every variant.
 MAX_BATCH_NEURONS = 16384
-#: Threads of a variant's block on CUDA, by mesh size: a thread per neuron up to 1024 (a multiple of 32), else
-#: 1024 threads with several neurons each.
-_MOST_THREADS = 1024
 SCHEDULE_KEYS = ("iterations", "l_start", "l_end", "smoothing", "reach")
 
 
@@ -299,9 +296,9 @@ class BatchSom:
 
 def cuda_shape(n_neurons: int) -> dict:
     """The CUDA kernel's shape for a mesh (batch_kernels.variants_kernel's arguments), chosen by measurement on an
-    H200 (BENCHMARKS.md, "Variants"): up to 1,024 neurons small blocks of 64 threads, twelve to an SM in the
-    launch bounds, rates looked up six controls at a time and winners searched three at a time (the car); past that
-    1,024 threads a block (the space grid)."""
+    H200 (BENCHMARKS.md, "Variants"): up to 1,024 neurons blocks of 64 threads, eight to an SM in the launch bounds
+    (registers enough for six controls' places and winner keys at once: the car); past that 512 threads a block,
+    two to an SM (the space grid)."""
     if n_neurons <= 1024:
-        return {"threads": 64, "min_blocks": 12, "gather": 6, "searched": 3}
-    return {"threads": _MOST_THREADS, "min_blocks": 1, "gather": GATHER, "searched": SEARCH}
+        return {"threads": 64, "min_blocks": 8, "gather": 6, "searched": 6}
+    return {"threads": 512, "min_blocks": 2, "gather": GATHER, "searched": SEARCH}
