@@ -17,17 +17,9 @@ if __name__ == "__main__":
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
+from bench_variants import plan_for  # noqa: E402 (beside this script: the same variants)
 
-from somwidget.backend import presets  # noqa: E402
-from somwidget.backend.variants import plan_variants, run_batch, run_plan  # noqa: E402
-
-
-def plan_for(name: str, n: int, seed: int = 0):
-    p = presets.get_preset(name)
-    base = {"iterations": p.iterations, "l_start": p.l_start, "l_end": p.l_end, "smoothing": p.smoothing,
-            "reach": p.reach}
-    return plan_variants(p.topology, p.weights, p.controls, base, n, jitter=0.05, seed=seed, mirror=p.mirror,
-                         smooth_dims=p.smooth_dims, metric_weights=p.metric_weights, position_dims=p.layout.position)
+from somwidget.backend.variants import run_batch, run_plan  # noqa: E402
 
 
 def cluster(workers: int, gpus: bool):
@@ -62,7 +54,7 @@ def main(argv=None) -> None:
     else:
         counts = [int(x) for x in args.cpu_workers.split(",") if x]
         print(f"CPU workers, one core each ({os.cpu_count()} cores here)")
-    plans = {"car": plan_for("car", args.car), "space-grid": plan_for("space-grid", args.grid)}
+    plans = {"car": plan_for("car", args.car)[1], "space-grid": plan_for("space-grid", args.grid)[1]}
     rates: dict = {}
     for workers in counts:
         c, client = cluster(workers, gpus)

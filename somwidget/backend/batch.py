@@ -22,8 +22,8 @@ import warp as wp
 from numpy.typing import ArrayLike
 
 from . import checks
-from .batch_kernels import GATHER, MAX_KEYS, SEARCH, variants_kernel
-from .device import resolve, warp_exclusive, warp_lock
+from .batch_kernels import GATHER, SEARCH, variants_kernel
+from .device import resolve, usable_cores, warp_exclusive, warp_lock
 from .schedule import learning_table
 from .som import MAX_CONTROLS, MAX_DIMS, restart_iteration
 from .topology import Topology
@@ -110,7 +110,7 @@ class BatchSom:
         self._start = np.ascontiguousarray(w, dtype=np.float32)
         self._mirror = checks.dims("mirror", mirror, n)
         k_eff = k * (2 if self._mirror else 1)
-        if k < 1 or k_eff > min(MAX_CONTROLS, MAX_KEYS):
+        if k < 1 or k_eff > MAX_CONTROLS:
             raise ValueError(f"controls: expected 1 to {MAX_CONTROLS} controls counting mirrored copies, got {k} "
                              f"({k_eff} with mirroring)")
         self._controls = c.astype(np.float32)
@@ -130,7 +130,6 @@ class BatchSom:
         self._unit_metric = bool((self._metric == 1.0).all())
         mask = np.zeros(n, np.float32)
         mask[list(smooth)] = 1.0
-        self._smooth_dims = smooth
 
         dev = self.device
         self._tables, rows = self._build_tables()
@@ -194,10 +193,7 @@ class BatchSom:
             return 1
         if cpu_cores is not None:
             return min(checks.integer("cpu_cores", cpu_cores, 1, 64), self.n_variants)
-        try:
-            available = len(os.sched_getaffinity(0))
-        except AttributeError:  # pragma: no cover - not Linux
-            available = os.cpu_count() or 1
+        available = usable_cores()
         # a thread cap the process was given (a Dask worker's nanny sets OMP_NUM_THREADS=1: one core a worker)
         cap = os.environ.get("OMP_NUM_THREADS", "")
         if cap.isdigit() and int(cap) > 0:

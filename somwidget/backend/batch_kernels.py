@@ -22,11 +22,11 @@ import functools
 
 import warp as wp
 
+from .cycle_kernels import MAX_CONTROLS
 from .primitives import INDEX_MASK, KEY_NONE, UNREACHABLE, sync_block, winner_key
 
-#: Winner keys a block holds in shared memory: three buffers of up to 256 effective controls, uint64 each.
-MAX_KEYS = 256
-_SHARED_WORDS = 3 * MAX_KEYS * 2
+#: int32 words of the winner keys a block holds in shared memory: three buffers of MAX_CONTROLS uint64 keys.
+_SHARED_WORDS = 3 * MAX_CONTROLS * 2
 _SHARED = "extern __shared__ char dynamic_smem_base[]; unsigned long long* shared_keys = " \
           "(unsigned long long*)dynamic_smem_base; "
 
@@ -186,6 +186,7 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
         m = metric[0]
         lam = smoothing[b]
         pull = lam * mask[0]
+        into_moved = int(lam > wp.float32(0.0))
         s0 = s_from[b]
         if t == 0:
             for c in range(k):
@@ -202,12 +203,11 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
             sync_block()
             # 2. every neuron applies the controls in list order (pairs at once)
             row = table_row[b] + s
-            into_moved = int(lam > wp.float32(0.0))
             for c0 in range(0, k, gather):
                 move_group(weights, moved, into_moved, c0, b, controls, k, tables, row, distances, keys, base, buf,
                            t, threads)
             # 3. one Jacobi step of Laplacian smoothing from the moved weights
-            if lam > wp.float32(0.0):
+            if into_moved != 0:
                 sync_block()
                 for v in range(t, n, threads):
                     w = moved[b, v]

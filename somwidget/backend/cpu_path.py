@@ -5,12 +5,12 @@ the cores for the move and smoothing, the controls for the winner search, a spin
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import warp as wp
 
+from .device import usable_cores
 from .primitives import barrier, sched_yield_address
 
 _YIELD = sched_yield_address()
@@ -23,11 +23,7 @@ def _cpu_cores(n_neurons: int, n_controls: int) -> int:
     those this process may use, at most 8."""
     if n_neurons * n_controls < _PAIRS_PER_EXTRA_CORE:
         return 1
-    try:
-        available = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        available = os.cpu_count() or 1
-    return max(1, min(available, 8, n_neurons * n_controls // _PAIRS_PER_EXTRA_CORE))
+    return max(1, min(usable_cores(), 8, n_neurons * n_controls // _PAIRS_PER_EXTRA_CORE))
 
 
 class CpuPath:

@@ -65,6 +65,14 @@ def describe(device: str) -> str:
     return f"the CPU{why}"
 
 
+def usable_cores() -> int:
+    """The CPU cores this process may run on (its affinity mask where the platform has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 def resolve(device: str | None) -> str:
     """'cpu', 'cuda:N' (or 'cuda' = 'cuda:0') when that GPU exists; None = best available."""
     init()

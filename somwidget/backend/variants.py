@@ -8,10 +8,9 @@ a worker rebuilds the topology once per mesh.
 from __future__ import annotations
 
 import functools
-import hashlib
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -42,7 +41,6 @@ class VariantPlan:
     smooth_dims: tuple[int, ...] | None = None
     metric_weights: np.ndarray | None = None
     position_dims: tuple[int, ...] = (0, 1, 2)
-    mesh_key: str = field(default="", compare=False)
 
     @property
     def n_variants(self) -> int:
@@ -113,23 +111,22 @@ def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: 
     schedules = {key: _draw(key, params.get(key), base_params[key], n, rng) for key in SCHEDULE_KEYS}
     schedules["iterations"] = schedules["iterations"].astype(np.int64)
     edges = np.ascontiguousarray(np.asarray(topology.edges, np.int32).reshape(-1, 2))
-    key = hashlib.sha1(edges.tobytes() + str(topology.n_vertices).encode()).hexdigest()
     return VariantPlan(n_vertices=topology.n_vertices, edges=edges, start=start, controls=out.astype(np.float32),
                        schedules=schedules, restart=bool(restart), mirror=tuple(mirror),
                        smooth_dims=None if smooth_dims is None else tuple(smooth_dims),
                        metric_weights=None if metric_weights is None else np.asarray(metric_weights, np.float32),
-                       position_dims=tuple(dims), mesh_key=key)
+                       position_dims=tuple(dims))
 
 
 @functools.lru_cache(maxsize=4)
-def _topology(key: str, n_vertices: int, edges_bytes: bytes) -> Topology:
+def _topology(n_vertices: int, edges_bytes: bytes) -> Topology:
     edges = np.frombuffer(edges_bytes, np.int32).reshape(-1, 2)
     return Topology.from_edges(edges, n_vertices)
 
 
 def topology_of(plan: VariantPlan) -> Topology:
     """The plan's mesh, built once per process (a Dask worker keeps it for the next batch)."""
-    return _topology(plan.mesh_key, plan.n_vertices, plan.edges.tobytes())
+    return _topology(plan.n_vertices, plan.edges.tobytes())
 
 
 def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray, dict]:
@@ -167,7 +164,6 @@ def figures(plan: VariantPlan, weights: np.ndarray) -> dict:
         controls = np.concatenate([controls, image], axis=1)
     targets = controls[:, :, dims]
     rows = np.arange(n)[:, None]
-    gap = np.zeros(n)
     nearest = np.zeros(targets.shape[:2], np.int64)
     block = max(1, 8_000_000 // max(1, targets.shape[1] * p.shape[1]))
     for lo in range(0, n, block):

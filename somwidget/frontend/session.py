@@ -1361,23 +1361,18 @@ class Session:
         c = checks.finite_array("controls", controls, 2)
         if c.shape[1] != self.n_dims or not len(c):
             raise ValueError(f"controls: expected (k, {self.n_dims}) with k >= 1, got {c.shape}")
-        unknown = sorted(set(parameters) - {"iterations", "l_start", "l_end", "smoothing", "reach"})
+        schedule = ("iterations", "l_start", "l_end", "smoothing", "reach")
+        unknown = sorted(set(parameters) - set(schedule))
         if unknown:
-            raise ValueError(f"parameters: unknown {unknown}")
-        iterations = checks.integer("iterations", parameters.get("iterations", self.parameters["iterations"]), 1,
-                                    MAX_ITERATIONS)
-        for name in ("l_start", "l_end", "reach"):
-            if name in parameters:
-                checks.real(name, parameters[name], 0.0, 1.0, low_open=True)
-        if "smoothing" in parameters:
-            checks.real("smoothing", parameters["smoothing"], 0.0, 1.0)
+            raise ValueError(f"parameters: unknown {unknown}; a variant sets some of {list(schedule)}")
+        checked = {name: _PARAM[name].check(value) for name, value in parameters.items()}
+        iterations = checked.get("iterations", self.parameters["iterations"])
         with self._step("variant"):
             with self._som_lock:
                 self._drain()
                 with self._lock:
                     current = self._capture()
-                params = dict(current.parameters, **{key: value for key, value in parameters.items()})
-                params["iterations"] = iterations
+                params = dict(current.parameters, **checked)
                 self._apply_step(Step(preset=self._preset, controls=c, parameters=params, weights=w,
                                       iteration=iterations))
             with self._lock:

@@ -92,7 +92,7 @@ class Variants:
                 size: tuple[int, int] = (240, 200)) -> np.ndarray:
         """A gallery of thumbnails (pyvista, off-screen), each captioned with its index: (H, W, 3) uint8, written
         to `path` if given. indices: which variants (default: the first 16)."""
-        from .picture import render, save_image
+        from .picture import save_image
 
         chosen = list(range(min(len(self), GALLERY_COUNT))) if indices is None else [self._index(i) for i in indices]
         if not chosen:
@@ -102,8 +102,7 @@ class Variants:
         width, height = int(size[0]), int(size[1])
         sheet = np.full((rows * height, columns * width, 3), 255, np.uint8)
         for slot, i in enumerate(chosen):
-            shown = dataclasses.replace(self.preset, controls=self.controls[i])
-            img = render(shown, weights=self.weights[i], size=(width, height), title=f"#{i}", zoom=1.25)
+            img = self._render(i, (width, height), title=f"#{i}", zoom=1.25)
             r, c = divmod(slot, columns)
             sheet[r * height:(r + 1) * height, c * width:(c + 1) * width] = img[:height, :width]
         if path is not None:
@@ -112,10 +111,14 @@ class Variants:
 
     def thumbnails(self, size: tuple[int, int] = (150, 120)) -> list[np.ndarray]:
         """One small picture per variant, uncaptioned (the apps' galleries label them), (H, W, 3) uint8 each."""
+        return [self._render(i, size) for i in range(len(self))]
+
+    def _render(self, i: int, size: tuple[int, int], **options) -> np.ndarray:
+        """Variant i as picture.render draws a preset: its clay and its controls."""
         from .picture import render
 
-        return [render(dataclasses.replace(self.preset, controls=self.controls[i]), weights=self.weights[i],
-                       size=size) for i in range(len(self))]
+        return render(dataclasses.replace(self.preset, controls=self.controls[i]), weights=self.weights[i],
+                      size=size, **options)
 
     def apply(self, i: int, session=None) -> None:
         """Make variant i the current state of `session` (default: the session it was swept from): its controls,
