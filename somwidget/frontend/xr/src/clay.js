@@ -9,12 +9,12 @@ import * as THREE from 'three';
 const HELD = new THREE.Color(0xff2020);
 const WIREFRAME_LIMIT = 16384; // display vertices above which a surface is drawn without its edges
 const LIGHT_SEGMENTS = 4096; // synapses above which a drag on a software rasteriser shows the points alone
-const HOVER_EMISSIVE = new THREE.Color(0x555555);
-const NO_EMISSIVE = new THREE.Color(0x000000);
-const HELD_EMISSIVE = new THREE.Color(0x660000);
+const WHITE = new THREE.Color(0xffffff);
+const HOVER_LIGHTEN = 0.35; // a hovered control's colour moves this far towards white
 
 export class Clay {
-  constructor() {
+  // software: the page draws with a software rasteriser, which pays for every triangle (coarser control spheres)
+  constructor({ software = false } = {}) {
     this.stage = new THREE.Group();
     this.stage.name = 'stage';
     this.scaler = new THREE.Group();
@@ -27,7 +27,8 @@ export class Clay {
     this.topology = null;
     this.k = 0;
     this.kEff = 0;
-    this.controlMeshes = [];
+    this.controlAnchors = []; // per effective control: its place and size (drawn by controlDraws)
+    this.controlDraws = []; // the instanced spheres: originals, mirrored copies
     this.local = new Map(); // original index -> [x, y, z] model position while this client drags it
     this.held = new Set(); // original indices held by any client (server's grabs)
     this.hover = new Set(); // effective indices hovered by an input
@@ -35,7 +36,8 @@ export class Clay {
     this.controlRadius = 0.05;
     this.objects = [];
     this.lastFrame = null;
-    this.sphere = new THREE.SphereGeometry(1, 24, 16);
+    this.sphere = new THREE.IcosahedronGeometry(1, software ? 2 : 4); // 320 or 5,120 triangles, smooth normals
+    this.software = software;
     this.onChange = null; // called whenever something drawn changed
     this.segments = null;
     this.controlIds = []; // each control's stable id, in index order (what intents name)
@@ -53,12 +55,8 @@ export class Clay {
     }
     this.objects = [];
     this.segments = null;
-    for (const m of this.controlMeshes) {
-      this.content.remove(m);
-      m.material.dispose();
-    }
-    this.controlMeshes = [];
-    this.kEff = 0;
+    this.k = 0;
+    this.rebuildControls(0);
     this.local.clear();
     this.topology = t;
     this.controlIds = t.control_ids || [];
@@ -76,8 +74,8 @@ export class Clay {
       g.setAttribute('position', pos);
       g.setAttribute('color', col);
       g.setIndex(new THREE.BufferAttribute(new Uint32Array(t.triangles), 1));
-      const m = new THREE.Mesh(g, new THREE.MeshStandardMaterial({
-        vertexColors: true, side: THREE.DoubleSide, roughness: 0.8, metalness: 0.0,
+      const m = new THREE.Mesh(g, new THREE.MeshLambertMaterial({
+        vertexColors: true, side: THREE.DoubleSide,
         transparent: lines, opacity: lines ? 0.55 : 1.0, depthWrite: !lines,
       }));
       m.name = 'clay-surface';
@@ -125,8 +123,8 @@ export class Clay {
   // While the person drags on a software rasteriser, a point display with many synapses draws its points only
   // (thousands of lines are what such a rasteriser draws slowest, on the cores that also train): the lines come
   // back on release.
-  setLight(light) {
-    const drop = light && this.topology?.points && this.topology.segments.length / 2 > LIGHT_SEGMENTS;
+  setDragging(dragging) {
+    const drop = dragging && this.software && this.topology?.points && this.topology.segments.length / 2 > LIGHT_SEGMENTS;
     if (this.segments && this.segments.visible === drop) {
       this.segments.visible = !drop;
       this.onChange?.();
@@ -162,11 +160,13 @@ export class Clay {
     this.colourAttr.array.set(f.colours);
     this.colourAttr.needsUpdate = true;
     if (this.surface) this.surface.geometry.computeVertexNormals();
-    this.k = f.k;
-    if (f.kEff !== this.kEff) this.rebuildControls(f.kEff);
+    if (f.kEff !== this.kEff || f.k !== this.k) {
+      this.k = f.k;
+      this.rebuildControls(f.kEff);
+    }
     const c = new THREE.Color();
     for (let j = 0; j < this.kEff; j++) {
-      const m = this.controlMeshes[j];
+      const m = this.controlAnchors[j];
       m.userData.base = c.setRGB(f.controlColours[3 * j] / 255, f.controlColours[3 * j + 1] / 255,
         f.controlColours[3 * j + 2] / 255).clone();
       m.userData.server = [f.controlPositions[3 * j], f.controlPositions[3 * j + 1], f.controlPositions[3 * j + 2]];
@@ -178,21 +178,48 @@ export class Clay {
     return true;
   }
 
+  // The control spheres: an anchor (Object3D) per effective control carries its place and size, and two instanced
+  // meshes draw them, the originals solid and the mirrored copies translucent (two draw calls whatever the count: a
+  // software rasteriser pays for each call).
   rebuildControls(kEff) {
-    for (const m of this.controlMeshes) {
-      this.content.remove(m);
-      m.material.dispose();
+    for (const m of this.controlAnchors) this.content.remove(m);
+    for (const d of this.controlDraws) {
+      this.content.remove(d);
+      d.material.dispose();
+      d.dispose();
     }
-    this.controlMeshes = [];
+    this.controlAnchors = [];
     for (let j = 0; j < kEff; j++) {
-      const m = new THREE.Mesh(this.sphere, new THREE.MeshStandardMaterial({ roughness: 0.4, metalness: 0.1 }));
+      const m = new THREE.Object3D();
       m.name = `control-${j}`;
       m.userData.index = j;
-      m.frustumCulled = false;
-      this.controlMeshes.push(m);
+      m.userData.colour = new THREE.Color();
+      this.controlAnchors.push(m);
       this.content.add(m);
     }
+    const draw = (count, ghost) => {
+      const d = new THREE.InstancedMesh(this.sphere, new THREE.MeshLambertMaterial({
+        transparent: ghost, opacity: ghost ? 0.55 : 1.0 }), Math.max(count, 1));
+      d.count = count;
+      d.name = ghost ? 'control-mirrors' : 'control-spheres';
+      d.frustumCulled = false;
+      d.setColorAt(0, HELD);
+      this.content.add(d);
+      return d;
+    };
+    this.controlDraws = [draw(this.k, false), draw(kEff - this.k, true)];
     this.kEff = kEff;
+  }
+
+  // What control j looks like as drawn: its colour and its radius over the control radius.
+  controlLook(j) {
+    if (j < 0 || j >= this.kEff) return null;
+    const [d, i] = j < this.k ? [this.controlDraws[0], j] : [this.controlDraws[1], j - this.k];
+    const c = new THREE.Color();
+    d.getColorAt(i, c);
+    const m = new THREE.Matrix4();
+    d.getMatrixAt(i, m);
+    return { colour: `#${c.getHexString()}`, scale: m.getMaxScaleOnAxis() / this.controlRadius };
   }
 
   mirrored(p) {
@@ -202,20 +229,27 @@ export class Clay {
   // Positions, colours and highlights of the control spheres (local drags win over the server's positions).
   refreshControls() {
     this.onChange?.();
-    for (const m of this.controlMeshes) {
+    for (const m of this.controlAnchors) {
+      const j = m.userData.index;
       const i = m.userData.original;
       let p = m.userData.server;
       if (this.local.has(i)) p = m.userData.mirror ? this.mirrored(this.local.get(i)) : this.local.get(i);
       if (p) m.position.set(p[0], p[1], p[2]);
       const held = this.held.has(i) || this.local.has(i);
-      const hovered = this.hover.has(m.userData.index);
-      const mat = m.material;
-      mat.color.copy(held ? HELD : (m.userData.base || HELD));
-      mat.emissive.copy(held ? HELD_EMISSIVE : hovered ? HOVER_EMISSIVE : NO_EMISSIVE);
-      mat.transparent = m.userData.mirror;
-      mat.opacity = m.userData.mirror ? 0.55 : 1.0;
+      const hovered = this.hover.has(j);
+      const c = m.userData.colour.copy(held ? HELD : (m.userData.base || HELD));
+      if (hovered && !held) c.lerp(WHITE, HOVER_LIGHTEN);
       const grow = held ? (m.userData.mirror ? 1.35 : 1.6) : hovered ? 1.3 : 1.0;
       m.scale.setScalar(this.controlRadius * grow);
+      m.updateMatrix();
+      const [d, at] = j < this.k ? [this.controlDraws[0], j] : [this.controlDraws[1], j - this.k];
+      if (!d || at >= d.count) continue;
+      d.setMatrixAt(at, m.matrix);
+      d.setColorAt(at, c);
+    }
+    for (const d of this.controlDraws) {
+      d.instanceMatrix.needsUpdate = true;
+      if (d.instanceColor) d.instanceColor.needsUpdate = true;
     }
   }
 
@@ -254,7 +288,7 @@ export class Clay {
     const a = this.positionAttr.array;
     const v = new THREE.Vector3();
     for (let o = 0; o < a.length; o += 3) box.expandByPoint(v.set(a[o], a[o + 1], a[o + 2]));
-    for (const m of this.controlMeshes) box.expandByPoint(m.position);
+    for (const m of this.controlAnchors) box.expandByPoint(m.position);
     if (box.isEmpty()) return null;
     const centre = box.getCenter(new THREE.Vector3());
     const radius = Math.max(box.getSize(new THREE.Vector3()).length() / 2 + this.controlRadius * 1.6, 1e-6);
@@ -263,7 +297,7 @@ export class Clay {
   }
 
   controlWorld(j, target = new THREE.Vector3()) {
-    const m = this.controlMeshes[j];
+    const m = this.controlAnchors[j];
     if (!m) return null;
     this.stage.updateWorldMatrix(true, true);
     return m.getWorldPosition(target);

@@ -38,7 +38,7 @@ export class Grabs {
   begin(i) {
     if (this.active.has(i)) return false;
     this.renamed.delete(i);
-    const m = this.clay.controlMeshes[i];
+    const m = this.clay.controlAnchors[i];
     const p = m ? [m.position.x, m.position.y, m.position.z] : [0, 0, 0];
     const id = this.clay.controlIds[i] ?? i;
     this.active.set(i, { id, began: i, pos: p, lastSent: 0, pending: null, sentPos: p.map(round6) });

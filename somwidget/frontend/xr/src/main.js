@@ -162,16 +162,10 @@ window.somxr = {
     const r = renderer.domElement.getBoundingClientRect();
     return [r.left + ((p.x + 1) / 2) * r.width, r.top + ((1 - p.y) / 2) * r.height];
   },
-  controlModel: (j) => {
-    const m = clay.controlMeshes[j];
-    return m ? [m.position.x, m.position.y, m.position.z] : null;
-  },
-  controlLook: (j) => {
-    const m = clay.controlMeshes[j];
-    return m ? { colour: `#${m.material.color.getHexString()}`, scale: m.scale.x / clay.controlRadius } : null;
-  },
+  controlModel: (j) => view.controlModel(j),
+  controlLook: (j) => clay.controlLook(j),
   button: (name) => menu.describe(name),
-  serverControl: (j) => clay.controlMeshes[j]?.userData.server ?? null,
+  serverControl: (j) => clay.controlAnchors[j]?.userData.server ?? null,
   modelToWorld: (p) => clay.modelToWorld(p).toArray(),
   worldToModel: (p) => clay.worldToModel(new THREE.Vector3().fromArray(p)),
   positions: (count = 12) => (state.frame ? Array.from(state.frame.positions.slice(0, 3 * count)) : []),

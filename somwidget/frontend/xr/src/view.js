@@ -16,7 +16,7 @@ const CSS = `
 .somview { position: relative; overflow: hidden; background: #eef0f4; font-family: system-ui, sans-serif; }
 .somview canvas { display: block; touch-action: none; outline: none; }
 .somview-labels { position: absolute; inset: 0; pointer-events: none; overflow: hidden; }
-.somview-label { position: absolute; transform: translate(-50%, -130%); font-size: 11px; line-height: 1;
+.somview-label { position: absolute; left: 0; top: 0; font-size: 11px; line-height: 1;
   padding: 1px 3px; border-radius: 3px; background: rgba(255,255,255,0.8); color: #222; white-space: nowrap; }
 .somview-label.mirror { opacity: 0.6; }
 .somview-label.held { background: #d32f2f; color: white; }
@@ -87,14 +87,14 @@ export class ClayView {
     sun.position.set(1.5, 3, 2);
     this.scene.add(sun);
     this.camera = new THREE.PerspectiveCamera(45, 1, 0.01, 100);
-    this.clay = new Clay();
+    this.clay = new Clay({ software });
     this.scene.add(this.clay.stage);
     this.grabs = new Grabs(this.link, this.clay);
     this.software = software;
     this.desktop = new Desktop({ renderer: this.renderer, camera: this.camera, clay: this.clay, grabs: this.grabs,
-      onDragStart: () => this.clay.setLight(this.software),
+      onDragStart: () => this.clay.setDragging(true),
       onDragEnd: () => {
-        this.clay.setLight(false);
+        this.clay.setDragging(false);
         this.desktop.keepControlsInView();
       } });
 
@@ -188,6 +188,7 @@ export class ClayView {
     const w = Math.max(this.container.clientWidth, 1);
     const h = Math.max(this.container.clientHeight, 1);
     this.renderer.setSize(w, h);
+    this.size = [w, h];
     this.camera.aspect = w / h;
     this.camera.updateProjectionMatrix();
     this.dirty = true;
@@ -231,8 +232,7 @@ export class ClayView {
       this.labels.appendChild(d);
       this.labelDivs.push(d);
     }
-    const w = this.renderer.domElement.clientWidth;
-    const h = this.renderer.domElement.clientHeight;
+    const [w, h] = this.size; // kept by resize(): reading the layout here would force one every frame
     const p = new THREE.Vector3();
     this.camera.updateMatrixWorld();
     for (let j = 0; j < this.labelDivs.length; j++) {
@@ -248,8 +248,9 @@ export class ClayView {
       clay.controlWorld(j, p);
       p.project(this.camera);
       d.hidden = p.z > 1 || Math.abs(p.x) > 1.05 || Math.abs(p.y) > 1.05;
-      d.style.left = `${((p.x + 1) / 2) * w}px`;
-      d.style.top = `${((1 - p.y) / 2) * h}px`;
+      // a transform moves the label without a new layout of the page
+      d.style.transform = `translate(${(((p.x + 1) / 2) * w).toFixed(1)}px, ${(((1 - p.y) / 2) * h).toFixed(1)}px) `
+        + 'translate(-50%, -130%)';
       d.classList.toggle('mirror', mirror);
       d.classList.toggle('held', clay.held.has(i) || clay.local.has(i));
     }
@@ -297,13 +298,12 @@ export class ClayView {
   }
 
   controlModel(j) {
-    const m = this.clay.controlMeshes[j];
+    const m = this.clay.controlAnchors[j];
     return m ? [m.position.x, m.position.y, m.position.z] : null;
   }
 
   controlLook(j) {
-    const m = this.clay.controlMeshes[j];
-    return m ? { colour: `#${m.material.color.getHexString()}`, scale: m.scale.x / this.clay.controlRadius } : null;
+    return this.clay.controlLook(j);
   }
 
   // Move -> changed mesh on screen, per answered move: ms from the move's send to the first paint of the frame.
