@@ -16,6 +16,7 @@ import json
 import os
 import re
 import subprocess
+import time
 import sys
 import urllib.request
 
@@ -296,7 +297,9 @@ def lab(request, tmp_path_factory):
         pytest.skip(f"{CHROMIUM} is missing")
     root = tmp_path_factory.mktemp("lab")
     cells = ["import somwidget\nview = somwidget.show('car', device='cpu')\nview",
-             "view  # a second output of the same widget"]
+             "view  # a second output of the same widget",
+             "import hashlib\npng = view.view.picture_png() or b''\n"
+             "print('picture', png[:8] == b'\\x89PNG\\r\\n\\x1a\\n', len(png), hashlib.md5(png).hexdigest())"]
     nb = {"cells": [{"cell_type": "code", "execution_count": None, "metadata": {}, "outputs": [], "source": c}
                     for c in cells],
           "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"}},
@@ -334,7 +337,7 @@ def _answers(url: str) -> bool:
 def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
     """Interaction, in JupyterLab 4 and in Notebook 7: the page runs the cells; the mouse drags control 2 inside the
     widget; the panel's controls table (same output) shows the control moved and the second output of the widget
-    draws it there too."""
+    draws it there too; the picture a saved notebook keeps (the widget's state) is retaken after the drag."""
     views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
     with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
@@ -352,6 +355,9 @@ def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
                 raise
             table = page.locator(".jp-OutputArea-output table").first
             before = table.inner_text()
+            shown = picture(page)  # the still view has taken its picture
+            page.locator(".somview").first.scroll_into_view_if_needed()
+            page.wait_for_timeout(300)
             x, y = page.evaluate(f"() => {views}[0].controlScreen(2)")
             page.mouse.move(x, y)
             page.mouse.down()
@@ -366,8 +372,30 @@ def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
             other = page.evaluate(f"() => {views}[1].controlModel(2)")
             np.testing.assert_allclose(other, moved, atol=1e-5)  # the second output follows the first
             assert view_errors(page, views) == []
+            after = picture(page, unlike=shown)  # a new picture of the clay after the drag, in the kernel
+            assert after[1] > 5000, after  # a PNG of a drawn clay, not an empty canvas
         finally:
             browser.close()
+
+
+def picture(page, unlike=None, timeout: float = 30.0) -> tuple:
+    """Run the notebook's third cell until the kernel holds a PNG picture from the view (unlike `unlike`): (is a
+    PNG, bytes, md5)."""
+    deadline = time.monotonic() + timeout
+    out = page.locator(".jp-Notebook .jp-Cell").nth(2).locator(".jp-OutputArea-output")
+    while True:
+        run_cell(page, 2)
+        page.wait_for_function("(el) => !el.innerText.includes('[*]')",
+                               arg=page.locator(".jp-Notebook .jp-Cell").nth(2).locator(".jp-InputPrompt")
+                               .element_handle(), timeout=30000)
+        text = out.last.inner_text() if out.count() else ""
+        words = text.split()
+        if len(words) == 4 and words[0] == "picture" and words[1] == "True" and (unlike is None or
+                                                                                 words[3] != unlike[2]):
+            return True, int(words[2]), words[3]
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the kernel holds no new picture of the view: {text!r}")
+        page.wait_for_timeout(1000)
 
 
 def run_cell(page, index: int, tries: int = 20) -> None:

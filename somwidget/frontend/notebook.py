@@ -424,8 +424,9 @@ def _controls_table(frame: Frame, has_colour: bool) -> str:
 class SomWidget(widgets.HBox):
     """The panel and the live view side by side: `session`, `panel`, `view` (a ClayWidget; None without one).
 
-    In a saved notebook the output keeps a picture of the clay as it was when the widget was shown (image/png next
-    to the widget), so the notebook reads without a kernel."""
+    A saved notebook reads without a kernel: the output keeps a picture of the clay (image/png next to the widget)
+    as the view last showed it, or as it was when shown; the widget state, where the notebook saves it, keeps the
+    view's latest picture (ClayWidget.picture), which the view shows until frames come again."""
 
     def __init__(self, session: Session, panel: Panel, view: ClayWidget | None = None, owns_session: bool = False):
         self.session = session
@@ -441,7 +442,7 @@ class SomWidget(widgets.HBox):
         bundle = super()._repr_mimebundle_(**kwargs)
         if self.view is not None and isinstance(bundle, dict):
             try:
-                bundle["image/png"] = picture_png(self.session)
+                bundle["image/png"] = self.view.picture_png() or picture_png(self.session)
             except Exception:  # no off-screen rendering here: the live view is all there is
                 log.debug("no picture for the saved notebook", exc_info=True)
         return bundle

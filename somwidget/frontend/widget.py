@@ -12,6 +12,7 @@ on the kernel's thread (`_on_message`) and go to the Session through `Gestures`,
 
 from __future__ import annotations
 
+import base64
 import json
 import logging
 import threading
@@ -25,6 +26,10 @@ from .gestures import Gestures
 from .xr.server import DIST
 
 log = logging.getLogger(__name__)
+
+PICTURE_PREFIX = "data:image/png;base64,"
+#: A bound on the picture a browser may set (a 4K view's PNG is a few MB).
+MAX_PICTURE_CHARS = 16 * 1024 * 1024
 
 #: The one client of a widget's gestures (every output of a widget acts as one client).
 _CLIENT = "notebook"
@@ -42,6 +47,21 @@ class ClayWidget(anywidget.AnyWidget):
     """The live, draggable 3-D view of `session` in a notebook output."""
 
     height = traitlets.Int(520).tag(sync=True)
+    #: The clay as a view last showed it (a PNG data URL its browser takes once the view is still): kept in a saved
+    #: notebook's widget state and shown there until a kernel sends frames again.
+    picture = traitlets.Unicode("").tag(sync=True)
+
+    @traitlets.validate("picture")
+    def _check_picture(self, proposal):
+        value = proposal["value"]
+        if value and not (value.startswith(PICTURE_PREFIX) and len(value) <= MAX_PICTURE_CHARS):
+            raise traitlets.TraitError(f"picture: expected a PNG data URL ({PICTURE_PREFIX}...) of at most "
+                                       f"{MAX_PICTURE_CHARS} characters, got {value[:40]!r} ({len(value)} characters)")
+        return value
+
+    def picture_png(self) -> bytes | None:
+        """The PNG of `picture`, or None before a view has taken one."""
+        return base64.b64decode(self.picture[len(PICTURE_PREFIX):]) if self.picture else None
 
     def __init__(self, session, height: int = 520, max_fps: float = protocol.MAX_FPS, **kwargs):
         super().__init__(_esm=_module(), height=int(height), **kwargs)

@@ -26,6 +26,41 @@ function bufferOf(b) {
   return view.buffer.slice(view.byteOffset, view.byteOffset + view.byteLength);
 }
 
+const PICTURE_QUIET_MS = 1000; // a view still this long after drawing something new takes the saved picture again
+
+// The picture of the clay a saved notebook keeps in its widget state (`picture`, a PNG data URL): shown over the
+// view until the first frame comes (so a notebook opened without its kernel shows the clay as it was last seen), and
+// taken again from the canvas once the view has been still for a second after a change.
+function keepPicture(view, model, box) {
+  let img = null;
+  if (model.get('picture')) {
+    img = document.createElement('img');
+    img.className = 'somview-picture';
+    img.alt = 'the clay, as last seen';
+    img.src = model.get('picture');
+    box.appendChild(img);
+  }
+  view.onFrame = () => {
+    img?.remove();
+    img = null;
+  };
+  let taken = 0;
+  const timer = setInterval(() => {
+    const s = view.state;
+    if (!s.frame || s.frame.running || s.rendered === taken || performance.now() - s.renderedAt < PICTURE_QUIET_MS) {
+      return;
+    }
+    taken = s.rendered;
+    view.renderer.render(view.scene, view.camera); // the canvas is read in the task that drew it
+    const url = view.renderer.domElement.toDataURL('image/png');
+    if (url !== model.get('picture')) {
+      model.set('picture', url);
+      model.save_changes();
+    }
+  }, PICTURE_QUIET_MS / 2);
+  return () => clearInterval(timer);
+}
+
 function render({ model, el }) {
   const box = document.createElement('div');
   box.style.height = `${model.get('height')}px`;
@@ -64,7 +99,9 @@ function render({ model, el }) {
   model.on('change:height', onHeight);
   h.onStatus('connected');
   model.send(intents.hello()); // the topology and the latest frame, for this output
+  const stopPicture = keepPicture(view, model, box);
   return () => {
+    stopPicture();
     model.off('msg:custom', onMessage);
     model.off('change:height', onHeight);
     view.dispose();

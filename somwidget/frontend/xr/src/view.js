@@ -24,6 +24,8 @@ const CSS = `
   background: rgba(255,255,255,0.7); padding: 1px 5px; border-radius: 3px; pointer-events: none; }
 .somview-fit { position: absolute; right: 6px; top: 6px; font-size: 12px; padding: 2px 8px; cursor: pointer;
   border: 1px solid #99a; border-radius: 4px; background: rgba(255,255,255,0.85); }
+.somview-picture { position: absolute; inset: 0; width: 100%; height: 100%; object-fit: contain;
+  background: #eef0f4; pointer-events: none; }
 .somview-error { position: absolute; left: 6px; top: 6px; right: 60px; font-size: 12px; padding: 3px 6px;
   background: #fde2e2; color: #8a1010; border-radius: 4px; pointer-events: none; }
 `;
@@ -120,7 +122,7 @@ export class ClayView {
 
     this.state = { connected: false, topology: null, frame: null, frames: 0, fps: 0, fpsCount: 0,
       fpsStart: performance.now(), digest: 0, errors: [], lastError: null, cycleMs: null, serverFps: null,
-      painted: 0, paintedDigest: 0 };
+      painted: 0, paintedDigest: 0, rendered: 0, renderedAt: 0 };
     this.paints = []; // {digest, t}: when a changed mesh was first drawn (page clock, ms)
     this.hooks = []; // (time, xrFrame) => void, run before each render
     this.lastFitCheck = 0;
@@ -216,6 +218,8 @@ export class ClayView {
     }
     this.dirty = false;
     this.renderer.render(this.scene, this.camera);
+    s.rendered += 1;
+    s.renderedAt = now;
     if (s.frame && s.digest !== s.paintedDigest) { // a changed mesh is on screen from now on
       s.paintedDigest = s.digest;
       s.painted += 1;
