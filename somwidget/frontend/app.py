@@ -392,10 +392,11 @@ class SomApp:
             self._error(str(exc))
 
     def toggle_training(self) -> None:
-        if self.session.paused:
-            self.session.train()
-        else:
+        """Pause a running map; otherwise train (a settled run restarts locally), as the button says."""
+        if self.session.frame.running:
             self.session.pause()
+        else:
+            self.session.train()
         self.state.paused = self.session.paused
 
     def reset(self) -> None:
@@ -763,8 +764,9 @@ class SomApp:
             with layout.toolbar:
                 v3.VSpacer()
                 html.Div("{{ stats.iteration }} / {{ stats.S }}", classes="mr-3 text-body-2", id="iteration-label")
-                v3.VBtn("{{ paused ? 'Train' : 'Pause' }}", id="train-button", click="trigger('toggle_training')",
-                        prepend_icon=("paused ? 'mdi-play' : 'mdi-pause'",), variant="tonal", classes="mr-2")
+                v3.VBtn("{{ stats.running ? 'Pause' : 'Train' }}", id="train-button",
+                        click="trigger('toggle_training')",
+                        prepend_icon=("stats.running ? 'mdi-pause' : 'mdi-play'",), variant="tonal", classes="mr-2")
                 v3.VBtn(icon="mdi-undo", id="undo-button", click="trigger('undo')", disabled=("!stats.can_undo",),
                         title="Undo (Ctrl+Z)", variant="text")
                 v3.VBtn(icon="mdi-redo", id="redo-button", click="trigger('redo')", disabled=("!stats.can_redo",),
