@@ -47,6 +47,7 @@ export function digestOf(positions) {
 }
 
 const FIT_CHECK_MS = 250;
+const STATUS_MS = 250;
 
 // A software rasteriser (SwiftShader, llvmpipe: a browser without a GPU) draws every pixel on the CPU that also
 // trains the clay: there the view skips multisampling and draws at one pixel per CSS pixel.
@@ -126,6 +127,7 @@ export class ClayView {
     this.paints = []; // {digest, t}: when a changed mesh was first drawn (page clock, ms)
     this.hooks = []; // (time, xrFrame) => void, run before each render
     this.lastFitCheck = 0;
+    this.lastStatus = 0;
     this.dirty = true; // draw on the next animation frame (only then: a software rasteriser shares the CPU)
     this.clay.onChange = () => { this.dirty = true; };
     this.desktop.orbit.addEventListener('change', () => { this.dirty = true; });
@@ -212,7 +214,10 @@ export class ClayView {
         this.lastFitCheck = now;
         this.desktop.keepControlsInView();
       }
-      this.updateStatus();
+      if (now - this.lastStatus >= STATUS_MS) { // a few times a second: it is read, not watched
+        this.lastStatus = now;
+        this.updateStatus();
+      }
       if (!this.dirty) return;
       this.updateLabels();
     }
@@ -251,12 +256,18 @@ export class ClayView {
       if (d.textContent !== text) d.textContent = text;
       clay.controlWorld(j, p);
       p.project(this.camera);
-      d.hidden = p.z > 1 || Math.abs(p.x) > 1.05 || Math.abs(p.y) > 1.05;
-      // a transform moves the label without a new layout of the page
-      d.style.transform = `translate(${(((p.x + 1) / 2) * w).toFixed(1)}px, ${(((1 - p.y) / 2) * h).toFixed(1)}px) `
+      const out = p.z > 1 || Math.abs(p.x) > 1.05 || Math.abs(p.y) > 1.05;
+      if (d.hidden !== out) d.hidden = out;
+      // a transform moves the label without a new layout of the page; only what changed is written
+      const place = `translate(${(((p.x + 1) / 2) * w).toFixed(1)}px, ${(((1 - p.y) / 2) * h).toFixed(1)}px) `
         + 'translate(-50%, -130%)';
-      d.classList.toggle('mirror', mirror);
-      d.classList.toggle('held', clay.held.has(i) || clay.local.has(i));
+      if (d.somPlace !== place) {
+        d.somPlace = place;
+        d.style.transform = place;
+      }
+      const held = clay.held.has(i) || clay.local.has(i);
+      if (d.classList.contains('mirror') !== mirror) d.classList.toggle('mirror', mirror);
+      if (d.classList.contains('held') !== held) d.classList.toggle('held', held);
     }
   }
 
