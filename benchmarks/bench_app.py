@@ -4,9 +4,10 @@ Starts `python -m somwidget.cli serve` on a free loopback port for each preset a
 Playwright (no `playwright install`). For each preset it reports:
 
   training  frames applied to the page's scene per second while the map trains a long run (S set to 1,000,000 in
-            the panel's field, as a person would), next to the session's own frames/s
+            the panel's field, as a person would), next to the session's own frames/s and the changed meshes the
+            page drew per second
   drag      frames applied per second while the mouse drags a control round a circle (a real Playwright press,
-            then pointer moves at 60 a second dispatched in the page)
+            then pointer moves at 60 a second dispatched in the page), and changed meshes drawn per second
   latency   from a mouse move of a held control (the view sends it; page clock) to the first paint of a frame that
             shows the control there with a changed mesh: median and 90th percentile over every move of the drag
             (and, apart, to that frame's arrival)
@@ -133,16 +134,17 @@ def set_iterations(page, value: int) -> None:
 def measure_training(page, server: Server, seconds: float) -> dict:
     set_iterations(page, 1_000_000)
     time.sleep(1.0)
-    n0, t0, s0 = view(page)["frames"], time.monotonic(), server.state()["session"]["frame"]
+    v0, t0, s0 = view(page), time.monotonic(), server.state()["session"]["frame"]
     time.sleep(seconds)
-    n1, t1, s1 = view(page)["frames"], time.monotonic(), server.state()["session"]["frame"]
+    v1, t1, s1 = view(page), time.monotonic(), server.state()["session"]["frame"]
     page.locator("#train-button").click()  # pause
     time.sleep(0.3)
     set_iterations(page, 1000)
     page.locator("#train-button").click()  # train again: the run goes on to the new S
     server.idle()
-    return {"frames_per_s": (n1 - n0) / (t1 - t0), "session_frames_per_s": (s1["seq"] - s0["seq"]) / (t1 - t0),
-            "cycle_ms": s1["cycle_time"] * 1e3}
+    return {"frames_per_s": (v1["frames"] - v0["frames"]) / (t1 - t0),
+            "drawn_per_s": (v1["painted"] - v0["painted"]) / (t1 - t0),
+            "session_frames_per_s": (s1["seq"] - s0["seq"]) / (t1 - t0), "cycle_ms": s1["cycle_time"] * 1e3}
 
 
 DRAG_JS = """
@@ -168,17 +170,19 @@ def measure_drag(page, server: Server, seconds: float) -> dict:
     page.evaluate(f"() => {{ const v = {VIEW}; v.grabs.latencyLog.length = 0; v.grabs.latencies.length = 0; }}")
     page.mouse.move(x0, y0)
     page.mouse.down()  # a real press grabs the control
-    n0, t0 = view(page)["frames"], time.monotonic()
+    v0, t0 = view(page), time.monotonic()
     # the drag's pointer moves at 60 events/s, as a mouse reports (Playwright's driver manages about 20/s on two
     # loaded cores): the page dispatches them to the view's canvas from its own timer
     moves = page.evaluate(DRAG_JS, [x0, y0, seconds * 1000.0])
-    n1, t1 = view(page)["frames"], time.monotonic()
+    v1, t1 = view(page), time.monotonic()
     page.mouse.up()
     time.sleep(0.5)
     paint = np.array(page.evaluate(f"{VIEW}.moveToPaint()"))
     arrive = np.array(view(page)["latencies"])
     server.idle()
-    out = {"frames_per_s": (n1 - n0) / (t1 - t0), "mouse_moves_per_s": moves / (t1 - t0), "control": i,
+    out = {"frames_per_s": (v1["frames"] - v0["frames"]) / (t1 - t0),
+           "drawn_per_s": (v1["painted"] - v0["painted"]) / (t1 - t0), "mouse_moves_per_s": moves / (t1 - t0),
+           "control": i,
            "answered_moves": int(len(paint))}
     for name, a in (("paint", paint), ("arrive", arrive)):
         out[f"{name}_median_ms"] = float(np.median(a)) if len(a) else None
@@ -215,8 +219,10 @@ def main() -> int:
                 results["presets"][preset] = r
                 t, d = r["training"], r["drag"]
                 print(f"{preset}: training {t['frames_per_s']:.1f} frames/s in the page (session "
-                      f"{t['session_frames_per_s']:.1f}); drag {d['frames_per_s']:.1f} frames/s; move -> changed "
-                      f"mesh painted {d['paint_median_ms']:.0f} ms median, {d['paint_p90_ms']:.0f} ms p90 (arrived "
+                      f"{t['session_frames_per_s']:.1f}, drawn {t['drawn_per_s']:.1f}); drag {d['frames_per_s']:.1f} "
+                      f"frames/s (drawn {d['drawn_per_s']:.1f}, pointer moves {d['mouse_moves_per_s']:.1f}); "
+                      f"move -> changed mesh painted {d['paint_median_ms']:.0f} ms median, "
+                      f"{d['paint_p90_ms']:.0f} ms p90 (arrived "
                       f"{d['arrive_median_ms']:.0f} / {d['arrive_p90_ms']:.0f}) over {d['answered_moves']} moves",
                       flush=True)
         finally:

@@ -120,11 +120,11 @@ export class Clay {
     this.mirrorAxes = t.mirror_axes || [false, false, false];
   }
 
-  // While the person drags on a software rasteriser, a point display with many synapses draws its points only
-  // (thousands of lines are what such a rasteriser draws slowest, on the cores that also train): the lines come
-  // back on release.
-  setDragging(dragging) {
-    const drop = dragging && this.software && this.topology?.points && this.topology.segments.length / 2 > LIGHT_SEGMENTS;
+  // While the clay moves (training, or a drag) on a software rasteriser, a point display with many synapses draws
+  // its points only: thousands of lines are what such a rasteriser draws slowest, on the cores that also train, and
+  // they would halve the frames drawn. The lines come back when the clay is still.
+  setMoving(moving) {
+    const drop = moving && this.software && this.topology?.points && this.topology.segments.length / 2 > LIGHT_SEGMENTS;
     if (this.segments && this.segments.visible === drop) {
       this.segments.visible = !drop;
       this.onChange?.();

@@ -21,6 +21,7 @@ export class Grabs {
     this.controlLatencies = []; // ms from a move's send to the first frame showing the control there
     this.latencyLog = []; // {sent, arrived, index, seq} (page clock, ms) for the latencies above
     this.moves = 0;
+    this.answered = false; // a frame arrived that answers one of our moves and is not drawn yet
     this.lastDigest = 0;
     this.renamed = new Map(); // index a drag began at -> its control's index now
   }
@@ -157,6 +158,7 @@ export class Grabs {
           this.controlLatencies.push(pm.controlLatency);
         }
         if (digest !== pm.digest) {
+          this.answered = true; // this frame answers a move: the view draws it at once
           this.latencies.push(now - pm.t);
           this.latencyLog.push({ sent: pm.t, arrived: now, index: pm.index, seq: f.seq });
           if (this.latencyLog.length > 200) this.latencyLog.shift();

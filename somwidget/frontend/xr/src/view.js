@@ -48,6 +48,7 @@ export function digestOf(positions) {
 
 const FIT_CHECK_MS = 250;
 const STATUS_MS = 250;
+const DRAG_REDRAW_MS = 50;
 
 // A software rasteriser (SwiftShader, llvmpipe: a browser without a GPU) draws every pixel on the CPU that also
 // trains the clay: there the view skips multisampling and draws at one pixel per CSS pixel.
@@ -95,9 +96,9 @@ export class ClayView {
     this.grabs = new Grabs(this.link, this.clay);
     this.software = software;
     this.desktop = new Desktop({ renderer: this.renderer, camera: this.camera, clay: this.clay, grabs: this.grabs,
-      onDragStart: () => this.clay.setDragging(true),
+      onDragStart: () => this.clay.setMoving(true),
       onDragEnd: () => {
-        this.clay.setDragging(false);
+        this.clay.setMoving(!!this.state.frame?.running);
         this.desktop.keepControlsInView();
       } });
 
@@ -128,6 +129,7 @@ export class ClayView {
     this.hooks = []; // (time, xrFrame) => void, run before each render
     this.lastFitCheck = 0;
     this.lastStatus = 0;
+    this.lastRender = 0;
     this.dirty = true; // draw on the next animation frame (only then: a software rasteriser shares the CPU)
     this.clay.onChange = () => { this.dirty = true; };
     this.desktop.orbit.addEventListener('change', () => { this.dirty = true; });
@@ -167,6 +169,7 @@ export class ClayView {
     s.connected = true;
     s.digest = digestOf(f.positions);
     this.grabs.onFrame(f, s.digest);
+    this.clay.setMoving(f.running || !!this.desktop.drag);
     if (s.needsFrame) { // the first frame of a model: frame the camera on it
       s.needsFrame = false;
       this.onFirstFrame ? this.onFirstFrame() : this.desktop.frame();
@@ -219,10 +222,15 @@ export class ClayView {
         this.updateStatus();
       }
       if (!this.dirty) return;
+      // a software rasteriser dragging: draw each answer to a move at once, the frames between at most every
+      // DRAG_REDRAW_MS (each drawing holds the page's thread while the CPU draws; the next answer waits behind it)
+      if (this.software && this.desktop.drag && !this.grabs.answered && now - this.lastRender < DRAG_REDRAW_MS) return;
       this.updateLabels();
     }
     this.dirty = false;
     this.renderer.render(this.scene, this.camera);
+    this.lastRender = now;
+    this.grabs.answered = false;
     s.rendered += 1;
     s.renderedAt = now;
     if (s.frame && s.digest !== s.paintedDigest) { // a changed mesh is on screen from now on
