@@ -417,3 +417,75 @@ def run_cell(page, index: int, tries: int = 20) -> None:
 
 def view_errors(page, views: str) -> list:
     return page.evaluate(f"() => {views}.flatMap((v) => v.describe().errors)")
+
+
+def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened(tmp_path):
+    """JupyterLab with "Save Widget State Automatically": run the widget, let the view take its picture, save; the
+    file holds that picture in its widget state, and the notebook reopened in a fresh kernel (whose widgets are gone)
+    shows it in the view's place instead of a blank canvas."""
+    pytest.importorskip("jupyterlab")
+    if not os.path.exists(CHROMIUM):
+        pytest.skip(f"{CHROMIUM} is missing")
+    settings = tmp_path / "settings" / "@jupyter-widgets" / "jupyterlab-manager"
+    settings.mkdir(parents=True)
+    (settings / "plugin.jupyterlab-settings").write_text(json.dumps({"saveState": True}))
+    root = tmp_path / "root"
+    root.mkdir()
+    nb = {"cells": [{"cell_type": "code", "execution_count": None, "metadata": {}, "outputs": [],
+                     "source": "import somwidget\nview = somwidget.show('car', device='cpu')\nview"}],
+          "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"}},
+          "nbformat": 4, "nbformat_minor": 5}
+    path = root / "saved.ipynb"
+    path.write_text(json.dumps(nb))
+    port = helpers.free_port()
+    env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(tmp_path / "data")}
+    with open(tmp_path / "lab.log", "w") as log:
+        proc = subprocess.Popen([sys.executable, "-m", "jupyterlab", "--allow-root", "--no-browser", f"--port={port}",
+                                 "--ServerApp.ip=127.0.0.1", "--IdentityProvider.token=t0k",
+                                 f"--ServerApp.root_dir={root}", f"--LabApp.user_settings_dir={tmp_path / 'settings'}"],
+                                env=env, stdout=log, stderr=subprocess.STDOUT)
+        try:
+            helpers.wait_for(lambda: _answers(f"http://127.0.0.1:{port}/api?token=t0k"), timeout=90,
+                             what="JupyterLab to start")
+            url = f"http://127.0.0.1:{port}/lab/tree/saved.ipynb?token=t0k"
+            with helpers.sync_playwright() as p:
+                browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+                try:
+                    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+                    page.goto(url)
+                    page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=90000)
+                    run_cell(page, 0)
+                    page.wait_for_function("() => [...document.querySelectorAll('.somview')].some((e) => "
+                                           "e.somview.describe().painted > 0)", timeout=120000)
+
+                    def saved_picture():
+                        page.keyboard.press("Control+s")
+                        page.wait_for_timeout(1000)
+                        state = json.loads(path.read_text()).get("metadata", {}).get("widgets", {})
+                        models = state.get("application/vnd.jupyter.widget-state+json", {}).get("state", {})
+                        pictures = [m["state"].get("picture", "") for m in models.values()]
+                        return next((x for x in pictures if x.startswith("data:image/png;base64,")), None)
+
+                    picture = helpers.wait_for(saved_picture, timeout=30, what="the saved widget state's picture")
+                    page.close()
+                    # the notebook's kernel shut down: reopened, it gets a fresh one, where the saved widgets have no
+                    # kernel side (what a reader of the saved file sees)
+                    api = f"http://127.0.0.1:{port}/api/sessions"
+                    with urllib.request.urlopen(f"{api}?token=t0k", timeout=10) as r:
+                        for session in json.loads(r.read()):
+                            urllib.request.urlopen(urllib.request.Request(f"{api}/{session['id']}?token=t0k",
+                                                                          method="DELETE"), timeout=30).close()
+                    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+                    page.goto(url)
+                    shown = page.wait_for_selector("img.somview-picture", timeout=90000)
+                    assert shown.get_attribute("src") == picture
+                    box = shown.bounding_box()
+                    assert box and box["width"] > 200 and box["height"] > 200  # in the view's place, not a speck
+                finally:
+                    browser.close()
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
