@@ -11,6 +11,7 @@ panel and a second output of the widget follow. The sessions train the real Som 
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import os
@@ -285,45 +286,53 @@ def test_a_widget_of_a_closed_view_stops_following(session):
 
 
 # -- in a real JupyterLab: Playwright's mouse drags a control inside the widget ----------------------------------
-JUPYTER = helpers.ROOT / ".venv" / "bin" / "jupyter"
+
+
+def notebook_file(path, cells: list[str]) -> None:
+    nb = {"cells": [{"cell_type": "code", "execution_count": None, "metadata": {}, "outputs": [], "source": c}
+                    for c in cells],
+          "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"}},
+          "nbformat": 4, "nbformat_minor": 5}
+    path.write_text(json.dumps(nb))
+
+
+@contextlib.contextmanager
+def jupyter_server(app: str, root, *options: str):
+    """A real JupyterLab 4 (`app` "jupyterlab") or Notebook 7 ("notebook") server on `root`; yields its port."""
+    pytest.importorskip(app)
+    if not os.path.exists(CHROMIUM):
+        pytest.skip(f"{CHROMIUM} is missing")
+    port = helpers.free_port()
+    env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(root / "data")}
+    with open(root / "lab.log", "w") as log:
+        proc = subprocess.Popen([sys.executable, "-m", app, "--allow-root", "--no-browser", f"--port={port}",
+                                 "--ServerApp.ip=127.0.0.1", "--IdentityProvider.token=t0k",
+                                 f"--ServerApp.root_dir={root}", *options], env=env, stdout=log,
+                                stderr=subprocess.STDOUT)
+        try:
+            helpers.wait_for(lambda: _answers(f"http://127.0.0.1:{port}/api?token=t0k"), timeout=90,
+                             what=f"{app} to start")
+            yield port
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
 
 
 @pytest.fixture(scope="module", params=["jupyterlab", "notebook"])
 def lab(request, tmp_path_factory):
     """A notebook with the widget's cells, opened in a real JupyterLab 4 or Notebook 7 server; yields its URL."""
-    app = request.param
-    pytest.importorskip(app)
-    if not os.path.exists(CHROMIUM):
-        pytest.skip(f"{CHROMIUM} is missing")
     root = tmp_path_factory.mktemp("lab")
-    cells = ["import somwidget\nview = somwidget.show('car', device='cpu')\nview",
-             "view  # a second output of the same widget",
-             "import hashlib\npng = view.view.picture_png() or b''\n"
-             "print('picture', png[:8] == b'\\x89PNG\\r\\n\\x1a\\n', len(png), hashlib.md5(png).hexdigest())"]
-    nb = {"cells": [{"cell_type": "code", "execution_count": None, "metadata": {}, "outputs": [], "source": c}
-                    for c in cells],
-          "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"}},
-          "nbformat": 4, "nbformat_minor": 5}
-    (root / "clay.ipynb").write_text(json.dumps(nb))
-    port = helpers.free_port()
-    env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(root / "data")}
-    log = open(root / "lab.log", "w")
-    proc = subprocess.Popen([sys.executable, "-m", app, "--allow-root", "--no-browser", f"--port={port}",
-                             "--ServerApp.ip=127.0.0.1", "--IdentityProvider.token=t0k",
-                             f"--ServerApp.root_dir={root}"], env=env, stdout=log, stderr=subprocess.STDOUT)
-    page = "lab/tree" if app == "jupyterlab" else "notebooks"
-    url = f"http://127.0.0.1:{port}/{page}/clay.ipynb?token=t0k"
-    try:
-        helpers.wait_for(lambda: _answers(f"http://127.0.0.1:{port}/api?token=t0k"), timeout=90,
-                         what="JupyterLab to start")
-        yield url
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-        log.close()
+    notebook_file(root / "clay.ipynb", [
+        "import somwidget\nview = somwidget.show('car', device='cpu')\nview",
+        "view  # a second output of the same widget",
+        "import hashlib\npng = view.view.picture_png() or b''\n"
+        "print('picture', png[:8] == b'\\x89PNG\\r\\n\\x1a\\n', len(png), hashlib.md5(png).hexdigest())"])
+    with jupyter_server(request.param, root) as port:
+        page = "lab/tree" if request.param == "jupyterlab" else "notebooks"
+        yield f"http://127.0.0.1:{port}/{page}/clay.ipynb?token=t0k"
 
 
 def _answers(url: str) -> bool:
@@ -423,69 +432,47 @@ def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened
     """JupyterLab with "Save Widget State Automatically": run the widget, let the view take its picture, save; the
     file holds that picture in its widget state, and the notebook reopened in a fresh kernel (whose widgets are gone)
     shows it in the view's place instead of a blank canvas."""
-    pytest.importorskip("jupyterlab")
-    if not os.path.exists(CHROMIUM):
-        pytest.skip(f"{CHROMIUM} is missing")
     settings = tmp_path / "settings" / "@jupyter-widgets" / "jupyterlab-manager"
     settings.mkdir(parents=True)
     (settings / "plugin.jupyterlab-settings").write_text(json.dumps({"saveState": True}))
     root = tmp_path / "root"
     root.mkdir()
-    nb = {"cells": [{"cell_type": "code", "execution_count": None, "metadata": {}, "outputs": [],
-                     "source": "import somwidget\nview = somwidget.show('car', device='cpu')\nview"}],
-          "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"}},
-          "nbformat": 4, "nbformat_minor": 5}
     path = root / "saved.ipynb"
-    path.write_text(json.dumps(nb))
-    port = helpers.free_port()
-    env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(tmp_path / "data")}
-    with open(tmp_path / "lab.log", "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", "jupyterlab", "--allow-root", "--no-browser", f"--port={port}",
-                                 "--ServerApp.ip=127.0.0.1", "--IdentityProvider.token=t0k",
-                                 f"--ServerApp.root_dir={root}", f"--LabApp.user_settings_dir={tmp_path / 'settings'}"],
-                                env=env, stdout=log, stderr=subprocess.STDOUT)
-        try:
-            helpers.wait_for(lambda: _answers(f"http://127.0.0.1:{port}/api?token=t0k"), timeout=90,
-                             what="JupyterLab to start")
-            url = f"http://127.0.0.1:{port}/lab/tree/saved.ipynb?token=t0k"
-            with helpers.sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-                try:
-                    page = browser.new_page(viewport={"width": 1400, "height": 1000})
-                    page.goto(url)
-                    page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=90000)
-                    run_cell(page, 0)
-                    page.wait_for_function("() => [...document.querySelectorAll('.somview')].some((e) => "
-                                           "e.somview.describe().painted > 0)", timeout=120000)
-
-                    def saved_picture():
-                        page.keyboard.press("Control+s")
-                        page.wait_for_timeout(1000)
-                        state = json.loads(path.read_text()).get("metadata", {}).get("widgets", {})
-                        models = state.get("application/vnd.jupyter.widget-state+json", {}).get("state", {})
-                        pictures = [m["state"].get("picture", "") for m in models.values()]
-                        return next((x for x in pictures if x.startswith("data:image/png;base64,")), None)
-
-                    picture = helpers.wait_for(saved_picture, timeout=30, what="the saved widget state's picture")
-                    page.close()
-                    # the notebook's kernel shut down: reopened, it gets a fresh one, where the saved widgets have no
-                    # kernel side (what a reader of the saved file sees)
-                    api = f"http://127.0.0.1:{port}/api/sessions"
-                    with urllib.request.urlopen(f"{api}?token=t0k", timeout=10) as r:
-                        for session in json.loads(r.read()):
-                            urllib.request.urlopen(urllib.request.Request(f"{api}/{session['id']}?token=t0k",
-                                                                          method="DELETE"), timeout=30).close()
-                    page = browser.new_page(viewport={"width": 1400, "height": 1000})
-                    page.goto(url)
-                    shown = page.wait_for_selector("img.somview-picture", timeout=90000)
-                    assert shown.get_attribute("src") == picture
-                    box = shown.bounding_box()
-                    assert box and box["width"] > 200 and box["height"] > 200  # in the view's place, not a speck
-                finally:
-                    browser.close()
-        finally:
-            proc.terminate()
+    notebook_file(path, ["import somwidget\nview = somwidget.show('car', device='cpu')\nview"])
+    with jupyter_server("jupyterlab", root, f"--LabApp.user_settings_dir={tmp_path / 'settings'}") as port:
+        url = f"http://127.0.0.1:{port}/lab/tree/saved.ipynb?token=t0k"
+        with helpers.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
             try:
-                proc.wait(20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+                page = browser.new_page(viewport={"width": 1400, "height": 1000})
+                page.goto(url)
+                page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=90000)
+                run_cell(page, 0)
+                page.wait_for_function("() => [...document.querySelectorAll('.somview')].some((e) => "
+                                       "e.somview.describe().painted > 0)", timeout=120000)
+
+                def saved_picture():
+                    page.keyboard.press("Control+s")
+                    page.wait_for_timeout(1000)
+                    state = json.loads(path.read_text()).get("metadata", {}).get("widgets", {})
+                    models = state.get("application/vnd.jupyter.widget-state+json", {}).get("state", {})
+                    pictures = [m["state"].get("picture", "") for m in models.values()]
+                    return next((x for x in pictures if x.startswith("data:image/png;base64,")), None)
+
+                picture = helpers.wait_for(saved_picture, timeout=30, what="the saved widget state's picture")
+                page.close()
+                # the notebook's kernel shut down: reopened, it gets a fresh one, where the saved widgets have no
+                # kernel side (what a reader of the saved file sees)
+                api = f"http://127.0.0.1:{port}/api/sessions"
+                with urllib.request.urlopen(f"{api}?token=t0k", timeout=10) as r:
+                    for session in json.loads(r.read()):
+                        urllib.request.urlopen(urllib.request.Request(f"{api}/{session['id']}?token=t0k",
+                                                                      method="DELETE"), timeout=30).close()
+                page = browser.new_page(viewport={"width": 1400, "height": 1000})
+                page.goto(url)
+                shown = page.wait_for_selector("img.somview-picture", timeout=90000)
+                assert shown.get_attribute("src") == picture
+                box = shown.bounding_box()
+                assert box and box["width"] > 200 and box["height"] > 200  # in the view's place, not a speck
+            finally:
+                browser.close()

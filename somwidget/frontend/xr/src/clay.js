@@ -8,7 +8,7 @@ import * as THREE from 'three';
 
 const HELD = new THREE.Color(0xff2020);
 const WIREFRAME_LIMIT = 16384; // display vertices above which a surface is drawn without its edges
-const LIGHT_SEGMENTS = 4096; // synapses above which a drag on a software rasteriser shows the points alone
+const LIGHT_SEGMENTS = 4096; // synapses above which moving clay on a software rasteriser shows the points alone
 const WHITE = new THREE.Color(0xffffff);
 const HOVER_LIGHTEN = 0.35; // a hovered control's colour moves this far towards white
 
@@ -124,7 +124,8 @@ export class Clay {
   // its points only: thousands of lines are what such a rasteriser draws slowest, on the cores that also train, and
   // they would halve the frames drawn. The lines come back when the clay is still.
   setMoving(moving) {
-    const drop = moving && this.software && this.topology?.points && this.topology.segments.length / 2 > LIGHT_SEGMENTS;
+    const many = this.topology?.points && this.topology.segments.length / 2 > LIGHT_SEGMENTS;
+    const drop = Boolean(moving && this.software && many);
     if (this.segments && this.segments.visible === drop) {
       this.segments.visible = !drop;
       this.onChange?.();
@@ -179,8 +180,7 @@ export class Clay {
   }
 
   // The control spheres: an anchor (Object3D) per effective control carries its place and size, and two instanced
-  // meshes draw them, the originals solid and the mirrored copies translucent (two draw calls whatever the count: a
-  // software rasteriser pays for each call).
+  // meshes draw them, the originals solid and the mirrored copies translucent (two draw calls whatever the count).
   rebuildControls(kEff) {
     for (const m of this.controlAnchors) this.content.remove(m);
     for (const d of this.controlDraws) {
