@@ -343,6 +343,14 @@ def _answers(url: str) -> bool:
         return False
 
 
+def open_notebook(browser, url: str):
+    """A new page on the notebook at `url`, its cells on screen."""
+    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+    page.goto(url)
+    page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=90000)
+    return page
+
+
 def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
     """Interaction, in JupyterLab 4 and in Notebook 7: the page runs the cells; the mouse drags control 2 inside the
     widget; the panel's controls table (same output) shows the control moved and the second output of the widget
@@ -351,9 +359,7 @@ def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
     with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         try:
-            page = browser.new_page(viewport={"width": 1400, "height": 1000})
-            page.goto(lab)
-            page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=90000)
+            page = open_notebook(browser, lab)
             run_cell(page, 0)
             run_cell(page, 1)
             try:
@@ -444,9 +450,7 @@ def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened
         with helpers.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
             try:
-                page = browser.new_page(viewport={"width": 1400, "height": 1000})
-                page.goto(url)
-                page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=90000)
+                page = open_notebook(browser, url)
                 run_cell(page, 0)
                 page.wait_for_function("() => [...document.querySelectorAll('.somview')].some((e) => "
                                        "e.somview.describe().painted > 0)", timeout=120000)
