@@ -27,8 +27,8 @@ import numpy as np
 
 from somwidget.backend.presets import XYZ, Preset, controls_on, open_grid
 from somwidget.backend.topology import Topology
-from somwidget.frontend import protocol
-from somwidget.frontend.session import Session
+from somwidget.frontend.transport import protocol
+from somwidget.frontend.model.session import Session
 
 
 def grid(side: int) -> Preset:

@@ -31,8 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from somwidget.backend.presets import open_grid  # noqa: E402
-from somwidget.frontend import protocol  # noqa: E402
-from somwidget.frontend.xr.server import DIST  # noqa: E402
+from somwidget.frontend.transport import protocol  # noqa: E402
+from somwidget.frontend.client import DIST  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

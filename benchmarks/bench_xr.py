@@ -37,10 +37,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from somwidget.frontend.session import Session  # noqa: E402
-from somwidget.frontend import protocol  # noqa: E402
-from somwidget.frontend.xr.server import DIST  # noqa: E402
-from somwidget.frontend.xr.standalone import XRServer  # noqa: E402
+from somwidget.frontend.model.session import Session  # noqa: E402
+from somwidget.frontend.transport import protocol  # noqa: E402
+from somwidget.frontend.client import DIST  # noqa: E402
+from somwidget.frontend.web.standalone import XRServer  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

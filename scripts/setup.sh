@@ -4,7 +4,7 @@
 #   1. apt packages the app and its tests need (headless VTK rendering through EGL/Mesa, Chromium for the
 #      browser tests, fonts); skipped when all are installed already
 #   2. .venv at the repository root, with `pip install -e ".[test]"`; skipped while pyproject.toml is unchanged
-#   3. the WebXR client's npm build, when somwidget/frontend/xr/package.json exists
+#   3. the browser client's npm build (somwidget/frontend/client)
 # Environment: PYTHON (default python3) picks the interpreter for the venv; SOMWIDGET_SKIP_APT=1 skips step 1.
 set -euo pipefail
 
@@ -25,7 +25,7 @@ if ! command -v "$PYTHON" >/dev/null 2>&1; then
 elif ! "$PYTHON" -c 'import venv, ensurepip' >/dev/null 2>&1; then
     PACKAGES+=(python3-venv)  # Debian's python3 ships venv's ensurepip separately
 fi
-XR_DIR="somwidget/frontend/xr"
+XR_DIR="somwidget/frontend/client"
 if [ -f "$XR_DIR/package.json" ] && ! command -v npm >/dev/null 2>&1; then
     if command -v node >/dev/null 2>&1; then PACKAGES+=(npm); else PACKAGES+=(nodejs npm); fi
 fi

@@ -21,8 +21,8 @@ def show(what="car", **kwargs):
 def render(what, path=None, **kwargs):
     """An off-screen picture of a Som, Session, Preset or preset name: (H, W, 3) uint8, saved to `path` if given.
 
-    See somwidget.frontend.picture.render for the arguments."""
-    from .frontend.picture import render as _render
+    See somwidget.frontend.model.picture.render for the arguments."""
+    from .frontend.model.picture import render as _render
 
     return _render(what, path, **kwargs)
 
@@ -32,8 +32,8 @@ def sweep(preset_or_session="car", n: int = 64, jitter: float = 0.05, params=Non
     """Train n design variants at once (batched on the GPU, or over a Dask cluster with `client`) and return them as
     `Variants`: controls, weights, params, metrics, picture(), apply(i) / session(i).
 
-    See somwidget.frontend.variants.sweep for the arguments."""
-    from .frontend.variants import sweep as _sweep
+    See somwidget.frontend.model.variants.sweep for the arguments."""
+    from .frontend.model.variants import sweep as _sweep
 
     return _sweep(preset_or_session, n=n, jitter=jitter, params=params, seed=seed, device=device, client=client,
                   **kwargs)
@@ -41,8 +41,8 @@ def sweep(preset_or_session="car", n: int = 64, jitter: float = 0.05, params=Non
 
 def serve(preset: str | None = None, mesh=None, host: str | None = None, port: int = 8080, device: str = "auto",
           open_browser: bool = False, lan: bool = False, fresh: bool = False):
-    """Run the web app (what `somwidget serve` runs) until interrupted; see somwidget.frontend.app.run_server."""
-    from .frontend.app import run_server
+    """Run the web app (what `somwidget serve` runs) until interrupted; see somwidget.frontend.web.app.run_server."""
+    from .frontend.web.app import run_server
 
     return run_server(preset=preset, mesh=mesh, host=host, port=port, device=device, open_browser=open_browser,
                       lan=lan, fresh=fresh)

@@ -153,7 +153,7 @@ def _sweep(args: argparse.Namespace) -> int:
     import numpy as np
 
     from somwidget.backend import io as sw_io
-    from somwidget.frontend.variants import sweep
+    from somwidget.frontend.model.variants import sweep
 
     params = parse_vary(args.vary)
     if not args.out.endswith(".npz"):
@@ -190,7 +190,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    from somwidget.frontend.app import run_server
+    from somwidget.frontend.web.app import run_server
 
     run_server(
         preset=args.preset,

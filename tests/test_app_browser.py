@@ -393,7 +393,7 @@ def test_the_panel_comes_from_the_parameters_declaration_and_follows_a_change_ma
     comes back to that client as an error and changes nothing."""
     import aiohttp
 
-    from somwidget.frontend.parameters import PARAMETERS
+    from somwidget.frontend.model.parameters import PARAMETERS
 
     page = open_page(browser, server)
     try:
@@ -685,8 +685,8 @@ def local_app(tmp_path, monkeypatch):
     temporary files go to tmp_path/"tmp" so the test sees what is left behind."""
     from trame.app import get_server
 
-    from somwidget.frontend.app import build_app
-    from somwidget.frontend.session import Session
+    from somwidget.frontend.web.app import build_app
+    from somwidget.frontend.model.session import Session
 
     (tmp_path / "tmp").mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))

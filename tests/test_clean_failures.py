@@ -25,8 +25,8 @@ INTERNALS = re.compile(r"IndexError|KeyError|TypeError|allow_pickle|pickle|Trace
 def app(tmp_path, monkeypatch):
     from trame.app import get_server
 
-    from somwidget.frontend.app import build_app
-    from somwidget.frontend.session import Session
+    from somwidget.frontend.web.app import build_app
+    from somwidget.frontend.model.session import Session
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     session = Session("car", device="cpu", start=False, autosave=False)
@@ -78,7 +78,7 @@ def test_an_uploaded_non_session_names_the_file_not_a_temporary_path(app):
 
 
 def test_the_size_limit_in_messages_is_the_readme_s():
-    from somwidget.frontend.app import SomApp
+    from somwidget.frontend.web.app import SomApp
 
     readme = (helpers.ROOT / "README.md").read_text()
     shown = re.search(r"up to (\d+) MB", readme).group(1)
@@ -90,8 +90,8 @@ def test_the_size_limit_in_messages_is_the_readme_s():
 def test_upload_folders_of_a_killed_server_are_removed_at_the_next_start(tmp_path, monkeypatch):
     from trame.app import get_server
 
-    from somwidget.frontend.app import build_app
-    from somwidget.frontend.session import Session
+    from somwidget.frontend.web.app import build_app
+    from somwidget.frontend.model.session import Session
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     dead = subprocess.Popen([sys.executable, "-c", "pass"])

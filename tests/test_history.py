@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 
-from somwidget.frontend.history import History, Step
-from somwidget.frontend.session import Session
+from somwidget.frontend.model.history import History, Step
+from somwidget.frontend.model.session import Session
 
 
 def state_of(session: Session) -> dict:

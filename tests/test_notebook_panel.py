@@ -31,7 +31,7 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 pytest.importorskip("ipywidgets")
 
 from somwidget.frontend.notebook import Panel, SomWidget, show  # noqa: E402
-from somwidget.frontend.session import Session  # noqa: E402
+from somwidget.frontend.model.session import Session  # noqa: E402
 
 wait_for = functools.partial(helpers.wait_for, timeout=15.0, interval=0.02)
 
@@ -223,7 +223,7 @@ def shown():
 
 
 def test_show_puts_the_clay_view_beside_the_panel_and_opens_no_port(shown):
-    from somwidget.frontend.widget import ClayWidget
+    from somwidget.frontend.notebook.widget import ClayWidget
 
     assert isinstance(shown, SomWidget) and shown.children[0] is shown.panel
     assert isinstance(shown.view, ClayWidget) and shown.children[1] is shown.view
@@ -238,7 +238,7 @@ def test_show_puts_the_clay_view_beside_the_panel_and_opens_no_port(shown):
 def test_clay_widget_protocol_over_the_comm(shown):
     """The protocol (not the interaction): a new output says hello and gets the topology and a frame as a binary
     buffer; grab, move and release move the control as one undo step; a bad intent gets an error message."""
-    from somwidget.frontend import protocol
+    from somwidget.frontend.transport import protocol
 
     view, session = shown.view, shown.session
     session.wait_idle(30)

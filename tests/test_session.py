@@ -1,4 +1,4 @@
-"""The modelling session (somwidget.frontend.session): intents in, frames out, one training thread.
+"""The modelling session (somwidget.frontend.model.session): intents in, frames out, one training thread.
 
 These tests drive the Session through its Python API, as a view would (the protocol, not the interaction:
 tests/test_app_browser.py drags with a real mouse). They run the real Som on the CPU.
@@ -17,8 +17,8 @@ from somwidget.backend import presets
 from somwidget.backend.presets import parse_hex_colour, rgb_to_colour_dims
 from somwidget.backend.som import Som
 from somwidget.backend.topology import Topology
-from somwidget.frontend import session as session_module
-from somwidget.frontend.session import MAX_ITERATIONS, MAX_TABLE_ENTRIES, Frame, Session
+from somwidget.frontend.model import session as session_module
+from somwidget.frontend.model.session import MAX_ITERATIONS, MAX_TABLE_ENTRIES, Frame, Session
 
 
 @pytest.fixture
@@ -41,7 +41,7 @@ def _until(condition, timeout: float = 60.0, what: str = "condition") -> None:
 
 
 def test_session_does_not_import_ui_packages():
-    code = ("import sys, somwidget.frontend.session as s; "
+    code = ("import sys, somwidget.frontend.model.session as s; "
             "bad = [m for m in ('trame', 'pyvista', 'vtk', 'vtkmodules', 'ipywidgets') if m in sys.modules]; "
             "print(bad); raise SystemExit(1 if bad else 0)")
     import subprocess

@@ -15,7 +15,7 @@ import helpers
 import pytest
 
 pytest.importorskip("build", reason="the build package is not installed")
-DIST = helpers.ROOT / "somwidget" / "frontend" / "xr" / "dist"
+DIST = helpers.ROOT / "somwidget" / "frontend" / "client" / "dist"
 ANNOUNCED = re.compile(r"somwidget serving .* at (http://127\.0\.0\.1:\d+)/")
 
 
@@ -41,8 +41,8 @@ def installed(tmp_path_factory):
 def test_the_wheel_holds_the_built_client(installed):
     wheel, *_ = installed
     names = zipfile.ZipFile(wheel).namelist()
-    assert "somwidget/frontend/xr/dist/somview.js" in names
-    assert "somwidget/frontend/xr/dist/index.html" in names
+    assert "somwidget/frontend/client/dist/somview.js" in names
+    assert "somwidget/frontend/client/dist/index.html" in names
     assert not [n for n in names if "node_modules" in n]
 
 

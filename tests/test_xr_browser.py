@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, wait_for
 
-from somwidget.frontend.xr.server import DIST
+from somwidget.frontend.client import DIST
 
 VIEWPORT = {"width": 480, "height": 360}  # small: SwiftShader renders on the CPU
 
@@ -29,13 +29,13 @@ playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Play
 if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
     pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
 if not (DIST / "emulator.html").is_file():  # pragma: no cover
-    pytest.skip("the WebXR client is not built (npm ci && npm run build in somwidget/frontend/xr)",
+    pytest.skip("the WebXR client is not built (npm ci && npm run build in somwidget/frontend/client)",
                 allow_module_level=True)
 
 
 @pytest.fixture(scope="module")
 def session():
-    from somwidget.frontend.session import Session
+    from somwidget.frontend.model.session import Session
 
     s = Session("car", device="cpu")
     assert s.wait_idle(120), "the session did not converge"
@@ -45,7 +45,7 @@ def session():
 
 @pytest.fixture(scope="module")
 def server(session):
-    from somwidget.frontend.xr.standalone import XRServer
+    from somwidget.frontend.web.standalone import XRServer
 
     with XRServer(session) as srv:
         yield srv

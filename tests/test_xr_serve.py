@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, insecure_context
 
-from somwidget.frontend import protocol
-from somwidget.frontend.xr.server import DIST
+from somwidget.frontend.transport import protocol
+from somwidget.frontend.client import DIST
 
-NOT_WIRED = ("`somwidget serve` does not serve /xr/: app.py must call somwidget.frontend.xr.attach(wslink_server, "
+NOT_WIRED = ("`somwidget serve` does not serve /xr/: app.py must call somwidget.frontend.web.hub.attach(wslink_server, "
              "session, token=...) from ctrl.on_server_bind (see the XR helper's report)")
 
 async def next_binary(ws) -> bytes:
@@ -47,7 +47,7 @@ def test_serve_has_the_xr_page_and_socket(serve):
     assert status != 404, NOT_WIRED
     if not DIST.is_dir():
         assert status == 503 and b"npm" in body  # not built: says how to build it
-        pytest.skip("the WebXR client is not built (npm run build in somwidget/frontend/xr)")
+        pytest.skip("the WebXR client is not built (npm run build in somwidget/frontend/client)")
     assert status == 200 and b"somwidget" in body
 
     async def main():

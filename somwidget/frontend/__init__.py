@@ -1,7 +1,12 @@
-"""Views of a modelling session: the shared Session (no UI imports) and, imported on demand, the trame web app
-(`somwidget.frontend.app`, `somwidget serve`), the notebook's panel and clay widget (`notebook`, `widget`) and the
-browser client they all draw with (`xr/`: the clay view and the WebXR page), fed by one protocol (`protocol`)."""
+"""The app layer around the engine, by role; imports run one way: hosts -> transport -> model -> backend.
 
-from .session import Frame, Session
+model/      the modelling session and its parts (no UI, no network): Session, Frame
+transport/  what travels between a session and its views: wire messages, frame encoding, gestures, the outbox
+web/        the trame web app (`somwidget serve`), its websocket hub and routes, the LAN guard
+notebook/   Jupyter: show(), the ipywidgets panel, the anywidget clay view
+client/     the one browser client (JavaScript): the clay view, the link, the headset page
+"""
+
+from .model import Frame, Session
 
 __all__ = ["Frame", "Session"]

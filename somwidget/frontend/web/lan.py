@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import quote
 
-from .storage import data_dir
+from ..model.storage import data_dir
 
 log = logging.getLogger(__name__)
 

@@ -26,13 +26,13 @@ from pathlib import Path
 
 from aiohttp import WSMsgType, web
 
-from .. import lan, protocol
-from ..gestures import Gestures
+from ..client import BUILD_HINT, DIST
+from ..transport import protocol
+from . import lan
+from ..transport.gestures import Gestures
 
 log = logging.getLogger(__name__)
 
-HERE = Path(__file__).resolve().parent
-DIST = HERE / "dist"
 #: Refused messages a client may send within ERROR_WINDOW seconds before the server closes its socket.
 MAX_ERRORS = 200
 ERROR_WINDOW = 10.0
@@ -40,9 +40,8 @@ ERROR_WINDOW = 10.0
 MAX_TEXTS = 512
 #: Seconds one send may take before the client counts as not reading and is dropped.
 SEND_TIMEOUT = 5.0
-NOT_BUILT = """<!doctype html><meta charset="utf-8"><title>somwidget XR: not built</title>
-<p>The WebXR client is not built. Run <code>npm ci &amp;&amp; npm run build</code> in
-<code>somwidget/frontend/xr</code> (<code>bash scripts/setup.sh</code> does it), then reload.</p>"""
+NOT_BUILT = ('<!doctype html><meta charset="utf-8"><title>somwidget: the client is not built</title>'
+             f"<p>The browser client is not built: {BUILD_HINT}. Then reload.</p>")
 
 
 class _Client:

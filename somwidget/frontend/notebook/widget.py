@@ -21,9 +21,9 @@ import time
 import anywidget
 import traitlets
 
-from . import protocol
-from .gestures import Gestures
-from .xr.server import DIST
+from ..transport import protocol
+from ..transport.gestures import Gestures
+from ..client import view_module
 
 log = logging.getLogger(__name__)
 
@@ -33,14 +33,6 @@ MAX_PICTURE_CHARS = 16 * 1024 * 1024
 
 #: The one client of a widget's gestures (every output of a widget acts as one client).
 _CLIENT = "notebook"
-
-
-def _module() -> str:
-    path = DIST / "somview.js"
-    if not path.is_file():
-        raise RuntimeError(f"the clay view is not built ({path} is missing): run `bash scripts/setup.sh` (or "
-                           f"`npm ci && npm run build` in {DIST.parent})")
-    return path.read_text(encoding="utf-8")
 
 
 class ClayWidget(anywidget.AnyWidget):
@@ -64,7 +56,7 @@ class ClayWidget(anywidget.AnyWidget):
         return base64.b64decode(self.picture[len(PICTURE_PREFIX):]) if self.picture else None
 
     def __init__(self, session, height: int = 520, max_fps: float = protocol.MAX_FPS, **kwargs):
-        super().__init__(_esm=_module(), height=int(height), **kwargs)
+        super().__init__(_esm=view_module(), height=int(height), **kwargs)
         self.session = session
         self.max_fps = float(max_fps)
         self.gestures = Gestures(session, on_change=self._send_grabs)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from ..backend import checks
+from ...backend import checks
 
 #: Bounds the session puts on S coming from a view (the engine has its own, wider checks).
 MAX_ITERATIONS = 1_000_000

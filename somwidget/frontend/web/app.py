@@ -38,19 +38,19 @@ from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 from wslink.websocket import LinkProtocol
 
-from ..backend import checks
-from ..backend import device as _device
-from ..backend import presets as _presets
+from ...backend import checks
+from ...backend import device as _device
+from ...backend import presets as _presets
 from . import lan as _lan
-from .parameters import BY_NAME as _PARAM
-from .parameters import GAP_HELP, METRIC_WEIGHT
-from .protocol import control_colours
-from .session import REACH_HELP, Frame, Session, hex_colour, max_vertices_for
-from .variants import MAX_GALLERY_VARIANTS, VARIANTS_HELP, VARIED, vary_around
-from .variants import sweep as sweep_variants
-from .client_state import guard_state_updates
-from .ws_limits import bound_messages
-from .xr import attach as attach_xr
+from ..model.parameters import BY_NAME as _PARAM
+from ..model.parameters import GAP_HELP, METRIC_WEIGHT
+from ..transport.protocol import control_colours
+from ..model.session import REACH_HELP, Frame, Session, hex_colour, max_vertices_for
+from ..model.variants import MAX_GALLERY_VARIANTS, VARIANTS_HELP, VARIED, vary_around
+from ..model.variants import sweep as sweep_variants
+from .state_guard import guard_state_updates
+from ..transport.limits import bound_messages
+from .hub import attach as attach_xr
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +62,7 @@ def _png_data_url(img) -> str:
     """An (H, W, 3) uint8 image as a PNG data URL (a thumbnail the page shows as it is)."""
     import base64
 
-    from .picture import png_bytes
+    from ..model.picture import png_bytes
 
     return "data:image/png;base64," + base64.b64encode(png_bytes(img)).decode("ascii")
 
@@ -544,7 +544,7 @@ class SomApp:
 
     def _load_mesh(self, path: Path, name: str) -> None:
         """Session.load_mesh for an uploaded file saved as `path`, named after the browser's file `name`."""
-        from ..backend import io as sw_io
+        from ...backend import io as sw_io
 
         preset = sw_io.load_mesh(path, max_vertices=self.session.max_vertices)
         stem = name[: -len(self._suffix(name))] if self._suffix(name) else name
@@ -960,7 +960,7 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
     host = host or "127.0.0.1"
     start = preset or "car"
     if mesh is not None:
-        from ..backend import io as sw_io
+        from ...backend import io as sw_io
 
         start = sw_io.load_mesh(mesh, max_vertices=max_vertices_for(device))
         start.name = f"mesh:{start.name}"

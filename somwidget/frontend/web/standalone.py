@@ -12,7 +12,7 @@ import threading
 
 from aiohttp import web
 
-from .server import attach
+from .hub import attach
 
 
 class XRServer:
@@ -26,7 +26,7 @@ class XRServer:
 
     def __init__(self, session, host: str = "127.0.0.1", port: int = 0, token: str | None = None, ssl_context=None,
                  dist=None):
-        from .. import lan
+        from . import lan
 
         host = lan.normalise_host(host) or "127.0.0.1"
         if not lan.is_loopback(host) and not token:
@@ -83,7 +83,7 @@ class XRServer:
             loop.close()
 
     async def _start(self) -> None:
-        from .. import lan
+        from . import lan
 
         middlewares = [lan.request_guard(check_host=lan.is_loopback(self.host))]
         if self.token:

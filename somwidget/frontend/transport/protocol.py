@@ -90,9 +90,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..backend import io as _io
-from ..backend import presets as _presets
-from . import parameters as _parameters
+from ...backend import io as _io
+from ...backend import presets as _presets
+from ..model import parameters as _parameters
 
 PROTOCOL_VERSION = 1
 MAGIC = b"SOMF"
@@ -341,7 +341,7 @@ def control_colours(frame, has_colour: bool) -> np.ndarray:
 
 def mirror_axes(session) -> list[bool]:
     """Which position axes (x, y, z) a mirrored copy negates, from the session's mirror dims."""
-    from .session import default_mirror
+    from ..model.session import default_mirror
 
     dims = set(default_mirror(session.preset))
     return [d in dims for d in session.layout.position]

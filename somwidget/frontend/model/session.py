@@ -51,14 +51,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..backend import checks
-from ..backend import presets as _presets
-from ..backend import device as _device
-from ..backend.metrics import nearest_distances
-from ..backend.presets import FeatureLayout, Preset
+from ...backend import checks
+from ...backend import presets as _presets
+from ...backend import device as _device
+from ...backend.metrics import nearest_distances
+from ...backend.presets import FeatureLayout, Preset
 # The colour helpers live with the layouts; importable from here for the views that already do.
-from ..backend.presets import hex_colour, parse_hex_colour, rgb_to_colour_dims  # noqa: F401
-from ..backend.som import _MAX_TABLE_ENTRIES
+from ...backend.presets import hex_colour, parse_hex_colour, rgb_to_colour_dims  # noqa: F401
+from ...backend.som import _MAX_TABLE_ENTRIES
 from . import storage
 from .history import History, Step
 from .parameters import BY_NAME as _PARAM
@@ -943,7 +943,7 @@ class Session:
         self._submit_autosave()
 
     def _submit_autosave(self) -> None:
-        from ..backend import io as sw_io
+        from ...backend import io as sw_io
 
         try:
             state = self.session_state()
@@ -973,7 +973,7 @@ class Session:
         """The session of the latest exit that did not close cleanly (a crash, a kill), restored exactly as its
         autosave left it (nothing trains until the next intent); None if there is none. `options` go to Session
         (device, start...). Its autosave is taken over: it is deleted once the new session has saved its own."""
-        from ..backend import io as sw_io
+        from ...backend import io as sw_io
 
         start = options.pop("start", True)
         max_vertices = options.get("max_vertices") or max_vertices_for(options.get("device"))
@@ -1276,7 +1276,7 @@ class Session:
     def load_mesh(self, path) -> Preset:
         """Load a mesh file (io.load_mesh) as the new start mesh, shown as it is with controls on it; ValueError for
         a bad file, session unchanged."""
-        from ..backend import io as sw_io
+        from ...backend import io as sw_io
 
         preset = sw_io.load_mesh(path, max_vertices=self.max_vertices)
         preset.name = f"mesh:{preset.name}"  # never mistaken for a built-in preset of the same name
@@ -1297,7 +1297,7 @@ class Session:
         """Write the current mesh (OBJ, PLY, GLB by extension) with its vertex colours (io.export_mesh).
 
         A loaded mesh is written back in its file's original frame (io.load_mesh normalised it)."""
-        from ..backend import io as sw_io
+        from ...backend import io as sw_io
 
         snap = self.snapshot()
         preset = snap["preset"]
@@ -1320,14 +1320,14 @@ class Session:
 
     def save(self, path) -> None:
         """Save the session (io.save_session, a versioned .npz)."""
-        from ..backend import io as sw_io
+        from ...backend import io as sw_io
 
         sw_io.save_session(path, self.session_state())
 
     def load(self, path) -> None:
         """Load a session saved by `save` (io.load_session) exactly as it was saved, training nothing until the
         next intent; one undo step. ValueError for a bad file, session unchanged."""
-        from ..backend import io as sw_io
+        from ...backend import io as sw_io
 
         self.restore(sw_io.load_session(path, max_vertices=self.max_vertices, max_iterations=MAX_ITERATIONS))
 
@@ -1335,7 +1335,7 @@ class Session:
         """Rebuild the session from a loaded session state: its start mesh, controls and settings, its weights
         and s exactly as saved, nothing training until the next intent. ValueError if the state does not describe
         a session."""
-        from ..backend import io as sw_io
+        from ...backend import io as sw_io
 
         try:
             preset = sw_io.preset_from_session(state)

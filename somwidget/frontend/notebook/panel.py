@@ -27,13 +27,13 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")  # the 
 
 import ipywidgets as widgets  # noqa: E402
 
-from ..backend import presets as _presets  # noqa: E402
-from ..backend.presets import Preset  # noqa: E402
-from .parameters import BY_NAME as _PARAM  # noqa: E402
-from .parameters import GAP_HELP, METRIC_WEIGHT  # noqa: E402
-from .session import REACH_HELP, Frame, Session, hex_colour  # noqa: E402
-from .variants import MAX_GALLERY_VARIANTS, VARIANTS_HELP, VARIED, vary_around  # noqa: E402
-from .variants import sweep as sweep_variants  # noqa: E402
+from ...backend import presets as _presets  # noqa: E402
+from ...backend.presets import Preset  # noqa: E402
+from ..model.parameters import BY_NAME as _PARAM  # noqa: E402
+from ..model.parameters import GAP_HELP, METRIC_WEIGHT  # noqa: E402
+from ..model.session import REACH_HELP, Frame, Session, hex_colour  # noqa: E402
+from ..model.variants import MAX_GALLERY_VARIANTS, VARIANTS_HELP, VARIED, vary_around  # noqa: E402
+from ..model.variants import sweep as sweep_variants  # noqa: E402
 from .widget import ClayWidget  # noqa: E402
 
 log = logging.getLogger(__name__)
@@ -360,7 +360,7 @@ class VariantsSection(widgets.VBox):
             self.sweep_button.disabled = False
 
     def _show(self, variants) -> None:
-        from .picture import png_bytes
+        from ..model.picture import png_bytes
 
         cells = []
         for i, image in enumerate(variants.thumbnails(size=(104, 84))):
@@ -459,7 +459,7 @@ class SomWidget(widgets.HBox):
 
 def picture_png(session: Session, size=(640, 420)) -> bytes:
     """The session's latest frame as a PNG (pyvista, off screen)."""
-    from .picture import png_bytes, render
+    from ..model.picture import png_bytes, render
 
     return png_bytes(render(session, size=size))
 
@@ -494,7 +494,7 @@ _DEVICES_SAID: set[str] = set()
 
 def _say_device(session: Session) -> None:
     """Say once per kernel and device, in plain words, where the map trains."""
-    from ..backend import device as _device
+    from ...backend import device as _device
 
     where = session.training_device
     if where not in _DEVICES_SAID:

@@ -21,9 +21,9 @@ from dataclasses import dataclass  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from ..backend import presets as _presets  # noqa: E402
-from ..backend.presets import FeatureLayout, Preset  # noqa: E402
-from ..backend.topology import Topology  # noqa: E402
+from ...backend import presets as _presets  # noqa: E402
+from ...backend.presets import FeatureLayout, Preset  # noqa: E402
+from ...backend.topology import Topology  # noqa: E402
 
 #: The pictures' background: the clay view's, so a picture looks like the live view.
 BACKGROUND = (0.933, 0.941, 0.957)
@@ -78,7 +78,7 @@ def _default_display(topology: Topology, layout: FeatureLayout) -> str:
 
 def picture_of(what, *, weights=None, layout: FeatureLayout | None = None, display: str | None = None) -> Picture:
     """The `Picture` of a Som, Session (or object with `.session`), Preset or preset name; `weights` overrides."""
-    from ..backend.som import Som
+    from ...backend.som import Som
 
     if hasattr(what, "session") and not isinstance(what, (Som, Preset)):
         what = what.session

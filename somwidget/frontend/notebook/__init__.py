@@ -1,0 +1,6 @@
+"""somwidget in Jupyter: `show()` puts the ipywidgets panel beside the live clay view (an anywidget) of a Session."""
+
+from .panel import Panel, SomWidget, show
+from .widget import ClayWidget
+
+__all__ = ["Panel", "SomWidget", "ClayWidget", "show"]
