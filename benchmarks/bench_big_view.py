@@ -2,7 +2,7 @@
 does per frame for an open W x W grid shown as it is, with its 6 controls on it.
 
 For each size it reports:
-  topology   the topology message (the decimated display mesh past protocol.STREAM_LIMIT nodes): time, bytes
+  topology   the topology message (the decimated display mesh past wire_display.STREAM_LIMIT nodes): time, bytes
   frame      encoding one frame for the views: time, bytes (what every view receives per frame)
   training   frames the session publishes per second during a full run (Reset), and cycles per second
   drag       a drag of one control, a move every 1/30 s for 2 s inside one gesture: frames published per second,
@@ -27,7 +27,7 @@ import numpy as np
 
 from somwidget.backend.presets import XYZ, Preset, controls_on, open_grid
 from somwidget.backend.topology import Topology
-from somwidget.frontend.transport import protocol
+from somwidget.frontend.transport import display as wire_display, frames as wire_frames
 from somwidget.frontend.model.session import Session
 
 
@@ -64,12 +64,12 @@ def measure(side: int, device: str) -> dict:
         session.wait_idle(600)
         frame = session.frame
         t = time.perf_counter()
-        topo = protocol.topology_message(session, frame)
+        topo = wire_display.topology_message(session, frame)
         topo_s = time.perf_counter() - t
         topo_bytes = len(json.dumps(topo))
         t = time.perf_counter()
         for _ in range(10):
-            data = protocol.encode_frame(frame, session)
+            data = wire_frames.encode_frame(frame, session)
         encode_s = (time.perf_counter() - t) / 10
         watch = Watch(session)
         t0 = time.perf_counter()

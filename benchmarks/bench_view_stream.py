@@ -1,6 +1,6 @@
 """The clay view in a browser, fed a big clay's frame stream: what the page does with it (no engine involved).
 
-A GPU machine trains a 1,000,000-vertex grid and streams it decimated (protocol.STREAM_LIMIT display vertices,
+A GPU machine trains a 1,000,000-vertex grid and streams it decimated (wire_display.STREAM_LIMIT display vertices,
 0.49 MB a frame; bench_big_view.py measures that side). This script replays such a stream on this machine: the
 same grid's display mesh, its nodes moving as a wave, sent by a small aiohttp server at a chosen rate to the page's
 clay view (dist/somview.js, mounted as the web app mounts it) in headless Chromium. It reports the frames the page
@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from somwidget.backend.presets import open_grid  # noqa: E402
-from somwidget.frontend.transport import protocol  # noqa: E402
+from somwidget.frontend.transport import messages as wire, display as wire_display, frames as wire_frames  # noqa: E402
 from somwidget.frontend.client import DIST  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
@@ -56,11 +56,11 @@ def stream(side: int):
     edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 3]],
                                               faces[:, [3, 0]]]), axis=1), axis=0)
     tris = np.concatenate([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]])
-    nodes, t, e = protocol.decimate_display(pts, tris, edges)
+    nodes, t, e = wire_display.decimate_display(pts, tris, edges)
     p = pts[nodes].astype(np.float32)
     controls = p[np.linspace(0, len(p) - 1, 6).astype(int)]
     lo, hi = pts.min(axis=0), pts.max(axis=0)
-    topology = {"type": "topology", "protocol": protocol.PROTOCOL_VERSION, "generation": 1, "preset": "grid",
+    topology = {"type": "topology", "protocol": wire.PROTOCOL_VERSION, "generation": 1, "preset": "grid",
                 "title": f"Grid {side} x {side} (replayed)", "display": "surface", "n_vertices": len(nodes),
                 "n_nodes": side * side, "triangles": t.ravel().tolist(), "segments": e.ravel().tolist(),
                 "points": False, "n_controls": 6, "n_effective": 6, "mirror_axes": [False, False, False],
@@ -71,7 +71,7 @@ def stream(side: int):
     def frame(k: int) -> bytes:
         q = p.copy()
         q[:, 2] = 0.15 * np.sin(3.0 * q[:, 0] + 0.2 * k) * np.cos(2.0 * q[:, 1])
-        header = protocol.HEADER.pack(protocol.MAGIC, protocol.PROTOCOL_VERSION, protocol.FLAG_RUNNING, k, 1,
+        header = wire_frames.HEADER.pack(wire.MAGIC, wire.PROTOCOL_VERSION, wire.FLAGS["running"], k, 1,
                                       k % 1000, 1000, len(q), 6, 6)
         body = b"".join([header, q.tobytes(), controls.tobytes(), colours.tobytes(),
                          np.full((6, 3), 220, np.uint8).tobytes()])

@@ -38,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from somwidget.frontend.model.session import Session  # noqa: E402
-from somwidget.frontend.transport import protocol  # noqa: E402
+from somwidget.frontend.transport import frames as wire_frames  # noqa: E402
 from somwidget.frontend.client import DIST  # noqa: E402
 from somwidget.frontend.web.standalone import XRServer  # noqa: E402
 
@@ -98,7 +98,7 @@ def stream(session: Session, srv: XRServer, seconds: float) -> dict:
     reps = 200
     t = time.perf_counter()
     for _ in range(reps):
-        protocol.encode_frame(frame, session)
+        wire_frames.encode_frame(frame, session)
     encode_ms = (time.perf_counter() - t) / reps * 1e3
     return {"frames_per_s": frames / elapsed, "bytes_per_s": (nbytes + text) / elapsed,
             "frame_bytes": int(np.median(sizes)) if sizes else 0, "session_frames_per_s": published / elapsed,
@@ -125,7 +125,7 @@ def protocol_latency(session: Session, srv: XRServer, repeats: int) -> dict:
                     while True:
                         msg = await ws.receive(timeout=timeout)
                         if msg.type == aiohttp.WSMsgType.BINARY:
-                            last = protocol.decode_frame(msg.data)
+                            last = wire_frames.decode_frame(msg.data)
                             return last
 
                 await next_frame()

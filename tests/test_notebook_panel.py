@@ -238,7 +238,7 @@ def test_show_puts_the_clay_view_beside_the_panel_and_opens_no_port(shown):
 def test_clay_widget_protocol_over_the_comm(shown):
     """The protocol (not the interaction): a new output says hello and gets the topology and a frame as a binary
     buffer; grab, move and release move the control as one undo step; a bad intent gets an error message."""
-    from somwidget.frontend.transport import protocol
+    from somwidget.frontend.transport import frames as wire_frames
 
     view, session = shown.view, shown.session
     session.wait_idle(30)
@@ -249,7 +249,7 @@ def test_clay_widget_protocol_over_the_comm(shown):
     assert [p["name"] for p in topo["parameters"]] == ["iterations", "l_start", "l_end", "smoothing", "reach",
                                                          "symmetry"]
     _, buffers = rec.of("frame")[-1]
-    frame = protocol.decode_frame(bytes(buffers[0]))
+    frame = wire_frames.decode_frame(bytes(buffers[0]))
     np.testing.assert_allclose(frame["positions"], session.frame.positions, atol=1e-6)
     history = session.history[0]
     target = [float(v) for v in session.controls[2][:3] + np.array([0.1, 0.0, 0.2])]

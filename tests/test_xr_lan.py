@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from somwidget.frontend.web import lan
-from somwidget.frontend.transport import protocol
+from somwidget.frontend.transport import frames as wire_frames
 from somwidget.frontend.web.standalone import XRServer
 
 
@@ -126,7 +126,7 @@ def test_https_with_token_end_to_end(tmp_path):
                     msg = await ws.receive(timeout=10)
                     while msg.type != aiohttp.WSMsgType.BINARY:  # replies (grabs) go out before frames
                         msg = await ws.receive(timeout=10)
-                    frame = protocol.decode_frame(msg.data)
+                    frame = wire_frames.decode_frame(msg.data)
                 return topo, frame
 
         topo, frame = asyncio.run(main())

@@ -17,7 +17,7 @@ import aiohttp
 import numpy as np
 import pytest
 
-from somwidget.frontend.transport import protocol
+from somwidget.frontend.transport import messages as wire, display as wire_display, frames as wire_frames
 from somwidget.frontend.web import hub as xr_server
 from somwidget.frontend.web.standalone import XRServer
 
@@ -53,7 +53,7 @@ class Client:
     async def receive(self, timeout: float = 10.0):
         msg = await self.ws.receive(timeout=timeout)
         if msg.type == aiohttp.WSMsgType.BINARY:
-            f = protocol.decode_frame(msg.data)
+            f = wire_frames.decode_frame(msg.data)
             f["bytes"] = len(msg.data)
             self.frames.append(f)
             return f
@@ -104,13 +104,13 @@ def test_topology_and_frame_layout(srv, session):
     c = run(main())
     t, f = c.topology, c.frames[0]
     frame = session.frame
-    assert t["protocol"] == protocol.PROTOCOL_VERSION and t["display"] == "surface" and t["preset"] == "car"
+    assert t["protocol"] == wire.PROTOCOL_VERSION and t["display"] == "surface" and t["preset"] == "car"
     assert t["n_vertices"] == 602 and t["n_controls"] == 9 and t["n_effective"] == 18
     assert t["mirror_axes"] == [False, True, False] and t["up_axis"] == 2
     tris = np.array(t["triangles"]).reshape(-1, 3)
     assert len(tris) == 1200 and tris.min() == 0 and tris.max() == 601  # 575 quads fanned + 50 pole triangles
     assert len(t["segments"]) == 2 * len(session.topology.edges)
-    assert f["n"] == 602 and f["k"] == 9 and f["k_eff"] == 18 and f["bytes"] == protocol.frame_size(602, 18)
+    assert f["n"] == 602 and f["k"] == 9 and f["k_eff"] == 18 and f["bytes"] == wire_frames.frame_size(602, 18)
     assert f["bytes"] == 32 + 15 * (602 + 18) + 0  # 9332: already a multiple of 4
     assert f["seq"] == frame.seq and f["generation"] == frame.generation == t["generation"]
     assert f["paused"] and not f["running"] and f["iterations"] == 1000
@@ -127,8 +127,8 @@ def test_other_displays_encode(preset, display, n):
 
     with Session(preset, device="cpu", start=False) as s:
         frame = s.frame
-        t = protocol.topology_message(s, frame)
-        f = protocol.decode_frame(protocol.encode_frame(frame, s))
+        t = wire_display.topology_message(s, frame)
+        f = wire_frames.decode_frame(wire_frames.encode_frame(frame, s))
     assert t["display"] == display and t["n_vertices"] == n and f["n"] == n
     if display == "lines":  # roots then tips, quads as two triangles, one root -> tip segment per node
         np.testing.assert_array_equal(f["positions"][:602], frame.positions)
@@ -137,7 +137,7 @@ def test_other_displays_encode(preset, display, n):
         assert t["points"] and not t["triangles"] and len(t["segments"]) == 2 * len(s.topology.edges)
         assert len(set(map(tuple, f["control_colours"]))) > 1  # no colour dims: palette colours for controls
     with pytest.raises(ValueError):
-        protocol.decode_frame(protocol.encode_frame(frame, s)[:-4])
+        wire_frames.decode_frame(wire_frames.encode_frame(frame, s)[:-4])
 
 
 # -- intents -----------------------------------------------------------------------------------------------------
@@ -186,18 +186,18 @@ BAD_MESSAGES = [
 @pytest.mark.parametrize("message, reason", [m for m in BAD_MESSAGES if "not held" not in m[1]])
 def test_parse_intent_refuses(message, reason):
     """Each malformed message is refused by the parser, with a message that says why."""
-    with pytest.raises(protocol.IntentError) as info:
-        protocol.parse_intent(message, n_controls=9)
+    with pytest.raises(wire.IntentError) as info:
+        wire.parse_intent(message, n_controls=9)
     assert reason in str(info.value)
 
 
 def test_parse_intent_accepts():
-    assert protocol.parse_intent('{"type": "move", "index": 3, "position": [1, -2.5, 0.25]}', 9) == protocol.Intent(
+    assert wire.parse_intent('{"type": "move", "index": 3, "position": [1, -2.5, 0.25]}', 9) == wire.Intent(
         "move", 3, (1.0, -2.5, 0.25))
-    assert protocol.parse_intent('{"type": "release", "index": 8}', 9).position is None
-    assert protocol.parse_intent('{"type": "ping", "t": 12.5}', 9).t == 12.5
+    assert wire.parse_intent('{"type": "release", "index": 8}', 9).position is None
+    assert wire.parse_intent('{"type": "ping", "t": 12.5}', 9).t == 12.5
     for kind in ("reset", "train", "pause"):
-        assert protocol.parse_intent(json.dumps({"type": kind}), 9).type == kind
+        assert wire.parse_intent(json.dumps({"type": kind}), 9).type == kind
 
 
 def test_fuzz_bad_messages_are_refused_and_harmless(srv, session):
@@ -433,8 +433,8 @@ def test_a_clay_past_the_streaming_limit_streams_a_decimated_mesh_on_its_trained
     pts = np.stack([ii.ravel() / (n - 1), jj.ravel() / (n - 1), 0.1 * np.sin(ii.ravel() / 20.0)], 1)
     tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
     edges = np.unique(np.sort(np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]]]), axis=1), axis=0)
-    nodes, t, e = protocol.decimate_display(pts, tris, edges)
-    assert 0.25 * protocol.STREAM_LIMIT < len(nodes) <= protocol.STREAM_LIMIT
+    nodes, t, e = wire_display.decimate_display(pts, tris, edges)
+    assert 0.25 * wire_display.STREAM_LIMIT < len(nodes) <= wire_display.STREAM_LIMIT
     assert len(np.unique(nodes)) == len(nodes) and nodes.max() < len(pts)
     assert t.max() < len(nodes) and e.max() < len(nodes) and len(t) > len(nodes)  # a surface, not a cloud
     assert (t[:, 0] != t[:, 1]).all() and (t[:, 1] != t[:, 2]).all() and (t[:, 0] != t[:, 2]).all()
@@ -448,11 +448,11 @@ def test_a_clay_past_the_streaming_limit_streams_a_decimated_mesh_on_its_trained
                                                      layout=SimpleNamespace(position=(0, 1, 2)),
                                                      topology=SimpleNamespace(n_vertices=len(pts),
                                                                               edges=edges, faces=quads.tolist())))
-    geo = protocol.display_of(session)
-    assert geo["n_vertices"] == len(geo["nodes"]) <= protocol.STREAM_LIMIT
+    geo = wire_display.display_of(session)
+    assert geo["n_vertices"] == len(geo["nodes"]) <= wire_display.STREAM_LIMIT
     trained = pts + 0.01
     frame = SimpleNamespace(positions=trained.astype(np.float32), colours=np.zeros_like(trained, np.float32))
-    pos, col = protocol.display_arrays(frame, session)
+    pos, col = wire_display.display_arrays(frame, session)
     np.testing.assert_array_equal(pos, trained.astype(np.float32)[geo["nodes"]])
 
 

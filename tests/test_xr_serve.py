@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, insecure_context
 
-from somwidget.frontend.transport import protocol
+from somwidget.frontend.transport import frames as wire_frames
 from somwidget.frontend.client import DIST
 
 NOT_WIRED = ("`somwidget serve` does not serve /xr/: app.py must call somwidget.frontend.web.hub.attach(wslink_server, "
@@ -54,7 +54,7 @@ def test_serve_has_the_xr_page_and_socket(serve):
         async with aiohttp.ClientSession() as cs:
             async with cs.ws_connect(serve.base + "/xr/ws") as ws:
                 topo = json.loads((await ws.receive(timeout=20)).data)
-                frame = protocol.decode_frame(await next_binary(ws))
+                frame = wire_frames.decode_frame(await next_binary(ws))
         return topo, frame
 
     topo, frame = asyncio.run(main())
@@ -143,7 +143,7 @@ def test_serve_lan_https_token(tmp_path):
                     assert info.value.status == 403
                 async with cs.ws_connect(wss + "/xr/ws", params={"token": token}) as ws:
                     topo = json.loads((await ws.receive(timeout=20)).data)
-                    frame = protocol.decode_frame(await next_binary(ws))
+                    frame = wire_frames.decode_frame(await next_binary(ws))
                 return topo, frame
 
         topo, frame = asyncio.run(main())

@@ -4,15 +4,18 @@ view (the websocket of the web app and the XR page, the notebook widget's comm).
 Controls are held by their stable id (`Session.control_ids`), not by their place: a control removed elsewhere
 cannot turn a drag into a drag of another control. A grab begins a gesture (one undo step) and its release ends
 it; a control is held by one client at a time; a client that goes away mid-grab ends its gestures; a held control
-that disappears ends its grab, and the holder is told (`prune`). Intents arrive checked by `protocol.parse_intent`.
+that disappears ends its grab, and the holder is told (`prune`). Intents arrive checked by `messages.parse_intent`.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Hashable
 
-from . import protocol
+from .messages import Intent, error_message, grabs_message, pong_message
+
+
+#: Intents that are a Session method of the same name, without arguments.
+SESSION_ACTIONS = ("undo", "redo", "reset", "train", "pause")
 
 
 class Gestures:
@@ -23,14 +26,14 @@ class Gestures:
         self.on_change = on_change or (lambda: None)
         self.grabs: dict[int, Hashable] = {}  # control id -> client
 
-    def message_for(self, client: Hashable) -> str:
+    def message_for(self, client: Hashable) -> dict:
         """The "grabs" message as `client` sees it (own: held by this client), with each control's index now."""
         ids = self.session.control_ids
         held = [{"index": ids.index(cid), "id": cid, "own": who == client}
                 for cid, who in sorted(self.grabs.items()) if cid in ids]
-        return json.dumps({"type": "grabs", "grabs": held})
+        return grabs_message(held)
 
-    def _control_of(self, intent: protocol.Intent) -> int:
+    def _control_of(self, intent: Intent) -> int:
         if intent.control_id is not None:
             self.session.index_of_control(intent.control_id)  # ValueError when it is gone
             return intent.control_id
@@ -39,12 +42,12 @@ class Gestures:
             raise ValueError(f"{intent.type}: control index {intent.index} is out of range")
         return ids[intent.index]
 
-    def apply(self, client: Hashable, intent: protocol.Intent) -> dict | None:
+    def apply(self, client: Hashable, intent: Intent) -> dict | None:
         """Do what `intent` asks for `client`; returns a reply to send back to that client alone (a pong), or None.
         ValueError (or the Session's RuntimeError) when the session refuses it."""
         kind = intent.type
         if kind == "ping":
-            return {"type": "pong", "t": intent.t}
+            return pong_message(intent.t)
         if kind == "grab":
             cid = self._control_of(intent)
             holder = self.grabs.get(cid)
@@ -68,16 +71,8 @@ class Gestures:
                     self.session.end_gesture()
         elif kind == "set":
             self.session.set_parameter(intent.name, intent.value)
-        elif kind == "undo":
-            self.session.undo()
-        elif kind == "redo":
-            self.session.redo()
-        elif kind == "reset":
-            self.session.reset()
-        elif kind == "train":
-            self.session.train()
-        elif kind == "pause":
-            self.session.pause()
+        elif kind in SESSION_ACTIONS:
+            getattr(self.session, kind)()
         return None
 
     def drop(self, client: Hashable) -> None:
@@ -89,7 +84,7 @@ class Gestures:
             self.on_change()
             self.session.end_gesture()
 
-    def prune(self, control_ids) -> list[tuple[Hashable, str]]:
+    def prune(self, control_ids) -> list[tuple[Hashable, dict]]:
         """Grabs of controls that are gone (removed, or the controls replaced) end; returns (client, message)
         for each client whose held control went, to tell it."""
         present = set(control_ids)
@@ -99,5 +94,5 @@ class Gestures:
         if gone:
             self.on_change()
             self.session.end_gesture()
-        return [(who, protocol.error_message(f"control {cid} was removed while you held it: the drag ended",
+        return [(who, error_message(f"control {cid} was removed while you held it: the drag ended",
                                              "grab")) for cid, who in gone]

@@ -44,7 +44,7 @@ from ...backend import presets as _presets
 from . import lan as _lan
 from ..model.parameters import BY_NAME as _PARAM
 from ..model.parameters import GAP_HELP, METRIC_WEIGHT
-from ..transport.protocol import control_colours
+from ..transport.display import control_colours
 from ..model.session import REACH_HELP, Frame, Session, hex_colour, max_vertices_for
 from ..model.variants import MAX_GALLERY_VARIANTS, VARIANTS_HELP, VARIED, vary_around
 from ..model.variants import sweep as sweep_variants

@@ -6,8 +6,8 @@ page and the XR page), the XR page at /xr/ and the view's module at /xr/somview.
 app holds the connected clients and who holds which control; every client shares the one `Session`, so a desktop
 tab, the trame panel and a headset all see each other's moves.
 
-Threads: the session calls `XRHub._on_frame` on its training thread; that only stores the frame and wakes the
-event loop. Everything else (encoding, sending, intents) happens on the event loop's thread. Each client has a
+Threads: the session's outbox (transport/outbox.py) calls `XRHub._on_frame` on the training thread; that only wakes
+the event loop. Everything else (encoding, sending, intents) happens on the event loop's thread. Each client has a
 slot for the latest frame and a bounded queue of JSON messages, sent first: a slow client gets the latest frame,
 never a backlog, and its replies never wait behind frames. A client whose queue overflows, or that stops reading
 (a send that does not finish within SEND_TIMEOUT), is dropped.
@@ -27,9 +27,10 @@ from pathlib import Path
 from aiohttp import WSMsgType, web
 
 from ..client import BUILD_HINT, DIST
-from ..transport import protocol
-from . import lan
+from ..transport import messages
 from ..transport.gestures import Gestures
+from ..transport.outbox import Peer, outbox_for
+from . import lan
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +53,7 @@ class _Client:
         self.texts: collections.deque = collections.deque()  # JSON messages, sent before any frame
         self.frame: bytes | None = None  # the latest frame not yet sent (a newer one replaces it)
         self.wake = asyncio.Event()
-        self.generation = -1
+        self.peer = Peer(id=cid)  # what this client has been sent (outbox.py)
         self.errors: collections.deque = collections.deque()
         self.refused = 0
         self.frames_sent = 0
@@ -60,7 +61,14 @@ class _Client:
         self.closed = False
         self.close_reason = b""
         self.transport = None  # the connection, to cut when the client stops reading
-        self.control_ids: tuple = ()  # the control ids this client was last told
+
+    def push(self, packets) -> None:
+        """Queue what the outbox made for this client: JSON messages (dicts) and the frame (bytes)."""
+        for packet in packets:
+            if isinstance(packet, bytes):
+                self.push_frame(packet)
+            else:
+                self.push_text(json.dumps(packet))
 
     def push_text(self, text: str) -> None:
         if len(self.texts) >= MAX_TEXTS:  # it does not read what it asked for: drop it, keep no more
@@ -84,25 +92,21 @@ class _Client:
 class XRHub:
     """The /xr/ routes and their clients, for one Session."""
 
-    def __init__(self, session, token: str | None = None, dist: Path | None = None, max_fps: float = protocol.MAX_FPS):
+    def __init__(self, session, token: str | None = None, dist: Path | None = None, max_fps: float = messages.MAX_FPS):
         self.session = session
         self.token = token or None
         self.dist = Path(dist) if dist is not None else DIST
         self.max_fps = float(max_fps)
         self.clients: dict[int, _Client] = {}
         self.gestures = Gestures(session, on_change=self._broadcast_grabs)
-        self._last_status = 0.0
+        self.outbox = outbox_for(session)
         self.refused_total = 0
         self.intents_total = 0
         self._next_id = 1
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._latest = None
-        self._latest_lock = threading.Lock()
         self._scheduled = False
-        self._sent_seq = -1
-        self._encoded: tuple[int, bytes] | None = None
-        self._topology: tuple[int, dict] | None = None
-        session.add_listener(self._on_frame, replay=False)
+        self._scheduled_lock = threading.Lock()
+        self.outbox.subscribe(self._on_frame)
 
     # -- routes ----------------------------------------------------------------------------------------------
     def add_routes(self, router) -> None:
@@ -172,74 +176,33 @@ class XRHub:
         return web.json_response(body, headers={"Cache-Control": "no-store"})
 
     # -- frames ---------------------------------------------------------------------------------------------------
-    def _on_frame(self, frame) -> None:
-        """Training thread: keep the latest frame and wake the loop once."""
-        with self._latest_lock:
-            self._latest = frame
+    def _on_frame(self) -> None:
+        """Training thread: wake the loop once for the newest frame."""
+        with self._scheduled_lock:
             if self._scheduled or not self.clients or self._loop is None:
                 return
             self._scheduled = True
         try:
             self._loop.call_soon_threadsafe(self._broadcast)
         except RuntimeError:  # the loop is closed: the server is going down
-            with self._latest_lock:
+            with self._scheduled_lock:
                 self._scheduled = False
 
-    def _topology_for(self, frame) -> dict | None:
-        if self._topology is not None and self._topology[0] == frame.generation:
-            return self._topology[1]
-        if self.session.generation != frame.generation:
-            return None  # a newer preset is being installed; its own frames follow
-        msg = protocol.topology_message(self.session, frame)
-        self._topology = (frame.generation, msg)
-        return msg
-
-    def _encode(self, frame) -> bytes | None:
-        if self._encoded is not None and self._encoded[0] == frame.seq:
-            return self._encoded[1]
-        if self.session.generation != frame.generation:
-            return None
-        data = protocol.encode_frame(frame, self.session)
-        self._encoded = (frame.seq, data)
-        return data
-
-    def _send_frame(self, client: _Client, frame) -> None:
+    def _send_frame(self, client: _Client, frame=None) -> None:
         try:
-            topo = self._topology_for(frame)
-            data = self._encode(frame)
+            client.push(self.outbox.packets(client.peer, frame))
         except Exception:  # never let one odd frame stop the stream
-            log.exception("encoding an XR frame failed")
-            return
-        if topo is None or data is None:
-            return
-        if client.generation != frame.generation:
-            client.generation = frame.generation
-            client.control_ids = frame.control_ids
-            client.push_text(json.dumps({**topo, "client": client.id}))
-        elif client.control_ids != frame.control_ids:  # a control added or removed: the ids before the frame
-            client.control_ids = frame.control_ids
-            client.push_text(protocol.controls_message(frame.control_ids))
-        client.push_frame(data)
+            log.exception("encoding a frame for client %d failed", client.id)
 
     def _broadcast(self) -> None:
-        with self._latest_lock:
-            frame = self._latest
+        with self._scheduled_lock:
             self._scheduled = False
-        if frame is None:
-            return
-        now = time.monotonic()
-        status = None
-        if now - self._last_status >= protocol.STATUS_PERIOD:
-            self._last_status = now
-            status = protocol.status_message(frame, self.session.frames_per_second)
+        frame = self.outbox.latest
         for client in list(self.clients.values()):
             self._send_frame(client, frame)
-            if status is not None:
-                client.push_text(status)
-        self._sent_seq = frame.seq
         for holder, message in self.gestures.prune(frame.control_ids):
             if holder in self.clients:
-                self.clients[holder].push_text(message)
+                self.clients[holder].push_text(json.dumps(message))
 
     @property
     def grabs(self) -> dict[int, int]:
@@ -249,7 +212,7 @@ class XRHub:
 
     def _broadcast_grabs(self) -> None:
         for c in self.clients.values():
-            c.push_text(self.gestures.message_for(c.id))
+            c.push_text(json.dumps(self.gestures.message_for(c.id)))
 
     async def _sender(self, client: _Client) -> None:
         """Sends the client's JSON messages first, then its latest frame at most max_fps a second; a send that
@@ -306,7 +269,7 @@ class XRHub:
         log.info("XR client %d connected from %s", client.id, request.remote)
         sender = asyncio.ensure_future(self._sender(client))
         try:
-            self._send_frame(client, self.session.frame)
+            self._send_frame(client)
             self._broadcast_grabs()
             async for msg in ws:
                 if msg.type == WSMsgType.TEXT:
@@ -337,14 +300,14 @@ class XRHub:
             client.errors.popleft()
         if client.refused <= 20 or client.refused % 100 == 0:
             log.warning("XR client %d: refused a message (%d so far): %s", client.id, client.refused, exc)
-        client.push_text(protocol.error_message(str(exc), intent))
+        client.push_text(json.dumps(messages.error_message(str(exc), intent)))
         if len(client.errors) > MAX_ERRORS:
             client.drop(b"too many refused messages")
 
     def _handle(self, client: _Client, data) -> None:
         try:
-            intent = protocol.parse_intent(data, self.session.n_controls)
-        except protocol.IntentError as exc:
+            intent = messages.parse_intent(data, self.session.n_controls)
+        except messages.IntentError as exc:
             self._refuse(client, exc, exc.intent)
             return
         try:
@@ -353,11 +316,11 @@ class XRHub:
         except (ValueError, RuntimeError) as exc:  # the session's own checks (or a closed session)
             self._refuse(client, exc, intent.type)
 
-    def _apply(self, client: _Client, intent: protocol.Intent) -> None:
+    def _apply(self, client: _Client, intent: messages.Intent) -> None:
         if intent.type == "hello":
-            client.generation = -1  # the topology again, then the latest frame
-            self._send_frame(client, self.session.frame)
-            client.push_text(self.gestures.message_for(client.id))
+            client.peer.forget()  # the topology again, then the latest frame
+            self._send_frame(client)
+            client.push_text(json.dumps(self.gestures.message_for(client.id)))
             return
         reply = self.gestures.apply(client.id, intent)
         if reply is not None:
@@ -368,7 +331,7 @@ class XRHub:
             await c.ws.close(code=1001, message=b"server shutdown")
 
     def detach(self) -> None:
-        self.session.remove_listener(self._on_frame)
+        self.outbox.unsubscribe(self._on_frame)
 
 
 def attach(server, session, token: str | None = None, dist=None) -> XRHub:

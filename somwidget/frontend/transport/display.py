@@ -1,0 +1,146 @@
+"""What a view draws: the display mesh of a session's preset (triangles, segments, points; a decimated mesh for a
+clay too big to stream), each frame's display positions and colours, and the topology message that describes them
+(messages.py documents its fields). Made once per preset and kept: a million-vertex mesh takes seconds to
+triangulate and decimate.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...backend import io as _io
+from ...backend import presets as _presets
+from ..model import parameters as _parameters
+from ..model.session import default_mirror
+from .messages import MAX_COORDINATE, MAX_MESSAGE_BYTES, PROTOCOL_VERSION
+
+#: Most display vertices a frame streams: 32,768 x 15 bytes = 0.5 MB a frame, 15 MB/s at 30 frames/s, which a
+#: headset's Wi-Fi and a laptop's browser both take. A bigger clay is shown decimated (`decimate_display`).
+STREAM_LIMIT = 32768
+
+
+def decimate_display(points: np.ndarray, triangles: np.ndarray, segments: np.ndarray, limit: int = STREAM_LIMIT):
+    """A display mesh of at most `limit` of the nodes, for a clay too big to stream whole: the nodes are clustered on
+    a uniform grid over their start positions (one node stands for each occupied cell), and the triangles and
+    segments are mapped onto those nodes (the degenerate ones dropped). Every frame then sends the trained
+    positions of those nodes. Returns (nodes (m,), triangles (T, 3), segments (E, 2)) over 0..m-1."""
+    pts = np.asarray(points, np.float64)
+    lo, span = pts.min(axis=0), np.ptp(pts, axis=0)
+    span[span <= 0] = 1.0
+    cells = max(2, int(round(limit ** (1 / 3))))
+    for _ in range(40):  # grow the grid while it keeps under the limit (a surface fills ~cells^2 of cells^3)
+        key = np.minimum((pts - lo) / span * cells, cells - 1).astype(np.int64)
+        key = (key[:, 0] * cells + key[:, 1]) * cells + key[:, 2]
+        _, first, cluster = np.unique(key, return_index=True, return_inverse=True)
+        if len(first) > limit:
+            cells = max(2, int(cells / 1.15))
+            continue
+        finer = max(cells + 1, int(cells * min(1.5, (limit / len(first)) ** 0.5)))
+        key2 = np.minimum((pts - lo) / span * finer, finer - 1).astype(np.int64)
+        if len(np.unique((key2[:, 0] * finer + key2[:, 1]) * finer + key2[:, 2])) > limit:
+            break
+        cells = finer
+    cluster = cluster.ravel()
+
+    def remap(idx: np.ndarray, width: int) -> np.ndarray:
+        m = cluster[np.asarray(idx, np.int64).reshape(-1, width)]
+        distinct = np.ones(len(m), bool)
+        for i in range(width):
+            for j in range(i + 1, width):
+                distinct &= m[:, i] != m[:, j]
+        m = m[distinct]
+        return np.unique(np.sort(m, axis=1), axis=0) if width == 2 else m
+
+    return first.astype(np.int64), remap(triangles, 3), remap(segments, 2)
+
+
+_DISPLAYS: dict[int, tuple] = {}  # id(preset) -> (preset, display): the latest few presets' display geometry
+
+
+def display_of(session) -> dict:
+    """The display geometry of the session's current preset: triangles, segments, points flag, n_vertices, and
+    `nodes` (the nodes a frame streams, in order) when the clay is past STREAM_LIMIT and shown decimated. Made once
+    per preset (a million-vertex mesh takes seconds to triangulate and decimate), then kept."""
+    preset = session.preset
+    cached = _DISPLAYS.get(id(preset))
+    if cached is not None and cached[0] is preset:
+        return cached[1]
+    display = _display_geometry(preset)
+    if len(_DISPLAYS) >= 4:
+        _DISPLAYS.clear()
+    _DISPLAYS[id(preset)] = (preset, display)
+    return display
+
+
+def _display_geometry(preset) -> dict:
+    topo, display = preset.topology, preset.display
+    n = topo.n_vertices
+    edges = np.asarray(topo.edges, np.int64).reshape(-1, 2)
+    if display == "lines":
+        quads = np.stack([edges[:, 0], edges[:, 1], edges[:, 1] + n, edges[:, 0] + n], axis=1)
+        tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+        segments = np.stack([np.arange(n), np.arange(n) + n], axis=1)
+        return {"display": "lines", "n_vertices": 2 * n, "triangles": tris, "segments": segments, "points": False,
+                "nodes": None}
+    surface = display == "surface" and bool(topo.faces)
+    tris = _io.triangulate(topo.faces) if surface else np.zeros((0, 3), np.int64)
+    nodes = None
+    if n > STREAM_LIMIT:
+        nodes, tris, edges = decimate_display(_presets.positions_of(preset.weights, preset.layout), tris, edges)
+        n = len(nodes)
+    return {"display": "surface" if surface else "points", "n_vertices": n, "triangles": tris, "segments": edges,
+            "points": not surface, "nodes": nodes}
+
+
+def display_arrays(frame, session) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) float32 display positions and (n, 3) float32 colours of a frame (roots then tips for "lines"; the
+    streamed nodes only for a decimated clay)."""
+    preset = session.preset
+    if preset.display == "lines":
+        pts, _ = _presets.line_display_mesh(frame.weights, preset.topology, preset.layout)
+        return pts, np.concatenate([frame.colours, frame.colours])
+    pos, col = np.asarray(frame.positions, np.float32), np.asarray(frame.colours, np.float32)
+    if preset.topology.n_vertices > STREAM_LIMIT:
+        nodes = display_of(session)["nodes"]
+        return pos[nodes], col[nodes]
+    return pos, col
+
+
+def control_colours(frame, has_colour: bool) -> np.ndarray:
+    """(k_eff, 3) display colours of the effective controls (the palette when the layout has no colour dims)."""
+    if has_colour:
+        return np.asarray(frame.effective_colours, np.float32)
+    return _presets.palette_colours(frame.n_controls, len(frame.effective_controls))[1]
+
+
+def mirror_axes(session) -> list[bool]:
+    """Which position axes (x, y, z) a mirrored copy negates, from the session's mirror dims."""
+
+    dims = set(default_mirror(session.preset))
+    return [d in dims for d in session.layout.position]
+
+
+def topology_message(session, frame, client_id: int | None = None) -> dict:
+    """The JSON topology message for `frame` (whose generation must be the session's current one)."""
+    geo = display_of(session)
+    pos, _ = display_arrays(frame, session)
+    start = _presets.positions_of(session.preset.weights, session.layout)
+    if session.preset.display == "lines":
+        start = np.concatenate([start, pos])
+    everything = np.concatenate([start, np.asarray(frame.effective_positions, np.float32).reshape(-1, 3)])
+    lo, hi = everything.min(axis=0), everything.max(axis=0)
+    span = float(np.linalg.norm(hi - lo)) or 1.0
+    return {
+        "type": "topology", "protocol": PROTOCOL_VERSION, "generation": int(frame.generation),
+        "preset": session.preset.name, "title": session.preset.title, "display": geo["display"],
+        "n_vertices": int(geo["n_vertices"]), "n_nodes": int(session.topology.n_vertices),
+        "triangles": geo["triangles"].ravel().tolist(), "segments": geo["segments"].ravel().tolist(),
+        "points": bool(geo["points"]), "n_controls": int(frame.n_controls),
+        "n_effective": int(len(frame.effective_controls)), "mirror_axes": mirror_axes(session), "up_axis": 2,
+        "bounds": {"min": [float(x) for x in lo], "max": [float(x) for x in hi]},
+        "control_radius": 0.035 * span, "colour_space": session.layout.colour_space,
+        "feature_names": list(session.layout.names), "max_coordinate": MAX_COORDINATE,
+        "max_message_bytes": MAX_MESSAGE_BYTES, "client": client_id,
+        "parameters": [p.describe() for p in _parameters.PARAMETERS],
+        "control_ids": [int(i) for i in frame.control_ids],
+    }
