@@ -1,5 +1,5 @@
-"""Undo, redo and the history's bounds; shapes kept until the person acts; exact loads (frontend/session.py,
-frontend/history.py). Real sessions on the CPU engine, with their training threads."""
+"""Undo, redo and the history's bounds; shapes kept until the person acts; exact loads (frontend/model/session.py,
+frontend/model/history.py). Real sessions on the CPU engine, with their training threads."""
 
 from __future__ import annotations
 

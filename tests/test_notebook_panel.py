@@ -104,7 +104,7 @@ def test_undo_redo_reload_and_reach_from_the_panel(panel, session):
     np.testing.assert_array_equal(session.controls, original)
     panel.reach.value = 0.12
     assert session.parameters["reach"] == 0.12
-    assert session.wait_applied(30) and session._som.reach == 0.12
+    assert session.wait_applied(30) and session.clay.som.reach == 0.12
     panel.undo_button.click()  # the reach, then the reload, go back
     assert session.parameters["reach"] == session.preset.reach
 
@@ -279,7 +279,7 @@ def test_a_widget_of_a_closed_view_stops_following(session):
     w.close()
     view._sender.join(5)
     assert view._closed and not view._sender.is_alive(), "the widget's sender thread still runs"
-    assert view._on_frame not in session._listeners  # it no longer follows the session
+    assert view._on_frame not in view.outbox._subscribers  # it no longer follows the session
     seq = session.frame.seq
     session.reset()  # the session goes on without it
     wait_for(lambda: session.frame.seq > seq, what="a frame after the widget closed")

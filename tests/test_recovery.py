@@ -1,5 +1,5 @@
-"""Nothing lost: the autosave (frontend/storage.py) and `Session.recover()` after a real SIGKILL, and `somwidget serve`
-recovering by itself (with `--fresh` to start anew)."""
+"""Nothing lost: the autosave (frontend/model/autosave.py) and `Session.recover()` after a real SIGKILL, and
+`somwidget serve` recovering by itself (with `--fresh` to start anew)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import pytest
 from helpers import ROOT, Serve, wait_for
 
 from somwidget.backend import io
-from somwidget.frontend.model import storage
+from somwidget.frontend.model import autosave, storage
 from somwidget.frontend.model.session import Session
 
 #: A session that makes three steps (a drag, a new control, a setting), waits until its own autosave holds the
@@ -88,7 +88,7 @@ def test_recover_after_sigkill_brings_back_the_last_step_exactly(tmp_path, monke
     monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(data))
     assert Session.recover(device="cpu") is None  # nothing crashed yet
     held = crash_a_session(data, tmp_path)
-    assert storage.crashed() == [storage.autosave_dir() / os.path.basename(held["path"])]
+    assert autosave.crashed() == [storage.autosave_dir() / os.path.basename(held["path"])]
     s = Session.recover(device="cpu")
     try:
         assert s is not None and s.recovered["preset"] == "car"
@@ -100,7 +100,7 @@ def test_recover_after_sigkill_brings_back_the_last_step_exactly(tmp_path, monke
         time.sleep(0.3)
         np.testing.assert_array_equal(s.frame.weights, held["weights"])  # nothing trains until the next intent
         # the recovered session took the autosave over: the crashed one is gone, its own is there
-        assert storage.crashed() == []
+        assert autosave.crashed() == []
         assert s.autosave_path.exists()
         assert Session.recover(device="cpu") is None
     finally:
@@ -131,13 +131,13 @@ def test_crashed_autosaves_are_bounded(tmp_path, monkeypatch):
     source = Session("grid", device="cpu", start=False, autosave=False)
     state = source.session_state()
     source.close()
-    for i in range(storage.KEEP_CRASHED + 3):  # states whose sessions are gone: free locks
+    for i in range(autosave.KEEP_CRASHED + 3):  # states whose sessions are gone: free locks
         io.save_session(folder / f"old-{i}.npz", state)
         (folder / f"old-{i}.lock").touch()
         os.utime(folder / f"old-{i}.npz", (1000 + i, 1000 + i))
-    found = storage.crashed()
-    assert [p.name for p in found] == [f"old-{i}.npz" for i in range(storage.KEEP_CRASHED + 2, 2, -1)]
-    assert len(list(folder.glob("*.npz"))) == storage.KEEP_CRASHED
+    found = autosave.crashed()
+    assert [p.name for p in found] == [f"old-{i}.npz" for i in range(autosave.KEEP_CRASHED + 2, 2, -1)]
+    assert len(list(folder.glob("*.npz"))) == autosave.KEEP_CRASHED
 
 
 def test_serve_recovers_by_itself_and_fresh_starts_anew(tmp_path):
@@ -153,7 +153,7 @@ def test_serve_recovers_by_itself_and_fresh_starts_anew(tmp_path):
         np.testing.assert_allclose(st["session"]["frame"]["positions"], held["weights"], rtol=0, atol=0)
     finally:
         srv.stop()  # a clean stop (SIGTERM): the recovered session's autosave goes too
-    wait_for(lambda: not list(storage.crashed(data / "autosave")), what="no crashed session left")
+    wait_for(lambda: not list(autosave.crashed(data / "autosave")), what="no crashed session left")
     crash_a_session(data, tmp_path, preset="sphere")
     srv = Serve("--fresh", env={"SOMWIDGET_DATA_DIR": str(data)})
     try:
@@ -162,7 +162,7 @@ def test_serve_recovers_by_itself_and_fresh_starts_anew(tmp_path):
         assert st["panel"]["recovered_message"] == ""
     finally:
         srv.stop()
-    assert len(storage.crashed(data / "autosave")) == 1  # --fresh left the crashed one for later
+    assert len(autosave.crashed(data / "autosave")) == 1  # --fresh left the crashed one for later
 
 
 @pytest.mark.parametrize("bad", [b"", b"PK\x03\x04 not a zip", b"\x93NUMPY"])

@@ -162,7 +162,7 @@ def test_parameters_are_validated_and_reach_the_som(session):
     assert session.wait_idle(30)
     p = session.parameters
     assert (p["iterations"], p["l_start"], p["l_end"], p["smoothing"]) == (600, 0.4, 0.05, 0.2)
-    som = session._som
+    som = session.clay.som
     assert (som.iterations, som.l_start, som.l_end, som.smoothing) == (600, 0.4, 0.05, 0.2)
     assert session.frame.iteration == 600
     for name, value in [("iterations", 0), ("iterations", -3), ("iterations", 2.5), ("iterations", "ten"),
@@ -176,7 +176,7 @@ def test_parameters_are_validated_and_reach_the_som(session):
     assert session.parameters == p
     session.set_metric_weights([1, 1, 1, 0.5, 0])
     assert session.wait_idle(30)
-    np.testing.assert_allclose(session._som.metric_weights, [1, 1, 1, 0.5, 0])
+    np.testing.assert_allclose(session.clay.som.metric_weights, [1, 1, 1, 0.5, 0])
 
 
 def test_symmetry_off_and_on(session):
@@ -242,9 +242,10 @@ def test_add_remove_control_and_colour(session):
     assert session.n_controls == 1
 
 
-def test_colour_helpers_live_in_presets_and_stay_importable_from_the_session():
-    for name in ("rgb_to_colour_dims", "parse_hex_colour", "hex_colour"):
-        assert getattr(session_module, name) is getattr(presets, name)
+def test_colour_helpers_live_in_presets_only():
+    for name in ("rgb_to_colour_dims", "parse_hex_colour", "hex_colour"):  # one home: no re-export by the session
+        assert callable(getattr(presets, name))
+    assert not hasattr(session_module, "hex_colour")
     assert presets.hex_colour([1.0, 128 / 255, 0.0]) == "#ff8000"
     assert not hasattr(Session, "set_control")  # replaced by move_control / set_control_feature / set_controls
 
@@ -421,7 +422,7 @@ def test_wait_applied_counts_intents_handled_by_the_training_thread(session):
     session.set_learning_rates(0.3, 0.05)  # two intents
     assert session.wait_applied(30)
     assert session.frame.applied == applied + 3
-    assert (session._som.smoothing, session._som.l_start, session._som.l_end) == (0.1, 0.3, 0.05)
+    assert (session.clay.som.smoothing, session.clay.som.l_start, session.clay.som.l_end) == (0.1, 0.3, 0.05)
     never_started = Session("sphere", device="cpu", start=False)
     try:
         never_started.set_smoothing(0.2)
@@ -454,13 +455,13 @@ def test_set_iterations_refuses_an_S_the_engine_would_refuse():
         assert s.parameters == before and s.error is None
         assert s.max_iterations == limit
         assert s.wait_idle(30)
-        assert s._som.iterations == before["iterations"]
-        with s._som_lock:  # the engine draws the line at the same place
+        assert s.clay.som.iterations == before["iterations"]
+        with s.clay.som_lock:  # the engine draws the line at the same place
             with pytest.raises(ValueError, match="learning table"):
-                s._som.iterations = limit + 1
+                s.clay.som.iterations = limit + 1
         s.set_iterations(5000)
         assert s.wait_applied(30)
-        assert s._som.iterations == s.parameters["iterations"] == 5000 and s.error is None
+        assert s.clay.som.iterations == s.parameters["iterations"] == 5000 and s.error is None
     finally:
         s.close()
     car = Session("car", device="cpu", start=False)
@@ -485,30 +486,30 @@ def test_a_refused_intent_is_rolled_back_and_the_rest_of_its_batch_still_lands(m
         monkeypatch.setattr(Som, "smoothing", property(smoothing.fget, refuse))
         target = np.float32([2.5, 0.7, 0.3])
         # hold the training thread off: the three intents of one gesture (one undo step) reach it as one batch
-        with s._som_lock, s.gesture():
+        with s.clay.som_lock, s.gesture():
             s.set_smoothing(0.3)
             s.move_control(2, target)
             s.set_l_start(0.45)
             assert s.parameters["smoothing"] == 0.3  # the session's view changes at once...
         assert s.wait_applied(30)
         assert "smoothing" in s.error and "no smoothing today" in s.error
-        assert s.parameters["smoothing"] == before["smoothing"] == s._som.smoothing  # ...and back when refused
+        assert s.parameters["smoothing"] == before["smoothing"] == s.clay.som.smoothing  # ...and back when refused
         # the intents after the refused one reached the Som and the frame
-        np.testing.assert_allclose(s._som.controls[2, :3], target)
+        np.testing.assert_allclose(s.clay.som.controls[2, :3], target)
         np.testing.assert_allclose(s.frame.controls[2, :3], target)
         np.testing.assert_array_equal(s.frame.controls, s.controls)
-        assert s._som.l_start == s.parameters["l_start"] == 0.45
+        assert s.clay.som.l_start == s.parameters["l_start"] == 0.45
         # a refused intent followed by a later one of the same kind: the later value stands
-        with s._som_lock:
+        with s.clay.som_lock:
             s.set_smoothing(0.3)
             s.set_smoothing(0.25)
         assert s.wait_applied(30)
-        assert s.parameters["smoothing"] == s._som.smoothing == 0.25
+        assert s.parameters["smoothing"] == s.clay.som.smoothing == 0.25
         monkeypatch.undo()
         s.set_smoothing(0.2)
         s.train()
         assert s.wait_idle(30)
-        assert s.error is None and s._som.smoothing == s.parameters["smoothing"] == 0.2
+        assert s.error is None and s.clay.som.smoothing == s.parameters["smoothing"] == 0.2
         assert s.frame.iteration == s.frame.iterations
     finally:
         s.close()
@@ -527,12 +528,12 @@ def test_a_failed_step_whose_error_frame_also_fails_keeps_the_thread_alive(monke
             raise RuntimeError("frame exploded")
 
         monkeypatch.setattr(Som, "step", broken_step)
-        monkeypatch.setattr(s, "_make_frame", broken_frame)
+        monkeypatch.setattr(s.trainer, "make_frame", broken_frame)
         s.train()
         t = time.monotonic()
         assert s.wait_idle(30)
         assert time.monotonic() - t < 10  # not a timeout: the thread is alive and paused
-        assert s._thread.is_alive()
+        assert s.trainer.thread.is_alive()
         assert "step exploded" in s.error and s.paused
         assert s.frame.seq > seq and s.frame.paused and not s.frame.running
         s.move_control(0, [1.0, 0.5, 0.2])  # intents still get handled (and shown in a frame)
@@ -550,17 +551,17 @@ def test_a_dead_training_thread_shows_in_error_and_waits_return_at_once():
     s = Session("car", device="cpu", paused=True)
     try:
         assert s.wait_idle(30)
-        should_step = s._should_step
+        should_step = s.trainer.should_step
 
         def bug():
-            if threading.current_thread() is s._thread:
+            if threading.current_thread() is s.trainer.thread:
                 raise RuntimeError("a bug in the loop")
             return should_step()
 
-        s._should_step = bug
+        s.trainer.should_step = bug
         s.train()
-        s._thread.join(30)
-        assert not s._thread.is_alive()
+        s.trainer.thread.join(30)
+        assert not s.trainer.thread.is_alive()
         assert "training thread stopped" in s.error and "a bug in the loop" in s.error
         t = time.monotonic()
         assert not s.wait_idle(30)  # nothing pending, yet not idle: nothing will train any more

@@ -19,10 +19,10 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ...backend import presets as _presets
-from ...backend.batch import SCHEDULE_KEYS
+from ...backend.schedule import KEYS as SCHEDULE_KEYS
 from ...backend.presets import Preset
 from ...backend.variants import FIGURES, VariantPlan, plan_variants, run_plan
-from .parameters import MAX_ITERATIONS
+from ...backend.schedule import MAX_ITERATIONS
 
 #: Thumbnails a gallery shows when no indices are given.
 GALLERY_COUNT = 16

@@ -31,7 +31,9 @@ from ...backend import presets as _presets  # noqa: E402
 from ...backend.presets import Preset  # noqa: E402
 from ..model.parameters import BY_NAME as _PARAM  # noqa: E402
 from ..model.parameters import GAP_HELP, METRIC_WEIGHT  # noqa: E402
-from ..model.session import REACH_HELP, Frame, Session, hex_colour  # noqa: E402
+from ...backend.presets import hex_colour  # noqa: E402
+from ..model import Frame, Session  # noqa: E402
+from ..model.parameters import REACH_HELP  # noqa: E402
 from ..model.variants import MAX_GALLERY_VARIANTS, VARIANTS_HELP, VARIED, vary_around  # noqa: E402
 from ..model.variants import sweep as sweep_variants  # noqa: E402
 from .widget import ClayWidget  # noqa: E402

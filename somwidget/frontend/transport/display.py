@@ -11,7 +11,7 @@ import numpy as np
 from ...backend import io as _io
 from ...backend import presets as _presets
 from ..model import parameters as _parameters
-from ..model.session import default_mirror
+from ..model.clay import default_mirror
 from .messages import MAX_COORDINATE, MAX_MESSAGE_BYTES, PROTOCOL_VERSION
 
 #: Most display vertices a frame streams: 32,768 x 15 bytes = 0.5 MB a frame, 15 MB/s at 30 frames/s, which a

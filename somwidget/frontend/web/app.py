@@ -45,7 +45,10 @@ from . import lan as _lan
 from ..model.parameters import BY_NAME as _PARAM
 from ..model.parameters import GAP_HELP, METRIC_WEIGHT
 from ..transport.display import control_colours
-from ..model.session import REACH_HELP, Frame, Session, hex_colour, max_vertices_for
+from ...backend.presets import hex_colour
+from ..model import Frame, Session
+from ..model.clay import max_vertices_for
+from ..model.parameters import REACH_HELP
 from ..model.variants import MAX_GALLERY_VARIANTS, VARIANTS_HELP, VARIED, vary_around
 from ..model.variants import sweep as sweep_variants
 from .state_guard import guard_state_updates

@@ -1,0 +1,138 @@
+"""The clay: what every part of a session shares. The installed preset and its Som, the controls and parameters as
+the views see them (an intent changes them at once; the Som follows on the training thread), and the run flags.
+
+Two locks: `lock` guards this state (`wake` is its condition: waiters wake on every change that matters), `som_lock`
+guards the Som, which the training thread holds while it steps. Whoever needs both takes `som_lock` first.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from ...backend import device as _device
+from ...backend import presets as _presets
+from ...backend.presets import Preset
+from ...backend.schedule import KEYS as SCHEDULE_KEYS
+from .history import Step
+
+#: Largest mesh a session on the CPU accepts by default: the dense distance table is N^2 uint16 (16384 -> 512 MiB),
+#: built and searched on the CPU's cores.
+DEFAULT_MAX_VERTICES = 16384
+#: Largest mesh a session on a GPU accepts by default: past 65,536 neurons the engine computes distance rows for the
+#: current winners on demand instead of a table, and the views stream a decimated display mesh past 32,768.
+GPU_MAX_VERTICES = 4_194_304
+
+
+def max_vertices_for(device: str | None) -> int:
+    """The largest mesh a session on `device` takes by default: the engine's on a GPU, the dense table's on the
+    CPU."""
+    on_gpu = _device.resolve(None if device in (None, "auto") else device).startswith("cuda")
+    return GPU_MAX_VERTICES if on_gpu else DEFAULT_MAX_VERTICES
+
+
+def default_mirror(preset: Preset) -> tuple[int, ...]:
+    """Dims negated by symmetry: the preset's own, else position y (and direction y where there is one)."""
+    if preset.mirror:
+        return tuple(preset.mirror)
+    layout = preset.layout
+    dims = [layout.position[1]]
+    if layout.direction:
+        dims.append(layout.direction[1])
+    return tuple(sorted(dims))
+
+
+def build(preset: str | Preset | None, device: str | None, max_vertices: int) -> tuple[Preset, object]:
+    """(preset, its Som) for a preset name or a Preset on `device`; ValueError for an unknown preset or a mesh over
+    `max_vertices`. A shape that does not grow (a general shape, an uploaded mesh) is shown as it is: its Som holds
+    the start weights at s = S, so nothing trains until the person acts."""
+    if preset is None:
+        preset = "car"
+    if isinstance(preset, str):
+        preset = _presets.get_preset(preset)
+    if not isinstance(preset, Preset):
+        raise ValueError(f"preset: expected a preset name or a Preset, got {type(preset).__name__}")
+    if preset.n_vertices > max_vertices:
+        raise ValueError(f"mesh has {preset.n_vertices} vertices; this session accepts at most {max_vertices} on its "
+                         f"device ({device}; on the CPU the distance table grows as N^2, a GPU session takes up to "
+                         f"{GPU_MAX_VERTICES:,})")
+    if preset.controls.shape[0] < 1:
+        raise ValueError(f"preset {preset.name!r} has no controls; at least one is needed")
+    som = preset.make_som(device=None if device in (None, "auto") else device)
+    if not preset.grow:
+        som.restore(preset.weights, som.iterations)
+    return preset, som
+
+
+class Clay:
+    """The shared state of one session (see the module's docstring)."""
+
+    def __init__(self, preset: Preset, som, paused: bool = False):
+        self.lock = threading.RLock()
+        self.wake = threading.Condition(self.lock)
+        self.som_lock = threading.RLock()
+        self.generation = 0
+        self.paused = bool(paused)  # the person's Train / Pause choice
+        self.hold = False  # nothing trains until the next intent (after an undo, a redo, a loaded session)
+        self.error: str | None = None  # the latest refused intent or failed step, for the views
+        self.gesture = False  # a gesture (a drag) is open: its intents make one undo step
+        self.unsaved = True  # a change the autosave has not written yet (a new session: its first state)
+        self._next_id = 0
+        self.install(preset, som)
+
+    def install(self, preset: Preset, som) -> None:
+        """A new preset and its Som (caller holds both locks, or nothing runs yet): new ids, parameters from the Som,
+        the next generation."""
+        self.preset, self.som, self.layout = preset, som, preset.layout
+        self.controls = np.array(som.controls, dtype=np.float32)
+        self.control_ids = self.applied_ids = self.fresh_ids(len(self.controls))
+        self.mirror_dims = default_mirror(preset)
+        self.params = {name: type(getattr(som, name))(getattr(som, name)) for name in SCHEDULE_KEYS}
+        self.params["symmetry"] = bool(som.mirror)
+        self.params["metric_weights"] = [float(x) for x in som.metric_weights]
+        self.generation += 1
+
+    def fresh_ids(self, k: int) -> tuple[int, ...]:
+        """k new control ids, never used before in this session."""
+        first = self._next_id
+        self._next_id += k
+        return tuple(range(first, first + k))
+
+    def parameters(self) -> dict:
+        """A copy of the parameters, with "mirror": the dims symmetry negates now (caller holds lock)."""
+        p = dict(self.params)
+        p["metric_weights"] = list(p["metric_weights"])
+        p["mirror"] = list(self.mirror_dims) if p["symmetry"] else []
+        return p
+
+    def capture(self) -> Step:
+        """The state now as an undo step (caller holds both locks, with no operation queued)."""
+        params = dict(self.params, metric_weights=list(self.params["metric_weights"]))
+        return Step(preset=self.preset, controls=self.controls.copy(), parameters=params, weights=self.som.weights,
+                    iteration=int(self.som.iteration))
+
+    def put_back(self, step: Step) -> None:
+        """Put a recorded state into the Som exactly, and the session's view with it; nothing trains until the next
+        intent (caller holds both locks; the step's preset is the installed one)."""
+        som, p = self.som, step.parameters
+        for name in SCHEDULE_KEYS:
+            if name != "reach" and getattr(som, name) != p[name]:
+                setattr(som, name, p[name])
+        if list(som.metric_weights) != list(p["metric_weights"]):
+            som.metric_weights = np.asarray(p["metric_weights"], np.float32)
+        mirror = tuple(self.mirror_dims) if p["symmetry"] else ()
+        if som.mirror and tuple(som.mirror) != mirror:
+            som.mirror = ()
+        som.set_controls(step.controls)
+        if tuple(som.mirror) != mirror:
+            som.mirror = mirror
+        som.reach = p["reach"]
+        som.restore(step.weights, step.iteration)
+        self.controls = np.array(step.controls, np.float32)
+        if len(self.controls) != len(self.control_ids):  # a control added or removed: new ids (a grab on an id
+            self.control_ids = self.fresh_ids(len(self.controls))  # that is gone ends)
+        self.applied_ids = self.control_ids
+        self.params = dict(p, metric_weights=list(p["metric_weights"]))
+        self.hold = True
+        self.error = None

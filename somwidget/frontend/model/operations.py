@@ -1,0 +1,123 @@
+"""The operations a session queues for its training thread: one small class each, applied to the Som in order
+between two steps.
+
+An intent changes the session's own view at once (its controls, its parameters: what `session.controls` and
+`session.parameters` show) and queues an operation that brings the Som along. Should the engine refuse it, the
+operation's `roll_back` puts the session's view back to what the Som holds, unless a later operation with the same
+`key` is already on its way (it will set that view again).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class Operation:
+    """What the training thread does to the Som for one intent."""
+
+    #: Operations of the same key supersede each other's view (None: nothing to roll back).
+    key: str | None = None
+    #: The person acted: a held session (after an undo, a load) trains again.
+    acts = True
+
+    def apply(self, som) -> None:
+        raise NotImplementedError
+
+    def applied(self, clay) -> None:
+        """After `apply` succeeded (caller holds clay.lock)."""
+
+    def roll_back(self, clay, som) -> None:
+        """After `apply` failed: the session's view back to what `som` holds (caller holds clay.lock)."""
+
+
+@dataclass(frozen=True)
+class SetControls(Operation):
+    """New controls. In a drag, `anchor` is the Som that anchored the shape the drag began with: each frame of the
+    drag restarts from it (Som.set_controls(from_anchor=True)), so a long drag ends as one move would."""
+
+    controls: np.ndarray
+    anchor: object
+    ids: tuple
+    key = "controls"
+
+    def apply(self, som) -> None:
+        som.set_controls(self.controls, from_anchor=self.anchor is som)
+
+    def applied(self, clay) -> None:
+        clay.applied_ids = self.ids  # the ids of the controls the Som now holds
+
+    def roll_back(self, clay, som) -> None:
+        clay.controls = np.array(som.controls, dtype=np.float32)
+        clay.control_ids = clay.applied_ids
+
+
+@dataclass(frozen=True)
+class SetParameter(Operation):
+    """One schedule parameter (backend/schedule.py: iterations, l_start, l_end, smoothing, reach): a local restart."""
+
+    name: str
+    value: float
+
+    @property
+    def key(self) -> str:
+        return self.name
+
+    def apply(self, som) -> None:
+        setattr(som, self.name, self.value)
+
+    def roll_back(self, clay, som) -> None:
+        clay.params[self.name] = type(clay.params[self.name])(getattr(som, self.name))
+
+
+@dataclass(frozen=True)
+class SetMirror(Operation):
+    """Symmetry on (the dims each control's mirrored copy negates) or off (no dims)."""
+
+    dims: tuple
+    key = "mirror"
+
+    def apply(self, som) -> None:
+        som.mirror = self.dims
+
+    def roll_back(self, clay, som) -> None:
+        clay.params["symmetry"] = bool(som.mirror)
+
+
+@dataclass(frozen=True)
+class SetMetricWeights(Operation):
+    weights: np.ndarray
+    key = "metric_weights"
+
+    def apply(self, som) -> None:
+        som.metric_weights = self.weights
+
+    def roll_back(self, clay, som) -> None:
+        clay.params["metric_weights"] = [float(x) for x in som.metric_weights]
+
+
+@dataclass(frozen=True)
+class Reset(Operation):
+    """Back to the start mesh and s = 0: the whole schedule runs again."""
+
+    def apply(self, som) -> None:
+        som.reset()
+
+
+@dataclass(frozen=True)
+class Restart(Operation):
+    """A local restart from the latest weights (Train on a settled map)."""
+
+    def apply(self, som) -> None:
+        som.restart()
+
+
+@dataclass(frozen=True)
+class Publish(Operation):
+    """Nothing for the Som: a frame that shows what changed (paused, a step put back)."""
+
+    acts = False
+
+    def apply(self, som) -> None:
+        pass
