@@ -686,7 +686,7 @@ def local_app(tmp_path, monkeypatch):
     from trame.app import get_server
 
     from somwidget.frontend.web.app import build_app
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     (tmp_path / "tmp").mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))

@@ -26,7 +26,7 @@ def app(tmp_path, monkeypatch):
     from trame.app import get_server
 
     from somwidget.frontend.web.app import build_app
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     session = Session("car", device="cpu", start=False, autosave=False)
@@ -91,7 +91,7 @@ def test_upload_folders_of_a_killed_server_are_removed_at_the_next_start(tmp_pat
     from trame.app import get_server
 
     from somwidget.frontend.web.app import build_app
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     dead = subprocess.Popen([sys.executable, "-c", "pass"])

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from somwidget.frontend.model.history import History, Step
-from somwidget.frontend.model.session import Session
+from somwidget.frontend.model import Session
 
 
 def state_of(session: Session) -> dict:

@@ -31,7 +31,7 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 pytest.importorskip("ipywidgets")
 
 from somwidget.frontend.notebook import Panel, SomWidget, show  # noqa: E402
-from somwidget.frontend.model.session import Session  # noqa: E402
+from somwidget.frontend.model import Session  # noqa: E402
 
 wait_for = functools.partial(helpers.wait_for, timeout=15.0, interval=0.02)
 

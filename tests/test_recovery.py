@@ -17,7 +17,7 @@ from helpers import ROOT, Serve, wait_for
 
 from somwidget.backend import io
 from somwidget.frontend.model import autosave, storage
-from somwidget.frontend.model.session import Session
+from somwidget.frontend.model import Session
 
 #: A session that makes three steps (a drag, a new control, a setting), waits until its own autosave holds the
 #: last one (written by itself when training settles: no flush), writes what it holds, says READY and waits to be
@@ -26,7 +26,7 @@ CHILD = textwrap.dedent("""
     import json, sys, time
     import numpy as np
     from somwidget.backend import io
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     preset, out = sys.argv[1], sys.argv[2]
     s = Session(preset, device="cpu")

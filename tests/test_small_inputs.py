@@ -26,7 +26,7 @@ PROBE = """
 import json, resource, sys, time
 import trimesh
 from somwidget.backend import io
-from somwidget.frontend.model.session import MAX_ITERATIONS
+from somwidget.backend.schedule import MAX_ITERATIONS
 kind, path = sys.argv[1], sys.argv[2]
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t = time.perf_counter()

@@ -218,3 +218,32 @@ class SessionAutosave:
 
     def close(self) -> None:
         self.writer.close(clean=True)
+
+
+def recover(session_class, **options):
+    """A session of `session_class` brought back from the newest readable crashed autosave (nothing trains until the
+    next intent), or None; `options` go to the class (device, start...). An unreadable autosave is discarded with
+    the reason in the log. The crashed file goes once the new session has saved its own."""
+    from . import files
+    from .clay import max_vertices_for
+
+    start = options.pop("start", True)
+    max_vertices = options.get("max_vertices") or max_vertices_for(options.get("device"))
+    for path in crashed():
+        try:
+            state = files.read(path, max_vertices)
+            preset, weights, iteration = files.preset_of(state)
+            saved = path.stat().st_mtime
+        except (ValueError, OSError) as exc:
+            log.warning("autosave %s cannot be read (%s): discarded", path, exc)
+            discard(path)
+            continue
+        session = session_class(preset, start=False, **options)
+        session._restore_into(weights, iteration)
+        session.recovered = {"path": str(path), "saved": saved, "preset": state["preset"]}
+        session.flush_autosave()
+        discard(path)
+        if start:
+            session.start()
+        return session
+    return None

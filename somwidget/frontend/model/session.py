@@ -33,29 +33,20 @@ import numpy as np
 
 from ...backend import checks
 from ...backend import presets as _presets
-from ...backend.presets import FeatureLayout, Preset, parse_hex_colour, rgb_to_colour_dims
+from ...backend.presets import FeatureLayout, Preset
 from ...backend.schedule import KEYS as SCHEDULE_KEYS
-from ...backend.schedule import MAX_ITERATIONS
-from ...backend.som import _MAX_TABLE_ENTRIES
 from . import autosave as _autosave
 from . import files
-from .clay import GPU_MAX_VERTICES, Clay, build, default_mirror, max_vertices_for
+from .clay import GPU_MAX_VERTICES, Clay, build, max_vertices_for
 from .frames import Frame, FrameListener, FrameStream
-from .history import Step
-from .operations import Publish, Reset, Restart, SetControls, SetMetricWeights, SetMirror, SetParameter
+from .controls import ControlEdits
+from .operations import Publish, Reset, Restart
 from .parameters import BY_NAME as _PARAM
-from .parameters import METRIC_WEIGHT, SYMMETRY
+from .settings import ParameterEdits
 from .timeline import Timeline
 from .trainer import Trainer
 
 log = logging.getLogger(__name__)
-
-#: The engine's cap on its learning table, S x (d_max + 1) float32 entries (2 GiB): backend/som.py, _build_table.
-MAX_TABLE_ENTRIES = _MAX_TABLE_ENTRIES
-#: The engine's limit on effective controls (originals plus mirrored copies).
-MAX_CONTROLS = _presets.MAX_CONTROLS
-#: Largest |value| accepted for a control coordinate or feature.
-MAX_ABS_VALUE = 1e6
 
 _LIVE: weakref.WeakSet = weakref.WeakSet()
 
@@ -68,15 +59,6 @@ def _close_live_sessions() -> None:
             session.close(timeout=2.0)
         except Exception:  # pragma: no cover - nothing must stop the exit
             pass
-
-
-def _check_index(name: str, value, count: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name}: expected an integer index, got {value!r}")
-    i = int(value)
-    if not 0 <= i < count:
-        raise ValueError(f"{name}: index {i} is out of range (there are {count} controls: 0..{count - 1})")
-    return i
 
 
 class Session:
@@ -106,6 +88,8 @@ class Session:
         self.frames = FrameStream(self.clay.wake)
         self.trainer = Trainer(self.clay, self.frames, self._make_frame, self._after_turn, frame_rate, step_fraction)
         self.timeline = Timeline(self.clay, self.trainer, self._rebuild, self._install_frame)
+        self.edit_controls = ControlEdits(self.clay, self.timeline, self.trainer, self.frames)
+        self.edit_parameters = ParameterEdits(self.clay, self.timeline, self.trainer)
         self.frames.install(self._make_frame(0))
         self.autosave = (_autosave.SessionAutosave(self.clay, self.session_state, files.write, self._settled)
                          if autosave else None)
@@ -157,10 +141,6 @@ class Session:
             clay.error = None
             self._install_frame()  # `frame` matches `preset` at once; listeners get the next one
             self.trainer.enqueue(Publish())
-
-    def _enqueue_controls(self, controls: np.ndarray) -> None:
-        """Queue new controls (caller holds clay.lock); inside a drag they restart from the shape it began with."""
-        self.trainer.enqueue(SetControls(controls, self.timeline.drag_anchor(), self.clay.control_ids))
 
     # -- lifetime ----------------------------------------------------------------------------------------------
     def start(self) -> None:
@@ -297,14 +277,7 @@ class Session:
     def index_of_control(self, control_id) -> int:
         """The index of the control with this id now; ValueError when it is gone (removed, or a preset, undo or
         load replaced the controls)."""
-        if isinstance(control_id, bool) or not isinstance(control_id, (int, np.integer)):
-            raise ValueError(f"control id: expected an integer, got {control_id!r}")
-        with self.clay.lock:
-            try:
-                return self.clay.control_ids.index(int(control_id))
-            except ValueError:
-                raise ValueError(f"control {int(control_id)} no longer exists (it was removed, or the controls "
-                                 "were replaced)") from None
+        return self.edit_controls.index_of(control_id)
 
     def state(self, positions: bool = False) -> dict:
         """A JSON-friendly summary (for debug routes and tests); `positions` adds every node's x, y, z."""
@@ -360,132 +333,39 @@ class Session:
         return self.timeline.redo()
 
     # -- intents: controls -------------------------------------------------------------------------------------
-    def _check_controls(self, controls: np.ndarray, symmetry: bool | None = None) -> None:
-        if symmetry is None:
-            symmetry = self.clay.params["symmetry"]
-        k = controls.shape[0]
-        if k < 1:
-            raise ValueError("controls: at least one control is needed")
-        if k * (2 if symmetry else 1) > MAX_CONTROLS:
-            raise ValueError(f"controls: at most {MAX_CONTROLS} controls counting mirrored copies; "
-                             f"{k} controls{' with symmetry' if symmetry else ''} is too many")
-
-    def _edit_control(self, step: str, index, edit, control_id=None) -> None:
-        """One control's values changed by `edit(i, values) -> values` (caller's checks inside), as one step."""
-        clay = self.clay
-        with self.timeline.step(step), clay.lock:
-            i = (_check_index("control", index, clay.controls.shape[0]) if control_id is None
-                 else self.index_of_control(control_id))
-            controls = clay.controls.copy()
-            controls[i] = edit(i, controls[i].copy())
-            clay.controls = controls
-            self._enqueue_controls(controls.copy())
-
     def move_control(self, index: int | None, position, *, control_id: int | None = None) -> None:
         """Move control `index` to `position`: 3 numbers (x, y, z; the other features stay) or all n features."""
-        layout = self.clay.layout
-
-        def edit(i, values):
-            n = layout.n_dims
-            if hasattr(position, "__len__") and not isinstance(position, str) and len(position) == n:
-                return checks.finite_vector(f"control {i}", position, n, MAX_ABS_VALUE)
-            values[list(layout.position)] = checks.finite_vector(f"control {i} position", position, 3, MAX_ABS_VALUE)
-            return values
-
-        self._edit_control("controls", index, edit, control_id)
+        self.edit_controls.move(index, position, control_id)
 
     def move_control_id(self, control_id, position) -> None:
         """`move_control` for the control with this id (ValueError when it is gone), in one step with the lookup:
         a control removed meanwhile cannot make the move edit another one."""
-        self.move_control(None, position, control_id=control_id)
+        self.edit_controls.move(None, position, control_id)
 
     def set_control_feature(self, index: int, dim: int, value) -> None:
         """Set one feature dim of control `index`."""
-        layout = self.clay.layout
-
-        def edit(i, values):
-            d = checks.integer_text("feature dimension", dim, 0, layout.n_dims - 1)
-            values[d] = checks.real(f"control {i} {layout.names[d]}", value, -MAX_ABS_VALUE, MAX_ABS_VALUE)
-            return values
-
-        self._edit_control("controls", index, edit)
+        self.edit_controls.set_feature(index, dim, value)
 
     def set_control_colour(self, index: int, colour) -> None:
         """Set control `index`'s colour dims from an RGB triple in [0, 1] or a '#rrggbb' string."""
-        rgb = parse_hex_colour(colour) if isinstance(colour, str) else colour
-        layout = self.clay.layout
-
-        def edit(_i, values):
-            values[list(layout.colour)] = rgb_to_colour_dims(rgb, layout)
-            return values
-
-        self._edit_control("colour", index, edit)
+        self.edit_controls.set_colour(index, colour)
 
     def set_controls(self, controls) -> None:
         """Replace every control: (k, n) finite values, 1 <= k (counting mirrored copies <= 256)."""
-        arr = checks.finite_array("controls", controls, 2, np.float64)
-        if np.abs(arr).max(initial=0.0) > MAX_ABS_VALUE:
-            raise ValueError(f"controls: values must lie within +-{MAX_ABS_VALUE:g}")
-        arr = arr.astype(np.float32)
-        clay = self.clay
-        with self.timeline.step("controls"), clay.lock:
-            n = clay.layout.n_dims
-            if arr.shape[1] != n:
-                raise ValueError(f"controls: expected shape (k, {n}), got {arr.shape}")
-            self._check_controls(arr)
-            clay.controls = arr.copy()
-            if len(arr) != len(clay.control_ids):
-                clay.control_ids = clay.fresh_ids(len(arr))
-            self._enqueue_controls(arr)
+        self.edit_controls.replace(controls)
 
     def add_control(self, values=None) -> int:
         """Append a control (all n features; default: next to the last one); returns its index."""
-        clay = self.clay
-        with self.timeline.step("add"), clay.lock:
-            if values is None:
-                v = clay.controls[-1].copy()
-                pos = self.frame.positions
-                span = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0))) or 1.0
-                v[clay.layout.position[2]] += 0.15 * span
-            else:
-                v = checks.finite_vector("new control", values, clay.layout.n_dims, MAX_ABS_VALUE)
-            controls = np.concatenate([clay.controls, v[None, :]]).astype(np.float32)
-            self._check_controls(controls)
-            clay.controls = controls
-            clay.control_ids = (*clay.control_ids, *clay.fresh_ids(1))
-            self._enqueue_controls(controls.copy())
-            return controls.shape[0] - 1
+        return self.edit_controls.add(values)
 
     def remove_control(self, index: int) -> None:
-        clay = self.clay
-        with self.timeline.step("remove"), clay.lock:
-            i = _check_index("control", index, clay.controls.shape[0])
-            if clay.controls.shape[0] <= 1:
-                raise ValueError("controls: cannot remove the last control")
-            clay.controls = np.delete(clay.controls, i, axis=0)
-            clay.control_ids = clay.control_ids[:i] + clay.control_ids[i + 1:]
-            self._enqueue_controls(clay.controls.copy())
+        self.edit_controls.remove(index)
 
     # -- intents: parameters -----------------------------------------------------------------------------------
     def set_parameter(self, name: str, value) -> None:
-        """Set one of PARAMETERS (iterations or S, l_start, l_end, smoothing, reach, symmetry) or metric_weights.
-        A schedule parameter restarts the schedule locally from the latest weights."""
-        name = "iterations" if name == "S" else name
-        if name == "symmetry":
-            return self.set_symmetry(value)
-        if name == "metric_weights":
-            return self.set_metric_weights(value)
-        if name not in _PARAM:
-            raise ValueError(f"unknown parameter {name!r}; known: {', '.join((*_PARAM, 'metric_weights'))}")
-        x = _PARAM[name].parse(value)
-        with self.timeline.step(f"parameter:{name}"), self.clay.lock:
-            if name == "iterations" and x > self.max_iterations:
-                d_max = int(self.clay.preset.topology.d_max)
-                raise ValueError(f"S (iterations): {x} is more than this mesh allows: at most {self.max_iterations}, "
-                                 f"since the learning table S x (d_max + 1) = {x} x {d_max + 1} may hold at most "
-                                 f"{MAX_TABLE_ENTRIES} entries")
-            self.clay.params[name] = x
-            self.trainer.enqueue(SetParameter(name, x))
+        """Set one of the parameters (parameters.py: iterations or S, l_start, l_end, smoothing, reach, symmetry)
+        or metric_weights. A schedule parameter restarts the schedule locally from the latest weights."""
+        self.edit_parameters.set(name, value)
 
     def set_iterations(self, value) -> None:
         """S: cycles in a run."""
@@ -508,47 +388,24 @@ class Session:
 
     def set_learning_rates(self, l_start, l_end) -> None:
         """l_start and l_end together, as one step."""
-        a, b = _PARAM["l_start"].parse(l_start), _PARAM["l_end"].parse(l_end)
-        with self.timeline.step("parameter:rates"), self.clay.lock:
-            self.clay.params["l_start"], self.clay.params["l_end"] = a, b
-            self.trainer.enqueue(SetParameter("l_start", a))
-            self.trainer.enqueue(SetParameter("l_end", b))
+        self.edit_parameters.set_learning_rates(l_start, l_end)
+
+    def set_symmetry(self, value) -> None:
+        """Mirror every control across the xz-plane (the preset's mirror dims) or not."""
+        self.edit_parameters.set_symmetry(value)
+
+    def set_metric_weights(self, value) -> None:
+        """One weight >= 0 per feature dim (at least one positive) for the winner search."""
+        self.edit_parameters.set_metric_weights(value)
+
+    def set_metric_weight(self, dim: int, value) -> None:
+        self.edit_parameters.set_metric_weight(dim, value)
 
     @property
     def max_iterations(self) -> int:
         """The largest S this mesh allows: MAX_ITERATIONS, or fewer where the engine's learning table
         S x (d_max + 1) would pass MAX_TABLE_ENTRIES (a mesh with a long grid diameter)."""
-        d_max = int(self.clay.preset.topology.d_max)  # the Som's own d_max: sessions keep the dense table
-        return min(MAX_ITERATIONS, MAX_TABLE_ENTRIES // (d_max + 1))
-
-    def set_symmetry(self, value) -> None:
-        """Mirror every control across the xz-plane (the preset's mirror dims) or not."""
-        on = SYMMETRY.parse(value)
-        clay = self.clay
-        with self.timeline.step("parameter:symmetry"), clay.lock:
-            self._check_controls(clay.controls, symmetry=on)
-            clay.params["symmetry"] = on
-            self.trainer.enqueue(SetMirror(clay.mirror_dims if on else ()))
-
-    def set_metric_weights(self, value) -> None:
-        """One weight >= 0 per feature dim (at least one positive) for the winner search."""
-        clay = self.clay
-        with self.timeline.step("parameter:metric_weights"), clay.lock:
-            m = checks.finite_vector("metric_weights", value, clay.layout.n_dims, MAX_ABS_VALUE)
-            if (m < 0).any():
-                raise ValueError(f"metric_weights: weights must be >= 0, got {m.tolist()}")
-            if not (m > 0).any():
-                raise ValueError("metric_weights: at least one weight must be positive")
-            clay.params["metric_weights"] = [float(x) for x in m]
-            self.trainer.enqueue(SetMetricWeights(m))
-
-    def set_metric_weight(self, dim: int, value) -> None:
-        clay = self.clay
-        with clay.lock:
-            d = checks.integer_text("feature dimension", dim, 0, clay.layout.n_dims - 1)
-            m = list(clay.params["metric_weights"])
-            m[d] = METRIC_WEIGHT.check(value, f"{METRIC_WEIGHT.label} of {clay.layout.names[d]}")
-        self.set_metric_weights(m)
+        return self.edit_parameters.max_iterations
 
     # -- intents: run control ----------------------------------------------------------------------------------
     def train(self) -> None:
@@ -657,14 +514,7 @@ class Session:
             raise ValueError(f"parameters: unknown {unknown}; a variant sets some of {list(SCHEDULE_KEYS)}")
         checked = {name: _PARAM[name].check(value) for name, value in parameters.items()}
         with self.timeline.step("variant"):
-            with clay.som_lock:
-                self.trainer.drain()
-                with clay.lock:
-                    params = dict(clay.capture().parameters, **checked)
-                self.timeline.put_back(Step(preset=clay.preset, controls=c, parameters=params, weights=w,
-                                            iteration=params["iterations"]))
-            with clay.lock:
-                self.trainer.enqueue(Publish(), intent=False)
+            self.timeline.jump(c, checked, w)
 
     # -- autosave and recovery ---------------------------------------------------------------------------------
     @property
@@ -682,30 +532,15 @@ class Session:
         """The session of the latest exit that did not close cleanly (a crash, a kill), restored exactly as its
         autosave left it (nothing trains until the next intent); None if there is none. `options` go to Session
         (device, start...). Its autosave is taken over: it is deleted once the new session has saved its own."""
-        start = options.pop("start", True)
-        max_vertices = options.get("max_vertices") or max_vertices_for(options.get("device"))
-        for path in _autosave.crashed():
-            try:
-                state = files.read(path, max_vertices)
-                preset, weights, iteration = files.preset_of(state)
-                saved = path.stat().st_mtime
-            except (ValueError, OSError) as exc:
-                log.warning("autosave %s cannot be read (%s): discarded", path, exc)
-                _autosave.discard(path)
-                continue
-            session = cls(preset, start=False, **options)
-            clay = session.clay
-            with clay.som_lock, clay.lock:  # weights and s into the Som of its preset, which holds the rest
-                clay.som.restore(weights, iteration)
-                clay.hold = True
-                session._install_frame()
-            session.recovered = {"path": str(path), "saved": saved, "preset": state["preset"]}
-            session.flush_autosave()
-            _autosave.discard(path)
-            if start:
-                session.start()
-            return session
-        return None
+        return _autosave.recover(cls, **options)
+
+    def _restore_into(self, weights, iteration: int) -> None:
+        """Weights and s into the Som of the installed preset (which holds the rest), held: nothing trains."""
+        clay = self.clay
+        with clay.som_lock, clay.lock:
+            clay.som.restore(weights, iteration)
+            clay.hold = True
+            self._install_frame()
 
 
-__all__ = ["Frame", "Session", "default_mirror", "max_vertices_for"]
+__all__ = ["Frame", "Session"]

@@ -142,5 +142,18 @@ class Timeline:
             self.clay.put_back(step)
             self.install_frame()
 
+    def jump(self, controls, changes: dict, weights) -> None:
+        """Put a state made elsewhere in place (a design variant: its controls, schedule `changes` and trained
+        weights), at the end of its schedule, held (caller records the step)."""
+        clay = self.clay
+        with clay.som_lock:
+            self.trainer.drain()
+            with clay.lock:
+                params = dict(clay.capture().parameters, **changes)
+            self.put_back(Step(preset=clay.preset, controls=controls, parameters=params, weights=weights,
+                               iteration=params["iterations"]))
+        with clay.lock:
+            self.trainer.enqueue(Publish(), intent=False)
+
     def close(self) -> None:
         self.history.close()
