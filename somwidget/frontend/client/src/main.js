@@ -2,6 +2,7 @@
 // It shares the server's modelling session through the websocket /xr/ws (see protocol.js).
 
 import * as THREE from 'three';
+import { HUD_ACTIONS } from './actions.js';
 import { Link, socketURL } from './link.js';
 import { Menu } from './menu.js';
 import { intents } from './protocol.js';
@@ -9,9 +10,28 @@ import { ClayView } from './view.js';
 import { XRApp } from './xr.js';
 
 const $ = (id) => document.getElementById(id);
+
+// The HUD's buttons (actions.js) into the page's empty #buttons, with a space between them as in written HTML.
+function buildButtons(container) {
+  const buttons = {};
+  for (const a of HUD_ACTIONS) {
+    if (container.childElementCount) container.append(' ');
+    const button = document.createElement('button');
+    button.id = a.name;
+    button.textContent = a.label;
+    if (a.title) button.title = a.title;
+    button.hidden = !!a.hidden;
+    button.disabled = !!a.disabled;
+    container.append(button);
+    buttons[a.name] = button;
+  }
+  return buttons;
+}
+
+const buttons = buildButtons($('buttons'));
 const ui = {
-  status: $('status'), error: $('error'), ar: $('enter-ar'), vr: $('enter-vr'), train: $('train'),
-  reset: $('reset'), title: $('title'), undo: $('undo'), redo: $('redo'),
+  status: $('status'), error: $('error'), ar: buttons['enter-ar'], vr: buttons['enter-vr'], train: buttons.train,
+  title: $('title'), undo: buttons.undo, redo: buttons.redo,
 };
 
 let link = null;
@@ -49,12 +69,19 @@ view.onFrame = (f) => {
   state.running = f.running;
 };
 
-function toggleTraining() {
-  link.send(state.paused ? intents.train() : intents.pause());
+async function enter(mode) {
+  try {
+    await xr.enter(mode);
+  } catch (err) {
+    link.handlers.onError({ message: `could not start ${mode}: ${err.message || err}` });
+  }
 }
 
-const menu = new Menu({
-  train: toggleTraining,
+// What each action (actions.js) does, for the HUD's buttons and the headset menu's alike.
+const perform = {
+  'enter-ar': () => enter('immersive-ar'),
+  'enter-vr': () => enter('immersive-vr'),
+  train: () => link.send(state.paused ? intents.train() : intents.pause()),
   undo: () => link.send(intents.undo()),
   redo: () => link.send(intents.redo()),
   reset: () => link.send(intents.reset()),
@@ -62,7 +89,9 @@ const menu = new Menu({
   bigger: () => xr.rescale(1.25),
   here: () => { xr.wantPlace = true; },
   exit: () => xr.exit(),
-});
+};
+
+const menu = new Menu(perform);
 
 const xr = new XRApp({
   renderer, scene, clay, grabs, menu,
@@ -77,28 +106,16 @@ const xr = new XRApp({
   },
 });
 
-ui.train.addEventListener('click', toggleTraining);
-ui.reset.addEventListener('click', () => link.send(intents.reset()));
-ui.undo.addEventListener('click', () => link.send(intents.undo()));
-ui.redo.addEventListener('click', () => link.send(intents.redo()));
+for (const [name, button] of Object.entries(buttons)) button.addEventListener('click', () => perform[name]());
 // Ctrl+Z undoes, Ctrl+Shift+Z (or Ctrl+Y) redoes; Cmd on a Mac
 window.addEventListener('keydown', (e) => {
   if (!(e.ctrlKey || e.metaKey) || e.altKey) return;
   const key = e.key.toLowerCase();
-  if (key === 'z' && !e.shiftKey) link.send(intents.undo());
-  else if ((key === 'z' && e.shiftKey) || key === 'y') link.send(intents.redo());
+  if (key === 'z' && !e.shiftKey) perform.undo();
+  else if ((key === 'z' && e.shiftKey) || key === 'y') perform.redo();
   else return;
   e.preventDefault();
 });
-async function enter(mode) {
-  try {
-    await xr.enter(mode);
-  } catch (err) {
-    link.handlers.onError({ message: `could not start ${mode}: ${err.message || err}` });
-  }
-}
-ui.ar.addEventListener('click', () => enter('immersive-ar'));
-ui.vr.addEventListener('click', () => enter('immersive-vr'));
 
 XRApp.supportedModes().then((m) => {
   state.supported = m;

@@ -1,8 +1,9 @@
-// The in-headset menu: a row of buttons (Train / Pause, Undo, Redo, Reset, smaller, bigger, bring here, exit) and a status
-// line, drawn on canvases, floating below the clay and facing the person. Pressed by pointing a ray and pulling
-// the trigger (or pinching), or by touching a button with an index finger tip.
+// The in-headset menu: a row of buttons (the menu's actions in actions.js: Train / Pause, Undo, Redo, Reset, smaller,
+// bigger, bring here, exit) and a status line, drawn on canvases, floating below the clay and facing the person.
+// Pressed by pointing a ray and pulling the trigger (or pinching), or by touching a button with an index finger tip.
 
 import * as THREE from 'three';
+import { MENU_ACTIONS } from './actions.js';
 
 const W = 0.07;
 const H = 0.034;
@@ -23,15 +24,13 @@ function drawLabel(canvas, text, active, bg = '#24283a') {
 }
 
 export class Menu {
-  constructor(actions) {
-    this.actions = actions; // name -> function
+  constructor(perform) {
+    this.perform = perform; // action name -> function
     this.group = new THREE.Group();
     this.group.name = 'xr-menu';
     this.buttons = [];
-    const names = [['train', 'Train'], ['undo', 'Undo'], ['redo', 'Redo'], ['reset', 'Reset'], ['smaller', '\u2212'],
-      ['bigger', '+'], ['here', 'Bring here'], ['exit', 'Exit']];
-    const total = names.length * W + (names.length - 1) * GAP;
-    names.forEach(([name, label], i) => {
+    const total = MENU_ACTIONS.length * W + (MENU_ACTIONS.length - 1) * GAP;
+    MENU_ACTIONS.forEach(({ name, label }, i) => {
       const canvas = document.createElement('canvas');
       canvas.width = 256;
       canvas.height = 124;
@@ -91,7 +90,7 @@ export class Menu {
       drawLabel(b.userData.canvas, b.userData.label, true);
       b.userData.tex.needsUpdate = true;
     }
-    this.actions[name]?.();
+    this.perform[name]?.();
   }
 
   // The button a ray hits: name or null.

@@ -1,0 +1,22 @@
+// The XR page's actions, declared once: the HUD's button bar (main.js builds it into #buttons) and the headset menu
+// (menu.js) both take their buttons from this list, in this order; main.js says what each action does.
+//
+// name: the HUD button's id and the menu button's name (somxr.button(name)); label: its text; title: the HUD
+// button's tooltip; where: 'hud', 'menu' or 'both'; hidden / disabled: the HUD button's state until the page knows
+// better (the browser's XR modes, the first frame's undo and redo steps).
+
+export const ACTIONS = [
+  { name: 'enter-ar', label: 'Enter AR', where: 'hud', hidden: true },
+  { name: 'enter-vr', label: 'Enter VR', where: 'hud', hidden: true },
+  { name: 'train', label: 'Pause', where: 'both' }, // "Train" while paused (main.js relabels it)
+  { name: 'undo', label: 'Undo', title: 'Undo (Ctrl+Z)', where: 'both', disabled: true },
+  { name: 'redo', label: 'Redo', title: 'Redo (Ctrl+Shift+Z)', where: 'both', disabled: true },
+  { name: 'reset', label: 'Reset', where: 'both' },
+  { name: 'smaller', label: '\u2212', where: 'menu' }, // the clay 1.25 times smaller
+  { name: 'bigger', label: '+', where: 'menu' },
+  { name: 'here', label: 'Bring here', where: 'menu' }, // place the clay in front of the person again
+  { name: 'exit', label: 'Exit', where: 'menu' }, // leave the immersive session
+];
+
+export const HUD_ACTIONS = ACTIONS.filter((a) => a.where !== 'menu');
+export const MENU_ACTIONS = ACTIONS.filter((a) => a.where !== 'hud');
