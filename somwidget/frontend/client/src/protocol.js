@@ -1,4 +1,5 @@
-// The /xr/ws protocol, client side: the twin of somwidget/frontend/xr/protocol.py (the layout is documented there).
+// The /xr/ws protocol, client side: the twin of somwidget/frontend/transport/messages.py (the layout is documented
+// there; tests/test_client_protocol.py keeps the two in step).
 //
 // Binary frame, little-endian: a 32-byte header (magic "SOMF", u16 version, u16 flags, u32 seq, u32 generation,
 // u32 iteration, u32 iterations, u32 n, u16 k, u16 kEff), then Float32 positions (n x 3), Float32 control
