@@ -10,6 +10,9 @@ import argparse
 import re
 import sys
 
+from .backend.schedule import KEYS
+
+
 def device_name(text: str) -> str:
     """--device: auto, cpu, cuda or cuda:N."""
     if text in ("auto", "cpu", "cuda") or re.fullmatch(r"cuda:\d+", text):
@@ -112,8 +115,8 @@ def _build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--jitter", type=float, default=0.05,
                        help="each control moves by up to this share of the model's size (default: %(default)s)")
     sweep.add_argument("--vary", action="append", default=[], metavar="NAME=LOW:HIGH|NAME=A,B,...",
-                       help="vary a schedule parameter (iterations, l_start, l_end, smoothing, reach) over a range "
-                       "or a list; may be given several times")
+                       help=f"vary a schedule parameter ({', '.join(KEYS)}) over a range or a list; may be given "
+                       "several times")
     sweep.add_argument("--seed", type=int, default=0, help="the same seed gives the same variants (default: 0)")
     sweep.add_argument("--out", default="variants.npz", metavar="FILE.npz",
                        help="where the arrays go (default: %(default)s); the gallery goes beside it as .png")

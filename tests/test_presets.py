@@ -19,7 +19,7 @@ from somwidget.backend.presets import (
     line_display_mesh,
     uv_ellipsoid,
 )
-from somwidget.backend.som import DEFAULT_REACH
+from somwidget.backend.schedule import DEFAULT_REACH
 from somwidget.backend.topology import Topology
 
 

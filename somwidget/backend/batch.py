@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike
 from . import checks
 from .batch_kernels import GATHER, SEARCH, variants_kernel
 from .device import resolve, usable_cores, warp_exclusive, warp_lock
-from .schedule import learning_table
+from .schedule import BY_NAME, KEYS, learning_table
 from .som import MAX_CONTROLS, MAX_DIMS, restart_iteration
 from .topology import Topology
 
@@ -32,23 +32,20 @@ from .topology import Topology
 MAX_TABLE_ENTRIES = 1 << 29
 #: Meshes a batch takes: its dense distance table (N x N uint16) is shared by every variant.
 MAX_BATCH_NEURONS = 16384
-SCHEDULE_KEYS = ("iterations", "l_start", "l_end", "smoothing", "reach")
+#: The schedule's parameter names under the name the app layer imports; new code reads schedule.KEYS.
+SCHEDULE_KEYS = KEYS
 
 
-def _per_variant(name: str, value, n: int, kind: str, low: float, high: float | None = None,
-                 low_open: bool = False) -> np.ndarray:
-    """A scalar or n values of one schedule parameter, each checked as Som checks it."""
+def _per_variant(name: str, value, n: int) -> np.ndarray:
+    """A scalar or n values of one schedule parameter, each checked as Som checks it (its Setting)."""
     values = np.asarray(value, dtype=np.float64)
     if values.ndim == 0:
         values = np.full(n, values)
     if values.shape != (n,):
         raise ValueError(f"{name}: expected one value or {n} (one per variant), got shape {values.shape}")
+    setting = BY_NAME[name]
     for i, x in enumerate(values.tolist()):
-        label = f"{name}[{i}]"
-        if kind == "int":
-            checks.integer(label, int(x) if float(x).is_integer() else x, int(low))
-        else:
-            checks.real(label, x, low, high, low_open=low_open)
+        setting.check(x, f"{name}[{i}]")
     return values
 
 
@@ -67,11 +64,11 @@ class BatchSom:
         topology: Topology,
         weights: ArrayLike,
         controls: ArrayLike,
-        iterations: int | ArrayLike = 1000,
-        l_start: float | ArrayLike = 0.25,
-        l_end: float | ArrayLike = 0.03,
-        smoothing: float | ArrayLike = 0.0,
-        reach: float | ArrayLike = 0.08,
+        iterations: int | ArrayLike = BY_NAME["iterations"].default,
+        l_start: float | ArrayLike = BY_NAME["l_start"].default,
+        l_end: float | ArrayLike = BY_NAME["l_end"].default,
+        smoothing: float | ArrayLike = BY_NAME["smoothing"].default,
+        reach: float | ArrayLike = BY_NAME["reach"].default,
         smooth_dims: Sequence[int] | None = None,
         metric_weights: ArrayLike | None = None,
         mirror: Sequence[int] = (),
@@ -115,11 +112,11 @@ class BatchSom:
                              f"({k_eff} with mirroring)")
         self._controls = c.astype(np.float32)
         B = self.n_variants
-        self._iterations = _per_variant("iterations", iterations, B, "int", 1).astype(np.int64)
-        self._l_start = _per_variant("l_start", l_start, B, "real", 0.0, 1.0, low_open=True)
-        self._l_end = _per_variant("l_end", l_end, B, "real", 0.0, 1.0, low_open=True)
-        self._smoothing = _per_variant("smoothing", smoothing, B, "real", 0.0, 1.0)
-        self._reach = _per_variant("reach", reach, B, "real", 0.0, 1.0, low_open=True)
+        self._iterations = _per_variant("iterations", iterations, B).astype(np.int64)
+        self._l_start = _per_variant("l_start", l_start, B)
+        self._l_end = _per_variant("l_end", l_end, B)
+        self._smoothing = _per_variant("smoothing", smoothing, B)
+        self._reach = _per_variant("reach", reach, B)
         smooth = tuple(range(min(3, n))) if smooth_dims is None else checks.dims("smooth_dims", smooth_dims, n)
         metric = np.ones(n, np.float32) if metric_weights is None else checks.finite_array(
             "metric_weights", metric_weights, 1)
@@ -221,10 +218,10 @@ class BatchSom:
 
     @property
     def params(self) -> list[dict]:
-        """Each variant's schedule: iterations, l_start, l_end, smoothing, reach."""
-        return [{"iterations": int(self._iterations[b]), "l_start": float(self._l_start[b]),
-                 "l_end": float(self._l_end[b]), "smoothing": float(self._smoothing[b]),
-                 "reach": float(self._reach[b])} for b in range(self.n_variants)]
+        """Each variant's schedule: a value of each of schedule.KEYS, as Som keeps it (iterations an int)."""
+        columns = {key: getattr(self, f"_{key}") for key in KEYS}
+        return [{key: BY_NAME[key].check(values[b], key) for key, values in columns.items()}
+                for b in range(self.n_variants)]
 
     @property
     @warp_exclusive

@@ -14,9 +14,9 @@ from struct import error as struct_error
 import numpy as np
 
 from . import checks
-from .som import DEFAULT_REACH
 from .presets import (DISPLAYS, KEPT_SHAPE_REACH, XYZ, FeatureLayout, Preset, colours_of, controls_on,
                       line_display_mesh, positions_of)
+from .schedule import BY_NAME, KEYS
 from .topology import Topology
 
 #: The default vertex limit of `load_mesh`: the dense distance table's cap (2^16 neurons).
@@ -238,11 +238,13 @@ def triangulate(faces) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------------------
 #: Keys a session state must have.
 SESSION_REQUIRED = ("weights", "start_weights", "controls", "topology", "layout")
-#: Keys a session state may have, with the value used when it is absent.
+#: Keys a session state may have, with the value used when it is absent (the schedule's: schedule.SETTINGS).
 SESSION_DEFAULTS = {
-    "preset": "", "display": "surface", "iterations": 1000, "l_start": 0.25, "l_end": 0.03, "smoothing": 0.0,
-    "smooth_dims": None, "metric_weights": None, "mirror": (), "iteration": 0, "reach": DEFAULT_REACH,
+    "preset": "", "display": "surface", **{key: BY_NAME[key].default for key in KEYS},
+    "smooth_dims": None, "metric_weights": None, "mirror": (), "iteration": 0,
 }
+#: How a session file stores each schedule parameter: an int64 or a float64 scalar.
+_SCALAR_KIND = {key: "i" if BY_NAME[key].kind == "int" else "f" for key in KEYS}
 
 
 def save_session(path, state: dict) -> None:
@@ -251,7 +253,8 @@ def save_session(path, state: dict) -> None:
     state keys (load_session returns the same, plus "format_version" and "n_vertices"):
       weights (N, n), start_weights (N, n), controls (k, n): float arrays; topology: a Topology (its faces are kept
       when it has them, else its edges); layout: a FeatureLayout; and optionally preset (str), display (str),
-      iterations, iteration (ints), l_start, l_end, smoothing, reach (floats), smooth_dims (None or dims),
+      the schedule (schedule.KEYS: iterations an int, l_start, l_end, smoothing, reach floats), iteration (an
+      int), smooth_dims (None or dims),
       metric_weights (None or (n,) floats), mirror (dims). `session_state()` builds one from a Preset and a Som.
       n_vertices and format_version may be present (as in a loaded state) and are checked / ignored.
     """
@@ -273,9 +276,8 @@ def save_session(path, state: dict) -> None:
         "weights": clean["weights"], "start_weights": clean["start_weights"], "controls": clean["controls"],
         "n_vertices": np.int64(topo.n_vertices),
         "edges": np.asarray(topo.edges, np.int64).reshape(-1, 2),
-        "iterations": np.int64(clean["iterations"]), "iteration": np.int64(clean["iteration"]),
-        "l_start": np.float64(clean["l_start"]), "l_end": np.float64(clean["l_end"]),
-        "smoothing": np.float64(clean["smoothing"]), "reach": np.float64(clean["reach"]),
+        **{key: (np.int64 if kind == "i" else np.float64)(clean[key]) for key, kind in _SCALAR_KIND.items()},
+        "iteration": np.int64(clean["iteration"]),
         "smooth_dims": np.asarray(clean["smooth_dims"] or (), np.int64),
         "smooth_dims_default": np.bool_(clean["smooth_dims"] is None),
         "metric_weights": (np.zeros(0, np.float32) if clean["metric_weights"] is None else clean["metric_weights"]),
@@ -310,7 +312,7 @@ def save_session(path, state: dict) -> None:
 #: The members a session archive may hold (np.savez names each key.npy): any other is refused unread.
 SESSION_MEMBERS = frozenset({
     "format_version", "preset", "display", "weights", "start_weights", "controls", "n_vertices", "edges",
-    "iterations", "iteration", "l_start", "l_end", "smoothing", "reach", "smooth_dims", "smooth_dims_default",
+    *KEYS, "iteration", "smooth_dims", "smooth_dims_default",
     "metric_weights", "metric_weights_default", "mirror", "layout_names", "layout_position", "layout_colour",
     "layout_colour_space", "layout_direction", "layout_length", "topology_kind", "face_indices", "face_sizes"})
 
@@ -435,9 +437,9 @@ def load_session(path, *, max_vertices: int = MAX_VERTICES, max_iterations: int 
         "preset": scalar("preset", "s"), "display": scalar("display", "s"),
         "weights": get("weights"), "start_weights": get("start_weights"), "controls": get("controls"),
         "topology": topology, "layout": layout,
-        "iterations": scalar("iterations", "i"), "iteration": scalar("iteration", "i"),
-        "l_start": scalar("l_start", "f"), "l_end": scalar("l_end", "f"), "smoothing": scalar("smoothing", "f"),
-        "reach": scalar("reach", "f") if "reach" in data else DEFAULT_REACH,  # files before reach: the default
+        # a schedule parameter the file lacks (it was written before there was one: reach) takes its default
+        **{key: scalar(key, kind) if key in data else BY_NAME[key].default for key, kind in _SCALAR_KIND.items()},
+        "iteration": scalar("iteration", "i"),
         "smooth_dims": None if scalar("smooth_dims_default", "b") else tuple(int(d) for d in ints("smooth_dims")),
         "metric_weights": None if scalar("metric_weights_default", "b") else get("metric_weights"),
         "mirror": tuple(int(d) for d in ints("mirror")),
@@ -477,12 +479,9 @@ def _check_state(state: dict, label: str) -> dict:
             raise ValueError(f"{label}: key {key!r}: expected a string, got {type(state[key]).__name__}")
     if state["display"] not in DISPLAYS:
         raise ValueError(f"{label}: key 'display': expected one of {DISPLAYS}, got {state['display']!r}")
-    out["iterations"] = checks.integer(f"{label}: key 'iterations'", state["iterations"], 1)
+    for key in KEYS:
+        out[key] = BY_NAME[key].check(state[key], f"{label}: key {key!r}")
     out["iteration"] = checks.integer(f"{label}: key 'iteration'", state["iteration"], 0, out["iterations"])
-    out["l_start"] = checks.real(f"{label}: key 'l_start'", state["l_start"], 0.0, 1.0, low_open=True)
-    out["l_end"] = checks.real(f"{label}: key 'l_end'", state["l_end"], 0.0, 1.0, low_open=True)
-    out["smoothing"] = checks.real(f"{label}: key 'smoothing'", state["smoothing"], 0.0, 1.0)
-    out["reach"] = checks.real(f"{label}: key 'reach'", state["reach"], 0.0, 1.0, low_open=True)
     out["mirror"] = checks.dims(f"{label}: key 'mirror'", state["mirror"], n)
     if state["smooth_dims"] is not None:
         out["smooth_dims"] = checks.dims(f"{label}: key 'smooth_dims'", state["smooth_dims"], n)
@@ -500,14 +499,13 @@ def session_state(preset: Preset, som=None) -> dict:
     state = {
         "preset": preset.name, "display": preset.display, "topology": preset.topology, "layout": preset.layout,
         "start_weights": preset.weights, "weights": preset.weights, "controls": preset.controls,
-        "iterations": preset.iterations, "iteration": 0, "l_start": preset.l_start, "l_end": preset.l_end,
-        "smoothing": preset.smoothing, "smooth_dims": preset.smooth_dims, "metric_weights": preset.metric_weights,
-        "mirror": preset.mirror, "reach": preset.reach,
+        **{key: getattr(preset, key) for key in KEYS}, "iteration": 0,
+        "smooth_dims": preset.smooth_dims, "metric_weights": preset.metric_weights, "mirror": preset.mirror,
     }
     if som is not None:
-        state.update(weights=som.weights, controls=som.controls, iteration=som.iteration, iterations=som.iterations,
-                     l_start=som.l_start, l_end=som.l_end, smoothing=som.smoothing, smooth_dims=som.smooth_dims,
-                     metric_weights=som.metric_weights, mirror=som.mirror, reach=som.reach)
+        state.update({key: getattr(som, key) for key in KEYS})
+        state.update(weights=som.weights, controls=som.controls, iteration=som.iteration, smooth_dims=som.smooth_dims,
+                     metric_weights=som.metric_weights, mirror=som.mirror)
     return state
 
 
@@ -518,6 +516,6 @@ def preset_from_session(state: dict) -> Preset:
     return Preset(
         name=state.get("preset") or "session", title=state.get("preset") or "Session", description="A saved session.",
         topology=state["topology"], weights=state["start_weights"], controls=state["controls"],
-        layout=state["layout"], iterations=state["iterations"], l_start=state["l_start"], l_end=state["l_end"],
-        smoothing=state["smoothing"], mirror=state["mirror"], metric_weights=state["metric_weights"],
-        display=state["display"], smooth_dims=state["smooth_dims"], reach=state.get("reach", DEFAULT_REACH))
+        layout=state["layout"], mirror=state["mirror"], metric_weights=state["metric_weights"],
+        display=state["display"], smooth_dims=state["smooth_dims"],
+        **{key: state.get(key, BY_NAME[key].default) for key in KEYS})

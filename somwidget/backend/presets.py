@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import checks
-from .som import DEFAULT_REACH
+from .schedule import BY_NAME, KEYS
 from .topology import Topology
 
 #: Colour spaces and the number of colour dims each one takes.
@@ -127,15 +127,16 @@ class Preset:
     weights: np.ndarray
     controls: np.ndarray
     layout: FeatureLayout
-    iterations: int = 1000
-    l_start: float = 0.25
-    l_end: float = 0.03
-    smoothing: float = 0.0
+    # the schedule (schedule.KEYS), its defaults those of schedule.SETTINGS
+    iterations: int = BY_NAME["iterations"].default
+    l_start: float = BY_NAME["l_start"].default
+    l_end: float = BY_NAME["l_end"].default
+    smoothing: float = BY_NAME["smoothing"].default
     mirror: tuple[int, ...] = ()
     metric_weights: np.ndarray | None = None
     display: str = "surface"
     smooth_dims: tuple[int, ...] | None = None
-    reach: float = DEFAULT_REACH
+    reach: float = BY_NAME["reach"].default
     grow: bool = False
     meta: dict = field(default_factory=dict)
 
@@ -155,11 +156,9 @@ class Preset:
                              f"({self.topology.n_vertices}, {n}) (topology vertices, layout dims)")
         if self.controls.shape[1] != n:
             raise ValueError(f"preset {self.name!r}: controls have {self.controls.shape[1]} dims, the layout has {n}")
-        self.iterations = checks.integer(f"preset {self.name!r}: iterations", self.iterations, 1)
-        self.l_start = checks.real(f"preset {self.name!r}: l_start", self.l_start, 0.0, 1.0, low_open=True)
-        self.l_end = checks.real(f"preset {self.name!r}: l_end", self.l_end, 0.0, 1.0, low_open=True)
-        self.smoothing = checks.real(f"preset {self.name!r}: smoothing", self.smoothing, 0.0, 1.0)
-        self.reach = checks.real(f"preset {self.name!r}: reach", self.reach, 0.0, 1.0, low_open=True)
+        for key in KEYS:  # a schedule parameter without a field here takes its default
+            setting = BY_NAME[key]
+            setattr(self, key, setting.check(getattr(self, key, setting.default), f"preset {self.name!r}: {key}"))
         self.grow = bool(self.grow)
         self.mirror = checks.dims(f"preset {self.name!r}: mirror", self.mirror, n)
         if self.smooth_dims is not None:
@@ -193,10 +192,9 @@ class Preset:
         that does not `grow` as it is: it then puts s at S (`Som.restore`) so that nothing trains."""
         from .som import Som
 
-        return Som(self.topology, self.weights, self.controls, iterations=self.iterations, l_start=self.l_start,
-                   l_end=self.l_end, smoothing=self.smoothing, smooth_dims=self.smooth_dims,
-                   metric_weights=self.metric_weights, mirror=self.mirror, device=device, reach=self.reach,
-                   **engine_options)
+        return Som(self.topology, self.weights, self.controls, smooth_dims=self.smooth_dims,
+                   metric_weights=self.metric_weights, mirror=self.mirror, device=device,
+                   **{key: getattr(self, key) for key in KEYS}, **engine_options)
 
 
 def effective_controls(controls, mirror=()) -> np.ndarray:

@@ -40,19 +40,13 @@ from .cpu_path import CpuPath
 from .cuda_path import CudaPath
 from .cycle_kernels import CUDA_BLOCK, LONGEST_GRAPH, MAX_CONTROLS, PAIRS, SCALED_PAIRS, SINGLES, cycle_kernels
 from .rows_path import RowCache, RowsPath
-from .schedule import learning_table
+from .schedule import BY_NAME, DEFAULT_REACH, learning_table
 from .topology import MAX_DENSE_NEURONS, Topology
 
 MAX_DIMS = 32
 _KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
 #: Learning table entries (S x (d_max + 1) float32) a Som may hold: 2 GiB.
 _MAX_TABLE_ENTRIES = 1 << 29
-#: The neighbourhood radius a restart begins with, as a share of the full radius sigma (Restarts, above). Chosen
-#: by measurement on the car (BENCHMARKS.md, "Local restarts"): a control moved by 5% of the size is followed to
-#: within 1% while the far half of the mesh stays within 2% and nothing collapses, with the least spike at the moved
-#: control among the values that do (a smaller reach pulls a narrower, pointier bump; a larger one wears down the
-#: neighbourhoods of the other controls).
-DEFAULT_REACH = 0.08
 
 
 def restart_iteration(reach: float, iterations: int) -> int:
@@ -85,10 +79,10 @@ class Som(CpuPath, CudaPath, RowsPath):
         topology: Topology,
         weights: ArrayLike,
         controls: ArrayLike,
-        iterations: int = 1000,
-        l_start: float = 0.25,
-        l_end: float = 0.03,
-        smoothing: float = 0.0,
+        iterations: int = BY_NAME["iterations"].default,
+        l_start: float = BY_NAME["l_start"].default,
+        l_end: float = BY_NAME["l_end"].default,
+        smoothing: float = BY_NAME["smoothing"].default,
         smooth_dims: Sequence[int] | None = None,
         metric_weights: ArrayLike | None = None,
         mirror: Sequence[int] = (),
@@ -110,11 +104,11 @@ class Som(CpuPath, CudaPath, RowsPath):
             raise ValueError(f"weights: expected 1 to {MAX_DIMS} feature dimensions, got {start.shape[1]}")
         self.n_neurons, self.n_dims = start.shape
         self._start = start
-        self._iterations = checks.integer("iterations", iterations, 1)
-        self._l_start = checks.real("l_start", l_start, 0.0, 1.0, low_open=True)
-        self._l_end = checks.real("l_end", l_end, 0.0, 1.0, low_open=True)
-        self._smoothing = checks.real("smoothing", smoothing, 0.0, 1.0)
-        self._reach = checks.real("reach", reach, 0.0, 1.0, low_open=True)
+        self._iterations = BY_NAME["iterations"].check(iterations, "iterations")
+        self._l_start = BY_NAME["l_start"].check(l_start, "l_start")
+        self._l_end = BY_NAME["l_end"].check(l_end, "l_end")
+        self._smoothing = BY_NAME["smoothing"].check(smoothing, "smoothing")
+        self._reach = BY_NAME["reach"].check(reach, "reach")
         self._mirror = checks.dims("mirror", mirror, self.n_dims)
         self._smooth_dims = self._check_smooth_dims(smooth_dims)
         self._metric = self._check_metric(metric_weights)
@@ -238,7 +232,7 @@ class Som(CpuPath, CudaPath, RowsPath):
 
     @reach.setter
     def reach(self, value: float) -> None:
-        self._reach = checks.real("reach", value, 0.0, 1.0, low_open=True)
+        self._reach = BY_NAME["reach"].check(value, "reach")
 
     @property
     def restart_iteration(self) -> int:
@@ -253,7 +247,7 @@ class Som(CpuPath, CudaPath, RowsPath):
     @iterations.setter
     @warp_exclusive
     def iterations(self, value: int) -> None:
-        old, self._iterations = self._iterations, checks.integer("iterations", value, 1)
+        old, self._iterations = self._iterations, BY_NAME["iterations"].check(value, "iterations")
         try:
             self._build_table()
         except ValueError:
@@ -268,7 +262,7 @@ class Som(CpuPath, CudaPath, RowsPath):
     @l_start.setter
     @warp_exclusive
     def l_start(self, value: float) -> None:
-        self._l_start = checks.real("l_start", value, 0.0, 1.0, low_open=True)
+        self._l_start = BY_NAME["l_start"].check(value, "l_start")
         self._build_table()
         self._restart()
 
@@ -279,7 +273,7 @@ class Som(CpuPath, CudaPath, RowsPath):
     @l_end.setter
     @warp_exclusive
     def l_end(self, value: float) -> None:
-        self._l_end = checks.real("l_end", value, 0.0, 1.0, low_open=True)
+        self._l_end = BY_NAME["l_end"].check(value, "l_end")
         self._build_table()
         self._restart()
 
@@ -291,7 +285,7 @@ class Som(CpuPath, CudaPath, RowsPath):
     @smoothing.setter
     @warp_exclusive
     def smoothing(self, value: float) -> None:
-        self._smoothing = checks.real("smoothing", value, 0.0, 1.0)
+        self._smoothing = BY_NAME["smoothing"].check(value, "smoothing")
         self._graphs.clear()  # the graphs hold lambda
         self._restart()
 

@@ -15,18 +15,16 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import checks, metrics
-from .batch import MAX_TABLE_ENTRIES, SCHEDULE_KEYS, BatchSom
+from .batch import MAX_TABLE_ENTRIES, BatchSom
+from .schedule import BY_NAME, KEYS
 from .topology import Topology
 
-#: What each schedule parameter may be (Som's checks): (low, high, whole numbers).
-PARAMETER_BOUNDS = {"iterations": (1, 1_000_000, True), "l_start": (0.0, 1.0, False), "l_end": (0.0, 1.0, False),
-                    "smoothing": (0.0, 1.0, False), "reach": (0.0, 1.0, False)}
 FIGURES = ("gap", "spike", "symmetry", "size")
 
 
 @dataclass(frozen=True)
 class VariantPlan:
-    """n variants of one mesh: their controls (n, k, dims) and schedules (each key of SCHEDULE_KEYS: (n,)).
+    """n variants of one mesh: their controls (n, k, dims) and schedules (each key of schedule.KEYS: (n,)).
 
     restart False: each variant is a whole run from `start` (as `Som.reset()` then `train()`); True: each is a local
     restart from `start` (a session's current weights), as a move of its controls would be."""
@@ -52,21 +50,22 @@ class VariantPlan:
                        schedules={key: values[lo:hi] for key, values in self.schedules.items()})
 
     def params(self, i: int) -> dict:
-        """Variant i's schedule as a dict (iterations an int)."""
-        return {key: (int(v[i]) if key == "iterations" else float(v[i])) for key, v in self.schedules.items()}
+        """Variant i's schedule as a dict, as Som keeps it (iterations an int)."""
+        return {key: BY_NAME[key].check(v[i], key) for key, v in self.schedules.items()}
 
 
 def _draw(name: str, spec, base, n: int, rng: np.random.Generator) -> np.ndarray:
-    """n values of one parameter: the base value (spec None), uniform in a (low, high) range, or drawn from a list."""
-    low, high, whole = PARAMETER_BOUNDS[name]
+    """n values of one parameter: the base value (spec None), uniform in a (low, high) range, or drawn from a list;
+    int64 for a whole-number parameter (iterations), else float64."""
+    setting = BY_NAME[name]
+    whole = setting.kind == "int"
+    dtype = np.int64 if whole else np.float64
 
     def check(x):
-        if whole:
-            return checks.integer(f"params[{name!r}]", x, max(1, int(low)), int(high))
-        return checks.real(f"params[{name!r}]", x, low, high, low_open=name in ("l_start", "l_end", "reach"))
+        return setting.check(x, f"params[{name!r}]")
 
     if spec is None:
-        return np.full(n, check(base), np.float64)
+        return np.full(n, check(base), dtype)
     if isinstance(spec, tuple):
         if len(spec) != 2:
             raise ValueError(f"params[{name!r}]: a range is (low, high), got {spec!r}")
@@ -74,14 +73,14 @@ def _draw(name: str, spec, base, n: int, rng: np.random.Generator) -> np.ndarray
         if lo > hi:
             raise ValueError(f"params[{name!r}]: the range's low {lo} is above its high {hi}")
         if whole:
-            return rng.integers(lo, hi + 1, n).astype(np.float64)
+            return rng.integers(lo, hi + 1, n).astype(dtype)
         return rng.uniform(lo, hi, n)
     if isinstance(spec, (list, np.ndarray)):
         values = [check(x) for x in list(spec)]
         if not values:
             raise ValueError(f"params[{name!r}]: the list of values is empty")
-        return np.asarray(values, np.float64)[rng.integers(0, len(values), n)]
-    return np.full(n, check(spec), np.float64)
+        return np.asarray(values, dtype)[rng.integers(0, len(values), n)]
+    return np.full(n, check(spec), dtype)
 
 
 def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: int, jitter: float = 0.05,
@@ -94,9 +93,9 @@ def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: 
     n = checks.integer("n", n, 1, 1_000_000)
     jitter = checks.real("jitter", jitter, 0.0, 1.0)
     params = dict(params or {})
-    unknown = sorted(set(params) - set(SCHEDULE_KEYS))
+    unknown = sorted(set(params) - set(KEYS))
     if unknown:
-        raise ValueError(f"params: unknown parameter(s) {unknown}; expected some of {list(SCHEDULE_KEYS)}")
+        raise ValueError(f"params: unknown parameter(s) {unknown}; expected some of {list(KEYS)}")
     start = checks.finite_array("weights", start, 2)
     base = checks.finite_array("controls", controls, 2)
     dims = [d for d in position_dims if d < start.shape[1]]
@@ -108,8 +107,7 @@ def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: 
     radius = jitter * size * rng.uniform(size=(n, k, 1)) ** (1.0 / max(1, len(dims)))
     out = np.repeat(base[None].astype(np.float64), n, axis=0)
     out[:, :, dims] += direction * radius
-    schedules = {key: _draw(key, params.get(key), base_params[key], n, rng) for key in SCHEDULE_KEYS}
-    schedules["iterations"] = schedules["iterations"].astype(np.int64)
+    schedules = {key: _draw(key, params.get(key), base_params[key], n, rng) for key in KEYS}
     edges = np.ascontiguousarray(np.asarray(topology.edges, np.int32).reshape(-1, 2))
     return VariantPlan(n_vertices=topology.n_vertices, edges=edges, start=start, controls=out.astype(np.float32),
                        schedules=schedules, restart=bool(restart), mirror=tuple(mirror),
