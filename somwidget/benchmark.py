@@ -12,7 +12,8 @@ as the app calls it (`step(10)` between frames), the numpy baseline's time per c
 compile, graph capture) is timed and reported apart. Then the engine and each baseline run cycle by cycle from the
 start and their winners and weights are compared, so the figures are known to come from the same cycles.
 
-Imports only numpy, warp and somwidget.backend: it runs on a GPU machine with nothing else installed.
+Imports only numpy, warp and somwidget.backend: it runs on a GPU machine with nothing else installed. Run it as
+`somwidget bench` or `python benchmarks/bench_engine.py` (both parse their arguments in cli.py and call `run`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ import math
 import os
 import platform
 import statistics
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 
@@ -582,12 +582,3 @@ def run(device: str | None = "auto", cases=None, cycles: int | None = None, repe
         out(f"\nwrote {json_path}")
     return results
 
-
-def main(argv=None) -> int:
-    from somwidget.cli import main as cli_main
-
-    return cli_main(["bench", *(argv or [])])
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
