@@ -28,7 +28,7 @@ import numpy as np
 from somwidget.backend.presets import XYZ, Preset, controls_on, open_grid
 from somwidget.backend.topology import Topology
 from somwidget.frontend.transport import display as wire_display, frames as wire_frames
-from somwidget.frontend.model.session import Session
+from somwidget.frontend.model import Session
 
 
 def grid(side: int) -> Preset:

@@ -41,8 +41,8 @@ def sweep(preset_or_session="car", n: int = 64, jitter: float = 0.05, params=Non
 
 def serve(preset: str | None = None, mesh=None, host: str | None = None, port: int = 8080, device: str = "auto",
           open_browser: bool = False, lan: bool = False, fresh: bool = False):
-    """Run the web app (what `somwidget serve` runs) until interrupted; see somwidget.frontend.web.app.run_server."""
-    from .frontend.web.app import run_server
+    """Run the web app (what `somwidget serve` runs) until interrupted; see somwidget.frontend.web.serve.run_server."""
+    from .frontend.web.serve import run_server
 
     return run_server(preset=preset, mesh=mesh, host=host, port=port, device=device, open_browser=open_browser,
                       lan=lan, fresh=fresh)

@@ -193,7 +193,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    from somwidget.frontend.web.app import run_server
+    from somwidget.frontend.web.serve import run_server
 
     run_server(
         preset=args.preset,

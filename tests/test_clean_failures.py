@@ -78,12 +78,12 @@ def test_an_uploaded_non_session_names_the_file_not_a_temporary_path(app):
 
 
 def test_the_size_limit_in_messages_is_the_readme_s():
-    from somwidget.frontend.web.app import SomApp
+    from somwidget.frontend.web import uploads
 
     readme = (helpers.ROOT / "README.md").read_text()
     shown = re.search(r"up to (\d+) MB", readme).group(1)
     with pytest.raises(ValueError) as info:
-        SomApp._file_of({"name": "big.obj", "size": 60_000_000, "content": b"x"})
+        uploads.file_of({"name": "big.obj", "size": 60_000_000, "content": b"x"})
     assert f"the limit is {shown} MB" in str(info.value)
 
 

@@ -63,9 +63,9 @@ def test_subcommand_help_lists_every_option(command, options, capsys):
 
 def test_serve_defaults_and_passes_options(monkeypatch):
     calls = []
-    fake = types.ModuleType("somwidget.frontend.web.app")
+    fake = types.ModuleType("somwidget.frontend.web.serve")
     fake.run_server = lambda **kwargs: calls.append(kwargs)
-    monkeypatch.setitem(sys.modules, "somwidget.frontend.web.app", fake)
+    monkeypatch.setitem(sys.modules, "somwidget.frontend.web.serve", fake)
     assert main(["serve"]) == 0
     assert calls[-1] == dict(preset=None, mesh=None, host="127.0.0.1", port=8080, device="auto", open_browser=False,
                            lan=False, fresh=False)

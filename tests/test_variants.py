@@ -10,7 +10,7 @@ import pytest
 import somwidget
 from somwidget import Som, presets
 from somwidget.cli import main as cli_main
-from somwidget.frontend.model.session import Session
+from somwidget.frontend.model import Session
 
 
 def _single_run(preset, controls, params, start=None, restart=False):

@@ -35,7 +35,7 @@ if not (DIST / "emulator.html").is_file():  # pragma: no cover
 
 @pytest.fixture(scope="module")
 def session():
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     s = Session("car", device="cpu")
     assert s.wait_idle(120), "the session did not converge"

@@ -97,7 +97,7 @@ def test_qr_text_encodes_the_url():
 def test_https_with_token_end_to_end(tmp_path):
     """The XR route over TLS with the token middleware: 403 without the token, the page and the websocket with it
     (the client checks the server's certificate is the one made)."""
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     cfg = lan.prepare_lan(host="127.0.0.1", directory=tmp_path)
     client_ctx = ssl.create_default_context()
@@ -158,7 +158,7 @@ def test_an_empty_host_is_an_error_not_lan_mode(host):
         lan.is_loopback(host)
     with pytest.raises(ValueError, match="empty host"):
         lan.prepare_lan(host)
-    from somwidget.frontend.web.app import run_server
+    from somwidget.frontend.web.serve import run_server
 
     with pytest.raises(ValueError, match="empty host"):
         run_server(host=host, device="cpu")
@@ -178,7 +178,7 @@ def test_cookie_name_is_per_port():
 
 
 def test_xr_server_beyond_loopback_needs_a_token():
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     with Session("car", device="cpu", start=False) as session:
         for host in ("0.0.0.0", "192.168.1.20", "example.org"):
@@ -193,7 +193,7 @@ def test_xr_server_beyond_loopback_needs_a_token():
 def test_xr_server_refuses_other_sites_and_host_names():
     """The standalone XR server: a websocket from another site's page is refused (403), and so is a request whose
     Host is not a loopback name; its own origin is served."""
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     with Session("car", device="cpu", paused=True) as session, XRServer(session) as srv:
         async def main():

@@ -24,7 +24,7 @@ from somwidget.frontend.web.standalone import XRServer
 
 @pytest.fixture(scope="module")
 def session():
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     s = Session("car", device="cpu", paused=True)
     yield s
@@ -123,7 +123,7 @@ def test_topology_and_frame_layout(srv, session):
 
 @pytest.mark.parametrize("preset, display, n", [("lines", "lines", 1204), ("lattice", "points", 512)])
 def test_other_displays_encode(preset, display, n):
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     with Session(preset, device="cpu", start=False) as s:
         frame = s.frame
@@ -404,7 +404,7 @@ def test_token_required(session):
 
 def test_new_preset_sends_a_new_topology():
     """When the desktop loads another preset, every XR client gets the new topology before its frames."""
-    from somwidget.frontend.model.session import Session
+    from somwidget.frontend.model import Session
 
     with Session("car", device="cpu", paused=True) as session, XRServer(session) as srv:
         async def main():

@@ -90,6 +90,14 @@ class Frame:
         return int(self.controls.shape[0])
 
     @property
+    def control_display_colours(self) -> np.ndarray:
+        """(k_eff, 3) the colours the views draw the effective controls in: their colour dims' where the layout has
+        them, else the palette's (a mirrored copy in its control's colour)."""
+        if self.preset.layout.colour_space != "none":
+            return np.asarray(self.effective_colours, np.float32)
+        return _presets.palette_colours(self.n_controls, len(self.effective_controls))[1]
+
+    @property
     def progress(self) -> float:
         return self.iteration / self.iterations if self.iterations else 1.0
 

@@ -1,6 +1,7 @@
 """somwidget in Jupyter: `show()` puts the ipywidgets panel beside the live clay view (an anywidget) of a Session."""
 
-from .panel import Panel, SomWidget, show
+from .panel import Panel
+from .show import SomWidget, picture_png, show
 from .widget import ClayWidget
 
-__all__ = ["Panel", "SomWidget", "ClayWidget", "show"]
+__all__ = ["Panel", "SomWidget", "ClayWidget", "show", "picture_png"]

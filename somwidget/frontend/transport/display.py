@@ -106,13 +106,6 @@ def display_arrays(frame, session) -> tuple[np.ndarray, np.ndarray]:
     return pos, col
 
 
-def control_colours(frame, has_colour: bool) -> np.ndarray:
-    """(k_eff, 3) display colours of the effective controls (the palette when the layout has no colour dims)."""
-    if has_colour:
-        return np.asarray(frame.effective_colours, np.float32)
-    return _presets.palette_colours(frame.n_controls, len(frame.effective_controls))[1]
-
-
 def mirror_axes(session) -> list[bool]:
     """Which position axes (x, y, z) a mirrored copy negates, from the session's mirror dims."""
 

@@ -8,7 +8,7 @@ import struct
 
 import numpy as np
 
-from .display import control_colours, display_arrays
+from .display import display_arrays
 from .messages import FLAGS, HEADER_FORMAT, HEADER_SIZE, MAGIC, PROTOCOL_VERSION
 
 HEADER = struct.Struct(HEADER_FORMAT)
@@ -22,7 +22,7 @@ def encode_frame(frame, session) -> bytes:
     """The binary frame message for `frame` of `session` (the outbox encodes each published frame once)."""
     pos, col = display_arrays(frame, session)
     cpos = np.asarray(frame.effective_positions, np.float32).reshape(-1, 3)
-    ccol = control_colours(frame, session.layout.colour_space != "none")
+    ccol = frame.control_display_colours
     n, k, k_eff = len(pos), int(frame.n_controls), len(cpos)
     undo, redo = frame.history
     set_ = {"running": frame.running, "paused": frame.paused, "mirrored": k_eff > k, "can_undo": undo > 0,

@@ -1,0 +1,207 @@
+"""The panel model: what every panel of a session shows and does, with no UI. The web app's trame panel
+(web/panel.py) and the notebook's ipywidgets panel (notebook/panel.py) bind their widgets to one of these:
+
+- the fields: the parameters' declarations (parameters.py) and their values as the session holds them;
+- the rows: one per feature dimension (name, role, metric weight) and one per control (colour, position, gap);
+- the status line and the Train / Pause button's label, from a frame;
+- the actions (ACTIONS: train or pause, undo, redo, reset, the preset again) and the edits, each returning the
+  message a panel shows when the session refuses it (None when it took it);
+- the variants: a sweep of the current design, its thumbnails and captions, and picking one.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ...backend import presets as _presets
+from ...backend.presets import hex_colour
+from .frames import Frame
+from .parameters import BY_NAME, METRIC_WEIGHT, PARAMETERS
+from .session import Session
+from .variants import MAX_GALLERY_VARIANTS, VARIED, vary_around
+from .variants import sweep as sweep_variants
+
+
+@dataclass(frozen=True)
+class Action:
+    """A button every panel has."""
+
+    name: str
+    label: str
+    icon: str  # a Material Design icon name (mdi-...), for the web; the notebook maps it to Font Awesome
+    help: str
+
+
+ACTIONS: tuple[Action, ...] = (
+    Action("toggle_training", "Train", "play", "Train or pause the map"),
+    Action("undo", "Undo", "undo", "Undo the last step (a drag, a setting, a preset...); Ctrl+Z"),
+    Action("redo", "Redo", "redo", "Redo the step undone last; Ctrl+Shift+Z"),
+    Action("reset", "Reset", "restore", "Back to the start mesh; the whole schedule runs again (the controls stay)"),
+    Action("reload_preset", "Reload", "reload", "This preset again as it starts: its own controls and start mesh"),
+)
+ACTION_NAMES = tuple(a.name for a in ACTIONS)
+
+
+def fmt(x: float | None, digits: int = 3) -> str:
+    """A number as a panel shows it ("-" for none)."""
+    return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
+
+
+def field_text(name: str, value) -> str | float | bool:
+    """A parameter's value as its field holds it: S as text, reach a number, symmetry a flag, the rest 6 digits."""
+    if name == "iterations":
+        return str(value)
+    if name == "reach":
+        return float(value)
+    if name == "symmetry":
+        return bool(value)
+    return fmt(value, 6)
+
+
+class PanelModel:
+    """One panel's view of a Session (see the module's docstring)."""
+
+    fields = PARAMETERS
+    metric = METRIC_WEIGHT
+    max_variants = MAX_GALLERY_VARIANTS
+    varied = tuple(VARIED)
+
+    def __init__(self, session: Session):
+        self.session = session
+        self.variants = None  # the latest sweep's Variants
+
+    # -- edits and actions: None when the session took it, else the message to show -------------------------------
+    @staticmethod
+    def attempt(fn: Callable, *args) -> str | None:
+        try:
+            fn(*args)
+        except (ValueError, RuntimeError, TypeError) as exc:
+            return str(exc)
+        return None
+
+    def set(self, name: str, value) -> str | None:
+        return self.attempt(self.session.set_parameter, name, value)
+
+    def set_metric(self, dim, value) -> str | None:
+        return self.attempt(self.session.set_metric_weight, dim, value)
+
+    def run(self, action: str) -> str | None:
+        if action not in ACTION_NAMES:
+            return f"unknown action {action!r}"
+        return self.attempt(getattr(self, action))
+
+    def toggle_training(self) -> None:
+        """Pause a running map; otherwise train (a settled run restarts locally), as the button says."""
+        if self.session.frame.running:
+            self.session.pause()
+        else:
+            self.session.train()
+
+    def undo(self) -> None:
+        self.session.undo()
+
+    def redo(self) -> None:
+        self.session.redo()
+
+    def reset(self) -> None:
+        self.session.reset()
+
+    def reload_preset(self) -> None:
+        """The current preset again, as it starts (one undo step); a loaded mesh or session: its own start."""
+        preset = self.session.preset
+        self.session.load_preset(preset.name if preset.name in _presets.PRESETS else preset)
+
+    # -- what the panel shows ----------------------------------------------------------------------------------
+    def values(self) -> dict:
+        """Each field's value as the session holds it (`field_text`), and the metric weights."""
+        p = self.session.parameters
+        out = {f.name: field_text(f.name, p[f.name]) for f in self.fields}
+        out["metric_weights"] = [float(x) for x in p["metric_weights"]]
+        return out
+
+    @staticmethod
+    def train_label(frame: Frame) -> str:
+        return "Pause" if frame.running else "Train"
+
+    def status(self, frame: Frame) -> dict:
+        k = frame.n_controls
+        gaps = frame.gaps
+        return {
+            "iteration": frame.iteration, "S": frame.iterations, "progress": round(100.0 * frame.progress, 1),
+            "running": frame.running, "paused": frame.paused,
+            "state": "training" if frame.running else ("paused" if frame.paused else "converged"),
+            "cycle_ms": fmt(frame.cycle_time * 1e3, 3) if frame.cycle_time > 0 else "-",
+            "fps": fmt(self.session.frames_per_second, 3), "n_vertices": int(frame.positions.shape[0]), "k": k,
+            "k_eff": int(len(gaps)), "max_gap": fmt(float(gaps.max()) if len(gaps) else 0.0, 3),
+            "can_undo": frame.history[0] > 0, "can_redo": frame.history[1] > 0, "held": frame.held,
+            "train_label": self.train_label(frame),
+        }
+
+    @staticmethod
+    def control_rows(frame: Frame) -> list[dict]:
+        """One row per control: its index, colour ('#rrggbb'), position and gap text (original / mirror)."""
+        k, gaps = frame.n_controls, frame.gaps
+        colours = frame.control_display_colours[:k]
+        rows = []
+        for i in range(k):
+            g = [float(gaps[i])] if i < len(gaps) else []
+            if len(gaps) >= 2 * k:  # mirrored copy i sits at k + i
+                g.append(float(gaps[k + i]))
+            rows.append({"i": i, "colour": hex_colour(colours[i]),
+                         "position": ", ".join(f"{x:.2f}" for x in frame.control_positions[i]),
+                         "gap": " / ".join(f"{x:.3f}" for x in g)})
+        return rows
+
+    def feature_rows(self) -> list[dict]:
+        """One row per feature dimension: its index, name, role and metric weight."""
+        layout = self.session.layout
+        roles = {d: "position" for d in layout.position}
+        roles.update({d: f"colour ({layout.colour_space})" for d in layout.colour})
+        roles.update({d: "direction" for d in layout.direction})
+        if layout.length is not None:
+            roles[layout.length] = "length"
+        weights = self.session.parameters["metric_weights"]
+        return [{"d": d, "name": layout.names[d], "role": roles.get(d, "feature"), "colour": d in layout.colour,
+                 "weight": float(weights[d])} for d in range(layout.n_dims)]
+
+    def preset_options(self, labels: dict[str, str] | None = None) -> list[tuple[str, str]]:
+        """(label, name) of every preset, and of the session's own when it is a loaded mesh or session."""
+        labels = _presets.PRESET_LABELS if labels is None else labels
+        options = [(labels.get(name, name), name) for name in _presets.PRESETS]
+        preset = self.session.preset
+        if preset.name not in _presets.PRESETS:
+            options.append((f"{preset.title} (loaded, {preset.n_vertices} nodes)", preset.name))
+        return options
+
+    # -- variants ----------------------------------------------------------------------------------------------
+    def sweep(self, n, jitter, vary, progress: Callable[[int, int], None] | None = None, thumbnail_size=None):
+        """Train n variants of the current design (a local restart each, with the controls jittered and the chosen
+        parameters varied around their values) on the session's device; returns (Variants, thumbnails)."""
+        from ...backend import checks
+
+        n = checks.integer_text("variants: how many", n, 1, MAX_GALLERY_VARIANTS)
+        jitter = checks.real("variants: jitter", jitter, 0.0, 1.0)
+        params = vary_around([name for name in vary if name in VARIED], self.session.parameters)
+        variants = sweep_variants(self.session, n=n, jitter=jitter, params=params, progress=progress,
+                                  device=self.session.training_device)
+        thumbs = variants.thumbnails() if thumbnail_size is None else variants.thumbnails(size=thumbnail_size)
+        self.variants = variants
+        return variants, thumbs
+
+    def caption(self, i: int, vary=()) -> str:
+        """Variant i's figures (and the varied parameters' values) in a line."""
+        v = self.variants
+        return (f"#{i}: gap {v.metrics['gap'][i]:.3f}, spike {v.metrics['spike'][i]:.2f}"
+                + "".join(f", {k} {fmt(x)}" for k, x in v.params[i].items() if k in vary))
+
+    def pick(self, i) -> str | None:
+        """Make variant i of the latest sweep the session's state (one undo step)."""
+        if self.variants is None:
+            return "variants: no variants yet: press Sweep first"
+        error = self.attempt(self.variants.apply, i, self.session)
+        return None if error is None else f"variants: {error}"
+
+
+__all__ = ["PanelModel", "ACTIONS", "Action", "BY_NAME", "fmt"]

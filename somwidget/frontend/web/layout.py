@@ -1,0 +1,234 @@
+"""The web app's page, laid out with trame's vuetify widgets: the toolbar, the panel (fields generated from the
+panel model's declarations, tables bound to the state app.py keeps), and the element the clay view mounts into.
+The page's own scripts: the keyboard shortcuts and the view's mount.
+"""
+
+from __future__ import annotations
+
+from trame.ui.vuetify3 import SinglePageWithDrawerLayout
+from trame.widgets import client, html
+from trame.widgets import vuetify3 as v3
+
+from ..model.panel import PanelModel
+from ..model.parameters import BY_NAME as _PARAM
+from ..model.parameters import GAP_HELP, METRIC_WEIGHT
+from ..model.variants import VARIANTS_HELP
+from .uploads import MIME
+
+
+def state_key(name: str) -> str:
+    """The trame state key of a parameter's field."""
+    return "param_S" if name == "iterations" else f"param_{name}"
+
+
+#: The page's keyboard shortcuts: Ctrl+Z undoes, Ctrl+Shift+Z or Ctrl+Y redoes (Cmd on a Mac), except while a text
+#: field has the focus (its own undo).
+SHORTCUTS_JS = """
+if (!window.somwidgetShortcuts) {
+  window.somwidgetShortcuts = true;
+  window.addEventListener('keydown', (e) => {
+    if (!(e.ctrlKey || e.metaKey) || e.altKey || !window.trame) return;
+    const t = e.target;
+    if (t && (t.tagName === 'INPUT' || t.tagName === 'TEXTAREA' || t.isContentEditable)) return;
+    const key = e.key.toLowerCase();
+    const name = key === 'z' ? (e.shiftKey ? 'redo' : 'undo') : key === 'y' ? 'redo' : null;
+    if (!name) return;
+    e.preventDefault();
+    window.trame.trigger(name);
+  });
+}
+"""
+
+
+#: Mounts the clay view (the module the XR hub serves) into the page's #clay-view, and again should the page
+#: replace that element.
+MOUNT_VIEW_JS = """
+if (!window.somwidgetMount) {
+  window.somwidgetMount = () => {
+    const el = document.getElementById('clay-view');
+    if (!el || el.somview || el.dataset.mounting) return;
+    el.dataset.mounting = '1';
+    import(new URL('xr/somview.js', document.baseURI).href)
+      .then((m) => { window.somview = m.mountWebView(el); })
+      .catch((err) => { el.textContent = `The clay view did not load: ${err}`; })
+      .finally(() => { delete el.dataset.mounting; });
+  };
+  setInterval(window.somwidgetMount, 300);
+  window.somwidgetMount();
+}
+"""
+
+
+def build_page(server, panel: PanelModel):
+    """The page: a toolbar (iteration, Train / Pause, Undo, Redo, Reset), the panel in a drawer, and the element the
+    clay view mounts into (#clay-view). Returns trame's layout."""
+    with SinglePageWithDrawerLayout(server, full_height=True) as layout:
+        layout.title.set_text("somwidget: computational clay")
+        with layout.toolbar:
+            v3.VSpacer()
+            html.Div("{{ stats.iteration }} / {{ stats.S }}", classes="mr-3 text-body-2", id="iteration-label")
+            v3.VBtn("{{ stats.running ? 'Pause' : 'Train' }}", id="train-button",
+                    click="trigger('toggle_training')",
+                    prepend_icon=("stats.running ? 'mdi-pause' : 'mdi-play'",), variant="tonal", classes="mr-2")
+            v3.VBtn(icon="mdi-undo", id="undo-button", click="trigger('undo')", disabled=("!stats.can_undo",),
+                    title="Undo (Ctrl+Z)", variant="text")
+            v3.VBtn(icon="mdi-redo", id="redo-button", click="trigger('redo')", disabled=("!stats.can_redo",),
+                    title="Redo (Ctrl+Shift+Z)", variant="text", classes="mr-2")
+            v3.VBtn("Reset", id="reset-button", click="trigger('reset')", prepend_icon="mdi-restore",
+                    variant="tonal", classes="mr-2", title="Back to the start mesh; the whole schedule runs again")
+        with layout.drawer as drawer:
+            drawer.width = 390
+            _panel(panel)
+        client.Script(SHORTCUTS_JS)
+        client.Script(MOUNT_VIEW_JS)
+        with layout.content:
+            # the clay view mounts here (MOUNT_VIEW_JS); Vue leaves the element's children alone
+            html.Div(id="clay-view", style="position: relative; width: 100%; height: calc(100vh - 88px)")
+    return layout
+
+
+def _on_enter_or_change(handler: str) -> list[str]:
+    return [f'@change="{handler}"', f'@keydown.enter="{handler}"']
+
+def _panel(panel: PanelModel) -> None:
+    with v3.VContainer(classes="pa-2 text-body-2", id="panel"):
+        v3.VAlert(v_if="error_message", text=("error_message",), type="error", density="compact",
+                  closable=True, id="error-alert", classes="mb-2",
+                  click_close="error_message = ''")
+        v3.VAlert(v_if="info_message && !error_message", text=("info_message",), type="info",
+                  density="compact", closable=True, classes="mb-2", click_close="info_message = ''")
+        with v3.VAlert(v_if="recovered_message", type="success", density="compact", classes="mb-2",
+                       id="recovered-alert", closable=True, click_close="recovered_message = ''"):
+            html.Div("{{ recovered_message }}")
+            v3.VBtn("Start fresh", size="small", variant="tonal", classes="mt-1", id="start-fresh",
+                    click="trigger('start_fresh')", title="Load the preset the server was started with (Undo "
+                                                       "brings the recovered session back)")
+        v3.VProgressLinear(v_if="busy", indeterminate=True, classes="mb-2")
+
+        # preset and files
+        with html.Div(classes="d-flex align-center mb-1"):
+            v3.VSelect(v_model=("preset_name",), items=("preset_items",), label="Preset", density="compact",
+                       hide_details=True, id="preset-select", disabled=("busy",))
+            v3.VBtn(icon="mdi-reload", variant="text", size="small", id="reload-preset",
+                    click="trigger('reload_preset')", disabled=("busy",),
+                    title="This preset again as it starts: its own controls and start mesh")
+        html.Div("{{ preset_description }}", classes="text-caption mb-2")
+        v3.VFileInput(v_model=("mesh_upload",), label="Upload a mesh (OBJ, PLY, STL, OFF, GLB)",
+                      density="compact", hide_details=True, prepend_icon="mdi-upload", id="mesh-upload",
+                      accept=".obj,.ply,.stl,.off,.glb,.gltf", classes="mb-2", disabled=("busy",))
+
+        # progress
+        with v3.VCard(variant="outlined", classes="pa-2 mb-2"):
+            html.Div("iteration {{ stats.iteration }} / {{ stats.S }}"
+                     " {{ stats.running ? '(training)' : (stats.paused ? '(paused)' : '(converged)') }}",
+                     id="iteration-text")
+            v3.VProgressLinear(model_value=("stats.progress",), height=6, color="primary", classes="my-1",
+                               id="progress-bar")
+            html.Div("cycle {{ stats.cycle_ms }} ms, {{ stats.fps }} frames/s; {{ stats.n_vertices }} nodes, "
+                     "{{ stats.k }} controls ({{ stats.k_eff }} with mirrors)", classes="text-caption",
+                     id="speed-text")
+
+        # schedule: the fields come from the parameters' declaration (parameters.py)
+        html.Div("Schedule", classes="text-subtitle-2 mt-2")
+        with v3.VRow(dense=True):
+            for name in ("iterations", "smoothing", "l_start", "l_end"):
+                p = _PARAM[name]
+                with v3.VCol(cols=6), html.Div(id=f"param-{name}", title=p.help):
+                    v3.VTextField(v_model=(state_key(name),), label=p.label, density="compact", type="number",
+                                  error_messages=(f"param_errors['{name}'] || []",), hide_details="auto",
+                                  id=f"field-{name}",
+                                  raw_attrs=_on_enter_or_change(
+                                      f"trigger('set_param', ['{name}', $event.target.value])"))
+        reach = _PARAM["reach"]
+        with html.Div(id="param-reach", title=reach.help):
+            v3.VSlider(v_model=("param_reach",), label=("'reach ' + Number(param_reach).toFixed(2)",),
+                       min=reach.slider[0], max=reach.slider[1], step=reach.slider[2], density="compact",
+                       hide_details="auto", thumb_label=True, id="reach-slider", classes="mt-1",
+                       error_messages=("param_errors['reach'] || []",),
+                       end="trigger('set_param', ['reach', $event])")
+        html.Div("{{ reach_help }}", classes="text-caption", id="reach-help")
+        with html.Div(id="param-symmetry", title=_PARAM["symmetry"].help):
+            v3.VSwitch(v_model=("param_symmetry",), label=_PARAM["symmetry"].label, density="compact",
+                       hide_details=True, color="primary", id="symmetry-switch")
+
+        # features
+        html.Div("Feature dimensions (metric weights)", classes="text-subtitle-2 mt-2")
+        with v3.VTable(density="compact", id="features-table"):
+            with html.Tbody():
+                with html.Tr(v_for="f in features_ui", key="f.d"):
+                    html.Td("{{ f.d }}")
+                    html.Td("{{ f.name }}")
+                    html.Td("{{ f.role }}", classes="text-caption")
+                    with html.Td(style="width: 96px"):
+                        v3.VTextField(model_value=("f.weight",), density="compact", type="number",
+                                      hide_details="auto", variant="plain", title=METRIC_WEIGHT.help,
+                                      error_messages=("param_errors['metric_weights_' + f.d] || []",),
+                                      raw_attrs=_on_enter_or_change(
+                                          "trigger('set_metric', [f.d, $event.target.value])"))
+
+        # controls
+        with html.Div(classes="d-flex align-center mt-2"):
+            html.Div("Controls (gap to the nearest node: original / mirror)", classes="text-subtitle-2",
+                     title=GAP_HELP)
+            v3.VSpacer()
+            v3.VBtn(icon="mdi-plus", size="small", variant="text", click="trigger('add_control')",
+                    id="add-control", title="Add a control")
+        with v3.VTable(density="compact", id="controls-table"):
+            with html.Tbody():
+                with html.Tr(v_for="c in controls_ui", key="c.i"):
+                    html.Td("{{ c.i }}")
+                    with html.Td():
+                        html.Input(type="color", value=("c.colour",), disabled=("!has_colour",),
+                                   style="width: 32px; height: 22px; border: none; padding: 0",
+                                   change="trigger('set_colour', [c.i, $event.target.value])",
+                                   title="control colour")
+                    html.Td("{{ c.position }}", classes="text-caption")
+                    html.Td("{{ c.gap }}", classes="text-caption gap-cell")
+                    with html.Td():
+                        v3.VBtn(icon="mdi-close", size="x-small", variant="text",
+                                click="trigger('remove_control', [c.i])", title="Remove")
+
+        # design variants
+        html.Div("Variants", classes="text-subtitle-2 mt-2", title=VARIANTS_HELP)
+        with v3.VRow(dense=True):
+            with v3.VCol(cols=6):
+                v3.VTextField(v_model=("variants_n",), label="how many", density="compact", type="number",
+                              hide_details=True, id="variants-n", title="Variants to train at once (at most "
+                              f"{panel.max_variants} here; somwidget.sweep takes thousands)")
+            with v3.VCol(cols=6):
+                v3.VTextField(v_model=("variants_jitter",), label="jitter", density="compact", type="number",
+                              hide_details=True, id="variants-jitter",
+                              title="Each control moves by up to this share of the model's size")
+        with v3.VChipGroup(v_model=("variants_vary",), multiple=True, column=True, id="variants-vary"):
+            for name in panel.varied:
+                v3.VChip(name, value=name, size="small", filter=True, variant="outlined",
+                         title=f"vary {name} around its value")
+        with html.Div(classes="d-flex align-center ga-2 mb-1"):
+            v3.VBtn("Sweep", size="small", variant="tonal", prepend_icon="mdi-view-grid-plus", id="sweep",
+                    click="trigger('sweep_variants')", disabled=("busy",))
+            v3.VProgressLinear(model_value=("variants_progress",), height=4, color="primary",
+                               v_if="variants_gallery.length || busy", id="variants-progress")
+        with html.Div(classes="d-flex flex-wrap ga-1 mb-2", id="variants-gallery"):
+            with html.Div(v_for="v in variants_gallery", key="v.i", style="position: relative"):
+                html.Img(src=("v.src",), title=("v.title",), classes="variant-thumb",
+                         style="width: 96px; height: 77px; cursor: pointer; border: 1px solid #ccd; "
+                               "border-radius: 4px; display: block",
+                         click="trigger('pick_variant', [v.i])")
+                html.Span("#{{ v.i }}", classes="text-caption",
+                          style="position: absolute; left: 4px; top: 1px; pointer-events: none")
+
+        # files out
+        html.Div("Export and sessions", classes="text-subtitle-2 mt-2")
+        with html.Div(classes="d-flex flex-wrap ga-1 mb-2"):
+            for fmt in ("obj", "ply", "glb"):
+                v3.VBtn(fmt.upper(), size="small", variant="tonal", prepend_icon="mdi-download",
+                        id=f"export-{fmt}",
+                        click=f"utils.download('somwidget-mesh.{fmt}', trigger('export_mesh', ['{fmt}']), "
+                              f"'{MIME[fmt]}')")
+            v3.VBtn("Save session", size="small", variant="tonal", prepend_icon="mdi-content-save",
+                    id="save-session",
+                    click="utils.download('somwidget-session.npz', trigger('save_session'), "
+                          "'application/octet-stream')")
+        v3.VFileInput(v_model=("session_upload",), label="Load a session (.npz)", density="compact",
+                      hide_details=True, prepend_icon="mdi-folder-open", accept=".npz", id="session-upload",
+                      disabled=("busy",))
