@@ -32,8 +32,6 @@ from .topology import Topology
 MAX_TABLE_ENTRIES = 1 << 29
 #: Meshes a batch takes: its dense distance table (N x N uint16) is shared by every variant.
 MAX_BATCH_NEURONS = 16384
-#: The schedule's parameter names under the name the app layer imports; new code reads schedule.KEYS.
-SCHEDULE_KEYS = KEYS
 
 
 def _per_variant(name: str, value, n: int) -> np.ndarray:
