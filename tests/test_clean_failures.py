@@ -39,9 +39,9 @@ def app(tmp_path, monkeypatch):
 @pytest.mark.parametrize("index", ["0", 1.9, None, [1], True])
 def test_a_control_index_that_is_not_an_integer_is_refused_not_truncated(app, index):
     before = app.session.controls.copy()
-    app.remove_control(index)
+    app.panel_state.remove_control(index)
     assert "integer index" in app.state.error_message, app.state.error_message
-    app.set_colour(index, "#00ff00")
+    app.panel_state.set_colour(index, "#00ff00")
     assert "integer index" in app.state.error_message
     np.testing.assert_array_equal(app.session.controls, before)
 

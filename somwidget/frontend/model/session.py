@@ -34,17 +34,17 @@ import numpy as np
 from ...backend import checks
 from ...backend import presets as _presets
 from ...backend.presets import FeatureLayout, Preset
-from ...backend.schedule import KEYS as SCHEDULE_KEYS
 from . import autosave as _autosave
 from . import files
 from .clay import GPU_MAX_VERTICES, Clay, build, max_vertices_for
 from .frames import Frame, FrameListener, FrameStream
 from .controls import ControlEdits
 from .operations import Publish, Reset, Restart
-from .parameters import BY_NAME as _PARAM
 from .settings import ParameterEdits
+from .summary import summary
 from .timeline import Timeline
 from .trainer import Trainer
+from .variants import check_variant
 
 log = logging.getLogger(__name__)
 
@@ -281,28 +281,7 @@ class Session:
 
     def state(self, positions: bool = False) -> dict:
         """A JSON-friendly summary (for debug routes and tests); `positions` adds every node's x, y, z."""
-        frame, clay = self.frame, self.clay
-        with clay.lock:
-            controls, params, pending = clay.controls.copy(), clay.parameters(), len(self.trainer.ops)
-        layout, preset = clay.layout, clay.preset
-        out = {
-            "preset": preset.name, "title": preset.title, "display": preset.display, "generation": frame.generation,
-            "n_vertices": int(preset.n_vertices), "n_dims": layout.n_dims, "feature_names": list(layout.names),
-            "position_dims": list(layout.position), "colour_dims": list(layout.colour),
-            "colour_space": layout.colour_space, "controls": controls.tolist(), "parameters": params,
-            "paused": clay.paused, "pending_intents": pending,
-            "frame": {
-                "seq": frame.seq, "iteration": frame.iteration, "iterations": frame.iterations,
-                "running": frame.running, "cycle_time": frame.cycle_time,
-                "controls": frame.controls.tolist(), "effective_controls": frame.effective_controls.tolist(),
-                "gaps": frame.gaps.tolist(), "centroid": frame.positions.mean(axis=0).tolist(),
-            },
-            "frames_per_second": self.frames_per_second, "error": self.error,
-            "history": list(frame.history), "held": frame.held, "recovered": self.recovered is not None,
-        }
-        if positions:
-            out["frame"]["positions"] = frame.positions.tolist()
-        return out
+        return summary(self, positions)
 
     # -- undo, redo and gestures -------------------------------------------------------------------------------
     def begin_gesture(self) -> None:
@@ -501,18 +480,7 @@ class Session:
         """Make a design variant (somwidget.sweep) the current state: its controls, its schedule (iterations,
         l_start, l_end, smoothing, reach) and its trained weights, at the end of its schedule, nothing training
         until the next intent; one undo step. ValueError if it does not fit this session's mesh."""
-        clay = self.clay
-        w = checks.finite_array("weights", weights, 2)
-        if w.shape != clay.preset.weights.shape:
-            raise ValueError(f"weights: expected shape {clay.preset.weights.shape} (this session's mesh), got "
-                             f"{w.shape}")
-        c = checks.finite_array("controls", controls, 2)
-        if c.shape[1] != self.n_dims or not len(c):
-            raise ValueError(f"controls: expected (k, {self.n_dims}) with k >= 1, got {c.shape}")
-        unknown = sorted(set(parameters) - set(SCHEDULE_KEYS))
-        if unknown:
-            raise ValueError(f"parameters: unknown {unknown}; a variant sets some of {list(SCHEDULE_KEYS)}")
-        checked = {name: _PARAM[name].check(value) for name, value in parameters.items()}
+        c, checked, w = check_variant(self.clay.preset, controls, parameters, weights)
         with self.timeline.step("variant"):
             self.timeline.jump(c, checked, w)
 

@@ -18,11 +18,12 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from ...backend import checks
 from ...backend import presets as _presets
 from ...backend.schedule import KEYS as SCHEDULE_KEYS
 from ...backend.presets import Preset
 from ...backend.variants import FIGURES, VariantPlan, plan_variants, run_plan
-from ...backend.schedule import MAX_ITERATIONS
+from ...backend.schedule import BY_NAME, MAX_ITERATIONS
 
 #: Thumbnails a gallery shows when no indices are given.
 GALLERY_COUNT = 16
@@ -39,6 +40,22 @@ VARIED = {
 VARIANTS_HELP = ("Design variants: each control moved at random by up to the jitter (a share of the model's size), "
                  "the chosen schedule parameters varied around their values, all trained at once from the current "
                  "shape. Pick one to continue from it (Undo goes back).")
+
+
+def check_variant(preset: Preset, controls, parameters: Mapping, weights):
+    """(controls, schedule changes, weights) of a variant checked against the mesh of `preset`; ValueError naming
+    what does not fit."""
+    w = checks.finite_array("weights", weights, 2)
+    if w.shape != preset.weights.shape:
+        raise ValueError(f"weights: expected shape {preset.weights.shape} (this session's mesh), got {w.shape}")
+    n_dims = preset.layout.n_dims
+    c = checks.finite_array("controls", controls, 2)
+    if c.shape[1] != n_dims or not len(c):
+        raise ValueError(f"controls: expected (k, {n_dims}) with k >= 1, got {c.shape}")
+    unknown = sorted(set(parameters) - set(SCHEDULE_KEYS))
+    if unknown:
+        raise ValueError(f"parameters: unknown {unknown}; a variant sets some of {list(SCHEDULE_KEYS)}")
+    return c, {name: BY_NAME[name].check(value) for name, value in parameters.items()}, w
 
 
 def vary_around(names, parameters: Mapping) -> dict:

@@ -22,10 +22,8 @@ and the access token (lan.py).
 from __future__ import annotations
 
 import asyncio
-import base64
 import logging
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -34,22 +32,19 @@ from trame.app import get_server
 from wslink.websocket import LinkProtocol
 
 from ...backend import presets as _presets
-from ..model import Frame, Session
-from ..model.panel import PanelModel, fmt
+from ..model import Session
 from ..model.parameters import REACH_HELP
-from ..model.picture import png_bytes
 from ..transport.limits import bound_messages
 from . import lan as _lan
 from . import uploads
 from .hub import attach as attach_hub
-from .layout import build_page, state_key
+from .layout import build_page
+from .panel_state import PanelState
 from .state_guard import guard_state_updates
 
 log = logging.getLogger(__name__)
 
-#: Panel numbers (iteration, gaps, cycle time) refresh at most this often per second.
-PANEL_HZ = 8
-#: The page's triggers: each calls the SomApp method of the same name.
+#: The page's triggers: each calls the method of the same name of the panel's state (panel_state.py) or the app.
 TRIGGERS = ("set_param", "set_metric", "set_colour", "add_control", "remove_control", "toggle_training", "reset",
             "undo", "redo", "start_fresh", "reload_preset", "export_mesh", "save_session", "sweep_variants",
             "pick_variant")
@@ -68,14 +63,12 @@ class _ClientWatch(LinkProtocol):
     def onClose(self, client_id):  # noqa: N802
         self._app.clients.discard(str(client_id))
 
-
 class SomApp:
     """The trame app around one Session: the page, the panel's state and triggers, the clay view's hub and the
     panel pump."""
 
     def __init__(self, session: Session, server=None, title: str = "somwidget", fresh=None):
         self.session = session
-        self.panel = PanelModel(session)
         self.fresh = fresh if fresh is not None else session.preset  # what "Start fresh" loads after a recovery
         self.xr_token: str | None = None  # the LAN access token, when served beyond loopback
         # on a loopback bind, answer only loopback Host names (False behind a proxy that forwards the browser's Host)
@@ -86,69 +79,26 @@ class SomApp:
         self.state, self.ctrl = self.server.state, self.server.controller
         self.title = title
         self.clients: set[str] = set()
-        self._latest: Frame | None = None
-        self._latest_lock = threading.Lock()
-        self._generation_seen = session.frame.generation
-        self._history_seen = session.frame.history
-        self._params_seen = session.parameters
-        self._values_synced: dict = {}
-        self._last_panel = 0.0
-        self._panel_seq = -1
         self._pump_task = None
         self._uploaded: dict[str, object] = {}  # the latest mesh uploaded in this server's life, by name
         if session.preset.name not in _presets.PRESETS:  # started from `somwidget serve --mesh FILE`
             self._uploaded = {session.preset.name: session.preset}
         uploads.sweep_uploads()  # what servers killed mid-upload left behind
+        self.panel_state = PanelState(session, self.state)
+        self.panel = self.panel_state.panel
         self._init_state()
         self.layout = build_page(self.server, self.panel)
         self._register()
-        session.add_listener(self._on_frame)
 
     def close(self) -> None:
         """Detach from the session (the app and its hub; call on the server's thread, after it stopped)."""
         uploads.sweep_uploads(own=True)
-        self.session.remove_listener(self._on_frame)
+        self.panel_state.close()
         if self.xr is not None:
             self.xr.detach()
         if self._pump_task is not None:
             self._pump_task.cancel()
             self._pump_task = None
-
-    # -- session -> panel ----------------------------------------------------------------------------------------
-    def _on_frame(self, frame: Frame) -> None:
-        """Training thread: keep only the latest frame; the pump shows its numbers."""
-        with self._latest_lock:
-            self._latest = frame
-
-    async def _pump(self) -> None:
-        while True:
-            try:
-                self._pump_once()
-            except Exception:
-                log.exception("panel pump failed")
-            await asyncio.sleep(1.0 / (2 * PANEL_HZ))
-
-    def _pump_once(self) -> None:
-        with self._latest_lock:
-            frame = self._latest
-        if frame is None:
-            return
-        params = self.session.parameters
-        if frame.generation != self._generation_seen:  # a new preset (from any view): every field
-            self._generation_seen, self._history_seen, self._params_seen = frame.generation, frame.history, params
-            with self.state:
-                self._sync_fields(force=True)
-        elif frame.history != self._history_seen or params != self._params_seen:
-            # an undo, a redo, a new step or a parameter set elsewhere (a repeat within PARAMETER_STEP_SECONDS joins
-            # its step, so the history alone does not tell): the fields whose values changed follow
-            self._history_seen, self._params_seen = frame.history, params
-            with self.state:
-                self._sync_fields()
-        now = time.monotonic()
-        if now - self._last_panel > 1 / PANEL_HZ and (frame.seq != self._panel_seq or now - self._last_panel > 1.0):
-            self._show_frame(frame)
-            self._panel_seq = frame.seq
-            self._last_panel = now
 
     def _preset_items(self) -> list[dict]:
         items = [{"title": label, "value": name} for label, name in self.panel.preset_options()
@@ -177,100 +127,8 @@ class SomApp:
         s.variants_vary = []
         s.variants_gallery = []
         s.variants_progress = 0
-        self._sync_fields()
-        self._show_frame(self.session.frame)
-
-    def _sync_fields(self, force: bool = False) -> None:
-        """Panel fields that change with the preset or a parameter intent (not every frame). A parameter's field
-        is written only when its value changed since the last sync (or with `force`): a field someone is typing in
-        is not reset by another view's step."""
-        s, sess = self.state, self.session
-        values = self.panel.values()
-        last = {} if force else self._values_synced
-        s.preset_name = sess.preset.name
-        s.preset_title = sess.preset.title
-        s.preset_description = sess.preset.description
-        for f in self.panel.fields:
-            if force or values[f.name] != last.get(f.name):
-                s[state_key(f.name)] = values[f.name]
-        self._values_synced = values
-        s.paused = sess.paused
-        s.features_ui = [dict(row, weight=fmt(row["weight"], 6)) for row in self.panel.feature_rows()]
-        s.has_colour = sess.layout.colour_space != "none"
-        s.param_errors = {}
-
-    def _show_frame(self, frame: Frame) -> None:
-        with self.state as s:
-            s.controls_ui = self.panel.control_rows(frame)
-            s.stats = self.panel.status(frame)
-            s.paused = frame.paused
-            if self.session.error and not s.error_message:
-                s.error_message = self.session.error
-
-    def _error(self, message: str) -> None:
-        log.info("refused: %s", message)
-        self.state.error_message = message
-        self.state.flush()
-
-    def _show(self, error: str | None) -> bool:
-        """A panel model's answer: its message in the panel, or the last one cleared. True when it took it."""
-        if error is not None:
-            self._error(error)
-        return error is None
-
-    # -- triggers ------------------------------------------------------------------------------------------------
-    def set_param(self, name, value) -> None:
-        errors = dict(self.state.param_errors or {})
-        error = self.panel.set(name, value)
-        if error is None:
-            errors.pop(name, None)
-        else:
-            errors[name] = error
-        self.state.error_message = error or ""
-        with self.state:
-            self.state.param_errors = errors
-            if error is None:
-                self._sync_fields()
-
-    def set_metric(self, dim, value) -> None:
-        key = f"metric_weights_{dim}" if isinstance(dim, int) and not isinstance(dim, bool) else "metric_weights"
-        error = self.panel.set_metric(dim, value)  # the session checks dim: no truncation here
-        if error is None:
-            self.state.error_message = ""
-        else:
-            self._error(error)
-        with self.state:
-            self._sync_fields()
-            if error is not None:  # at the field that caused it (the sync above cleared the others)
-                self.state.param_errors = {**(self.state.param_errors or {}), key: error}
-
-    def set_colour(self, index, colour) -> None:
-        self._show(self.panel.attempt(self.session.set_control_colour, index, colour))
-
-    def add_control(self) -> None:
-        self._show(self.panel.attempt(self.session.add_control))
-
-    def remove_control(self, index) -> None:
-        self._show(self.panel.attempt(self.session.remove_control, index))  # "0" or 1.9 refused there
-
-    def toggle_training(self) -> None:
-        self._show(self.panel.run("toggle_training"))
-        self.state.paused = self.session.paused
-
-    def reset(self) -> None:
-        self._show(self.panel.run("reset"))
-
-    def undo(self) -> None:
-        self._travel("undo")
-
-    def redo(self) -> None:
-        self._travel("redo")
-
-    def _travel(self, action: str) -> None:
-        self._show(self.panel.run(action))
-        with self.state:
-            self._sync_fields()
-            self._show_frame(self.session.frame)
+        self.panel_state.sync_fields()
+        self.panel_state.show_frame(self.session.frame)
 
     def _recovered_message(self) -> str:
         found = self.session.recovered
@@ -297,7 +155,7 @@ class SomApp:
         if isinstance(name, str) and (not name or name == self.session.preset.name):
             return
         if not isinstance(name, str) or (name not in self._uploaded and name not in _presets.PRESETS):
-            self._error(f"unknown preset {name!r}" if isinstance(name, str) else
+            self.panel_state.error(f"unknown preset {name!r}" if isinstance(name, str) else
                         f"unknown preset: expected a preset's name, got {type(name).__name__}")
             with self.state:
                 self.state.preset_name = self.session.preset.name
@@ -357,7 +215,7 @@ class SomApp:
                     self.state.preset_name = preset.name
                     self.state.info_message = f"loaded {name}: {preset.n_vertices} vertices"
         except (ValueError, OSError) as exc:
-            self._error(str(exc))
+            self.panel_state.error(str(exc))
         finally:
             with self.state:
                 self.state.mesh_upload = None
@@ -377,7 +235,7 @@ class SomApp:
                 with self.state:
                     self.state.info_message = f"session {name} loaded"
         except (ValueError, OSError) as exc:
-            self._error(str(exc))
+            self.panel_state.error(str(exc))
         finally:
             with self.state:
                 self.state.session_upload = None
@@ -385,7 +243,7 @@ class SomApp:
     def export_mesh(self, fmt) -> bytes | None:
         fmt = str(fmt).lower()
         if fmt not in uploads.MIME:
-            self._error(f"export: unknown format {fmt!r}; use obj, ply or glb")
+            self.panel_state.error(f"export: unknown format {fmt!r}; use obj, ply or glb")
             return None
         return self._download(self.session.export_mesh, "." + fmt)
 
@@ -396,53 +254,12 @@ class SomApp:
         try:
             return uploads.written_bytes(write, suffix)
         except (ValueError, OSError) as exc:
-            self._error(str(exc))
+            self.panel_state.error(str(exc))
             return None
-
-    async def sweep_variants(self) -> None:
-        """Train the Variants section's design variants of the current design (a local restart each, batched on the
-        session's device) and show them as a gallery of thumbnails."""
-        s = self.state
-        vary = [name for name in (s.variants_vary or []) if name in self.panel.varied]
-        loop = asyncio.get_running_loop()
-
-        def progress(done, total):
-            loop.call_soon_threadsafe(self._set_variants_progress, 100.0 * done / max(1, total))
-
-        def run():
-            variants, thumbs = self.panel.sweep(s.variants_n, s.variants_jitter, vary, progress)
-            return variants, ["data:image/png;base64," + base64.b64encode(png_bytes(t)).decode("ascii")
-                              for t in thumbs]
-
-        with self.state:
-            s.busy = True
-            s.variants_progress = 0
-        try:
-            variants, thumbs = await loop.run_in_executor(None, run)
-        except (ValueError, TypeError, RuntimeError) as exc:
-            self._error(f"variants: {exc}")
-            return
-        finally:
-            with self.state:
-                s.busy = False
-        with self.state:
-            s.variants_gallery = [{"i": i, "src": thumbs[i], "title": self.panel.caption(i, vary)}
-                                  for i in range(len(variants))]
-            s.variants_progress = 100
-
-    def _set_variants_progress(self, value: float) -> None:
-        with self.state:
-            self.state.variants_progress = value
-
-    def pick_variant(self, i) -> None:
-        """Make gallery variant i the session's current state (one undo step)."""
-        self._show(self.panel.pick(i))
-
-    # -- wiring --------------------------------------------------------------------------------------------------
     def _register(self) -> None:
         server, state, ctrl = self.server, self.state, self.ctrl
         for name in TRIGGERS:
-            server.trigger(name)(getattr(self, name))
+            server.trigger(name)(getattr(self.panel_state if hasattr(self.panel_state, name) else self, name))
 
         @state.change("preset_name")
         async def _preset_changed(preset_name, **_):
@@ -461,7 +278,7 @@ class SomApp:
         @state.change("param_symmetry")
         def _symmetry(param_symmetry, **_):
             if bool(param_symmetry) != self.session.parameters["symmetry"]:
-                self.set_param("symmetry", bool(param_symmetry))
+                self.panel_state.set_param("symmetry", bool(param_symmetry))
 
         ctrl.on_server_bind.add(self._bind_routes)
         ctrl.on_server_ready.add(self._on_ready)
@@ -469,7 +286,7 @@ class SomApp:
 
     def _on_ready(self, **_):
         if self._pump_task is None:
-            self._pump_task = asyncio.get_event_loop().create_task(self._pump())
+            self._pump_task = asyncio.get_event_loop().create_task(self.panel_state.pump())
 
     def _bind_routes(self, wslink_server) -> None:
         bound = getattr(wslink_server, "config", {}).get("host")

@@ -1,0 +1,211 @@
+"""The web panel's state: the session's panel model (model/panel.py) bound to trame's state, both ways. Frames
+refresh the panel's numbers a few times a second (a task on the server's event loop, `pump`); the fields follow
+the preset, the history and parameters set elsewhere; the page's triggers for parameters, controls, the run and
+the variants land here and their refusals show at their fields and in the panel's alert.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import logging
+import threading
+import time
+
+from ..model import Frame, Session
+from ..model.panel import PanelModel, fmt
+from ..model.picture import png_bytes
+from .layout import state_key
+
+log = logging.getLogger(__name__)
+
+#: Panel numbers (iteration, gaps, cycle time) refresh at most this often per second.
+PANEL_HZ = 8
+
+
+class PanelState:
+    """One session's panel model in one trame server's state (see the module's docstring)."""
+
+    def __init__(self, session: Session, state):
+        self.session = session
+        self.panel = PanelModel(session)
+        self.state = state
+        self._latest: Frame | None = None
+        self._latest_lock = threading.Lock()
+        self._generation_seen = session.frame.generation
+        self._history_seen = session.frame.history
+        self._params_seen = session.parameters
+        self._values_synced: dict = {}
+        self._last_panel = 0.0
+        self._panel_seq = -1
+        session.add_listener(self._on_frame)
+
+    def close(self) -> None:
+        self.session.remove_listener(self._on_frame)
+
+    # -- session -> panel ----------------------------------------------------------------------------------------
+    def _on_frame(self, frame: Frame) -> None:
+        """Training thread: keep only the latest frame; the pump shows its numbers."""
+        with self._latest_lock:
+            self._latest = frame
+
+    async def pump(self) -> None:
+        while True:
+            try:
+                self._pump_once()
+            except Exception:
+                log.exception("panel pump failed")
+            await asyncio.sleep(1.0 / (2 * PANEL_HZ))
+
+    def _pump_once(self) -> None:
+        with self._latest_lock:
+            frame = self._latest
+        if frame is None:
+            return
+        params = self.session.parameters
+        if frame.generation != self._generation_seen:  # a new preset (from any view): every field
+            self._generation_seen, self._history_seen, self._params_seen = frame.generation, frame.history, params
+            with self.state:
+                self.sync_fields(force=True)
+        elif frame.history != self._history_seen or params != self._params_seen:
+            # an undo, a redo, a new step or a parameter set elsewhere (a repeat within PARAMETER_STEP_SECONDS joins
+            # its step, so the history alone does not tell): the fields whose values changed follow
+            self._history_seen, self._params_seen = frame.history, params
+            with self.state:
+                self.sync_fields()
+        now = time.monotonic()
+        if now - self._last_panel > 1 / PANEL_HZ and (frame.seq != self._panel_seq or now - self._last_panel > 1.0):
+            self.show_frame(frame)
+            self._panel_seq = frame.seq
+            self._last_panel = now
+
+    def sync_fields(self, force: bool = False) -> None:
+        """Panel fields that change with the preset or a parameter intent (not every frame). A parameter's field
+        is written only when its value changed since the last sync (or with `force`): a field someone is typing in
+        is not reset by another view's step."""
+        s, sess = self.state, self.session
+        values = self.panel.values()
+        last = {} if force else self._values_synced
+        s.preset_name = sess.preset.name
+        s.preset_title = sess.preset.title
+        s.preset_description = sess.preset.description
+        for f in self.panel.fields:
+            if force or values[f.name] != last.get(f.name):
+                s[state_key(f.name)] = values[f.name]
+        self._values_synced = values
+        s.paused = sess.paused
+        s.features_ui = [dict(row, weight=fmt(row["weight"], 6)) for row in self.panel.feature_rows()]
+        s.has_colour = sess.layout.colour_space != "none"
+        s.param_errors = {}
+
+    def show_frame(self, frame: Frame) -> None:
+        with self.state as s:
+            s.controls_ui = self.panel.control_rows(frame)
+            s.stats = self.panel.status(frame)
+            s.paused = frame.paused
+            if self.session.error and not s.error_message:
+                s.error_message = self.session.error
+
+    def error(self, message: str) -> None:
+        log.info("refused: %s", message)
+        self.state.error_message = message
+        self.state.flush()
+
+    def _show(self, error: str | None) -> bool:
+        """A panel model's answer: its message in the panel, or the last one cleared. True when it took it."""
+        if error is not None:
+            self.error(error)
+        return error is None
+
+    # -- triggers ------------------------------------------------------------------------------------------------
+    def set_param(self, name, value) -> None:
+        errors = dict(self.state.param_errors or {})
+        error = self.panel.set(name, value)
+        if error is None:
+            errors.pop(name, None)
+        else:
+            errors[name] = error
+        self.state.error_message = error or ""
+        with self.state:
+            self.state.param_errors = errors
+            if error is None:
+                self.sync_fields()
+
+    def set_metric(self, dim, value) -> None:
+        key = f"metric_weights_{dim}" if isinstance(dim, int) and not isinstance(dim, bool) else "metric_weights"
+        error = self.panel.set_metric(dim, value)  # the session checks dim: no truncation here
+        if error is None:
+            self.state.error_message = ""
+        else:
+            self.error(error)
+        with self.state:
+            self.sync_fields()
+            if error is not None:  # at the field that caused it (the sync above cleared the others)
+                self.state.param_errors = {**(self.state.param_errors or {}), key: error}
+
+    def set_colour(self, index, colour) -> None:
+        self._show(self.panel.attempt(self.session.set_control_colour, index, colour))
+
+    def add_control(self) -> None:
+        self._show(self.panel.attempt(self.session.add_control))
+
+    def remove_control(self, index) -> None:
+        self._show(self.panel.attempt(self.session.remove_control, index))  # "0" or 1.9 refused there
+
+    def toggle_training(self) -> None:
+        self._show(self.panel.run("toggle_training"))
+        self.state.paused = self.session.paused
+
+    def reset(self) -> None:
+        self._show(self.panel.run("reset"))
+
+    def undo(self) -> None:
+        self._travel("undo")
+
+    def redo(self) -> None:
+        self._travel("redo")
+
+    def _travel(self, action: str) -> None:
+        self._show(self.panel.run(action))
+        with self.state:
+            self.sync_fields()
+            self.show_frame(self.session.frame)
+
+    async def sweep_variants(self) -> None:
+        """Train the Variants section's design variants of the current design (a local restart each, batched on the
+        session's device) and show them as a gallery of thumbnails."""
+        s = self.state
+        vary = [name for name in (s.variants_vary or []) if name in self.panel.varied]
+        loop = asyncio.get_running_loop()
+
+        def progress(done, total):
+            loop.call_soon_threadsafe(self._set_variants_progress, 100.0 * done / max(1, total))
+
+        def run():
+            variants, thumbs = self.panel.sweep(s.variants_n, s.variants_jitter, vary, progress)
+            return variants, ["data:image/png;base64," + base64.b64encode(png_bytes(t)).decode("ascii")
+                              for t in thumbs]
+
+        with self.state:
+            s.busy = True
+            s.variants_progress = 0
+        try:
+            variants, thumbs = await loop.run_in_executor(None, run)
+        except (ValueError, TypeError, RuntimeError) as exc:
+            self.error(f"variants: {exc}")
+            return
+        finally:
+            with self.state:
+                s.busy = False
+        with self.state:
+            s.variants_gallery = [{"i": i, "src": thumbs[i], "title": self.panel.caption(i, vary)}
+                                  for i in range(len(variants))]
+            s.variants_progress = 100
+
+    def _set_variants_progress(self, value: float) -> None:
+        with self.state:
+            self.state.variants_progress = value
+
+    def pick_variant(self, i) -> None:
+        """Make gallery variant i the session's current state (one undo step)."""
+        self._show(self.panel.pick(i))
