@@ -189,56 +189,49 @@ class SomApp:
             self.state.preset_name = self.session.preset.name
         return ok
 
-    async def upload_mesh(self, value) -> None:
-        """A mesh file from the upload field becomes the clay (uploads.py: checked, written under a name of ours in a
-        fresh temporary folder, removed afterwards); the field (and the bytes in trame's state) is cleared whatever
-        happens."""
+    async def _upload(self, value, field: str, file_name, load) -> str | None:
+        """An uploaded file (uploads.py: checked, then written as `file_name(name)` in a fresh temporary folder that
+        is removed afterwards) handed to `load(path, name)` off the event loop; the browser's file name when it
+        loaded, else None (the message in the panel). The field (and the bytes in trame's state) is cleared
+        whatever happens."""
         try:
             got = uploads.file_of(value)
             if got is None:
-                return
+                return None
             name, content = got
-            suffix = uploads.check_mesh_name(name)
             with tempfile.TemporaryDirectory(prefix=uploads.upload_prefix()) as folder:
-                path = Path(folder) / f"upload{suffix}"
+                path = Path(folder) / file_name(name)
                 path.write_bytes(content)
-
-                def load():
-                    self.session.load_preset(uploads.read_mesh(path, name, self.session.max_vertices))
-
-                ok = await self._replace(load, scrub={str(path): name})
-            if ok:
-                preset = self.session.preset
-                self._uploaded = {preset.name: preset}  # the latest upload only
-                with self.state:
-                    self.state.preset_items = self._preset_items()
-                    self.state.preset_name = preset.name
-                    self.state.info_message = f"loaded {name}: {preset.n_vertices} vertices"
+                ok = await self._replace(lambda: load(path, name), scrub={str(path): name})
+            return name if ok else None
         except (ValueError, OSError) as exc:
             self.panel_state.error(str(exc))
+            return None
         finally:
             with self.state:
-                self.state.mesh_upload = None
+                self.state[field] = None
+
+    async def upload_mesh(self, value) -> None:
+        """A mesh file from the upload field becomes the clay, shown as it is with controls on it."""
+        def load(path, name):
+            self.session.load_preset(uploads.read_mesh(path, name, self.session.max_vertices))
+
+        name = await self._upload(value, "mesh_upload", lambda n: f"upload{uploads.check_mesh_name(n)}", load)
+        if name is not None:
+            preset = self.session.preset
+            self._uploaded = {preset.name: preset}  # the latest upload only
+            with self.state:
+                self.state.preset_items = self._preset_items()
+                self.state.preset_name = preset.name
+                self.state.info_message = f"loaded {name}: {preset.n_vertices} vertices"
 
     async def upload_session(self, value) -> None:
-        """A saved session (.npz) from the upload field replaces the session; the same care as upload_mesh."""
-        try:
-            got = uploads.file_of(value)
-            if got is None:
-                return
-            name, content = got
-            with tempfile.TemporaryDirectory(prefix=uploads.upload_prefix()) as folder:
-                path = Path(folder) / "upload.npz"
-                path.write_bytes(content)
-                ok = await self._replace(lambda: self.session.load(path), scrub={str(path): name})
-            if ok:
-                with self.state:
-                    self.state.info_message = f"session {name} loaded"
-        except (ValueError, OSError) as exc:
-            self.panel_state.error(str(exc))
-        finally:
+        """A saved session (.npz) from the upload field replaces the session, exactly as it was saved."""
+        name = await self._upload(value, "session_upload", lambda _n: "upload.npz",
+                                  lambda path, _n: self.session.load(path))
+        if name is not None:
             with self.state:
-                self.state.session_upload = None
+                self.state.info_message = f"session {name} loaded"
 
     def export_mesh(self, fmt) -> bytes | None:
         fmt = str(fmt).lower()
@@ -256,6 +249,7 @@ class SomApp:
         except (ValueError, OSError) as exc:
             self.panel_state.error(str(exc))
             return None
+
     def _register(self) -> None:
         server, state, ctrl = self.server, self.state, self.ctrl
         for name in TRIGGERS:
