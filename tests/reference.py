@@ -1,4 +1,5 @@
-"""An independent float64 reference of the somwidget engine, written from DESIGN.md ("The algorithm") alone.
+"""An independent float64 reference of the somwidget engine, written from the algorithm alone (as backend/som.py
+states it).
 
 Nothing here imports or calls somwidget: topology edges, BFS distances, the learning table, mirroring,
 winners, moves and smoothing are re-derived with plain Python and numpy in float64, so the tests can hold
@@ -171,7 +172,7 @@ def winner_margins(weights, controls, metric_weights=None) -> np.ndarray:
 
 # ----------------------------------------------------------------------------------------------- SOM
 class ReferenceSom:
-    """float64 mirror of the public Som semantics (DESIGN.md, "The algorithm" and "Public API").
+    """float64 mirror of the public Som semantics (the algorithm and the public API of backend/som.py).
 
     `margins` records, for every iteration run, the (k_eff,) winner margins used to pick the winners.
     """
@@ -189,7 +190,7 @@ class ReferenceSom:
         smooth_dims=None,
         metric_weights=None,
         mirror: Sequence[int] = (),
-        reach: float = 0.08,  # the engine's default (DESIGN.md: chosen by measurement)
+        reach: float = 0.08,  # the engine's default (chosen by measurement)
     ):
         self.n_vertices = int(n_vertices)
         self.reach = float(reach)

@@ -122,7 +122,7 @@ def test_bench_tiny_run_on_cpu(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------------------
-# The numpy baseline against a plain float64 reference of DESIGN.md's cycle
+# The numpy baseline against a plain float64 reference of the cycle (backend/som.py)
 # ------------------------------------------------------------------------------------------------------------
 def _reference(weights, controls, distances, table, cycles, metric, smoothing, smooth_dims, offsets, neighbors):
     w = weights.astype(np.float64)

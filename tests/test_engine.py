@@ -256,7 +256,7 @@ def test_topologies_match_reference(device, name, smoothing, seed):
 # ------------------------------------------------------------------------------------- mirroring
 @pytest.mark.parametrize(("n_dims", "mirror", "seed"), [(3, (1,), 1), (3, (0, 2), 5), (5, (1, 3), 1)])
 def test_mirror_matches_reference(device, n_dims, mirror, seed):
-    """Mirrored pairs act together (DESIGN.md step 2); seeds whose winners stay well apart over the run."""
+    """Mirrored pairs act together (the algorithm's step 2); seeds whose winners stay well apart over the run."""
     case = _case("torus")
     rng = np.random.default_rng(seed)
     W = np.concatenate([case.points, rng.uniform(0, 1, size=(case.n, n_dims - 3))], axis=1)
@@ -613,7 +613,7 @@ def test_other_settings_take_effect(device, attr, value):
     ],
 )
 def test_settings_change_mid_run(device, attr, before, after, seed):
-    """Smoothing, smooth_dims and metric weights set mid-run restart locally (DESIGN.md, Restarts): s0 from the
+    """Smoothing, smooth_dims and metric weights set mid-run restart locally (som.py, Restarts): s0 from the
     latest weights, with the new setting from the first cycle on. Same-sized steps before and after the change
     also catch a replayed run that kept the old setting."""
     case = _case("torus")

@@ -188,7 +188,7 @@ def test_car_nodes_take_the_colour_of_the_control_that_pulls_them():
     nearest = d.argmin(axis=1)
     assert d.min(axis=1).max() < 0.05  # each control reached
     np.testing.assert_allclose(w[nearest, 3:], eff[:, 3:], atol=0.02)  # and its node took on its colour
-    # (No symmetry check on the result: DESIGN.md applies the effective controls one after another, originals
+    # (No symmetry check on the result: the algorithm applies the effective controls one after another, originals
     # first, and that order alone makes the trained body noticeably asymmetric.)
 
 
