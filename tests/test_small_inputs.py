@@ -155,9 +155,12 @@ def test_a_chunk_header_claiming_256_mb_on_the_page_websocket_allocates_nothing(
                 reply = await ws.receive(timeout=10)
                 assert reply.type == aiohttp.WSMsgType.BINARY
                 t = time.perf_counter()
-                for mid in range(2, 10):  # eight headers, 256 MB each, no content
-                    await ws.send_bytes(helpers.wslink_chunk(mid, total=256 * 2**20))
                 closed = False
+                try:
+                    for mid in range(2, 10):  # eight headers, 256 MB each, no content
+                        await ws.send_bytes(helpers.wslink_chunk(mid, total=256 * 2**20))
+                except aiohttp.ClientConnectionResetError:  # the server closed the socket before the last ones
+                    return True, time.perf_counter() - t
                 try:
                     while True:
                         msg = await ws.receive(timeout=5)
