@@ -191,6 +191,9 @@ class ReferenceSom:
         metric_weights=None,
         mirror: Sequence[int] = (),
         reach: float = 0.08,  # the engine's default (chosen by measurement)
+        radii=None,
+        group_maps=None,
+        smoothing_rule: str = "laplacian",
     ):
         self.n_vertices = int(n_vertices)
         self.reach = float(reach)
@@ -218,10 +221,20 @@ class ReferenceSom:
         self.iteration = 0
         self.margins: list[np.ndarray] = []
         self._table()
+        # the shaping rules (a radius per control, groups of any order, Taubin's smoothing): stated in
+        # backend/shaping_kernels.py's docstring; `group_maps` (G, n, n) maps each control to its copies, identity first
+        self.radii = np.zeros(len(self.controls)) if radii is None else np.array(radii, dtype=np.float64)
+        self.group_maps = None if group_maps is None else np.asarray(group_maps, dtype=np.float64)
+        self.smoothing_rule = smoothing_rule
+        self.rest = self.W.copy()
+        p = self.start_weights[:, :min(3, self.n_dims)]
+        lengths = np.linalg.norm(p[self.edges[:, 0]] - p[self.edges[:, 1]], axis=1) if len(self.edges) else [1.0]
+        self.edge = float(np.median(lengths)) or 1.0
 
     # schedule parameters: changing one restarts at s0 from the latest weights
     def _restart(self):
         self.iteration = restart_iteration(self.reach, self._iterations)
+        self.rest = self.W.copy()
 
     def restart(self):
         """A local restart from the latest weights (what a change of smoothing or metric weights does)."""
@@ -278,8 +291,10 @@ class ReferenceSom:
     def winners(self) -> np.ndarray:
         return winners(self.W, self.effective_controls, self.metric_weights)
 
-    def set_controls(self, controls):
+    def set_controls(self, controls, radii=None):
         self.controls = np.array(controls, dtype=np.float64, copy=True)
+        if radii is not None:
+            self.radii = np.array(radii, dtype=np.float64)
         self._restart()
 
     def set_weights(self, weights):
@@ -289,10 +304,68 @@ class ReferenceSom:
     def restore(self, weights, iteration):
         self.W = np.array(weights, dtype=np.float64, copy=True)
         self.iteration = int(iteration)
+        self.rest = self.W.copy()
 
     def reset(self):
         self.W = self.start_weights.copy()
         self.iteration = 0
+        self.rest = self.W.copy()
+
+    @property
+    def shaping(self) -> bool:
+        return bool(self.radii.any()) or self.group_maps is not None or (
+            self.smoothing_rule == "taubin" and self.smoothing > 0)
+
+    def _one_shaping_iteration(self):
+        """The shaping rules: a control of radius r > 0 carries its winner's region, W_v += alpha(s) g (C - W_u),
+        g = exp(-|x_v - x_u|^2 / (2 sigma^2)) of the rest positions (where the restart began), sigma = r / 2, zero
+        past ceil(3 sigma / median edge) + 1 hops; radius 0 is the paper's rule; a control and its copies act together,
+        scaled by 1 / max(1, sum of rates) when there are copies; smoothing is lambda, then Taubin's mu."""
+        s = self.iteration
+        W = self.W
+        maps = self.group_maps if self.group_maps is not None else np.eye(self.n_dims)[None]
+        if self.group_maps is None and self.mirror:
+            flip = np.eye(self.n_dims)
+            flip[list(self.mirror), list(self.mirror)] = -1.0
+            maps = np.stack([np.eye(self.n_dims), flip])
+        G, k = len(maps), len(self.controls)
+        members = np.array([maps[g] @ self.controls[c] for c in range(k) for g in range(G)])
+        self.margins.append(winner_margins(W, members, self.metric_weights))
+        win = winners(W, members, self.metric_weights)
+        wu = W[win].copy()
+        alpha = self.L[s, 0]
+        pos = list(range(min(3, self.n_dims)))
+        for c in range(k):
+            step = np.zeros_like(W)
+            total = np.zeros(self.n_vertices)
+            for g in range(G):
+                j = c * G + g
+                d = self.dist[win[j]].astype(np.int64)
+                ok = d != UNREACHABLE
+                rate = np.zeros(self.n_vertices)
+                if self.radii[c] == 0:
+                    rate[ok] = self.L[s, d[ok]]
+                    step += rate[:, None] * (members[j][None, :] - W)
+                else:
+                    sigma = 0.5 * self.radii[c]
+                    cutoff = np.ceil(3.0 * sigma / self.edge) + 1
+                    apart = self.rest[:, pos] - self.rest[win[j], pos]
+                    near = ok & (d <= cutoff)
+                    rate[near] = alpha * np.exp(-np.sum(apart[near] ** 2, axis=1) / (2 * sigma**2))
+                    step += rate[:, None] * (members[j] - wu[j])[None, :]
+                total += rate
+            if G > 1:
+                step /= np.maximum(1.0, total)[:, None]
+            W += step
+        dims = list(self._smooth_dims())
+        lams = [] if self.smoothing <= 0 else [self.smoothing]
+        if lams and self.smoothing_rule == "taubin":
+            lams.append(1.0 / (0.015 - 1.0 / self.smoothing))  # mu of Taubin's pair, pass band 0.015
+        for lam in lams:
+            old = W[:, dims].copy()
+            mean = self._mean_op @ old
+            W[:, dims] = np.where(self._has_nb[:, None], old + lam * (mean - old), old)
+        self.iteration += 1
 
     def _smooth_dims(self) -> tuple[int, ...]:
         if self.smooth_dims is None:
@@ -300,6 +373,8 @@ class ReferenceSom:
         return tuple(int(d) for d in self.smooth_dims)
 
     def _one_iteration(self):
+        if self.shaping:
+            return self._one_shaping_iteration()
         s = self.iteration
         C = self.effective_controls
         W = self.W

@@ -41,6 +41,8 @@ from .cuda_path import CudaPath
 from .cycle_kernels import CUDA_BLOCK, LONGEST_GRAPH, MAX_CONTROLS, PAIRS, SCALED_PAIRS, SINGLES, cycle_kernels
 from .rows_path import RowCache, RowsPath
 from .schedule import BY_NAME, DEFAULT_REACH, learning_table
+from .shaping_path import ShapingPath, taubin_mu
+from .symmetry import Symmetry
 from .topology import MAX_DENSE_NEURONS, Topology
 
 MAX_DIMS = 32
@@ -54,7 +56,14 @@ def restart_iteration(reach: float, iterations: int) -> int:
     return min(int(np.floor((1.0 - reach) * iterations)), iterations - 1)
 
 
-class Som(CpuPath, CudaPath, RowsPath):
+#: How a Som smooths: "laplacian" (the paper's uniform step, the case studies) or "taubin" (the same step, then a
+#: negative one that undoes its shrinking: the volume stays).
+SMOOTHING_RULES = ("laplacian", "taubin")
+#: Largest radius of influence a control may have (model units).
+MAX_RADIUS = 1e6
+
+
+class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
     """A SOM whose neurons are the vertices of `topology`, trained towards `controls`.
 
     weights (N, n) and controls (k, n) share the n feature dimensions (1..32). State stays on `device`
@@ -71,6 +80,11 @@ class Som(CpuPath, CudaPath, RowsPath):
     module's docstring). Moving controls and changing S, l_start, l_end, smoothing or metric weights restart at
     s0 = floor((1 - reach) S) from the latest weights (the clay follows locally); `reset()` runs the whole schedule
     from the start weights; `restore()` puts saved weights and s back without training.
+
+    radii (k,): each control's radius of influence in model units (None: all 0, the paper's point controls); a
+    control with a radius carries the clay around its winner with a smooth falloff (shaping_kernels.py). symmetry: a
+    `Symmetry` group whose copies of each control act together with it (`mirror` is the shorthand for a mirror of
+    any dims). smoothing_rule: "laplacian" (the paper's) or "taubin" (keeps the volume).
     """
 
     @warp_exclusive
@@ -88,7 +102,10 @@ class Som(CpuPath, CudaPath, RowsPath):
         mirror: Sequence[int] = (),
         device: str | None = None,
         reach: float = DEFAULT_REACH,
+        radii: ArrayLike | None = None,
+        symmetry: Symmetry | None = None,
         *,
+        smoothing_rule: str = "laplacian",
         cpu_cores: int | None = None,
         distances: str | None = None,
         cache_rows: int | None = None,
@@ -109,10 +126,15 @@ class Som(CpuPath, CudaPath, RowsPath):
         self._l_end = BY_NAME["l_end"].check(l_end, "l_end")
         self._smoothing = BY_NAME["smoothing"].check(smoothing, "smoothing")
         self._reach = BY_NAME["reach"].check(reach, "reach")
-        self._mirror = checks.dims("mirror", mirror, self.n_dims)
+        self._position_dims = list(range(min(3, self.n_dims)))
+        self._symmetry, self._mirror = self._check_symmetry(symmetry, mirror)
+        self._smoothing_rule = self._check_smoothing_rule(smoothing_rule)
         self._smooth_dims = self._check_smooth_dims(smooth_dims)
         self._metric = self._check_metric(metric_weights)
         self._controls = self._check_controls(controls, self._mirror)
+        self._radii = self._check_radii(radii, len(self._controls))
+        self._edge: float | None = None  # the start mesh's median edge length, once the shaping path needs it
+        self._sh_rest = None  # the shaping path's weights where the latest restart began
 
         dev = self.device
         self._blocks = (self.n_neurons + int(CUDA_BLOCK) - 1) // int(CUDA_BLOCK)
@@ -183,6 +205,71 @@ class Som(CpuPath, CudaPath, RowsPath):
                              f"{self.n_neurons:,}; use distances='rows' (distance rows computed on demand)")
         return distances == "rows"
 
+    def _check_symmetry(self, symmetry, mirror) -> tuple[Symmetry | None, tuple[int, ...]]:
+        """(the group, the mirror dims): a mirror group is the engine's mirrored pairs of its position dim."""
+        dims = checks.dims("mirror", mirror, self.n_dims)
+        if symmetry is None:
+            return None, dims
+        if not isinstance(symmetry, Symmetry):
+            raise ValueError(f"symmetry: expected a Symmetry (Symmetry.mirror(axis), Symmetry.radial(n, axis)) or "
+                             f"None, got {type(symmetry).__name__}")
+        if dims:
+            raise ValueError("give either symmetry or mirror, not both (mirror is the shorthand for a mirror group)")
+        if symmetry.axis >= len(self._position_dims):
+            raise ValueError(f"symmetry: axis {symmetry.axis} is not one of the {len(self._position_dims)} position "
+                             "dims")
+        if symmetry.kind == "mirror":
+            return None, (self._position_dims[symmetry.axis],)
+        if len(self._position_dims) < 3:
+            raise ValueError("symmetry: a radial group needs three position dims")
+        return symmetry, ()
+
+    def _check_smoothing_rule(self, rule) -> str:
+        if rule not in SMOOTHING_RULES:
+            raise ValueError(f"smoothing_rule: expected one of {', '.join(SMOOTHING_RULES)}, got {rule!r}")
+        return rule
+
+    def _check_radii(self, radii, k: int) -> np.ndarray:
+        if radii is None:
+            return np.zeros(k, np.float32)
+        r = checks.finite_array("radii", [radii] if np.isscalar(radii) else radii, 1)
+        if r.shape[0] != k:
+            raise ValueError(f"radii: expected one radius per control ({k}), got {r.shape[0]}")
+        if (r < 0).any() or (r > MAX_RADIUS).any():
+            raise ValueError(f"radii: each radius must lie in [0, {MAX_RADIUS:g}] (model units; 0 = a point "
+                             f"control), got {r.tolist()}")
+        return r
+
+    @property
+    def _order(self) -> int:
+        """Each control's group: the control and its copies."""
+        if self._symmetry is not None:
+            return self._symmetry.order
+        return 2 if self._mirror else 1
+
+    def _group_maps(self) -> np.ndarray:
+        """(order, n, n) the group's maps of a control, the identity first."""
+        if self._symmetry is not None:
+            return self._symmetry.maps(self.n_dims, self._position_dims)
+        maps = np.repeat(np.eye(self.n_dims)[None], self._order, axis=0)
+        if self._mirror:
+            maps[1][list(self._mirror), list(self._mirror)] = -1.0
+        return maps
+
+    @property
+    def _shaping(self) -> bool:
+        """The shaping path runs the cycles: radii, a radial group or Taubin's smoothing in use."""
+        return bool(self._radii.any()) or self._symmetry is not None or (
+            self._smoothing_rule == "taubin" and self._smoothing > 0.0)
+
+    def _smoothing_steps(self) -> list[float]:
+        """The strengths of the smoothing steps a cycle runs: none, lambda, or Taubin's lambda and mu."""
+        if self._smoothing <= 0.0:
+            return []
+        if self._smoothing_rule == "taubin":
+            return [self._smoothing, taubin_mu(self._smoothing)]
+        return [self._smoothing]
+
     def _check_controls(self, controls, mirror) -> np.ndarray:
         c = np.asarray(controls) if not isinstance(controls, np.ndarray) else controls
         if c.ndim == 1:
@@ -190,10 +277,11 @@ class Som(CpuPath, CudaPath, RowsPath):
         c = checks.finite_array("controls", c, 2)
         if c.shape[1] != self.n_dims:
             raise ValueError(f"controls: expected {self.n_dims} feature dimensions like the weights, got {c.shape[1]}")
-        k_eff = c.shape[0] * (2 if mirror else 1)
+        order = self._symmetry.order if getattr(self, "_symmetry", None) is not None else (2 if mirror else 1)
+        k_eff = c.shape[0] * order
         if c.shape[0] < 1 or k_eff > MAX_CONTROLS:
-            raise ValueError(f"controls: expected 1 to {MAX_CONTROLS} controls counting mirrored copies, "
-                             f"got {c.shape[0]} ({k_eff} with mirroring)")
+            raise ValueError(f"controls: expected 1 to {MAX_CONTROLS} controls counting symmetric copies, "
+                             f"got {c.shape[0]} ({k_eff} with their copies)")
         return c
 
     def _check_metric(self, metric) -> np.ndarray:
@@ -320,8 +408,61 @@ class Som(CpuPath, CudaPath, RowsPath):
     @warp_exclusive
     def mirror(self, value: Sequence[int]) -> None:
         mirror = checks.dims("mirror", value, self.n_dims)
-        self._check_controls(self._controls, mirror)
+        symmetry, self._symmetry = self._symmetry, None
+        try:
+            self._check_controls(self._controls, mirror)
+        except ValueError:
+            self._symmetry = symmetry
+            raise
         self._mirror = mirror
+        self._upload_controls()
+        self._restart()
+
+    @property
+    def symmetry(self) -> Symmetry | None:
+        """The symmetry group of the controls: a radial `Symmetry`, a mirror one (the same as `mirror` of its position
+        dim), or None."""
+        if self._symmetry is not None:
+            return self._symmetry
+        if len(self._mirror) == 1 and self._mirror[0] in self._position_dims:
+            return Symmetry.mirror(self._position_dims.index(self._mirror[0]))
+        return None
+
+    @symmetry.setter
+    @warp_exclusive
+    def symmetry(self, value: Symmetry | None) -> None:
+        old = self._symmetry, self._mirror
+        self._symmetry, self._mirror = None, ()
+        try:
+            self._symmetry, self._mirror = self._check_symmetry(value, ())
+            self._check_controls(self._controls, self._mirror)
+        except ValueError:
+            self._symmetry, self._mirror = old
+            raise
+        self._upload_controls()
+        self._restart()
+
+    @property
+    def radii(self) -> np.ndarray:
+        """(k,) each control's radius of influence in model units (0: the paper's point control)."""
+        return self._radii.copy()
+
+    @radii.setter
+    @warp_exclusive
+    def radii(self, value: ArrayLike) -> None:
+        self._radii = self._check_radii(value, len(self._controls))
+        self._upload_controls()
+        self._restart()
+
+    @property
+    def smoothing_rule(self) -> str:
+        """"laplacian" (the paper's step) or "taubin" (the step, then one that undoes its shrinking)."""
+        return self._smoothing_rule
+
+    @smoothing_rule.setter
+    @warp_exclusive
+    def smoothing_rule(self, value: str) -> None:
+        self._smoothing_rule = self._check_smoothing_rule(value)
         self._upload_controls()
         self._restart()
 
@@ -332,12 +473,12 @@ class Som(CpuPath, CudaPath, RowsPath):
 
     @property
     def effective_controls(self) -> np.ndarray:
-        """[originals..., mirrored copies...]: the list the cycle applies in order."""
-        if not self._mirror:
+        """[originals..., their first copies..., their second copies...]: every control and its symmetric copies
+        (with a mirror: [originals..., mirrored copies...]); copy j is of control j mod k."""
+        if self._order == 1:
             return self._controls.copy()
-        copies = self._controls.copy()
-        copies[:, list(self._mirror)] *= -1.0
-        return np.concatenate([self._controls, copies])
+        maps = self._group_maps()
+        return np.concatenate([(self._controls.astype(np.float64) @ m.T).astype(np.float32) for m in maps])
 
     @property
     @warp_exclusive
@@ -361,13 +502,17 @@ class Som(CpuPath, CudaPath, RowsPath):
 
     # -- intents ------------------------------------------------------------------------------------------
     @warp_exclusive
-    def set_controls(self, controls: ArrayLike, from_anchor: bool = False) -> None:
-        """New controls (any count k); the schedule restarts at s0 from the latest weights (local follow), or with
-        `from_anchor` from the weights `anchor()` kept (each frame of a drag restarts from the shape the drag began
-        with: on CUDA the copy back is a node of the run's first graph, not a call of its own)."""
+    def set_controls(self, controls: ArrayLike, radii: ArrayLike | None = None, *, from_anchor: bool = False) -> None:
+        """New controls (any count k) and their radii (None: kept where the count stays, else all 0); the schedule
+        restarts at s0 from the latest weights (local follow), or with `from_anchor` from the weights `anchor()` kept
+        (each frame of a drag restarts from the shape the drag began with: on CUDA the copy back is a node of the
+        run's first graph, not a call of its own)."""
         if from_anchor and self._w_anchor is None:
             raise ValueError("set_controls: from_anchor needs anchor() first (no weights are kept)")
-        self._controls = self._check_controls(controls, self._mirror)
+        controls = self._check_controls(controls, self._mirror)
+        if radii is not None or len(controls) != len(self._controls):
+            self._radii = self._check_radii(radii, len(controls))
+        self._controls = controls
         self._anchor_pending = from_anchor
         if from_anchor and self.device == "cpu":
             self._settle_anchor()
@@ -414,6 +559,8 @@ class Som(CpuPath, CudaPath, RowsPath):
     def winners(self) -> np.ndarray:
         """(k_eff,) the nearest neuron (metric-weighted) of each effective control for the current weights, in the
         order of `effective_controls`."""
+        if self._shaping:
+            return self._shaping_winners()
         self._find_winners_now()
         found = self._current_winners()
         if not self._mirror:
@@ -488,6 +635,7 @@ class Som(CpuPath, CudaPath, RowsPath):
             if self.device == "cpu":
                 self._plan_cores()
         self._winners_valid = False
+        self._sh_controls = None  # the shaping path's grouped controls: uploaded when it next runs
 
     @property
     def _pairs(self) -> int:
@@ -502,6 +650,7 @@ class Som(CpuPath, CudaPath, RowsPath):
         """Continue the schedule from cycle s (default: s0, a local restart) with the winners found afresh."""
         self._s = restart_iteration(self._reach, self._iterations) if s is None else s
         self._winners_valid = False
+        self._sh_rest_pending = True  # the shaping path's falloffs measure from the shape a restart begins with
 
     def _set_cycle(self) -> None:
         """Every cycle counter to s; on CUDA the staged controls go up with them, in one asynchronous copy."""
@@ -542,6 +691,10 @@ class Som(CpuPath, CudaPath, RowsPath):
 
     def _run(self, cycles: int) -> None:
         """`cycles` cycles from s, replayed from captured graphs (one per CPU core)."""
+        if self._shaping:
+            self._run_shaping(cycles)
+            self._winners_valid = False
+            return
         if self._rows_mode:
             self._settle_anchor()
             self._run_rows(cycles)

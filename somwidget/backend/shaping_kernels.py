@@ -1,0 +1,154 @@
+"""The shaping cycle's kernels: controls with a radius of influence, symmetry groups of any size, and a smoothing
+step that keeps the volume (shaping_path.py runs them; som.py's docstring states the rules).
+
+One cycle, as the algorithm's three steps, generic on the CPU and on CUDA (a thread per neuron or per control):
+  1. `find`: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2 for every effective control, from the weights before the
+     cycle (a thread per control and stretch of neurons, an atomic min of winner keys); `gather` keeps each
+     winner's weights W_u (the move below must not read a winner that another thread already moved);
+  2. `move`: each neuron applies the control groups in order (a group: a control and its symmetric copies, their
+     rates from the same W_v, scaled by 1 / max(1, sum of rates) when the group has copies). A control of radius 0
+     is the paper's: W_v += L[s, D[u, v]] (C - W_v). A control of radius r carries the clay around its winner:
+     W_v += alpha(s) g(v) (C - W_u), g = exp(-|x_v - x_u|^2 / (2 sigma^2)) of the distance between v's and the
+     winner's positions where the restart began (`rest`: the falloff keeps its shape while the region moves), sigma
+     from r, 0 past `cutoff` hops from the winner; so the region moves with the winner, falling off smoothly, and
+     no node but the winner is drawn onto the control;
+  3. `smooth`: one Jacobi step of uniform Laplacian smoothing with `strength` on the masked dims (twice per cycle
+     for Taubin's pair: lambda, then the negative mu that undoes the shrinking).
+"""
+
+import functools
+from types import SimpleNamespace
+from typing import Any
+
+import warp as wp
+
+from .primitives import FLOAT_MAX, INDEX_MASK, UNREACHABLE, winner_key
+
+#: Neurons one thread of `find` scans for one control.
+FIND_STRETCH = 256
+
+
+@wp.func
+def row_of(distances: wp.array2d(dtype=wp.uint16), slot_of: wp.array(dtype=wp.int32), u: int) -> int:
+    """The dense table's row of neuron u: its own."""
+    return u
+
+
+@wp.func
+def row_of(distances: wp.array2d(dtype=wp.int32), slot_of: wp.array(dtype=wp.int32), u: int) -> int:  # noqa: F811
+    """The cached distance row of neuron u (the path fetched every winner's row before the move)."""
+    return slot_of[u]
+
+
+@wp.func
+def hops_at(distances: wp.array2d(dtype=wp.uint16), row: int, v: int) -> int:
+    """D[u, v] from the dense table, -1 for unreachable."""
+    d = distances[row, v]
+    return wp.where(d != UNREACHABLE, wp.int32(d), -1)
+
+
+@wp.func
+def hops_at(distances: wp.array2d(dtype=wp.int32), row: int, v: int) -> int:  # noqa: F811 (overload)
+    """D[u, v] from a cached distance row, -1 for unreachable (the path fetched every winner's row before)."""
+    return distances[wp.max(row, 0), v]
+
+
+@functools.cache
+def shaping_kernels(n_dims: int) -> SimpleNamespace:
+    """The shaping cycle's kernels for weights of n_dims features (compiled once per device on first use)."""
+    vec = wp.types.vector(length=n_dims, dtype=wp.float32)
+    options = {"max_unroll": 32}
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def find(weights: wp.array(dtype=vec), controls: wp.array(dtype=vec), metric: wp.array(dtype=vec),
+             keys: wp.array(dtype=wp.uint64), stretches: int):
+        """Step 1, a thread per (control, stretch of FIND_STRETCH neurons): the stretch's nearest neuron (the lowest
+        index on a tie) into keys[c] by atomic min."""
+        tid = wp.tid()
+        c = tid // stretches
+        lo = (tid % stretches) * FIND_STRETCH
+        hi = wp.min(lo + FIND_STRETCH, weights.shape[0])
+        target = controls[c]
+        m = metric[0]
+        best = FLOAT_MAX
+        best_v = lo
+        for v in range(lo, hi):
+            diff = target - weights[v]
+            dist = wp.dot(wp.cw_mul(diff, m), diff)
+            nearer = dist < best
+            best = wp.where(nearer, dist, best)
+            best_v = wp.where(nearer, v, best_v)
+        wp.atomic_min(keys, c, winner_key(best, best_v))
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def gather(weights: wp.array(dtype=vec), keys: wp.array(dtype=wp.uint64), winners: wp.array(dtype=vec)):
+        """Each control's winner's weights before the move."""
+        c = wp.tid()
+        winners[c] = weights[wp.int32(keys[c] & INDEX_MASK)]
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def move(
+        weights: wp.array(dtype=vec),
+        rest: wp.array(dtype=vec),
+        controls: wp.array(dtype=vec),
+        winners: wp.array(dtype=vec),
+        keys: wp.array(dtype=wp.uint64),
+        inv_two_sigma2: wp.array(dtype=wp.float32),
+        cutoff: wp.array(dtype=wp.int32),
+        group_start: wp.array(dtype=wp.int32),
+        n_groups: int,
+        table: wp.array2d(dtype=wp.float32),
+        s: int,
+        distances: Any,
+        slot_of: wp.array(dtype=wp.int32),
+        position: vec,
+    ):
+        """Step 2 for neuron v (see the module's docstring), in place: v reads only its own weights and the
+        gathered winners."""
+        v = wp.tid()
+        w = weights[v]
+        alpha = table[s, 0]
+        last = table.shape[1] - 1
+        for g in range(n_groups):
+            lo = group_start[g]
+            hi = group_start[g + 1]
+            step = vec()
+            total = wp.float32(0.0)
+            for j in range(lo, hi):
+                u = wp.int32(keys[j] & INDEX_MASK)
+                d = hops_at(distances, row_of(distances, slot_of, u), v)
+                rate = wp.float32(0.0)
+                if d >= 0:
+                    k = inv_two_sigma2[j]
+                    if k == wp.float32(0.0):  # the paper's point control: towards the control
+                        rate = table[s, wp.min(d, last)]
+                        step += rate * (controls[j] - w)
+                    elif d <= cutoff[j]:  # a control with a radius: along with its winner
+                        apart = wp.cw_mul(rest[v] - rest[u], position)
+                        rate = alpha * wp.exp(-k * wp.dot(apart, apart))
+                        step += rate * (controls[j] - winners[j])
+                total += rate
+            if hi - lo > 1:
+                step = step / wp.max(wp.float32(1.0), total)
+            w = w + step
+        weights[v] = w
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def smooth(weights_in: wp.array(dtype=vec), weights_out: wp.array(dtype=vec), offsets: wp.array(dtype=wp.int32),
+               neighbors: wp.array(dtype=wp.int32), pull: vec):
+        """Step 3 for neuron v: W_v + pull * (mean of W over v's neighbours - W_v), pull = strength * mask, from
+        the weights before the step; a neuron without neighbours stays."""
+        v = wp.tid()
+        w = weights_in[v]
+        lo = offsets[v]
+        hi = offsets[v + 1]
+        if hi > lo:
+            total = vec()
+            for e in range(lo, hi):
+                total += weights_in[neighbors[e]]
+            w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
+        weights_out[v] = w
+
+    for source in (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32)):
+        wp.overload(move, {"distances": source})
+    return SimpleNamespace(vec=vec, find=find, gather=gather, move=move, smooth=smooth)

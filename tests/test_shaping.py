@@ -1,0 +1,182 @@
+"""The shaping rules in the engine (backend/shaping_kernels.py): controls with a radius of influence, symmetry groups,
+Taubin's smoothing; against the independent float64 reference (tests/reference.py) and by the figures a designer
+sees (the swell's volume, the far side staying, the symmetry kept). Real Warp kernels on the CPU, and on CUDA where
+there is a GPU."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from reference import ReferenceSom
+
+from somwidget.backend import io, metrics, presets
+from somwidget.backend.som import Som
+from somwidget.backend.symmetry import Symmetry
+from somwidget.backend.topology import Topology
+
+
+def _mesh(n_lon=12, n_rings=7):
+    faces, pts = presets.uv_ellipsoid(n_lon, n_rings, (1.0, 0.8, 0.6))
+    return Topology.from_faces(faces, len(pts)), pts.astype(np.float32), faces
+
+
+def _volume(points, faces) -> float:
+    t = io.triangulate(faces)
+    p = np.asarray(points, np.float64)
+    a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
+    return abs(float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0)
+
+
+def _compare(som: Som, ref: ReferenceSom, cycles: int, tol: float) -> None:
+    """Run both the same cycles; the winners well apart all along (no near-tie decides the comparison)."""
+    som.step(cycles)
+    ref.step(cycles)
+    assert ref.min_margin() > 1e-4, f"a near-tie ({ref.min_margin():.2e}): choose another case"
+    size = metrics.bounding_diagonal(ref.weights[:, :3])
+    err = np.abs(som.weights.astype(np.float64) - ref.weights).max() / size
+    assert err < tol, f"engine and float64 reference part by {err:.2e} of the size"
+
+
+def test_point_controls_keep_the_case_studies_path():
+    topo, pts, _ = _mesh()
+    som = Som(topo, pts, pts[[0, 20]], device="cpu", radii=[0.0, 0.0], mirror=(1,))
+    assert not som._shaping  # the case studies' paths, bit for bit
+    som.radii = [0.0, 0.3]
+    assert som._shaping
+    som.radii = [0.0, 0.0]
+    som.smoothing, som.smoothing_rule = 0.2, "laplacian"
+    assert not som._shaping
+
+
+@pytest.mark.parametrize("mirror", [(), (1,)])
+def test_radius_rule_matches_the_float64_reference(device, mirror):
+    topo, pts, _ = _mesh()
+    controls = pts[[3, 40, 70]].copy()
+    controls[0, :3] += [0.0, 0.0, 0.35]  # pulled out
+    controls[1, :3] *= 0.85  # pushed in
+    radii = [0.6, 0.0, 0.4]  # a point control among controls with radii
+    kw = dict(iterations=300, l_start=0.25, l_end=0.03, reach=0.3, mirror=mirror)
+    som = Som(topo, pts, pts[[3, 40, 70]], device=device, radii=radii, **kw)
+    ref = ReferenceSom(topo.n_vertices, topo.edges, pts, pts[[3, 40, 70]], radii=radii, **kw)
+    som.restore(pts, 300)
+    ref.restore(pts, 300)
+    som.set_controls(controls)
+    ref.set_controls(controls)
+    _compare(som, ref, 90, 2e-5)
+    moved = np.linalg.norm(som.weights - pts, axis=1)
+    assert moved.max() > 0.05  # the run did something worth comparing
+
+
+def test_radial_group_matches_the_float64_reference(device):
+    topo, pts, _ = _mesh(n_lon=12)
+    group = Symmetry.radial(4, 2)
+    controls = pts[[14, 50]].copy()
+    controls[:, :2] *= 1.3
+    kw = dict(iterations=200, reach=0.3)
+    som = Som(topo, pts, controls, device=device, radii=[0.5, 0.0], symmetry=group, **kw)
+    ref = ReferenceSom(topo.n_vertices, topo.edges, pts, controls, radii=[0.5, 0.0], group_maps=group.maps(3), **kw)
+    ref.restart()
+    som.restart()
+    _compare(som, ref, 60, 2e-5)
+    eff = som.effective_controls
+    assert eff.shape == (8, 3)
+    np.testing.assert_allclose(eff[2], group.maps(3)[1] @ controls[0], atol=1e-6)  # copy j of control j mod k
+
+
+def test_taubin_smoothing_matches_the_float64_reference(device):
+    topo, pts, _ = _mesh()
+    kw = dict(iterations=200, reach=0.5, smoothing=0.3, smoothing_rule="taubin")
+    som = Som(topo, pts, pts[[3, 40]], device=device, **kw)
+    ref = ReferenceSom(topo.n_vertices, topo.edges, pts, pts[[3, 40]], **kw)
+    som.restart()
+    ref.restart()
+    _compare(som, ref, 50, 2e-5)
+
+
+def test_a_radial_start_stays_radial(device):
+    """The sphere preset (32 longitudes) with 8-fold symmetry about z: a control with a radius pulled out, the copies
+    follow, and every node's rotated image stays on its partner to 1e-4 of the size."""
+    p = presets.get_preset("sphere")
+    group = Symmetry.radial(8, 2)
+    pts = p.weights.astype(np.float32)
+    rot = group.rotations()[1]
+    image = pts.astype(np.float64) @ rot.T
+    partner = np.argmin(((image[:, None, :] - pts[None, :, :]) ** 2).sum(-1), axis=1)
+    assert np.abs(pts[partner] - image).max() < 1e-5  # the start is 8-fold symmetric
+    c = pts[[100]].copy()
+    c[0, :2] *= 1.4
+    som = Som(p.topology, pts, c, device=device, radii=[0.6], symmetry=group, reach=0.3)
+    som.restore(pts, som.iterations)
+    som.set_controls(c)
+    som.train()
+    w = som.weights.astype(np.float64)
+    size = metrics.bounding_diagonal(w)
+    assert np.linalg.norm(w - pts, axis=1).max() > 0.2 * size * 0.3  # it moved
+    assert np.abs(w[partner] - w @ rot.T).max() / size < 1e-4
+
+
+@pytest.mark.parametrize("whole", [True, False], ids=["whole run", "local restart"])
+@pytest.mark.parametrize("strength", [0.1, 0.3])
+def test_taubin_keeps_the_sphere_s_volume(whole, strength):
+    """Smoothing with lambda up to 0.3 changes the sphere's volume by at most 1% against the same run without it
+    (the paper's Laplacian step shrinks it to a third)."""
+    p = presets.get_preset("sphere")
+    size = metrics.bounding_diagonal(p.weights)
+
+    def volume(rule, lam):
+        som = Som(p.topology, p.weights, p.controls, device="cpu", reach=0.3, smoothing=lam, smoothing_rule=rule,
+                  radii=np.full(len(p.controls), 0.25 * size, np.float32))
+        if whole:
+            som.reset()
+        else:
+            som.restore(p.weights, som.iterations)
+            som.restart()
+        som.train()
+        return _volume(som.weights, p.topology.faces)
+
+    plain = volume("laplacian", 0.0)
+    assert abs(volume("taubin", strength) / plain - 1.0) < 0.01
+    if whole:
+        assert volume("laplacian", strength) / plain < 0.6  # what the paper's step does: a check that can fail
+
+
+def test_a_control_with_a_radius_swells_the_sphere_where_the_paper_s_rule_makes_a_spike():
+    p = presets.get_preset("sphere")
+    pts = p.weights.astype(np.float64)
+    size = metrics.bounding_diagonal(pts)
+    out = {}
+    for name, radius, reach in (("paper", 0.0, 0.3), ("radius", 0.25 * size, 0.3)):
+        som = Som(p.topology, p.weights, p.controls, device="cpu", reach=reach,
+                  radii=np.full(len(p.controls), radius, np.float32))
+        som.restore(p.weights, som.iterations)
+        c = som.controls
+        i = 1  # a control away from the poles
+        c[i] += 0.3 * size * c[i] / np.linalg.norm(c[i])
+        som.set_controls(c)
+        som.train()
+        w = som.weights.astype(np.float64)
+        out[name] = dict(volume=_volume(w, p.topology.faces) / _volume(pts, p.topology.faces),
+                         far=metrics.far_half_moved(pts, w, c[i]),
+                         gap=float(metrics.nearest_distances(c[i:i + 1], w)[0]) / size)
+    assert out["radius"]["volume"] >= 0.95 and out["radius"]["far"] <= 0.02 and out["radius"]["gap"] <= 0.01
+    assert out["paper"]["volume"] < out["radius"]["volume"] - 0.1  # the paper's rule at this reach caves in
+
+
+def test_radii_and_symmetry_are_checked():
+    topo, pts, _ = _mesh()
+    with pytest.raises(ValueError, match="radii: expected one radius per control"):
+        Som(topo, pts, pts[:2], device="cpu", radii=[0.1])
+    with pytest.raises(ValueError, match="radii: each radius"):
+        Som(topo, pts, pts[:2], device="cpu", radii=[0.1, -1.0])
+    with pytest.raises(ValueError, match="radii"):
+        Som(topo, pts, pts[:2], device="cpu", radii=[0.1, float("nan")])
+    with pytest.raises(ValueError, match="symmetry: expected a Symmetry"):
+        Som(topo, pts, pts[:2], device="cpu", symmetry="radial")
+    with pytest.raises(ValueError, match="either symmetry or mirror"):
+        Som(topo, pts, pts[:2], device="cpu", symmetry=Symmetry.mirror(1), mirror=(1,))
+    with pytest.raises(ValueError, match="n: expected at least 2 and at most 32"):
+        Symmetry.radial(33, 2)
+    with pytest.raises(ValueError, match="counting symmetric copies"):
+        Som(topo, pts, np.repeat(pts[:1], 9, axis=0), device="cpu", symmetry=Symmetry.radial(32, 2))
+    with pytest.raises(ValueError, match="smoothing_rule"):
+        Som(topo, pts, pts[:2], device="cpu", smoothing_rule="bilaplacian")
