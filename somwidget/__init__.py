@@ -6,6 +6,7 @@ no UI package: `show` (Jupyter) and `render` (static pictures) import theirs whe
 
 from .backend import presets
 from .backend.som import Som
+from .backend.symmetry import Symmetry
 from .backend.topology import Topology
 
 
@@ -48,4 +49,13 @@ def serve(preset: str | None = None, mesh=None, host: str | None = None, port: i
                       lan=lan, fresh=fresh)
 
 
-__all__ = ["Som", "Topology", "presets", "serve", "show", "render", "sweep"]
+def __getattr__(name: str):
+    """`somwidget.Session`: the modelling session every view shares (imported on first use; no UI package)."""
+    if name == "Session":
+        from .frontend.model import Session
+
+        return Session
+    raise AttributeError(f"module 'somwidget' has no attribute {name!r}")
+
+
+__all__ = ["Som", "Topology", "Symmetry", "Session", "presets", "serve", "show", "render", "sweep"]

@@ -178,5 +178,11 @@ def test_radii_and_symmetry_are_checked():
         Symmetry.radial(33, 2)
     with pytest.raises(ValueError, match="counting symmetric copies"):
         Som(topo, pts, np.repeat(pts[:1], 9, axis=0), device="cpu", symmetry=Symmetry.radial(32, 2))
+    with pytest.raises(ValueError, match="do not fit 2 feature dims"):
+        Som(topo, pts[:, :2], pts[:2, :2], device="cpu", symmetry=Symmetry.radial(4, 2))
+    assert Symmetry.parse("radial-6-z-mirror") == Symmetry.radial(6, 2, mirror=True)
+    assert Symmetry.parse(Symmetry.mirror("x").spec) == Symmetry.mirror(0) and Symmetry.parse("none") is None
+    with pytest.raises(ValueError, match="expected none, mirror-x"):
+        Symmetry.parse("spiral")
     with pytest.raises(ValueError, match="smoothing_rule"):
         Som(topo, pts, pts[:2], device="cpu", smoothing_rule="bilaplacian")

@@ -42,7 +42,7 @@ from .cycle_kernels import CUDA_BLOCK, LONGEST_GRAPH, MAX_CONTROLS, PAIRS, SCALE
 from .rows_path import RowCache, RowsPath
 from .schedule import BY_NAME, DEFAULT_REACH, learning_table
 from .shaping_path import ShapingPath, taubin_mu
-from .symmetry import Symmetry
+from .symmetry import Symmetry, mirror_dims_of, mirror_of_dims
 from .topology import MAX_DENSE_NEURONS, Topology
 
 MAX_DIMS = 32
@@ -215,13 +215,9 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
                              f"None, got {type(symmetry).__name__}")
         if dims:
             raise ValueError("give either symmetry or mirror, not both (mirror is the shorthand for a mirror group)")
-        if symmetry.axis >= len(self._position_dims):
-            raise ValueError(f"symmetry: axis {symmetry.axis} is not one of the {len(self._position_dims)} position "
-                             "dims")
+        symmetry.maps(self.n_dims)  # ValueError when its dims do not fit the weights
         if symmetry.kind == "mirror":
-            return None, (self._position_dims[symmetry.axis],)
-        if len(self._position_dims) < 3:
-            raise ValueError("symmetry: a radial group needs three position dims")
+            return None, mirror_dims_of(symmetry)
         return symmetry, ()
 
     def _check_smoothing_rule(self, rule) -> str:
@@ -250,7 +246,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
     def _group_maps(self) -> np.ndarray:
         """(order, n, n) the group's maps of a control, the identity first."""
         if self._symmetry is not None:
-            return self._symmetry.maps(self.n_dims, self._position_dims)
+            return self._symmetry.maps(self.n_dims)
         maps = np.repeat(np.eye(self.n_dims)[None], self._order, axis=0)
         if self._mirror:
             maps[1][list(self._mirror), list(self._mirror)] = -1.0
@@ -420,13 +416,11 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
 
     @property
     def symmetry(self) -> Symmetry | None:
-        """The symmetry group of the controls: a radial `Symmetry`, a mirror one (the same as `mirror` of its position
-        dim), or None."""
-        if self._symmetry is not None:
+        """The symmetry group of the controls: a radial `Symmetry`, a mirror one (the same as `mirror` of its dims),
+        or None (also for mirror dims that are no axis's)."""
+        if self._symmetry is not None or not self._mirror or len(self._position_dims) < 3:
             return self._symmetry
-        if len(self._mirror) == 1 and self._mirror[0] in self._position_dims:
-            return Symmetry.mirror(self._position_dims.index(self._mirror[0]))
-        return None
+        return mirror_of_dims(self._mirror, self._position_dims)
 
     @symmetry.setter
     @warp_exclusive

@@ -13,8 +13,8 @@ direction dims, where a layout has them) and leaves every other feature (colour,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -40,6 +40,8 @@ class Symmetry:
     axis: int
     n: int = 2
     mirrored: bool = False
+    position: tuple[int, ...] = (0, 1, 2)  # the feature dims of a node's x, y, z
+    direction: tuple[int, ...] = ()  # the dims of a direction vector that turns with the positions (case study 3)
 
     def __post_init__(self) -> None:
         if self.kind not in ("mirror", "radial"):
@@ -47,6 +49,40 @@ class Symmetry:
         object.__setattr__(self, "axis", _axis(self.axis))
         if self.kind == "radial":
             object.__setattr__(self, "n", checks.integer("symmetry: n", self.n, 2, MAX_RADIAL))
+        for name in ("position", "direction"):
+            dims = tuple(int(d) for d in getattr(self, name))
+            if len(dims) not in ((3,) if name == "position" else (0, 3)):
+                raise ValueError(f"symmetry: {name} must name 3 feature dims{' or none' if name == 'direction' else ''}"
+                                 f", got {dims}")
+            object.__setattr__(self, name, dims)
+
+    def on(self, position: Sequence[int], direction: Sequence[int] = ()) -> Symmetry:
+        """This group acting on the given position (and direction) dims of a layout."""
+        return replace(self, position=tuple(position), direction=tuple(direction))
+
+    @property
+    def spec(self) -> str:
+        """The group as text: "mirror-y", "radial-8-z", "radial-6-z-mirror" (`parse` reads it back)."""
+        if self.kind == "mirror":
+            return f"mirror-{AXES[self.axis]}"
+        return f"radial-{self.n}-{AXES[self.axis]}" + ("-mirror" if self.mirrored else "")
+
+    @classmethod
+    def parse(cls, text: str) -> Symmetry | None:
+        """The group a `spec` names ("none" or "" for none); ValueError naming what was expected."""
+        t = str(text).strip().lower()
+        if t in ("", "none", "off"):
+            return None
+        parts = t.split("-")
+        try:
+            if parts[0] == "mirror" and len(parts) == 2:
+                return cls.mirror(parts[1])
+            if parts[0] == "radial" and len(parts) in (3, 4) and parts[3:] in ([], ["mirror"]):
+                return cls.radial(int(parts[1]), parts[2], mirror=len(parts) == 4)
+        except ValueError as exc:
+            raise ValueError(f"symmetry {text!r}: {exc}") from None
+        raise ValueError(f"symmetry {text!r}: expected none, mirror-x|y|z or radial-<n>-x|y|z[-mirror] (n 2 to "
+                         f"{MAX_RADIAL})")
 
     @classmethod
     def mirror(cls, axis=1) -> Symmetry:
@@ -85,10 +121,12 @@ class Symmetry:
             out += [r @ flip for r in out]
         return np.stack(out)
 
-    def maps(self, n_dims: int, position: Sequence[int] = (0, 1, 2), direction: Sequence[int] = ()) -> np.ndarray:
+    def maps(self, n_dims: int) -> np.ndarray:
         """(order, n_dims, n_dims) float64: the group acting on feature vectors whose `position` (and `direction`)
         dims are 3-vectors; every other dim is kept."""
-        position, direction = list(position), list(direction)
+        position, direction = list(self.position), list(self.direction)
+        if max(position + direction) >= n_dims:
+            raise ValueError(f"symmetry: dims {position + direction} do not fit {n_dims} feature dims")
         out = np.repeat(np.eye(n_dims)[None], self.order, axis=0)
         for g, r in enumerate(self.rotations()):
             for dims in (position, direction):
@@ -96,11 +134,10 @@ class Symmetry:
                     out[g][np.ix_(dims, dims)] = r
         return out
 
-    def copies(self, controls: np.ndarray, position: Sequence[int] = (0, 1, 2),
-               direction: Sequence[int] = ()) -> np.ndarray:
+    def copies(self, controls: np.ndarray) -> np.ndarray:
         """(k * order, n) the effective controls, grouped: each control followed by its copies."""
         c = np.asarray(controls, np.float64)
-        maps = self.maps(c.shape[1], position, direction)
+        maps = self.maps(c.shape[1])
         return np.einsum("gij,kj->kgi", maps, c).reshape(-1, c.shape[1])
 
     def describe(self) -> str:
@@ -110,13 +147,23 @@ class Symmetry:
         return f"{self.n}-fold about {name}" + (" with a mirror" if self.mirrored else "")
 
 
-def mirror_dims_of(symmetry: Symmetry | None, position: Sequence[int] = (0, 1, 2),
-                   direction: Sequence[int] = ()) -> tuple[int, ...] | None:
+def mirror_dims_of(symmetry: Symmetry | None) -> tuple[int, ...] | None:
     """The dims a mirror group negates (the engine's mirrored pairs: `Som(mirror=...)`), or None for a group that is
     not a plain mirror."""
     if symmetry is None or symmetry.kind != "mirror":
         return None
-    dims = [list(position)[symmetry.axis]]
-    if len(direction) == 3:
-        dims.append(list(direction)[symmetry.axis])
+    dims = [symmetry.position[symmetry.axis]]
+    if symmetry.direction:
+        dims.append(symmetry.direction[symmetry.axis])
     return tuple(sorted(dims))
+
+
+def mirror_of_dims(dims: Sequence[int], position: Sequence[int] = (0, 1, 2),
+                   direction: Sequence[int] = ()) -> Symmetry | None:
+    """The mirror group whose negated dims are `dims` (a position axis, with its direction axis where there is one),
+    or None when they are not such a mirror."""
+    for axis in range(3):
+        group = Symmetry.mirror(axis).on(position, direction)
+        if mirror_dims_of(group) == tuple(sorted(dims)):
+            return group
+    return None
