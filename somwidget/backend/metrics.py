@@ -123,3 +123,114 @@ def follow(som, control: int, share: float = 0.05, direction=None, position_dims
         least_size=least / size, far_moved_p90=far_half_moved(before, after, target, mirrored),
         gap=float(nearest_distances(target[None, :], after)[0]) / size,
         spike=float(spike_figures(after, som.topology, np.unique(som.winners())).max()), cycles=cycles)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Shape figures: how smooth a surface is, what it encloses, how far one point set lies from another (float64)
+# --------------------------------------------------------------------------------------------------------------
+def _face_arrays(faces) -> tuple[np.ndarray, np.ndarray]:
+    """Faces of any size (a list of index sequences or an (F, k) int array) as (flat vertex indices, sizes)."""
+    if isinstance(faces, np.ndarray) and faces.ndim == 2:
+        arr = faces.astype(np.int64)
+        return arr.ravel(), np.full(len(arr), arr.shape[1], np.int64)
+    rows = [np.asarray(f, np.int64).ravel() for f in faces]
+    sizes = np.array([len(f) for f in rows], np.int64)
+    flat = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+    return flat, sizes
+
+
+def triangles_of(faces) -> np.ndarray:
+    """(T, 3) int64 triangles of faces of any size, each face fanned from its first vertex: (f0, f_j, f_j+1) for
+    j = 1 .. k - 2, in face order. A triangle stays as it is; a face of fewer than 3 vertices gives none. The fan
+    keeps each face's winding, so outward faces give outward triangles."""
+    flat, sizes = _face_arrays(faces)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]) if len(sizes) else sizes
+    count = np.maximum(sizes - 2, 0)
+    if not count.sum():
+        return np.zeros((0, 3), np.int64)
+    face = np.repeat(np.arange(len(sizes)), count)
+    j = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count) + 1  # 1 .. k - 2 in each face
+    first = starts[face]
+    return np.stack([flat[first], flat[first + j], flat[first + j + 1]], axis=1)
+
+
+def face_normals(positions, faces) -> np.ndarray:
+    """(F, 3) unit normals of faces of any size by Newell's method (for a triangle: the normalised cross product
+    (p1 - p0) x (p2 - p0)); a face wound counter-clockwise seen from outside points outward. A degenerate face (no
+    area) gets NaN."""
+    p = np.asarray(positions, np.float64)
+    flat, sizes = _face_arrays(faces)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]) if len(sizes) else sizes
+    nxt = np.arange(1, len(flat) + 1)
+    some = sizes > 0
+    nxt[(starts + sizes - 1)[some]] = starts[some]  # each face's closing pair
+    a, b = p[flat], p[flat[nxt]]
+    terms = np.stack([(a[:, 1] - b[:, 1]) * (a[:, 2] + b[:, 2]),
+                      (a[:, 2] - b[:, 2]) * (a[:, 0] + b[:, 0]),
+                      (a[:, 0] - b[:, 0]) * (a[:, 1] + b[:, 1])], axis=1)
+    face = np.repeat(np.arange(len(sizes)), sizes)
+    n = np.stack([np.bincount(face, terms[:, k], minlength=len(sizes)) for k in range(3)], axis=1)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(length > 0, n / length, np.nan)
+
+
+def dihedral_angles(positions, faces) -> np.ndarray:
+    """The angle in degrees between the normals of the two faces on each edge they share, one value per such edge
+    (in no particular order): 0 where the surface is flat across the edge, 90 at a cube's edge, up to 180 where it
+    folds back on itself. It is the turn of the surface from face to face, so it grows with the curvature times the
+    edge length: a smooth surface gives small angles everywhere, a crease or a spike large ones.
+
+    faces: any size (a list of index sequences or an (F, k) int array); a face's normal is Newell's (face_normals),
+    so a non-planar quad counts as one face: pass `triangles_of(faces)` to measure the triangles a renderer draws,
+    including the fold across each quad's diagonal. Where the two faces run the shared edge the same way (their
+    windings disagree) one normal is flipped first, so the figure does not depend on the faces' orientation.
+    A boundary edge (one face) gives nothing; an edge of more than two faces gives the pairs of its consecutive
+    faces in face order. A pair with a degenerate face (no area) gives NaN."""
+    flat, sizes = _face_arrays(faces)
+    if not len(sizes):
+        return np.zeros(0)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    nxt = np.arange(1, len(flat) + 1)
+    some = sizes > 0
+    nxt[(starts + sizes - 1)[some]] = starts[some]
+    a, b = flat, flat[nxt]
+    face = np.repeat(np.arange(len(sizes)), sizes)
+    keep = a != b
+    a, b, face = a[keep], b[keep], face[keep]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.lexsort((face, hi, lo))
+    lo, hi, face, forward = lo[order], hi[order], face[order], (a < b)[order]
+    same = (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1]) & (face[1:] != face[:-1])  # consecutive half-edges of an edge
+    f1, f2 = face[:-1][same], face[1:][same]
+    flip = np.where(forward[:-1][same] == forward[1:][same], -1.0, 1.0)  # the same direction: windings disagree
+    normals = face_normals(positions, faces)
+    cos = np.einsum("ij,ij->i", normals[f1], normals[f2]) * flip
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def mesh_volume(positions, faces) -> float:
+    """The volume a closed mesh encloses, by the divergence theorem: the sum over its triangles (faces fanned by
+    `triangles_of`) of p0 . (p1 x p2) / 6, as an absolute value, so that it does not depend on whether the faces are
+    wound outward or inward (they must all agree) nor on where the origin lies. For an open or inconsistently wound
+    mesh the figure means nothing. Faces of any size; a non-planar face counts as its fan of triangles."""
+    p = np.asarray(positions, np.float64)
+    t = triangles_of(faces)
+    if not len(t):
+        return 0.0
+    p = p - p.mean(axis=0)  # the same sum, with less cancellation far from the origin
+    a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
+    return float(abs(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0)
+
+
+def chamfer(a, b) -> float:
+    """The symmetric Chamfer distance between two point sets (M, d) and (K, d): the mean distance from each point of
+    `a` to its nearest point of `b` and the mean from each point of `b` to its nearest in `a`, averaged:
+    (mean_i min_j |a_i - b_j| + mean_j min_i |a_i - b_j|) / 2. Plain (not squared) Euclidean distances, so it is in
+    the points' units: 0 for identical sets, the shift for a set shifted by less than half the spacing of its points.
+    Both sets must have points (ValueError otherwise)."""
+    pa = np.asarray(a, np.float64)
+    pb = np.asarray(b, np.float64)
+    if not len(pa) or not len(pb):
+        raise ValueError("chamfer: both point sets must have points")
+    return float((nearest_distances(pa, pb).mean() + nearest_distances(pb, pa).mean()) / 2.0)
