@@ -227,6 +227,7 @@ class ReferenceSom:
         self.group_maps = None if group_maps is None else np.asarray(group_maps, dtype=np.float64)
         self.smoothing_rule = smoothing_rule
         self.rest = self.W.copy()
+        self.sigmas = None  # the carrying controls' widths, fitted at a restart's first cycle
         p = self.start_weights[:, :min(3, self.n_dims)]
         lengths = np.linalg.norm(p[self.edges[:, 0]] - p[self.edges[:, 1]], axis=1) if len(self.edges) else [1.0]
         self.edge = float(np.median(lengths)) or 1.0
@@ -235,6 +236,7 @@ class ReferenceSom:
     def _restart(self):
         self.iteration = restart_iteration(self.reach, self._iterations)
         self.rest = self.W.copy()
+        self.sigmas = None
 
     def restart(self):
         """A local restart from the latest weights (what a change of smoothing or metric weights does)."""
@@ -305,22 +307,31 @@ class ReferenceSom:
         self.W = np.array(weights, dtype=np.float64, copy=True)
         self.iteration = int(iteration)
         self.rest = self.W.copy()
+        self.sigmas = None
 
     def reset(self):
         self.W = self.start_weights.copy()
         self.iteration = 0
         self.rest = self.W.copy()
+        self.sigmas = None
 
     @property
     def shaping(self) -> bool:
         return bool(self.radii.any()) or self.group_maps is not None or (
             self.smoothing_rule == "taubin" and self.smoothing > 0)
 
+    def _smooth_dims(self) -> tuple[int, ...]:
+        if self.smooth_dims is None:
+            return default_smooth_dims(self.n_dims)
+        return tuple(int(d) for d in self.smooth_dims)
+
     def _one_shaping_iteration(self):
         """The shaping rules: a control of radius r > 0 carries its winner's region, W_v += alpha(s) g (C - W_u),
-        g = exp(-|x_v - x_u|^2 / (2 sigma^2)) of the rest positions (where the restart began), sigma = r / 2, zero
-        past ceil(3 sigma / median edge) + 1 hops; radius 0 is the paper's rule; a control and its copies act together,
-        scaled by 1 / max(1, sum of rates) when there are copies; smoothing is lambda, then Taubin's mu."""
+        g = exp(-|x_v - x_u|^2 / (2 sigma^2)) of the rest positions (where the restart began), 0 in another connected
+        part; sigma = max(r / 2, sqrt(h e / 18 degrees)) with h the control's distance from its winner at the
+        restart's first cycle and e the start mesh's median edge; radius 0 is the paper's rule; a control and its
+        copies act together, scaled when there are copies by 1 / max(1, sum of their rates), a carrying group by
+        its falloffs' sum; smoothing is lambda, then Taubin's mu."""
         s = self.iteration
         W = self.W
         maps = self.group_maps if self.group_maps is not None else np.eye(self.n_dims)[None]
@@ -335,6 +346,10 @@ class ReferenceSom:
         wu = W[win].copy()
         alpha = self.L[s, 0]
         pos = list(range(min(3, self.n_dims)))
+        if self.sigmas is None:  # the restart's first cycle: each carrying control's width for its pull
+            h = np.linalg.norm((members - wu)[:, pos], axis=1)
+            base = np.repeat(0.5 * self.radii, G)
+            self.sigmas = np.where(base > 0, np.maximum(base, np.sqrt(h * self.edge / (np.pi / 10))), 0.0)
         for c in range(k):
             step = np.zeros_like(W)
             total = np.zeros(self.n_vertices)
@@ -346,14 +361,13 @@ class ReferenceSom:
                 if self.radii[c] == 0:
                     rate[ok] = self.L[s, d[ok]]
                     step += rate[:, None] * (members[j][None, :] - W)
+                    total += rate
                 else:
-                    sigma = 0.5 * self.radii[c]
-                    cutoff = np.ceil(3.0 * sigma / self.edge) + 1
+                    sigma = self.sigmas[j]
                     apart = self.rest[:, pos] - self.rest[win[j], pos]
-                    near = ok & (d <= cutoff)
-                    rate[near] = alpha * np.exp(-np.sum(apart[near] ** 2, axis=1) / (2 * sigma**2))
-                    step += rate[:, None] * (members[j] - wu[j])[None, :]
-                total += rate
+                    falloff = np.where(ok, np.exp(-np.sum(apart**2, axis=1) / (2 * sigma**2)), 0.0)
+                    step += (alpha * falloff)[:, None] * (members[j] - wu[j])[None, :]
+                    total += falloff
             if G > 1:
                 step /= np.maximum(1.0, total)[:, None]
             W += step
@@ -366,11 +380,6 @@ class ReferenceSom:
             mean = self._mean_op @ old
             W[:, dims] = np.where(self._has_nb[:, None], old + lam * (mean - old), old)
         self.iteration += 1
-
-    def _smooth_dims(self) -> tuple[int, ...]:
-        if self.smooth_dims is None:
-            return default_smooth_dims(self.n_dims)
-        return tuple(int(d) for d in self.smooth_dims)
 
     def _one_iteration(self):
         if self.shaping:

@@ -9,9 +9,12 @@ One cycle, as the algorithm's three steps, generic on the CPU and on CUDA (a thr
      rates from the same W_v, scaled by 1 / max(1, sum of rates) when the group has copies). A control of radius 0
      is the paper's: W_v += L[s, D[u, v]] (C - W_v). A control of radius r carries the clay around its winner:
      W_v += alpha(s) g(v) (C - W_u), g = exp(-|x_v - x_u|^2 / (2 sigma^2)) of the distance between v's and the
-     winner's positions where the restart began (`rest`: the falloff keeps its shape while the region moves), sigma
-     from r, 0 past `cutoff` hops from the winner; so the region moves with the winner, falling off smoothly, and
-     no node but the winner is drawn onto the control;
+     winner's positions where the restart began (`rest`: the falloff keeps its shape while the region moves), 0 in
+     another connected part of the mesh; so the region moves with the winner, falling off smoothly, and no node but
+     the winner is drawn onto the control. sigma is r / 2, widened (`fit`, once a restart) where the control is
+     so far from its winner that a bump that narrow would crease: the top of a bump of height h turns about
+     h e / sigma^2 radians an edge of length e, held to FIT_TURN. A group of such controls is scaled by the sum of
+     its falloffs g (two copies whose regions overlap move the nodes between them by their mean, not their sum);
   3. `smooth`: one Jacobi step of uniform Laplacian smoothing with `strength` on the masked dims (twice per cycle
      for Taubin's pair: lambda, then the negative mu that undoes the shrinking).
 """
@@ -26,6 +29,9 @@ from .primitives import FLOAT_MAX, INDEX_MASK, UNREACHABLE, winner_key
 
 #: Neurons one thread of `find` scans for one control.
 FIND_STRETCH = 256
+#: The most a carried bump's top may turn from one edge to the next (radians): 18 degrees, chosen by measurement
+#: (BENCHMARKS.md, "Shaping rules": the sphere's own 11 degrees an edge plus this stay under 30).
+FIT_TURN = wp.constant(0.3141592653589793)
 
 
 @wp.func
@@ -87,6 +93,20 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         winners[c] = weights[wp.int32(keys[c] & INDEX_MASK)]
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def fit(controls: wp.array(dtype=vec), winners: wp.array(dtype=vec), sigma: wp.array(dtype=wp.float32),
+            edge: wp.float32, position: vec, inv_two_sigma2: wp.array(dtype=wp.float32)):
+        """At a restart, each carrying control's falloff: sigma widened so that its bump's top turns at most
+        FIT_TURN an edge for the control's distance h from its winner; 0 stays 0 (a point control)."""
+        j = wp.tid()
+        s0 = sigma[j]
+        if s0 > wp.float32(0.0):
+            apart = wp.cw_mul(controls[j] - winners[j], position)
+            width = wp.max(s0, wp.sqrt(wp.length(apart) * edge / wp.float32(FIT_TURN)))
+            inv_two_sigma2[j] = wp.float32(1.0) / (wp.float32(2.0) * width * width)
+        else:
+            inv_two_sigma2[j] = wp.float32(0.0)
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def move(
         weights: wp.array(dtype=vec),
         rest: wp.array(dtype=vec),
@@ -94,7 +114,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         winners: wp.array(dtype=vec),
         keys: wp.array(dtype=wp.uint64),
         inv_two_sigma2: wp.array(dtype=wp.float32),
-        cutoff: wp.array(dtype=wp.int32),
+        component: wp.array(dtype=wp.int32),
         group_start: wp.array(dtype=wp.int32),
         n_groups: int,
         table: wp.array2d(dtype=wp.float32),
@@ -116,18 +136,18 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
             total = wp.float32(0.0)
             for j in range(lo, hi):
                 u = wp.int32(keys[j] & INDEX_MASK)
-                d = hops_at(distances, row_of(distances, slot_of, u), v)
-                rate = wp.float32(0.0)
-                if d >= 0:
-                    k = inv_two_sigma2[j]
-                    if k == wp.float32(0.0):  # the paper's point control: towards the control
+                k = inv_two_sigma2[j]
+                if k == wp.float32(0.0):  # the paper's point control: towards the control
+                    d = hops_at(distances, row_of(distances, slot_of, u), v)
+                    if d >= 0:
                         rate = table[s, wp.min(d, last)]
                         step += rate * (controls[j] - w)
-                    elif d <= cutoff[j]:  # a control with a radius: along with its winner
-                        apart = wp.cw_mul(rest[v] - rest[u], position)
-                        rate = alpha * wp.exp(-k * wp.dot(apart, apart))
-                        step += rate * (controls[j] - winners[j])
-                total += rate
+                        total += rate
+                elif component[u] == component[v]:  # a control with a radius: along with its winner
+                    apart = wp.cw_mul(rest[v] - rest[u], position)
+                    falloff = wp.exp(-k * wp.dot(apart, apart))
+                    step += (alpha * falloff) * (controls[j] - winners[j])
+                    total += falloff
             if hi - lo > 1:
                 step = step / wp.max(wp.float32(1.0), total)
             w = w + step
@@ -151,4 +171,4 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
 
     for source in (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32)):
         wp.overload(move, {"distances": source})
-    return SimpleNamespace(vec=vec, find=find, gather=gather, move=move, smooth=smooth)
+    return SimpleNamespace(vec=vec, find=find, gather=gather, fit=fit, move=move, smooth=smooth)

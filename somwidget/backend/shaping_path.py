@@ -3,8 +3,9 @@ mirrored pair, and Taubin's smoothing, in the generic kernels of shaping_kernels
 one of them is in use; with point controls, no symmetry or a mirror, and the paper's Laplacian step, it takes the
 case studies' paths (cpu_path.py, cuda_path.py, rows_path.py) and gives their results bit for bit.
 
-Each cycle launches its kernels from here (no captured graphs): find, gather, move, then one or two smoothing steps.
-In distance rows mode the winners come back to the host each cycle and their rows are fetched before the move.
+Each cycle launches its kernels from here (no captured graphs): find, gather (and, at a restart, fit), move, then one
+or two smoothing steps. In distance rows mode the point controls' winners come back to the host each cycle and their
+rows are fetched before the move; controls with a radius read only which part of the mesh a node is in.
 """
 
 from __future__ import annotations
@@ -15,19 +16,16 @@ import numpy as np
 import warp as wp
 
 from .shaping_kernels import FIND_STRETCH, shaping_kernels
+from .topology import _components
 
 #: A control's radius r is the distance at which its pull has fallen to exp(-2) = 0.14 of the winner's: the
-#: Gaussian's sigma is r / 2.
+#: Gaussian's sigma is r / 2 (widened for a far pull: shaping_kernels.fit).
 SIGMA_OF_RADIUS = 0.5
-#: Nodes farther than this many sigmas (in hops of the median edge, plus one) from a winner are not carried: a part of
-#: the clay that is near in space but far along the surface (the other side of a thin shell) stays.
-CUTOFF_SIGMAS = 3.0
 #: Taubin's pass band: with lambda > 0 the second step's mu = 1 / (PASS_BAND - 1 / lambda) < -lambda undoes the
 #: first step's shrinking of the shape's broad curves and keeps damping the fine ripples. Chosen by measurement on
 #: the sphere preset (BENCHMARKS.md, "Smoothing that keeps the volume"): the usual 0.1 grew it by up to 20% over a
 #: whole run at lambda 0.3, 0 shrank it by 2.7%; 0.015 keeps it within 0.1% for lambda 0.05 to 0.3.
 PASS_BAND = 0.015
-_INT_MAX = 2**31 - 1
 
 
 def taubin_mu(strength: float) -> float:
@@ -47,22 +45,23 @@ class ShapingPath:
         return float(np.median(np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1))) or 1.0
 
     def _upload_shaping(self) -> None:
-        """The effective controls grouped on the device (each control followed by its copies), each one's
-        1 / (2 sigma^2) (0: a point control) and hop cutoff, and where each group starts."""
+        """The effective controls grouped on the device (each control followed by its copies), each one's sigma
+        (0: a point control), and where each group starts."""
         maps = self._group_maps()
         order = len(maps)
         k = len(self._controls)
         grouped = np.einsum("gij,kj->kgi", maps, self._controls.astype(np.float64)).reshape(k * order, self.n_dims)
         sigma = np.repeat(self._radii.astype(np.float64) * SIGMA_OF_RADIUS, order)
-        with np.errstate(divide="ignore"):
-            inv = np.where(sigma > 0, 1.0 / (2.0 * sigma**2), 0.0)
         if self._edge is None:
             self._edge = self._median_edge()
-        hops = np.where(sigma > 0, np.ceil(CUTOFF_SIGMAS * sigma / self._edge) + 1, 0)
+            self._component = wp.array(_components(self.topology)[0].astype(np.int32), dtype=wp.int32,
+                                       device=self.device)
         dev = self.device
         self._sh_controls = wp.array(grouped.astype(np.float32), dtype=self._kernels.vec, device=dev)
-        self._sh_inv = wp.array(inv.astype(np.float32), dtype=wp.float32, device=dev)
-        self._sh_cutoff = wp.array(np.minimum(hops, _INT_MAX).astype(np.int32), dtype=wp.int32, device=dev)
+        self._sh_sigma = wp.array(sigma.astype(np.float32), dtype=wp.float32, device=dev)
+        self._sh_inv = wp.zeros(len(sigma), dtype=wp.float32, device=dev)
+        self._sh_point = np.repeat(self._radii == 0, order)  # the effective controls that read distances
+        self._sh_fit_pending = True
         self._sh_groups = wp.array(np.arange(0, k * order + 1, order, dtype=np.int32), dtype=wp.int32, device=dev)
         self._sh_n_groups = k
         self._sh_keys = wp.empty(k * order, dtype=wp.uint64, device=dev)
@@ -88,6 +87,7 @@ class ShapingPath:
         if self._sh_rest_pending:  # a restart: the falloffs measure distances on the shape it began from
             wp.copy(self._sh_rest, self._w)
             self._sh_rest_pending = False
+            self._sh_fit_pending = True
         kern = shaping_kernels(self.n_dims)
         dev, n = self.device, self.n_neurons
         steps = self._smoothing_steps()
@@ -99,12 +99,17 @@ class ShapingPath:
             self._shaping_find()
             wp.launch(kern.gather, dim=len(self._sh_keys), device=dev,
                       inputs=[self._w, self._sh_keys, self._sh_winners])
-            if self._rows_mode:
-                winners = (self._sh_keys.numpy() & np.uint64(0xFFFFFFFF)).astype(np.int64)
+            if self._sh_fit_pending:  # the first cycle of a restart: each carrying control's width for its pull
+                wp.launch(kern.fit, dim=len(self._sh_keys), device=dev,
+                          inputs=[self._sh_controls, self._sh_winners, self._sh_sigma, float(self._edge), position,
+                                  self._sh_inv])
+                self._sh_fit_pending = False
+            if self._rows_mode and self._sh_point.any():
+                winners = (self._sh_keys.numpy() & np.uint64(0xFFFFFFFF)).astype(np.int64)[self._sh_point]
                 self._cache.fetch(list(dict.fromkeys(winners.tolist())), self._d_max)
             wp.launch(kern.move, dim=n, device=dev,
                       inputs=[self._w, self._sh_rest, self._sh_controls, self._sh_winners, self._sh_keys, self._sh_inv,
-                              self._sh_cutoff, self._sh_groups, self._sh_n_groups, self._table, self._s,
+                              self._component, self._sh_groups, self._sh_n_groups, self._table, self._s,
                               self._distances, self._slot_of, position])
             for pull in masks:  # into the spare buffer and back (the other paths' graphs hold both buffers' places)
                 wp.launch(kern.smooth, dim=n, device=dev,
