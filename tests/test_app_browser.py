@@ -332,11 +332,16 @@ def test_panel_sets_schedule_and_refuses_bad_values(browser, server):
         page.locator("#field-iterations").press("Enter")
         page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('iterations')")
         assert server.state()["session"]["parameters"]["iterations"] == 1500
-        # symmetry off from the switch: the mirrored copies go
+        # symmetry off from the switch: each mirrored copy becomes a control of its own, and nothing moves
+        before = server.state(positions=True)["session"]["frame"]["positions"]
         page.locator("#symmetry-switch").click()
-        server.wait(lambda s: len(s["session"]["frame"]["effective_controls"]) == 9, what="symmetry off")
-        page.locator("#symmetry-switch").click()
-        server.wait(lambda s: len(s["session"]["frame"]["effective_controls"]) == 18, what="symmetry on")
+        st = server.wait(lambda s: len(s["session"]["controls"]) == 18 and not s["session"]["parameters"]["symmetry"]
+                         and s["session"]["pending_intents"] == 0, what="symmetry off")
+        assert len(st["session"]["frame"]["effective_controls"]) == 18
+        assert st["session"]["frame"]["positions"] == before
+        page.locator("#symmetry-switch").click()  # on again: the copies pair up with their controls
+        server.wait(lambda s: len(s["session"]["controls"]) == 9 and s["session"]["parameters"]["symmetry"]
+                    and len(s["session"]["frame"]["effective_controls"]) == 18, what="symmetry on")
         # a metric weight from the features table, and Pause / Train
         weight = page.locator("#features-table tr").nth(3).locator("input")
         weight.fill("2.5")

@@ -53,8 +53,8 @@ def test_a_crafted_client_cannot_write_the_template_or_other_tabs_state():
                           {"key": "param_symmetry", "value": False}]  # the page's own widget: goes through
                 with concurrent.futures.ThreadPoolExecutor(1) as pool:  # Playwright holds this thread's loop
                     pool.submit(lambda: asyncio.run(crafted_client(serve.base, attack))).result()
-                st = serve.wait(lambda s: len(s["session"]["frame"]["effective_controls"]) == 9,
-                                what="the allowed key (symmetry off) applied")
+                st = serve.wait(lambda s: not s["session"]["parameters"]["symmetry"]
+                                and len(s["session"]["controls"]) == 18, what="the allowed key (symmetry off) applied")
                 assert st["session"]["preset"] == "car"
                 assert st["panel"]["error_message"] == ""
                 tab.wait_for_timeout(1000)

@@ -80,8 +80,8 @@ def test_sliders_send_intents(panel, session):
     assert p["iterations"] == 300 and p["l_start"] == pytest.approx(0.4) and p["l_end"] == pytest.approx(0.05)
     assert p["smoothing"] == pytest.approx(0.1) and p["symmetry"] is False
     assert p["metric_weights"] == pytest.approx([1, 1, 1, 0, 1])
-    frame = wait_for(lambda: session.frame.iterations == 300 and len(session.frame.effective_controls) == 9
-                     and session.frame, what="a frame with the new parameters")  # no mirrored copies any more
+    frame = wait_for(lambda: session.frame.iterations == 300 and session.frame.n_controls == 18
+                     and session.frame, what="a frame with the new parameters")  # each copy a control of its own
     assert frame.iteration <= 300
     assert panel.error.value == ""
 

@@ -181,13 +181,25 @@ def test_parameters_are_validated_and_reach_the_som(session):
     np.testing.assert_allclose(session.clay.som.metric_weights, [1, 1, 1, 0.5, 0])
 
 
-def test_symmetry_off_and_on(session):
+def test_symmetry_off_and_on_moves_nothing(session):
+    """Off, the mirrored copies become controls of their own (18 controls, the same 18 pulls) and no node moves; on
+    again, they pair up as before (9 controls and their copies), and still no node moves."""
+    assert session.wait_idle(30)
+    before = session.frame.weights.copy()
     session.set_symmetry(False)
-    assert session.wait_idle(30)
-    assert session.frame.effective_controls.shape == (9, 5)
+    assert session.wait_applied(30) and session.wait_idle(30)
+    assert session.n_controls == 18 and session.frame.effective_controls.shape == (18, 5)
+    assert session.parameters["symmetry"] is False and session.parameters["group"] == "none"
+    np.testing.assert_array_equal(session.frame.weights, before)
     session.set_symmetry(True)
-    assert session.wait_idle(30)
-    assert session.frame.effective_controls.shape == (18, 5)
+    assert session.wait_applied(30) and session.wait_idle(30)
+    assert session.n_controls == 9 and session.frame.effective_controls.shape == (18, 5)
+    assert session.parameters["group"] == "mirror-y"
+    np.testing.assert_array_equal(session.frame.weights, before)
+    assert session.undo() and session.n_controls == 18  # each change one step
+    session.set_symmetry("radial-3-z")  # a group whose copies are not there yet: they appear and the clay follows
+    assert session.wait_applied(30) and session.wait_idle(30)
+    assert session.n_controls == 18 and session.frame.effective_controls.shape == (54, 5)
 
 
 def test_reset_restores_the_start_mesh(session):

@@ -186,3 +186,44 @@ def test_radii_and_symmetry_are_checked():
         Symmetry.parse("spiral")
     with pytest.raises(ValueError, match="smoothing_rule"):
         Som(topo, pts, pts[:2], device="cpu", smoothing_rule="bilaplacian")
+
+
+# -- in a session ------------------------------------------------------------------------------------------------
+def test_a_session_s_controls_carry_their_radii_through_edits_undo_and_files(tmp_path):
+    from somwidget.frontend.model import Session
+
+    with Session("sphere", device="cpu", autosave=False) as s:
+        size = metrics.bounding_diagonal(s.preset.weights)
+        assert np.allclose(s.radii, 0.2 * size)  # a kept shape's controls start with a radius
+        i = s.add_control([0.0, 0.0, 1.3], radius=0.3)
+        s.set_control_radius(0, 0.5)
+        s.set_control_radius(0, 0.45)  # a slider's drag: one step
+        assert s.wait_applied(30)
+        np.testing.assert_allclose(s.frame.radii[[0, i]], [0.45, 0.3])
+        np.testing.assert_allclose(s.clay.som.radii[[0, i]], [0.45, 0.3])
+        with pytest.raises(ValueError, match="radius"):
+            s.set_control_radius(0, -1)
+        with pytest.raises(ValueError, match="new control radius"):
+            s.add_control([0.0, 0.0, 1.0], radius=float("inf"))
+        s.set_symmetry("radial-4-z")
+        assert s.wait_applied(30) and s.wait_idle(60)
+        assert s.parameters["group"] == "radial-4-z" and len(s.frame.effective_controls) == 4 * s.n_controls
+        assert s.n_controls < 7  # the four controls around the equator are one control and its copies now
+        s.save(tmp_path / "s.npz")
+        radii = s.radii
+        assert s.undo() and s.parameters["group"] == "none"
+        assert s.undo() and s.radii[0] == pytest.approx(0.2 * size)  # both radius changes: one step
+        s.load(tmp_path / "s.npz")
+        assert s.parameters["group"] == "radial-4-z"
+        np.testing.assert_allclose(s.radii, radii)
+        s.remove_control(s.n_controls - 1)
+        assert len(s.radii) == s.n_controls == len(radii) - 1
+
+
+def test_a_case_study_keeps_its_point_controls():
+    from somwidget.frontend.model import Session
+
+    with Session("car", device="cpu", autosave=False, start=False) as s:
+        assert not s.radii.any() and not s.clay.som._shaping
+        s.add_control(s.controls[0])
+        assert s.radii[-1] == 0.0

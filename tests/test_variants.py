@@ -16,7 +16,8 @@ from somwidget.frontend.model import Session
 def _single_run(preset, controls, params, start=None, restart=False):
     som = Som(preset.topology, preset.weights, controls, iterations=params["iterations"], l_start=params["l_start"],
               l_end=params["l_end"], smoothing=params["smoothing"], reach=params["reach"],
-              smooth_dims=preset.smooth_dims, metric_weights=preset.metric_weights, mirror=preset.mirror, device="cpu")
+              smooth_dims=preset.smooth_dims, metric_weights=preset.metric_weights, mirror=preset.mirror, device="cpu",
+              radii=preset.control_radii(), symmetry=preset.symmetry, smoothing_rule=preset.smoothing_rule)
     if restart:
         som.restore(start, som.iterations)
         som.set_controls(controls)

@@ -14,9 +14,10 @@ from struct import error as struct_error
 import numpy as np
 
 from . import checks
-from .presets import (DISPLAYS, KEPT_SHAPE_REACH, XYZ, FeatureLayout, Preset, colours_of, controls_on,
+from .presets import (DISPLAYS, XYZ, FeatureLayout, Preset, colours_of, controls_on, kept_shape,
                       line_display_mesh, positions_of)
 from .schedule import BY_NAME, KEYS
+from .symmetry import Symmetry
 from .topology import Topology
 
 #: The default vertex limit of `load_mesh`: the dense distance table's cap (2^16 neurons).
@@ -148,7 +149,7 @@ def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
         name=p.stem or p.name, title=p.name,
         description=f"Loaded from {p.name}: {n} vertices, {len(mesh.faces)} triangles.",
         topology=topology, weights=points, controls=controls_on(points), layout=XYZ, display="surface",
-        reach=KEPT_SHAPE_REACH,
+        **kept_shape(points),
         meta={"source": str(p), "transform": {"centre": tuple(float(c) for c in centre), "scale": scale}})
 
 
@@ -242,6 +243,8 @@ SESSION_REQUIRED = ("weights", "start_weights", "controls", "topology", "layout"
 SESSION_DEFAULTS = {
     "preset": "", "display": "surface", **{key: BY_NAME[key].default for key in KEYS},
     "smooth_dims": None, "metric_weights": None, "mirror": (), "iteration": 0,
+    # the shaping rules (files before them: point controls, no radial group, the paper's smoothing)
+    "radii": None, "symmetry": "none", "smoothing_rule": "laplacian",
 }
 #: How a session file stores each schedule parameter: an int64 or a float64 scalar.
 _SCALAR_KIND = {key: "i" if BY_NAME[key].kind == "int" else "f" for key in KEYS}
@@ -255,7 +258,9 @@ def save_session(path, state: dict) -> None:
       when it has them, else its edges); layout: a FeatureLayout; and optionally preset (str), display (str),
       the schedule (schedule.KEYS: iterations an int, l_start, l_end, smoothing, reach floats), iteration (an
       int), smooth_dims (None or dims),
-      metric_weights (None or (n,) floats), mirror (dims). `session_state()` builds one from a Preset and a Som.
+      metric_weights (None or (n,) floats), mirror (dims), radii (None or (k,) floats >= 0), symmetry (a radial
+      group's spec, Symmetry.spec, or "none"), smoothing_rule ("laplacian" or "taubin"). `session_state()` builds
+      one from a Preset and a Som.
       n_vertices and format_version may be present (as in a loaded state) and are checked / ignored.
     """
     label = str(path)
@@ -283,6 +288,9 @@ def save_session(path, state: dict) -> None:
         "metric_weights": (np.zeros(0, np.float32) if clean["metric_weights"] is None else clean["metric_weights"]),
         "metric_weights_default": np.bool_(clean["metric_weights"] is None),
         "mirror": np.asarray(clean["mirror"], np.int64),
+        "radii": np.asarray(clean["radii"], np.float64),
+        "symmetry": np.str_(clean["symmetry"]),
+        "smoothing_rule": np.str_(clean["smoothing_rule"]),
         "layout_names": np.asarray(layout.names, dtype=np.str_),
         "layout_position": np.asarray(layout.position, np.int64),
         "layout_colour": np.asarray(layout.colour, np.int64),
@@ -313,7 +321,8 @@ def save_session(path, state: dict) -> None:
 SESSION_MEMBERS = frozenset({
     "format_version", "preset", "display", "weights", "start_weights", "controls", "n_vertices", "edges",
     *KEYS, "iteration", "smooth_dims", "smooth_dims_default",
-    "metric_weights", "metric_weights_default", "mirror", "layout_names", "layout_position", "layout_colour",
+    "metric_weights", "metric_weights_default", "mirror", "radii", "symmetry", "smoothing_rule",
+    "layout_names", "layout_position", "layout_colour",
     "layout_colour_space", "layout_direction", "layout_length", "topology_kind", "face_indices", "face_sizes"})
 
 
@@ -443,6 +452,9 @@ def load_session(path, *, max_vertices: int = MAX_VERTICES, max_iterations: int 
         "smooth_dims": None if scalar("smooth_dims_default", "b") else tuple(int(d) for d in ints("smooth_dims")),
         "metric_weights": None if scalar("metric_weights_default", "b") else get("metric_weights"),
         "mirror": tuple(int(d) for d in ints("mirror")),
+        "radii": get("radii") if "radii" in data else None,
+        "symmetry": scalar("symmetry", "s") if "symmetry" in data else "none",
+        "smoothing_rule": scalar("smoothing_rule", "s") if "smoothing_rule" in data else "laplacian",
     }
     clean = _check_state(state, label)
     clean["format_version"] = version
@@ -490,6 +502,24 @@ def _check_state(state: dict, label: str) -> dict:
         if mw.shape != (n,) or (mw < 0).any():
             raise ValueError(f"{label}: key 'metric_weights': expected {n} values >= 0, got {mw}")
         out["metric_weights"] = mw
+    k = len(controls)
+    radii = np.zeros(k, np.float32) if state.get("radii") is None else np.asarray(state["radii"])
+    radii = checks.finite_array(f"{label}: key 'radii'", radii.reshape(-1) if radii.size == k else radii, 1)
+    if radii.shape != (k,) or (radii < 0).any():
+        raise ValueError(f"{label}: key 'radii': expected {k} values >= 0 (one per control), got {radii.tolist()}")
+    out["radii"] = radii
+    try:
+        group = Symmetry.parse(state.get("symmetry", "none"))
+    except ValueError as exc:
+        raise ValueError(f"{label}: key 'symmetry': {exc}") from None
+    if group is not None and (group.kind != "radial" or out["mirror"]):
+        raise ValueError(f"{label}: key 'symmetry': a file keeps a mirror in 'mirror' and a radial group here, got "
+                         f"{state['symmetry']!r} with mirror {out['mirror']}")
+    out["symmetry"] = "none" if group is None else group.spec
+    if state.get("smoothing_rule", "laplacian") not in ("laplacian", "taubin"):
+        raise ValueError(f"{label}: key 'smoothing_rule': expected 'laplacian' or 'taubin', got "
+                         f"{state['smoothing_rule']!r}")
+    out["smoothing_rule"] = state.get("smoothing_rule", "laplacian")
     return out
 
 
@@ -501,11 +531,15 @@ def session_state(preset: Preset, som=None) -> dict:
         "start_weights": preset.weights, "weights": preset.weights, "controls": preset.controls,
         **{key: getattr(preset, key) for key in KEYS}, "iteration": 0,
         "smooth_dims": preset.smooth_dims, "metric_weights": preset.metric_weights, "mirror": preset.mirror,
+        "radii": preset.control_radii(), "symmetry": preset.symmetry.spec if preset.symmetry else "none",
+        "smoothing_rule": preset.smoothing_rule,
     }
     if som is not None:
         state.update({key: getattr(som, key) for key in KEYS})
+        radial = som.symmetry if som.symmetry is not None and som.symmetry.kind == "radial" else None
         state.update(weights=som.weights, controls=som.controls, iteration=som.iteration, smooth_dims=som.smooth_dims,
-                     metric_weights=som.metric_weights, mirror=som.mirror)
+                     metric_weights=som.metric_weights, mirror=som.mirror, radii=som.radii,
+                     symmetry=radial.spec if radial else "none", smoothing_rule=som.smoothing_rule)
     return state
 
 
@@ -517,5 +551,7 @@ def preset_from_session(state: dict) -> Preset:
         name=state.get("preset") or "session", title=state.get("preset") or "Session", description="A saved session.",
         topology=state["topology"], weights=state["start_weights"], controls=state["controls"],
         layout=state["layout"], mirror=state["mirror"], metric_weights=state["metric_weights"],
-        display=state["display"], smooth_dims=state["smooth_dims"],
+        display=state["display"], smooth_dims=state["smooth_dims"], radii=state.get("radii"),
+        symmetry=Symmetry.parse(state.get("symmetry", "none")), smoothing_rule=state.get("smoothing_rule", "laplacian"),
+        radius=float(np.max(state["radii"])) if state.get("radii") is not None and len(state["radii"]) else 0.0,
         **{key: state.get(key, BY_NAME[key].default) for key in KEYS})

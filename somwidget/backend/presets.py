@@ -16,7 +16,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import checks
+from .metrics import bounding_diagonal
 from .schedule import BY_NAME, KEYS
+from .symmetry import Symmetry
 from .topology import Topology
 
 #: Colour spaces and the number of colour dims each one takes.
@@ -139,6 +141,10 @@ class Preset:
     reach: float = BY_NAME["reach"].default
     grow: bool = False
     meta: dict = field(default_factory=dict)
+    radius: float = 0.0  # the radius of influence of its controls (and of new ones), model units (0: a point control)
+    radii: np.ndarray | None = None  # each control's own radius, where they differ (a saved session); else `radius`
+    symmetry: Symmetry | None = None  # a radial group of its controls (a mirror is `mirror`'s dims)
+    smoothing_rule: str = "laplacian"  # or "taubin" (keeps the volume): som.SMOOTHING_RULES
 
     def __post_init__(self):
         if not isinstance(self.topology, Topology):
@@ -160,6 +166,21 @@ class Preset:
             setting = BY_NAME[key]
             setattr(self, key, setting.check(getattr(self, key, setting.default), f"preset {self.name!r}: {key}"))
         self.grow = bool(self.grow)
+        self.radius = checks.real(f"preset {self.name!r}: radius", self.radius, 0.0, 1e6)
+        if self.radii is not None:
+            radii = checks.finite_array(f"preset {self.name!r}: radii", self.radii, 1)
+            if radii.shape != (len(self.controls),) or (radii < 0).any():
+                raise ValueError(f"preset {self.name!r}: radii must be {len(self.controls)} values >= 0, got {radii}")
+            self.radii = radii
+        if self.symmetry is not None:
+            if not isinstance(self.symmetry, Symmetry):
+                raise ValueError(f"preset {self.name!r}: symmetry must be a Symmetry, got {self.symmetry!r}")
+            if self.mirror:
+                raise ValueError(f"preset {self.name!r}: give either a symmetry or mirror dims, not both")
+            self.symmetry = self.symmetry.on(self.layout.position, self.layout.direction)
+        if self.smoothing_rule not in ("laplacian", "taubin"):
+            raise ValueError(f"preset {self.name!r}: smoothing_rule must be 'laplacian' or 'taubin', got "
+                             f"{self.smoothing_rule!r}")
         self.mirror = checks.dims(f"preset {self.name!r}: mirror", self.mirror, n)
         if self.smooth_dims is not None:
             self.smooth_dims = checks.dims(f"preset {self.name!r}: smooth_dims", self.smooth_dims, n)
@@ -168,7 +189,7 @@ class Preset:
             if mw.shape != (n,) or (mw < 0).any():
                 raise ValueError(f"preset {self.name!r}: metric_weights must be {n} values >= 0, got {mw}")
             self.metric_weights = mw
-        k_eff = len(effective_controls(self.controls, self.mirror))
+        k_eff = len(self.controls) * (self.symmetry.order if self.symmetry else 2 if self.mirror else 1)
         if k_eff > MAX_CONTROLS:
             raise ValueError(f"preset {self.name!r}: {k_eff} effective controls exceed the limit of {MAX_CONTROLS}")
         if self.display not in DISPLAYS:
@@ -183,8 +204,15 @@ class Preset:
         return self.topology.n_vertices
 
     def effective_controls(self) -> np.ndarray:
-        """The controls the engine trains on: originals, then their mirrored copies (if `mirror`)."""
+        """The controls the engine trains on: originals, then their symmetric copies (by the group's elements)."""
+        if self.symmetry is not None:
+            maps = self.symmetry.maps(self.layout.n_dims)
+            return np.concatenate([(self.controls.astype(np.float64) @ m.T).astype(np.float32) for m in maps])
         return effective_controls(self.controls, self.mirror)
+
+    def control_radii(self) -> np.ndarray:
+        """(k,) the radius each control starts with."""
+        return (self.radii if self.radii is not None else np.full(len(self.controls), self.radius)).astype(np.float32)
 
     def make_som(self, device=None, **engine_options):
         """A fresh `Som` at s = 0 with this preset's topology, start weights, controls and settings;
@@ -194,6 +222,7 @@ class Preset:
 
         return Som(self.topology, self.weights, self.controls, smooth_dims=self.smooth_dims,
                    metric_weights=self.metric_weights, mirror=self.mirror, device=device,
+                   radii=self.control_radii(), symmetry=self.symmetry, smoothing_rule=self.smoothing_rule,
                    **{key: getattr(self, key) for key in KEYS}, **engine_options)
 
 
@@ -456,10 +485,19 @@ CAR_LON, CAR_RINGS = 25, 24
 #: lambda of the space grid's Laplacian step: enough to keep the lattice even without holding it back from the
 #: controls (at 0.2 it stopped 12% of its size short of them, and every restart shrank it further).
 SPACE_GRID_SMOOTHING = 0.02
-#: The reach of shapes kept as they are (the general shapes, uploaded meshes): narrower than the default, since their
-#: controls sit on them and every restart pulls the nodes around each one in a little (BENCHMARKS.md, Local
-#: restarts: at 0.08 the far half of the torus, grid and lattice moved 2.6-3.5% of their size for a 5% move).
-KEPT_SHAPE_REACH = 0.06
+#: Shapes kept as they are (the general shapes, uploaded meshes) are shaped by controls with a radius of influence
+#: (som.py): each starts at this share of the shape's size (its bounding diagonal), and a restart runs this reach of
+#: the schedule, enough cycles for a moved control's winner to reach it (BENCHMARKS.md, "Shaping rules"); any
+#: smoothing keeps their volume (Taubin's rule).
+KEPT_SHAPE_RADIUS = 0.2
+KEPT_SHAPE_REACH = 0.3
+
+
+def kept_shape(points) -> dict:
+    """The Preset fields of a shape kept as it is, for its start positions: its controls' radius, reach and
+    smoothing rule."""
+    return dict(radius=KEPT_SHAPE_RADIUS * bounding_diagonal(np.asarray(points)[:, :3]), reach=KEPT_SHAPE_REACH,
+                smoothing_rule="taubin")
 
 
 def space_grid() -> Preset:
@@ -558,7 +596,7 @@ def lattice_preset() -> Preset:
         name="lattice", title="Lattice", description="An 8 x 8 x 8 lattice (6-neighbour synapses) with 6 controls "
                                                      "on its nodes: drag one to pull the lattice.",
         topology=Topology.from_edges(edges, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
-        l_start=0.3, display="points", reach=KEPT_SHAPE_REACH)
+        l_start=0.3, display="points", **kept_shape(pts))
 
 
 def grid_preset() -> Preset:
@@ -568,7 +606,7 @@ def grid_preset() -> Preset:
         name="grid", title="Grid", description="An open 32 x 32 quad sheet lying in the xy-plane, with 6 controls on "
                                                "it: drag one up or down to shape the sheet.",
         topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
-        reach=KEPT_SHAPE_REACH)
+        **kept_shape(pts))
 
 
 def sphere_preset() -> Preset:
@@ -577,7 +615,8 @@ def sphere_preset() -> Preset:
     return Preset(
         name="sphere", title="Sphere", description="A UV sphere of quads and pole triangles, with 6 controls on it: "
                                                    "drag one to push or pull the surface.",
-        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ)
+        topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
+        **kept_shape(pts))
 
 
 def torus_preset() -> Preset:
@@ -587,7 +626,7 @@ def torus_preset() -> Preset:
         name="torus", title="Torus", description="A periodic quad torus around the z-axis, with 6 controls on it: "
                                                  "drag one to reshape the ring.",
         topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
-        reach=KEPT_SHAPE_REACH)
+        **kept_shape(pts))
 
 
 PRESETS: dict[str, Callable[[], Preset]] = {

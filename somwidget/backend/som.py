@@ -135,6 +135,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         self._radii = self._check_radii(radii, len(self._controls))
         self._edge: float | None = None  # the start mesh's median edge length, once the shaping path needs it
         self._sh_rest = None  # the shaping path's weights where the latest restart began
+        self._sh_rest_pending = True  # taken when the first cycle runs
 
         dev = self.device
         self._blocks = (self.n_neurons + int(CUDA_BLOCK) - 1) // int(CUDA_BLOCK)
@@ -512,6 +513,29 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
             self._settle_anchor()
         self._upload_controls()
         self._restart()
+
+    @warp_exclusive
+    def regroup(self, controls: ArrayLike, radii: ArrayLike | None, symmetry: Symmetry | None = None,
+                mirror: Sequence[int] = (), keep_shape: bool = False) -> None:
+        """New controls, radii and symmetry at once (a group turned on or off: the controls change with it); with
+        `keep_shape` the weights and s stay as they are and nothing trains until the next change, else a local
+        restart. ValueError (nothing changed) if they do not fit together."""
+        old = self._symmetry, self._mirror, self._controls, self._radii
+        try:
+            self._symmetry, self._mirror = None, ()
+            self._symmetry, self._mirror = self._check_symmetry(symmetry, mirror)
+            self._controls = self._check_controls(controls, self._mirror)
+            self._radii = self._check_radii(radii, len(self._controls))
+        except ValueError:
+            self._symmetry, self._mirror, self._controls, self._radii = old
+            raise
+        self._upload_controls()
+        if keep_shape:
+            self._settle_anchor()
+            self._restart(self._s)
+        else:
+            self._anchor_pending = False
+            self._restart()
 
     @warp_exclusive
     def anchor(self) -> None:

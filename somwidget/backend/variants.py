@@ -17,6 +17,7 @@ import numpy as np
 from . import checks, metrics
 from .batch import MAX_TABLE_ENTRIES, BatchSom
 from .schedule import BY_NAME, KEYS
+from .symmetry import Symmetry
 from .topology import Topology
 
 FIGURES = ("gap", "spike", "symmetry", "size")
@@ -39,6 +40,16 @@ class VariantPlan:
     smooth_dims: tuple[int, ...] | None = None
     metric_weights: np.ndarray | None = None
     position_dims: tuple[int, ...] = (0, 1, 2)
+    radii: np.ndarray | None = None  # (k,) the controls' radii, the same in every variant (None: point controls)
+    origin: np.ndarray | None = None  # with `restart`: the session's start mesh (its Som's start weights)
+    symmetry: Symmetry | None = None  # a radial group (a mirror is `mirror`)
+    smoothing_rule: str = "laplacian"
+
+    @property
+    def shaping(self) -> bool:
+        """The variants need the shaping rules (som.py): radii, a radial group or Taubin's smoothing."""
+        return bool(self.radii is not None and np.any(self.radii > 0)) or self.symmetry is not None or (
+            self.smoothing_rule == "taubin" and bool(np.any(self.schedules["smoothing"] > 0)))
 
     @property
     def n_variants(self) -> int:
@@ -85,7 +96,8 @@ def _draw(name: str, spec, base, n: int, rng: np.random.Generator) -> np.ndarray
 
 def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: int, jitter: float = 0.05,
                   params: Mapping | None = None, seed: int = 0, restart: bool = False, mirror: Sequence[int] = (),
-                  smooth_dims=None, metric_weights=None, position_dims: Sequence[int] = (0, 1, 2)) -> VariantPlan:
+                  smooth_dims=None, metric_weights=None, position_dims: Sequence[int] = (0, 1, 2), radii=None,
+                  symmetry: Symmetry | None = None, smoothing_rule: str = "laplacian", origin=None) -> VariantPlan:
     """n variants around one design. Each control moves by up to `jitter` times the model's size (its bounding
     diagonal), in a direction and by a share drawn uniformly in a ball; `params` maps a schedule parameter to a
     (low, high) range, a list of values or one value (the others keep `base_params`). The same seed gives the same
@@ -113,7 +125,9 @@ def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: 
                        schedules=schedules, restart=bool(restart), mirror=tuple(mirror),
                        smooth_dims=None if smooth_dims is None else tuple(smooth_dims),
                        metric_weights=None if metric_weights is None else np.asarray(metric_weights, np.float32),
-                       position_dims=tuple(dims))
+                       position_dims=tuple(dims), radii=None if radii is None else np.asarray(radii, np.float32),
+                       symmetry=symmetry, smoothing_rule=smoothing_rule,
+                       origin=None if origin is None else np.asarray(origin, np.float32))
 
 
 @functools.lru_cache(maxsize=4)
@@ -131,6 +145,9 @@ def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray,
     """Train every variant of `plan` in one batch on `device` (None: this process's GPU when there is one):
     (weights (n, N, dims) float32, figures: each of FIGURES an (n,) array)."""
     s = plan.schedules
+    if plan.shaping:
+        weights = _run_singles(plan, device)
+        return weights, figures(plan, weights)
     som = BatchSom(topology_of(plan), plan.start, plan.controls, iterations=s["iterations"], l_start=s["l_start"],
                    l_end=s["l_end"], smoothing=s["smoothing"], reach=s["reach"], smooth_dims=plan.smooth_dims,
                    metric_weights=plan.metric_weights, mirror=plan.mirror, device=device)
@@ -139,6 +156,25 @@ def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray,
     som.train()
     weights = som.weights
     return weights, figures(plan, weights)
+
+
+def _run_singles(plan: VariantPlan, device: str | None) -> np.ndarray:
+    """The variants one Som after another (the batched kernels have no shaping rules yet): the same results as
+    their own runs."""
+    from .som import Som
+
+    topology, out = topology_of(plan), []
+    origin = plan.start if plan.origin is None else plan.origin
+    for i in range(plan.n_variants):
+        som = Som(topology, origin, plan.controls[i], **plan.params(i), smooth_dims=plan.smooth_dims,
+                  metric_weights=plan.metric_weights, mirror=plan.mirror, radii=plan.radii, symmetry=plan.symmetry,
+                  smoothing_rule=plan.smoothing_rule, device=device)
+        if plan.restart:  # a local restart from the design's shape, as a move of its controls would be
+            som.restore(plan.start, som.iterations)
+            som.restart()
+        som.train()
+        out.append(som.weights)
+    return np.stack(out)
 
 
 def figures(plan: VariantPlan, weights: np.ndarray) -> dict:
@@ -156,7 +192,10 @@ def figures(plan: VariantPlan, weights: np.ndarray) -> dict:
     size = np.linalg.norm(p.max(axis=1) - p.min(axis=1), axis=1)
     size = np.where(size > 0, size, 1.0)
     controls = plan.controls.astype(np.float64)
-    if plan.mirror:
+    if plan.symmetry is not None:
+        maps = plan.symmetry.maps(controls.shape[2])
+        controls = np.concatenate([controls @ m.T for m in maps], axis=1)
+    elif plan.mirror:
         image = controls.copy()
         image[:, :, list(plan.mirror)] *= -1.0
         controls = np.concatenate([controls, image], axis=1)

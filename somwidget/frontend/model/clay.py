@@ -15,6 +15,7 @@ from ...backend import device as _device
 from ...backend import presets as _presets
 from ...backend.presets import Preset
 from ...backend.schedule import KEYS as SCHEDULE_KEYS
+from ...backend.symmetry import Symmetry, mirror_dims_of, mirror_of_dims
 from .history import Step
 
 #: Largest mesh a session on the CPU accepts by default: the dense distance table is N^2 uint16 (16384 -> 512 MiB),
@@ -41,6 +42,28 @@ def default_mirror(preset: Preset) -> tuple[int, ...]:
     if layout.direction:
         dims.append(layout.direction[1])
     return tuple(sorted(dims))
+
+
+def default_group(preset: Preset) -> Symmetry | None:
+    """The group "symmetry on" brings for a preset: its own (a radial group, or its mirror dims as a mirror), else the
+    mirror across the xz-plane (y negated), acting on the layout's position and direction dims."""
+    layout = preset.layout
+    if preset.symmetry is not None:
+        return preset.symmetry
+    return mirror_of_dims(default_mirror(preset), layout.position, layout.direction)
+
+
+def engine_symmetry(group: Symmetry | None) -> tuple[Symmetry | None, tuple[int, ...]]:
+    """(Som's symmetry, Som's mirror dims) for a group: a mirror runs as the engine's mirrored pairs."""
+    dims = mirror_dims_of(group)
+    return (None, dims) if dims is not None else (group, ())
+
+
+def som_group(som, layout) -> Symmetry | None:
+    """The group a Som runs, as the session keeps it (acting on the layout's dims)."""
+    if som.symmetry is not None and som.symmetry.kind == "radial":
+        return som.symmetry
+    return mirror_of_dims(som.mirror, layout.position, layout.direction) if som.mirror else None
 
 
 def build(preset: str | Preset | None, device: str | None, max_vertices: int) -> tuple[Preset, object]:
@@ -86,10 +109,12 @@ class Clay:
         the next generation."""
         self.preset, self.som, self.layout = preset, som, preset.layout
         self.controls = np.array(som.controls, dtype=np.float32)
+        self.radii = np.array(som.radii, dtype=np.float32)
         self.control_ids = self.applied_ids = self.fresh_ids(len(self.controls))
-        self.mirror_dims = default_mirror(preset)
+        self.symmetry = som_group(som, preset.layout)
+        self.default_group = self.symmetry or default_group(preset)  # what "symmetry on" brings
         self.params = {name: type(getattr(som, name))(getattr(som, name)) for name in SCHEDULE_KEYS}
-        self.params["symmetry"] = bool(som.mirror)
+        self.params["symmetry"] = self.symmetry is not None
         self.params["metric_weights"] = [float(x) for x in som.metric_weights]
         self.generation += 1
 
@@ -99,18 +124,27 @@ class Clay:
         self._next_id += k
         return tuple(range(first, first + k))
 
+    def set_symmetry(self, group: Symmetry | None) -> None:
+        """The group in effect (caller holds lock); the one "symmetry on" brings follows a chosen group."""
+        self.symmetry = group
+        self.params["symmetry"] = group is not None
+        if group is not None:
+            self.default_group = group
+
     def parameters(self) -> dict:
-        """A copy of the parameters, with "mirror": the dims symmetry negates now (caller holds lock)."""
+        """A copy of the parameters, with "mirror" (the dims a mirror group negates) and "group" (the group's spec,
+        "none" when off) (caller holds lock)."""
         p = dict(self.params)
         p["metric_weights"] = list(p["metric_weights"])
-        p["mirror"] = list(self.mirror_dims) if p["symmetry"] else []
+        p["mirror"] = list(mirror_dims_of(self.symmetry) or ())
+        p["group"] = self.symmetry.spec if self.symmetry is not None else "none"
         return p
 
     def capture(self) -> Step:
         """The state now as an undo step (caller holds both locks, with no operation queued)."""
         params = dict(self.params, metric_weights=list(self.params["metric_weights"]))
         return Step(preset=self.preset, controls=self.controls.copy(), parameters=params, weights=self.som.weights,
-                    iteration=int(self.som.iteration))
+                    iteration=int(self.som.iteration), radii=self.radii.copy(), symmetry=self.symmetry)
 
     def put_back(self, step: Step) -> None:
         """Put a recorded state into the Som exactly, and the session's view with it; nothing trains until the next
@@ -121,15 +155,13 @@ class Clay:
                 setattr(som, name, p[name])
         if list(som.metric_weights) != list(p["metric_weights"]):
             som.metric_weights = np.asarray(p["metric_weights"], np.float32)
-        mirror = tuple(self.mirror_dims) if p["symmetry"] else ()
-        if som.mirror and tuple(som.mirror) != mirror:
-            som.mirror = ()
-        som.set_controls(step.controls)
-        if tuple(som.mirror) != mirror:
-            som.mirror = mirror
+        radii = np.zeros(len(step.controls), np.float32) if step.radii is None else step.radii
+        som.regroup(step.controls, radii, *engine_symmetry(step.symmetry))
         som.reach = p["reach"]
         som.restore(step.weights, step.iteration)
         self.controls = np.array(step.controls, np.float32)
+        self.radii = np.array(radii, np.float32)
+        self.set_symmetry(step.symmetry)
         if len(self.controls) != len(self.control_ids):  # a control added or removed: new ids (a grab on an id
             self.control_ids = self.fresh_ids(len(self.controls))  # that is gone ends)
         self.applied_ids = self.control_ids

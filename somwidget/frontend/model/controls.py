@@ -20,6 +20,8 @@ from .trainer import Trainer
 MAX_CONTROLS = _presets.MAX_CONTROLS
 #: Largest |value| accepted for a control coordinate or feature.
 MAX_ABS_VALUE = 1e6
+#: Largest radius of influence (model units).
+MAX_RADIUS = 1e6
 
 
 def check_index(name: str, value, count: int) -> int:
@@ -31,14 +33,21 @@ def check_index(name: str, value, count: int) -> int:
     return i
 
 
-def check_count(controls: np.ndarray, symmetry: bool) -> None:
-    """At least one control, and at most MAX_CONTROLS counting mirrored copies."""
+def check_count(controls: np.ndarray, group) -> None:
+    """At least one control, and at most MAX_CONTROLS counting the copies of a symmetry `group` (or None)."""
     k = controls.shape[0]
     if k < 1:
         raise ValueError("controls: at least one control is needed")
-    if k * (2 if symmetry else 1) > MAX_CONTROLS:
-        raise ValueError(f"controls: at most {MAX_CONTROLS} controls counting mirrored copies; "
-                         f"{k} controls{' with symmetry' if symmetry else ''} is too many")
+    order = group.order if group is not None else 1
+    if k * order > MAX_CONTROLS:
+        with_group = f" with {group.describe()} ({order} copies each)" if group is not None else ""
+        raise ValueError(f"controls: at most {MAX_CONTROLS} controls counting symmetric copies; {k} controls"
+                         f"{with_group} is too many")
+
+
+def check_radius(name: str, value) -> float:
+    """A radius of influence: a finite number in [0, MAX_RADIUS] model units (0: a point control)."""
+    return checks.real(name, value, 0.0, MAX_RADIUS)
 
 
 class ControlEdits:
@@ -51,8 +60,10 @@ class ControlEdits:
         self.frames = frames
 
     def _queue(self, controls: np.ndarray) -> None:
-        """The new controls to the Som (caller holds clay.lock); inside a drag they restart from where it began."""
-        self.trainer.enqueue(SetControls(controls, self.timeline.drag_anchor(), self.clay.control_ids))
+        """The new controls (and the radii the clay holds) to the Som (caller holds clay.lock); inside a drag they
+        restart from where it began."""
+        clay = self.clay
+        self.trainer.enqueue(SetControls(controls, clay.radii.copy(), self.timeline.drag_anchor(), clay.control_ids))
 
     def index_of(self, control_id) -> int:
         if isinstance(control_id, bool) or not isinstance(control_id, (int, np.integer)):
@@ -107,7 +118,17 @@ class ControlEdits:
 
         self._edit("colour", index, edit)
 
-    def replace(self, controls) -> None:
+    def set_radius(self, index, radius) -> None:
+        clay = self.clay
+        r = check_radius(f"control {index} radius", radius)
+        with self.timeline.step(f"parameter:radius:{index}"), clay.lock:
+            i = check_index("control", index, clay.controls.shape[0])
+            radii = clay.radii.copy()
+            radii[i] = r
+            clay.radii = radii
+            self._queue(clay.controls.copy())
+
+    def replace(self, controls, radii=None) -> None:
         arr = checks.finite_array("controls", controls, 2, np.float64)
         if np.abs(arr).max(initial=0.0) > MAX_ABS_VALUE:
             raise ValueError(f"controls: values must lie within +-{MAX_ABS_VALUE:g}")
@@ -117,14 +138,23 @@ class ControlEdits:
             n = clay.layout.n_dims
             if arr.shape[1] != n:
                 raise ValueError(f"controls: expected shape (k, {n}), got {arr.shape}")
-            check_count(arr, clay.params["symmetry"])
+            check_count(arr, clay.symmetry)
+            if radii is not None:
+                r = checks.finite_array("radii", radii, 1)
+                if r.shape != (len(arr),) or (r < 0).any() or (r > MAX_RADIUS).any():
+                    raise ValueError(f"radii: expected {len(arr)} values in [0, {MAX_RADIUS:g}] (one per control), "
+                                     f"got {r.tolist()}")
+                clay.radii = r
+            elif len(arr) != len(clay.radii):
+                clay.radii = np.full(len(arr), clay.preset.radius, np.float32)
             clay.controls = arr.copy()
             if len(arr) != len(clay.control_ids):
                 clay.control_ids = clay.fresh_ids(len(arr))
             self._queue(arr)
 
-    def add(self, values=None) -> int:
+    def add(self, values=None, radius=None) -> int:
         clay = self.clay
+        r = None if radius is None else check_radius("new control radius", radius)
         with self.timeline.step("add"), clay.lock:
             if values is None:  # next to the last one
                 v = clay.controls[-1].copy()
@@ -134,7 +164,8 @@ class ControlEdits:
             else:
                 v = checks.finite_vector("new control", values, clay.layout.n_dims, MAX_ABS_VALUE)
             controls = np.concatenate([clay.controls, v[None, :]]).astype(np.float32)
-            check_count(controls, clay.params["symmetry"])
+            check_count(controls, clay.symmetry)
+            clay.radii = np.append(clay.radii, clay.preset.radius if r is None else r).astype(np.float32)
             clay.controls = controls
             clay.control_ids = (*clay.control_ids, *clay.fresh_ids(1))
             self._queue(controls.copy())
@@ -147,5 +178,6 @@ class ControlEdits:
             if clay.controls.shape[0] <= 1:
                 raise ValueError("controls: cannot remove the last control")
             clay.controls = np.delete(clay.controls, i, axis=0)
+            clay.radii = np.delete(clay.radii, i)
             clay.control_ids = clay.control_ids[:i] + clay.control_ids[i + 1:]
             self._queue(clay.controls.copy())

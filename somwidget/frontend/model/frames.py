@@ -46,6 +46,8 @@ class Frame:
     held:               nothing trains until the next intent (after an undo, a redo, a loaded or recovered session)
     history:            (undo steps, redo steps) available
     control_ids:        a stable id for each control (k,): an id stays with its control while others come and go
+    radii:              (k,) each control's radius of influence (model units; 0: a point control)
+    group:              the symmetry group in effect (its spec: "mirror-y", "radial-8-z"), "none" when off
     """
 
     seq: int
@@ -72,6 +74,8 @@ class Frame:
     held: bool = False
     history: tuple[int, int] = (0, 0)
     control_ids: tuple[int, ...] = ()
+    radii: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    group: str = "none"
 
     @property
     def layout(self) -> FeatureLayout:
@@ -163,7 +167,8 @@ class FrameStream:
             effective_colours=_readonly(_presets.colours_of(eff, layout)), control_positions=_readonly(cpos),
             effective_positions=_readonly(epos), cycle_time=float(cycle_time), step_cycles=int(cycles),
             gaps=_readonly(gaps), preset=preset, applied=st["applied"], held=held, history=st["history"],
-            control_ids=tuple(st["control_ids"]))
+            control_ids=tuple(st["control_ids"]), radii=_readonly(np.asarray(som.radii, np.float32)),
+            group=st.get("group", "none"))
 
     def again(self, frame: Frame, **changes) -> Frame:
         """`frame` once more under a new number, with `changes` (after a failure that could make no new one)."""

@@ -34,6 +34,8 @@ class Step:
     parameters: dict
     weights: np.ndarray | Path
     iteration: int
+    radii: np.ndarray | None = None  # each control's radius (None: all 0)
+    symmetry: object = None  # the Symmetry group in effect, or None
 
     @property
     def nbytes(self) -> int:

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .clay import engine_symmetry, som_group
+
 
 class Operation:
     """What the training thread does to the Som for one intent."""
@@ -32,25 +34,32 @@ class Operation:
         """After `apply` failed: the session's view back to what `som` holds (caller holds clay.lock)."""
 
 
+def _controls_back(clay, som) -> None:
+    """The session's controls, radii and ids back to what the Som holds."""
+    clay.controls = np.array(som.controls, dtype=np.float32)
+    clay.radii = np.array(som.radii, dtype=np.float32)
+    clay.control_ids = clay.applied_ids
+
+
 @dataclass(frozen=True)
 class SetControls(Operation):
-    """New controls. In a drag, `anchor` is the Som that anchored the shape the drag began with: each frame of the
-    drag restarts from it (Som.set_controls(from_anchor=True)), so a long drag ends as one move would."""
+    """New controls and their radii. In a drag, `anchor` is the Som that anchored the shape the drag began with: each
+    frame of the drag restarts from it (Som.set_controls(from_anchor=True)), so a long drag ends as one move would."""
 
     controls: np.ndarray
+    radii: np.ndarray
     anchor: object
     ids: tuple
     key = "controls"
 
     def apply(self, som) -> None:
-        som.set_controls(self.controls, from_anchor=self.anchor is som)
+        som.set_controls(self.controls, self.radii, from_anchor=self.anchor is som)
 
     def applied(self, clay) -> None:
         clay.applied_ids = self.ids  # the ids of the controls the Som now holds
 
     def roll_back(self, clay, som) -> None:
-        clay.controls = np.array(som.controls, dtype=np.float32)
-        clay.control_ids = clay.applied_ids
+        _controls_back(clay, som)
 
 
 @dataclass(frozen=True)
@@ -72,17 +81,31 @@ class SetParameter(Operation):
 
 
 @dataclass(frozen=True)
-class SetMirror(Operation):
-    """Symmetry on (the dims each control's mirrored copy negates) or off (no dims)."""
+class SetSymmetry(Operation):
+    """A symmetry group on (`group`: a Symmetry) or off (None), with the controls it leaves: turned off, each copy
+    becomes a control of its own; turned on, controls that are each other's images pair up again. With `keep`, the
+    effective controls are the same as before: weights and s stay and nothing trains."""
 
-    dims: tuple
-    key = "mirror"
+    group: object
+    controls: np.ndarray
+    radii: np.ndarray
+    ids: tuple
+    keep: bool
+    key = "controls"
+
+    @property
+    def acts(self) -> bool:
+        return not self.keep
 
     def apply(self, som) -> None:
-        som.mirror = self.dims
+        som.regroup(self.controls, self.radii, *engine_symmetry(self.group), keep_shape=self.keep)
+
+    def applied(self, clay) -> None:
+        clay.applied_ids = self.ids
 
     def roll_back(self, clay, som) -> None:
-        clay.params["symmetry"] = bool(som.mirror)
+        _controls_back(clay, som)
+        clay.set_symmetry(som_group(som, clay.layout))
 
 
 @dataclass(frozen=True)

@@ -106,7 +106,8 @@ class Session:
             if len(clay.applied_ids) != len(clay.som.controls):  # cannot happen: ids travel with their controls
                 clay.applied_ids = clay.fresh_ids(len(clay.som.controls))
             return {"paused": clay.paused, "held": clay.hold, "applied": self.trainer.applied,
-                    "history": self.timeline.counts, "control_ids": clay.applied_ids}
+                    "history": self.timeline.counts, "control_ids": clay.applied_ids,
+                    "group": clay.symmetry.spec if clay.symmetry is not None else "none"}
 
         return self.frames.make(clay.som, clay.preset, clay.generation, cycles=cycles,
                                 cycle_time=self.trainer.cycle_time, status=status)
@@ -329,13 +330,32 @@ class Session:
         """Set control `index`'s colour dims from an RGB triple in [0, 1] or a '#rrggbb' string."""
         self.edit_controls.set_colour(index, colour)
 
-    def set_controls(self, controls) -> None:
-        """Replace every control: (k, n) finite values, 1 <= k (counting mirrored copies <= 256)."""
-        self.edit_controls.replace(controls)
+    def set_controls(self, controls, radii=None) -> None:
+        """Replace every control: (k, n) finite values, 1 <= k (counting symmetric copies <= 256), and their radii
+        (None: kept where the count stays, else the preset's radius for all)."""
+        self.edit_controls.replace(controls, radii)
 
-    def add_control(self, values=None) -> int:
-        """Append a control (all n features; default: next to the last one); returns its index."""
-        return self.edit_controls.add(values)
+    def add_control(self, values=None, radius: float | None = None) -> int:
+        """Append a control (all n features; default: next to the last one) with a radius of influence (model units;
+        None: the preset's, 0 for the case studies); returns its index."""
+        return self.edit_controls.add(values, radius)
+
+    def set_control_radius(self, index: int, radius: float) -> None:
+        """Control `index`'s radius of influence (model units; 0: the paper's point control): moving it then carries
+        the clay around its winner with a smooth falloff of about that radius. Set again within a moment (a slider's
+        drag), it joins the same undo step."""
+        self.edit_controls.set_radius(index, radius)
+
+    @property
+    def radii(self) -> np.ndarray:
+        """(k,) each control's radius of influence as the session holds it now."""
+        with self.clay.lock:
+            return self.clay.radii.copy()
+
+    @property
+    def symmetry(self):
+        """The symmetry group in effect (a `Symmetry`), or None."""
+        return self.clay.symmetry
 
     def remove_control(self, index: int) -> None:
         self.edit_controls.remove(index)
@@ -370,7 +390,10 @@ class Session:
         self.edit_parameters.set_learning_rates(l_start, l_end)
 
     def set_symmetry(self, value) -> None:
-        """Mirror every control across the xz-plane (the preset's mirror dims) or not."""
+        """A symmetry group for the controls: a `Symmetry` (Symmetry.mirror(axis), Symmetry.radial(n, axis,
+        mirror=)), its spec ("radial-8-z"), None or False (off), True (on: the last group, else the preset's mirror).
+        Every copy of a control acts together with it. Turned off, the copies become controls of their own and
+        nothing moves; turned on, controls that are each other's images pair up again without moving."""
         self.edit_parameters.set_symmetry(value)
 
     def set_metric_weights(self, value) -> None:
@@ -445,7 +468,8 @@ class Session:
         clay = self.clay
         with clay.som_lock, clay.lock:
             return {"preset": clay.preset, "weights": np.asarray(clay.som.weights, np.float32),
-                    "controls": clay.controls.copy(), "iteration": int(clay.som.iteration),
+                    "controls": clay.controls.copy(), "radii": clay.radii.copy(), "symmetry": clay.symmetry,
+                    "smoothing_rule": clay.som.smoothing_rule, "iteration": int(clay.som.iteration),
                     "parameters": clay.parameters()}
 
     def session_state(self) -> dict:

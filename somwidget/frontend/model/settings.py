@@ -6,12 +6,15 @@ locally from the latest weights. Setting the same parameter again within a momen
 
 from __future__ import annotations
 
+import numpy as np
+
 from ...backend import checks
 from ...backend.schedule import MAX_ITERATIONS
 from ...backend.som import _MAX_TABLE_ENTRIES
+from ...backend.symmetry import Symmetry
 from .clay import Clay
 from .controls import MAX_ABS_VALUE, check_count
-from .operations import SetMetricWeights, SetMirror, SetParameter
+from .operations import SetMetricWeights, SetParameter, SetSymmetry
 from .parameters import BY_NAME, METRIC_WEIGHT, SYMMETRY
 from .timeline import Timeline
 from .trainer import Trainer
@@ -59,12 +62,34 @@ class ParameterEdits:
             self.trainer.enqueue(SetParameter("l_end", b))
 
     def set_symmetry(self, value) -> None:
-        on = SYMMETRY.parse(value)
+        """A group (a Symmetry, its spec "radial-8-z") or on / off (True: the last group, else the preset's mirror).
+        Off, each copy becomes a control of its own; on, controls that are each other's images pair up again; when
+        the controls the engine applies stay the same, nothing moves and nothing trains."""
         clay = self.clay
-        with self.timeline.step("parameter:symmetry"), clay.lock:
-            check_count(clay.controls, on)
-            clay.params["symmetry"] = on
-            self.trainer.enqueue(SetMirror(clay.mirror_dims if on else ()))
+        group = self._group_of(value)
+        with self.timeline.step("symmetry"), clay.lock:
+            controls, radii, ids, keep = regroup(clay, group)
+            check_count(controls, group)
+            clay.controls, clay.radii, clay.control_ids = controls, radii, ids
+            clay.set_symmetry(group)
+            if keep:
+                clay.hold = True
+            self.trainer.enqueue(SetSymmetry(group, controls.copy(), radii.copy(), ids, keep))
+
+    def _group_of(self, value) -> Symmetry | None:
+        clay = self.clay
+        if isinstance(value, Symmetry):
+            group = value
+        elif isinstance(value, str) and value.strip().lower() not in ("true", "false", "on", "off", "1", "0"):
+            group = Symmetry.parse(value)
+        else:
+            group = clay.default_group if SYMMETRY.parse(value) else None
+        if group is None:
+            return None
+        layout = clay.layout
+        group = group.on(layout.position, layout.direction)
+        group.maps(layout.n_dims)  # ValueError when it does not fit
+        return group
 
     def set_metric_weights(self, value) -> None:
         clay = self.clay
@@ -84,3 +109,49 @@ class ParameterEdits:
             m = list(clay.params["metric_weights"])
             m[d] = METRIC_WEIGHT.check(value, f"{METRIC_WEIGHT.label} of {clay.layout.names[d]}")
         self.set_metric_weights(m)
+
+
+def expand(controls: np.ndarray, radii: np.ndarray, group) -> tuple[np.ndarray, np.ndarray]:
+    """Every control and its copies under `group` (None: the controls as they are): [originals..., first copies...]."""
+    if group is None:
+        return controls, radii
+    maps = group.maps(controls.shape[1])
+    return (np.concatenate([(controls.astype(np.float64) @ m.T).astype(np.float32) for m in maps]),
+            np.tile(radii, len(maps)))
+
+
+def regroup(clay, group) -> tuple[np.ndarray, np.ndarray, tuple, bool]:
+    """(controls, radii, ids, keep) of the clay's controls under a new `group` (caller holds clay.lock): the old
+    group's copies become controls of their own, then, under a group, controls that are images of an earlier one
+    (within PAIR_TOLERANCE of the size) join it as its copies. keep: the effective controls stay the same (every
+    image found), so nothing needs to move."""
+    controls, radii = expand(clay.controls, clay.radii, clay.symmetry)
+    k = len(clay.controls)
+    ids = list(clay.control_ids) + list(clay.fresh_ids(len(controls) - k))
+    if group is None:
+        return controls, radii, tuple(ids), True
+    pos = list(clay.layout.position)
+    size = float(np.linalg.norm(np.ptp(controls[:, pos], axis=0))) if len(controls) > 1 else 1.0
+    tol = PAIR_TOLERANCE * (size or 1.0)
+    maps = group.maps(controls.shape[1])
+    taken = np.zeros(len(controls), bool)
+    kept, complete = [], True
+    for i in range(len(controls)):
+        if taken[i]:
+            continue
+        taken[i] = True
+        kept.append(i)
+        for m in maps[1:]:
+            d = np.linalg.norm(controls.astype(np.float64) - m @ controls[i], axis=1)
+            d[taken] = np.inf
+            j = int(np.argmin(d))
+            if d[j] <= tol:
+                taken[j] = True
+            else:
+                complete = False
+    return controls[kept], radii[kept], tuple(ids[i] for i in kept), complete
+
+
+#: Two controls pair up as a control and its symmetric copy when the copy lies within this share of the controls'
+#: spread of the other.
+PAIR_TOLERANCE = 1e-4
