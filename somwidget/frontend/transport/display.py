@@ -11,7 +11,7 @@ import numpy as np
 from ...backend import io as _io
 from ...backend import presets as _presets
 from ..model import parameters as _parameters
-from ..model.clay import default_mirror
+from ...backend.symmetry import Symmetry
 from .messages import MAX_COORDINATE, MAX_MESSAGE_BYTES, PROTOCOL_VERSION
 
 #: Most display vertices a frame streams: 32,768 x 15 bytes = 0.5 MB a frame, 15 MB/s at 30 frames/s, which a
@@ -106,11 +106,18 @@ def display_arrays(frame, session) -> tuple[np.ndarray, np.ndarray]:
     return pos, col
 
 
-def mirror_axes(session) -> list[bool]:
-    """Which position axes (x, y, z) a mirrored copy negates, from the session's mirror dims."""
+def group_maps(group: str) -> list[list[float]]:
+    """The symmetry group of a frame (its spec) as the views use it: one 3 x 3 map of a position a copy, row-major,
+    the identity first (copy j of the effective controls is control j mod k under map j // k)."""
+    symmetry = Symmetry.parse(group)
+    maps = np.eye(3)[None] if symmetry is None else symmetry.rotations()
+    return [[float(x) for x in m.ravel()] for m in maps]
 
-    dims = set(default_mirror(session.preset))
-    return [d in dims for d in session.layout.position]
+
+def mirror_axes(group: str) -> list[bool]:
+    """Which position axes (x, y, z) a mirrored copy negates (a mirror group; none for another group)."""
+    symmetry = Symmetry.parse(group)
+    return [symmetry is not None and symmetry.kind == "mirror" and symmetry.axis == a for a in range(3)]
 
 
 def topology_message(session, frame, client_id: int | None = None) -> dict:
@@ -129,7 +136,8 @@ def topology_message(session, frame, client_id: int | None = None) -> dict:
         "n_vertices": int(geo["n_vertices"]), "n_nodes": int(session.topology.n_vertices),
         "triangles": geo["triangles"].ravel().tolist(), "segments": geo["segments"].ravel().tolist(),
         "points": bool(geo["points"]), "n_controls": int(frame.n_controls),
-        "n_effective": int(len(frame.effective_controls)), "mirror_axes": mirror_axes(session), "up_axis": 2,
+        "n_effective": int(len(frame.effective_controls)), "mirror_axes": mirror_axes(frame.group),
+        "group": frame.group, "group_maps": group_maps(frame.group), "up_axis": 2,
         "bounds": {"min": [float(x) for x in lo], "max": [float(x) for x in hi]},
         "control_radius": 0.035 * span, "colour_space": session.layout.colour_space,
         "feature_names": list(session.layout.names), "max_coordinate": MAX_COORDINATE,

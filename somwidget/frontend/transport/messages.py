@@ -19,7 +19,10 @@ Server -> client
     "segments": [i, j, ...]     flat line-segment list (mesh edges / synapses; root -> tip for "lines")
     "points": bool              draw each vertex as a point ("points" display)
     "n_controls": k, "n_effective": k_eff,
-    "mirror_axes": [bool, bool, bool]  the position axes a mirrored copy negates (copy j >= k mirrors control j - k)
+    "mirror_axes": [bool, bool, bool]  the position axes a mirrored copy negates (a mirror group)
+    "group": "radial-8-z",      the symmetry group of the controls ("none": each control alone)
+    "group_maps": [[9 floats], ...]  the group's maps of a position (3 x 3, row-major), the identity first: effective
+                                control j is control j mod k under map j // k
     "up_axis": 2,               the model's up axis (z; x forward, y sideways)
     "bounds": {"min": [x, y, z], "max": [x, y, z]}  start mesh and controls, for placing the clay
     "control_radius": r,        the drawn radius of a control (model units)
@@ -49,9 +52,10 @@ Server -> client
 
 3. Text, JSON, as things happen:
    {"type": "grabs", "grabs": [{"index": i, "id": c, "own": bool}, ...]}   controls held now (own: this client)
-   {"type": "controls", "ids": [c, ...]}                           each control's stable id, in index order:
-                                                                   sent (before the frame) whenever they change
-                                                                   (a control added or removed, new controls)
+   {"type": "controls", "ids": [c, ...], "group": g,               each control's stable id, in index order, and
+    "group_maps": [...]}                                           the group (as in the topology): sent (before the
+                                                                   frame) whenever they change (a control added or
+                                                                   removed, new controls, a group on or off)
    {"type": "error", "message": "...", "intent": "move" | null}     a refused message (see below)
    {"type": "pong", "t": t}                                        the answer to a ping
    {"type": "status", "cycle_ms": c, "fps": f}                     the engine's time per cycle and the frames
@@ -241,9 +245,11 @@ def status_message(cycle_time: float, frames_per_second: float) -> dict:
     return {"type": "status", "cycle_ms": round(float(cycle_time) * 1e3, 6), "fps": round(float(frames_per_second), 2)}
 
 
-def controls_message(control_ids) -> dict:
-    """The ids of the controls, in index order: sent before the first frame whose controls they name."""
-    return {"type": "controls", "ids": [int(i) for i in control_ids]}
+def controls_message(control_ids, group: str = "none", maps: list | None = None) -> dict:
+    """The ids of the controls, in index order, and their symmetry group: sent before the first frame whose
+    controls they name."""
+    return {"type": "controls", "ids": [int(i) for i in control_ids], "group": group,
+            "group_maps": maps if maps is not None else [[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]]}
 
 
 def grabs_message(grabs: list[dict]) -> dict:

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..model import Frame, Session
-from .display import topology_message
+from .display import group_maps, mirror_axes, topology_message
 from .frames import encode_frame
 from .messages import STATUS_PERIOD, controls_message, status_message
 
@@ -30,7 +30,7 @@ class Peer:
 
     id: int | None = None  # the client id its topology message carries (None: the notebook widget)
     generation: int = -1
-    control_ids: tuple = ()
+    control_ids: tuple = ()  # with the group: the controls it knows
     last_status: float = 0.0
     seq: int = -1  # the latest frame handed to it
 
@@ -99,12 +99,15 @@ class Outbox:
                 self._encoded = (frame.seq, encode_frame(frame, session))
             data = self._encoded[1]
         out: list = []
+        controls = (frame.control_ids, frame.group)
         if peer.generation != frame.generation:
-            out.append({**topology, "client": peer.id})
-            peer.generation, peer.control_ids = frame.generation, frame.control_ids
-        elif peer.control_ids != frame.control_ids:  # a control added or removed: the ids before the frame
-            out.append(controls_message(frame.control_ids))
-            peer.control_ids = frame.control_ids
+            out.append({**topology, "client": peer.id, "control_ids": list(frame.control_ids), "group": frame.group,
+                        "group_maps": group_maps(frame.group), "mirror_axes": mirror_axes(frame.group),
+                        "n_controls": frame.n_controls, "n_effective": len(frame.effective_controls)})
+            peer.generation, peer.control_ids = frame.generation, controls
+        elif peer.control_ids != controls:  # a control added or removed, a group on or off: before the frame
+            out.append(controls_message(frame.control_ids, frame.group, group_maps(frame.group)))
+            peer.control_ids = controls
         out.append(data)
         peer.seq = frame.seq
         now = time.monotonic()
