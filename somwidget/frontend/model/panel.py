@@ -4,8 +4,9 @@
 - the fields: the parameters' declarations (parameters.py) and their values as the session holds them;
 - the rows: one per feature dimension (name, role, metric weight) and one per control (colour, position, gap);
 - the status line and the Train / Pause button's label, from a frame;
-- the actions (ACTIONS: train or pause, undo, redo, reset, the preset again) and the edits, each returning the
-  message a panel shows when the session refuses it (None when it took it);
+- the actions (ACTIONS: train or pause, undo, redo, reset, the preset again) and the edits (a parameter, a metric
+  weight, a control's radius, the symmetry group), each returning the message a panel shows when the session
+  refuses it (None when it took it);
 - the variants: a sweep of the current design, its thumbnails and captions, and picking one.
 """
 
@@ -15,8 +16,10 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ...backend import metrics
 from ...backend import presets as _presets
 from ...backend.presets import hex_colour
+from ...backend.symmetry import Symmetry
 from .frames import Frame
 from .parameters import BY_NAME, METRIC_WEIGHT, PARAMETERS
 from .session import Session
@@ -42,6 +45,9 @@ ACTIONS: tuple[Action, ...] = (
     Action("reload_preset", "Reload", "reload", "This preset again as it starts: its own controls and start mesh"),
 )
 ACTION_NAMES = tuple(a.name for a in ACTIONS)
+#: The radial groups a panel offers (any n from 2 to 32 is one call of Session.set_symmetry away).
+RADIAL_CHOICES = (2, 3, 4, 5, 6, 8, 12, 16)
+RADIAL_MIRRORED_CHOICES = (3, 4, 6, 8)
 
 
 def fmt(x: float | None, digits: int = 3) -> str:
@@ -119,6 +125,7 @@ class PanelModel:
         p = self.session.parameters
         out = {f.name: field_text(f.name, p[f.name]) for f in self.fields}
         out["metric_weights"] = [float(x) for x in p["metric_weights"]]
+        out["group"] = p["group"]
         return out
 
     @staticmethod
@@ -149,10 +156,35 @@ class PanelModel:
             g = [float(gaps[i])] if i < len(gaps) else []
             if len(gaps) >= 2 * k:  # mirrored copy i sits at k + i
                 g.append(float(gaps[k + i]))
+            radius = float(frame.radii[i]) if i < len(frame.radii) else 0.0
             rows.append({"i": i, "colour": hex_colour(colours[i]),
                          "position": ", ".join(f"{x:.2f}" for x in frame.control_positions[i]),
-                         "gap": " / ".join(f"{x:.3f}" for x in g)})
+                         "gap": " / ".join(f"{x:.3f}" for x in g), "radius": round(radius, 4)})
         return rows
+
+    @property
+    def size(self) -> float:
+        """The clay's size: its start mesh's bounding diagonal (what a radius is measured against)."""
+        preset = self.session.preset
+        return metrics.bounding_diagonal(preset.weights[:, list(preset.layout.position)]) or 1.0
+
+    def group_choices(self) -> list[tuple[str, str]]:
+        """(label, spec) of the symmetry groups a panel offers, the one in effect among them."""
+        choices = [("off", "none")] + [(f"mirror across {a}", f"mirror-{a}") for a in "xyz"]
+        choices += [(f"{n}-fold about z", f"radial-{n}-z") for n in RADIAL_CHOICES]
+        choices += [(f"{n}-fold about z, mirrored", f"radial-{n}-z-mirror") for n in RADIAL_MIRRORED_CHOICES]
+        group = self.session.parameters["group"]
+        if group not in [spec for _, spec in choices]:
+            symmetry = Symmetry.parse(group)
+            choices.append((symmetry.describe(), group))
+        return choices
+
+    def set_group(self, spec) -> str | None:
+        """A symmetry group by its spec ("none" for off)."""
+        return self.attempt(self.session.set_symmetry, spec if isinstance(spec, str) else "")
+
+    def set_radius(self, index, value) -> str | None:
+        return self.attempt(self.session.set_control_radius, index, value)
 
     def feature_rows(self) -> list[dict]:
         """One row per feature dimension: its index, name, role and metric weight."""

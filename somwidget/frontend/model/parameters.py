@@ -59,8 +59,13 @@ METRIC_WEIGHT = Setting("metric_weights", "metric weight", "float", 0.0, 1e6, 1.
                              "m_j): 0 ignores it, larger makes it matter more than the others.")
 #: The line every panel shows under its reach slider.
 REACH_HELP = BY_NAME["reach"].help
+#: What a panel shows beside each control's radius.
+RADIUS_HELP = ("The control's radius of influence (model units): moving it carries the clay around its nearest node "
+               "with a smooth falloff of about this radius. 0 is the paper's point control, which draws the clay to "
+               "a point.")
 #: What a panel shows beside the gaps of the controls table.
 GAP_HELP = ("The distance from each control (and its mirrored copy) to its nearest node: small when the clay has "
             "reached the control.")
 
-__all__ = ["MAX_ITERATIONS", "PARAMETERS", "BY_NAME", "METRIC_WEIGHT", "SYMMETRY", "REACH_HELP", "GAP_HELP", "Toggle"]
+__all__ = ["MAX_ITERATIONS", "PARAMETERS", "BY_NAME", "METRIC_WEIGHT", "SYMMETRY", "REACH_HELP", "GAP_HELP",
+           "RADIUS_HELP", "Toggle"]

@@ -25,7 +25,7 @@ from ...backend import presets as _presets
 from ..model import Frame, Session
 from ..model.panel import PanelModel
 from ..model.parameters import BY_NAME as _PARAM
-from ..model.parameters import GAP_HELP, REACH_HELP
+from ..model.parameters import GAP_HELP, RADIUS_HELP, REACH_HELP
 from .variants import VariantsSection
 
 log = logging.getLogger(__name__)
@@ -104,6 +104,12 @@ class Panel(widgets.VBox):
                                          tooltip=_PARAM["symmetry"].help)
         self.features_box = widgets.VBox()
         self.metric: list[widgets.BoundedFloatText] = []
+        self.group = widgets.Dropdown(options=self.model.group_choices(), description="group", style=style,
+                                      layout=widgets.Layout(width="290px"),
+                                      tooltip="The symmetry group: every copy of a control acts together with it")
+        self.radius_of = widgets.Dropdown(description="radius of", style=style, layout=widgets.Layout(width="170px"))
+        self.radius = widgets.BoundedFloatText(min=0.0, max=1e6, step=0.05, description="", tooltip=RADIUS_HELP,
+                                               layout=widgets.Layout(width="110px"))
         self.controls_html = widgets.HTML()
         self.error = widgets.HTML()
         self.variants = VariantsSection(self.model, self._intent)
@@ -116,19 +122,23 @@ class Panel(widgets.VBox):
                                        "</small>")),
             self.S, self.l_start, self.l_end, self.smoothing, self.reach,
             widgets.HTML(_BLOCK.format(f"<small>{_html.escape(REACH_HELP)}</small>")),
-            self.symmetry,
+            widgets.HBox([self.symmetry, self.group]),
             widgets.HTML(_BLOCK.format("<b>Feature dimensions</b> <small>(metric weights m<sub>j</sub> of the "
                                        "winner search)</small>")),
             self.features_box,
             widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(GAP_HELP)}">Controls</b> <small>(gap: distance to '
                                        'the nearest node, original / mirror)</small>')),
-            self.controls_html, self.variants, self.error,
+            self.controls_html, widgets.HBox([self.radius_of, self.radius]), self.variants, self.error,
         ], layout=widgets.Layout(width="360px", min_width="360px", padding="4px"))
 
         for w, setter in ((self.S, session.set_iterations), (self.l_start, session.set_l_start),
                           (self.l_end, session.set_l_end), (self.smoothing, session.set_smoothing),
                           (self.reach, session.set_reach), (self.symmetry, session.set_symmetry)):
             w.observe(lambda change, setter=setter: self._intent(setter, change["new"]), names="value")
+        self.group.observe(lambda change: self._intent(session.set_symmetry, change["new"]), names="value")
+        self.radius_of.observe(lambda _change: self.refresh(), names="value")
+        self.radius.observe(lambda change: self._intent(session.set_control_radius, self.radius_of.value,
+                                                        change["new"]), names="value")
         self.preset.observe(self._preset_chosen, names="value")
         self.train_button.on_click(lambda _b: self._intent(self.model.toggle_training))
         self.reset_button.on_click(lambda _b: self._intent(session.reset))
@@ -224,6 +234,18 @@ class Panel(widgets.VBox):
             _set(self.smoothing, float(p["smoothing"]))
             _set(self.reach, float(p["reach"]))
             _set(self.symmetry, bool(p["symmetry"]))
+            choices = self.model.group_choices()
+            if list(self.group.options) != choices:
+                self.group.options = choices
+            _set(self.group, p["group"])
+            k = frame.n_controls
+            if list(self.radius_of.options) != [(str(i), i) for i in range(k)]:
+                self.radius_of.options = [(str(i), i) for i in range(k)]
+            i = self.radius_of.value if self.radius_of.value is not None and self.radius_of.value < k else 0
+            _set(self.radius_of, i)
+            self.radius.max = max(2.0 * self.model.size, float(frame.radii.max(initial=0.0)))  # a few sizes at most
+            if i < len(frame.radii):
+                _set(self.radius, round(float(frame.radii[i]), 4))
             for w, m in zip(self.metric, p["metric_weights"]):
                 _set(w, float(m))
             self.progress.max = max(1, frame.iterations)
@@ -283,7 +305,7 @@ class Panel(widgets.VBox):
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(2.0)
         self.variants.close()
-        for w in [*self.children, *self.metric, *self.features_box.children]:
+        for w in [*self.children, *self.metric, *self.features_box.children, self.group, self.radius_of, self.radius]:
             w.close()
         super().close()
 
@@ -303,6 +325,7 @@ def _controls_table(rows: list[dict]) -> str:
     """The panel model's control rows as a small HTML table."""
     cells = [f'<tr><td>{r["i"]}</td><td><span style="display:inline-block;width:12px;height:12px;'
              f'background:{r["colour"]};border:1px solid #888"></span></td><td>{r["position"]}</td>'
-             f'<td class="somwidget-gap">{r["gap"]}</td></tr>' for r in rows]
-    return ('<table style="font-size:11px;line-height:1.2"><tr><th>#</th><th></th><th>x, y, z</th><th>gap</th></tr>'
-            + "".join(cells) + "</table>")
+             f'<td class="somwidget-gap">{r["gap"]}</td><td class="somwidget-radius">{r["radius"]:.3g}</td></tr>'
+             for r in rows]
+    return ('<table style="font-size:11px;line-height:1.2"><tr><th>#</th><th></th><th>x, y, z</th><th>gap</th>'
+            '<th title="radius of influence">radius</th></tr>' + "".join(cells) + "</table>")

@@ -45,8 +45,8 @@ from .state_guard import guard_state_updates
 log = logging.getLogger(__name__)
 
 #: The page's triggers: each calls the method of the same name of the panel's state (panel_state.py) or the app.
-TRIGGERS = ("set_param", "set_metric", "set_colour", "add_control", "remove_control", "toggle_training", "reset",
-            "undo", "redo", "start_fresh", "reload_preset", "export_mesh", "save_session", "sweep_variants",
+TRIGGERS = ("set_param", "set_metric", "set_colour", "set_radius", "add_control", "remove_control", "toggle_training",
+            "reset", "undo", "redo", "start_fresh", "reload_preset", "export_mesh", "save_session", "sweep_variants",
             "pick_variant")
 
 
@@ -273,6 +273,11 @@ class SomApp:
         def _symmetry(param_symmetry, **_):
             if bool(param_symmetry) != self.session.parameters["symmetry"]:
                 self.panel_state.set_param("symmetry", bool(param_symmetry))
+
+        @state.change("param_group")
+        def _group(param_group, **_):
+            if isinstance(param_group, str) and param_group != self.session.parameters["group"]:
+                self.panel_state.set_group(param_group)
 
         ctrl.on_server_bind.add(self._bind_routes)
         ctrl.on_server_ready.add(self._on_ready)

@@ -11,7 +11,7 @@ from trame.widgets import vuetify3 as v3
 
 from ..model.panel import PanelModel
 from ..model.parameters import BY_NAME as _PARAM
-from ..model.parameters import GAP_HELP, METRIC_WEIGHT
+from ..model.parameters import GAP_HELP, METRIC_WEIGHT, RADIUS_HELP
 from ..model.variants import VARIANTS_HELP
 from .uploads import MIME
 
@@ -147,9 +147,13 @@ def _panel(panel: PanelModel) -> None:
                        error_messages=("param_errors['reach'] || []",),
                        end="trigger('set_param', ['reach', $event])")
         html.Div("{{ reach_help }}", classes="text-caption", id="reach-help")
-        with html.Div(id="param-symmetry", title=_PARAM["symmetry"].help):
-            v3.VSwitch(v_model=("param_symmetry",), label=_PARAM["symmetry"].label, density="compact",
+        with html.Div(id="param-symmetry", title=_PARAM["symmetry"].help, classes="d-flex align-center ga-2"):
+            v3.VSwitch(v_model=("param_symmetry",), label="symmetry", density="compact",
                        hide_details=True, color="primary", id="symmetry-switch")
+            v3.VSelect(v_model=("param_group",), items=("group_items",), label="group", density="compact",
+                       hide_details=True, id="symmetry-group", style="max-width: 210px",
+                       title="The symmetry group: every copy of a control acts together with it. Off, the copies "
+                             "become controls of their own and nothing moves; on, images pair up again.")
 
         # features
         html.Div("Feature dimensions (metric weights)", classes="text-subtitle-2 mt-2")
@@ -168,7 +172,7 @@ def _panel(panel: PanelModel) -> None:
 
         # controls
         with html.Div(classes="d-flex align-center mt-2"):
-            html.Div("Controls (gap to the nearest node: original / mirror)", classes="text-subtitle-2",
+            html.Div("Controls (gap to the nearest node: original / copy; radius)", classes="text-subtitle-2",
                      title=GAP_HELP)
             v3.VSpacer()
             v3.VBtn(icon="mdi-plus", size="small", variant="text", click="trigger('add_control')",
@@ -184,6 +188,12 @@ def _panel(panel: PanelModel) -> None:
                                    title="control colour")
                     html.Td("{{ c.position }}", classes="text-caption")
                     html.Td("{{ c.gap }}", classes="text-caption gap-cell")
+                    with html.Td(style="width: 72px"):
+                        v3.VTextField(model_value=("c.radius",), density="compact", type="number", variant="plain",
+                                      hide_details=True, classes="radius-cell", min=0, step=0.05,
+                                      title=RADIUS_HELP,
+                                      raw_attrs=_on_enter_or_change(
+                                          "trigger('set_radius', [c.i, $event.target.value])"))
                     with html.Td():
                         v3.VBtn(icon="mdi-close", size="x-small", variant="text",
                                 click="trigger('remove_control', [c.i])", title="Remove")

@@ -92,6 +92,8 @@ class PanelState:
         for f in self.panel.fields:
             if force or values[f.name] != last.get(f.name):
                 s[state_key(f.name)] = values[f.name]
+        s.group_items = [{"title": label, "value": spec} for label, spec in self.panel.group_choices()]
+        s.param_group = values["group"]
         self._values_synced = values
         s.paused = sess.paused
         s.features_ui = [dict(row, weight=fmt(row["weight"], 6)) for row in self.panel.feature_rows()]
@@ -145,6 +147,16 @@ class PanelState:
 
     def set_colour(self, index, colour) -> None:
         self._show(self.panel.attempt(self.session.set_control_colour, index, colour))
+
+    def set_radius(self, index, value) -> None:
+        self._show(self.panel.set_radius(index, value))
+
+    def set_group(self, spec) -> None:
+        """A symmetry group chosen in the panel; refused, the field goes back to the group in effect."""
+        error = self.panel.set_group(spec)
+        self._show(error)
+        with self.state:
+            self.sync_fields()
 
     def add_control(self) -> None:
         self._show(self.panel.attempt(self.session.add_control))

@@ -60,6 +60,7 @@ WRITABLE = {
     "param_smoothing": _number_or_text,
     "param_reach": _reach,
     "param_symmetry": _flag,
+    "param_group": _text,
     "variants_n": _number_or_text,
     "variants_jitter": _number_or_text,
     "variants_vary": lambda value: isinstance(value, list) and len(value) <= 5 and all(
