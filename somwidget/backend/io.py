@@ -164,8 +164,14 @@ def export_mesh(path, weights, topology: Topology, layout: FeatureLayout, *, dis
     line display mesh of case study 3: 2N vertices, two triangles per edge quad), "points" (a point cloud: all three
     formats store one), or None to choose: "lines" when the layout has direction dims, else "surface" when the
     topology has faces, else "points". transform: the {"centre", "scale"} of `Preset.meta["transform"]` to map the
-    positions back to a loaded file's frame. Vertex order is kept, so vertex i of the file is neuron i
-    (for "lines": N roots, then N tips).
+    positions back to a loaded file's frame.
+
+    A surface is welded (`weld`): neighbouring nodes within WELD_SHARE of the shape's size of each other (a control
+    pulled them onto one place) become one vertex and the faces that collapse with them go, so the file has no faces
+    without area and no edge of zero length; where two sheets of the clay touch, their vertices are set 1e-5 of the
+    size apart along their normals, so a closed clay stays closed after any tool's vertex merge. The vertices keep
+    their order otherwise: vertex i of the file is neuron i when nothing was welded (for "lines": N roots, then N
+    tips).
     """
     import trimesh
 
@@ -200,12 +206,72 @@ def export_mesh(path, weights, topology: Topology, layout: FeatureLayout, *, dis
         points = points / float(transform["scale"]) + centre
     rgba = np.concatenate([np.round(colours * 255.0), np.full((len(colours), 1), 255.0)], axis=1).astype(np.uint8)
     if len(faces):
+        if display == "surface":
+            points, faces, rgba = weld(points, faces, rgba)
         geom = trimesh.Trimesh(vertices=points, faces=faces, vertex_colors=rgba, process=False)
     else:
         geom = trimesh.PointCloud(points, colors=rgba)
     data = geom.export(file_type=ext)
     with open(path, "wb") as f:
         f.write(data.encode("utf-8") if isinstance(data, str) else data)
+
+
+#: Export: two vertices joined by an edge and closer than this share of the shape's size (its bounding diagonal)
+#: are welded into one.
+WELD_SHARE = 1e-6
+
+
+def weld(points: np.ndarray, triangles: np.ndarray, colours: np.ndarray | None = None):
+    """(points, triangles, colours) with each edge shorter than WELD_SHARE of the size collapsed (its vertices become
+    the lower-indexed one), the triangles that collapse with it (a repeated vertex, or no area) dropped, and the
+    vertices no triangle uses any more removed; the rest keep their order. Vertices that coincide without an edge
+    between them (two sheets of the clay touching) stay apart: joining them would pinch the surface open."""
+    p = np.asarray(points, np.float64)
+    tris = np.asarray(triangles, np.int64).reshape(-1, 3)
+    size = float(np.linalg.norm(np.ptp(p, axis=0))) if len(p) else 0.0
+    tol = WELD_SHARE * (size or 1.0)
+    target = np.arange(len(p))
+    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1), axis=0)
+    short = edges[np.linalg.norm(p[edges[:, 0]] - p[edges[:, 1]], axis=1) <= tol]
+    for a, b in short.tolist():  # union of short edges, each group to its lowest vertex
+        ra, rb = a, b
+        while target[ra] != ra:
+            ra = target[ra]
+        while target[rb] != rb:
+            rb = target[rb]
+        target[max(ra, rb)] = min(ra, rb)
+    for v in range(len(target)):
+        target[v] = target[target[v]]
+    tris = target[tris]
+    distinct = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
+    area2 = np.linalg.norm(np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]), axis=1)
+    tris = tris[distinct & (area2 > tol * tol)]
+    used = np.zeros(len(p), bool)
+    used[tris.ravel()] = True
+    index = np.cumsum(used) - 1
+    p, tris = _apart(p[used], index[tris], tol)
+    return p, tris, None if colours is None else np.asarray(colours)[used]
+
+
+def _apart(p: np.ndarray, tris: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices that coincide (within 10 tol) without an edge between them, two sheets of the clay touching, each
+    moved 10 tol along its own normal: a later vertex merge (any tool's) then cannot join the sheets and pinch the
+    surface open. Nothing moves when no such vertices exist."""
+    gap = 10.0 * tol
+    keys = np.floor(p / gap).astype(np.int64)
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    crowded = counts[inverse.ravel()] > 1
+    if not crowded.any():
+        return p, tris
+    normals = np.zeros_like(p)
+    face_n = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
+    for corner in range(3):
+        np.add.at(normals, tris[:, corner], face_n)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.where(length > 0, normals / np.where(length > 0, length, 1.0), 0.0)
+    out = p.copy()
+    out[crowded] += gap * normals[crowded]
+    return out, tris
 
 
 def triangulate(faces) -> np.ndarray:
