@@ -227,3 +227,78 @@ def test_a_case_study_keeps_its_point_controls():
         assert not s.radii.any() and not s.clay.som._shaping
         s.add_control(s.controls[0])
         assert s.radii[-1] == 0.0
+
+
+# -- refine --------------------------------------------------------------------------------------------------------
+def test_subdivision_keeps_the_surface_and_the_node_order():
+    from somwidget.backend import refine
+
+    p = presets.get_preset("sphere")
+    faces, w = refine.subdivide(p.topology.faces, p.weights)
+    n = p.topology.n_vertices
+    np.testing.assert_array_equal(w[:n], p.weights)  # the old nodes stay, in order
+    topo = Topology.from_faces(faces, len(w))
+    assert topo.n_vertices == len(w) > 3 * n
+    # every new node lies on the old surface: on an old edge or in an old face
+    old = metrics.triangles_of(p.topology.faces)
+    a, b, c = (p.weights[old[:, i]].astype(np.float64) for i in range(3))
+    normals = np.cross(b - a, c - a)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    off = np.abs(np.einsum("tk,vtk->vt", normals, w[n:, None, :].astype(np.float64) - a[None])).min(axis=1)
+    size = metrics.bounding_diagonal(p.weights)
+    assert off.max() < 0.005 * size
+    assert abs(metrics.mesh_volume(w, metrics.triangles_of(faces)) / metrics.mesh_volume(p.weights, old) - 1) < 0.01
+
+
+def test_stretched_edges_are_split_and_the_mesh_stays_closed():
+    from somwidget.backend import refine
+
+    p = presets.get_preset("sphere")
+    w = p.weights.copy()
+    w[:40, 2] += 1.0  # the cap pulled out: its ring of edges stretched
+    long = refine.stretched_edges(metrics.triangles_of(p.topology.faces), w, 2.0)  # quads: with their diagonals
+    assert len(long) > 10
+    faces, w2 = refine.refine_stretched(p.topology.faces, w, 2.0)
+    assert len(w2) == len(w) + len(long)
+    tris = np.array(faces)
+    edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    assert (counts == 2).all()  # every edge between two triangles: no node hangs on an edge
+    def longest(faces, w):
+        e = np.sort(np.concatenate([np.array(faces)[:, [0, 1]], np.array(faces)[:, [1, 2]]]), axis=1)
+        return np.linalg.norm(w[e[:, 0]] - w[e[:, 1]], axis=1).max()
+
+    assert longest(faces, w2) < 0.6 * longest(metrics.triangles_of(p.topology.faces), w)  # the long ones halved
+
+
+def test_a_session_refines_its_clay_as_one_step():
+    from somwidget.frontend.model import Session
+
+    with Session("sphere", device="cpu", autosave=False) as s:
+        c = s.controls
+        c[0, 2] += 0.5
+        s.move_control(0, c[0])
+        assert s.wait_idle(60)
+        before = s.frame.positions.copy()
+        radii, n, p_faces = s.radii, s.preset.n_vertices, s.preset.topology.faces
+        m = s.refine()
+        assert s.wait_applied(30)
+        assert s.preset.n_vertices == m == s.frame.positions.shape[0] > 3 * n
+        np.testing.assert_array_equal(s.frame.positions[:n], before)  # the shape as it was, nothing trained
+        np.testing.assert_allclose(s.radii, radii)
+        from somwidget.backend import refine
+
+        np.testing.assert_array_equal(s.frame.positions, refine.subdivide(p_faces, before)[1])  # the same surface
+        assert s.preset.name == "sphere (refined)" and s.frame.held
+        c = s.controls
+        c[1, 0] += 0.3
+        s.move_control(1, c[1])  # the refined clay trains as any other
+        assert s.wait_idle(60) and not s.frame.held
+        assert s.undo() and s.undo()
+        assert s.preset.n_vertices == n
+        np.testing.assert_array_equal(s.frame.positions, before)
+        with pytest.raises(ValueError, match="would have"):
+            Session("sphere", device="cpu", autosave=False, start=False, max_vertices=600).refine()
+    with Session("space-grid", device="cpu", autosave=False, start=False) as s:
+        with pytest.raises(ValueError, match="refine works on a surface"):
+            s.refine()

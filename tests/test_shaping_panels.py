@@ -43,6 +43,12 @@ def test_the_web_panel_sets_a_radius_and_a_symmetry_group():
             srv.wait(lambda s: s["session"]["parameters"]["group"] == "none"
                      and len(s["session"]["controls"]) == len(st["session"]["frame"]["effective_controls"]),
                      what="the group off")
+            n = st["session"]["n_vertices"]
+            page.locator("#refine").click()  # every face split: the clay keeps its shape with four times the faces
+            st = srv.wait(lambda s: s["session"]["n_vertices"] > 3 * n
+                          and s["session"]["preset"].endswith("(refined)"), what="the refined clay")
+            page.wait_for_function("() => document.getElementById('clay-view').somview.describe().generation >= "
+                                   f"{st['session']['generation']}", timeout=20000)  # the view draws the new mesh
             browser.close()
     finally:
         srv.stop()
@@ -69,6 +75,9 @@ def test_the_notebook_panel_sets_a_radius_and_a_symmetry_group():
         panel.symmetry.value = False
         assert session.parameters["group"] == "none"
         wait_for(lambda: session.wait_applied(1), what="the group off applied")
+        n = session.preset.n_vertices
+        panel.refine_button.click()
+        assert session.preset.n_vertices > 3 * n and "(refined)" in panel.preset.label
     finally:
         panel.close()
         session.close()

@@ -43,6 +43,8 @@ ACTIONS: tuple[Action, ...] = (
     Action("redo", "Redo", "redo", "Redo the step undone last; Ctrl+Shift+Z"),
     Action("reset", "Reset", "restore", "Back to the start mesh; the whole schedule runs again (the controls stay)"),
     Action("reload_preset", "Reload", "reload", "This preset again as it starts: its own controls and start mesh"),
+    Action("refine", "Refine", "vector-triangle", "Subdivide the clay, its shape kept: every face split in four "
+                                                  "(one undo step)"),
 )
 ACTION_NAMES = tuple(a.name for a in ACTIONS)
 #: The radial groups a panel offers (any n from 2 to 32 is one call of Session.set_symmetry away).
@@ -113,6 +115,9 @@ class PanelModel:
 
     def reset(self) -> None:
         self.session.reset()
+
+    def refine(self) -> None:
+        self.session.refine()
 
     def reload_preset(self) -> None:
         """The current preset again, as it starts (one undo step); a loaded mesh or session: its own start."""

@@ -40,6 +40,7 @@ from .clay import GPU_MAX_VERTICES, Clay, build, max_vertices_for
 from .frames import Frame, FrameListener, FrameStream
 from .controls import ControlEdits
 from .operations import Publish, Reset, Restart
+from .refining import refined_preset
 from .settings import ParameterEdits
 from .summary import summary
 from .timeline import Timeline
@@ -452,6 +453,18 @@ class Session:
         built = build(preset, self.device, self.max_vertices)
         with self.timeline.step("preset"):
             self._replace(built)
+
+    def refine(self, stretched: float | None = None) -> int:
+        """Subdivide the clay, its shape kept (backend/refine.py): every face split at its edges' midpoints, or with
+        `stretched` (a factor, e.g. 2) only the edges longer than that times the median edge. The controls, their
+        radii, the symmetry and the schedule stay; the distances follow the new mesh; nothing trains until the next
+        intent. One undo step; returns the new node count. ValueError for a clay without faces or one that would
+        pass this session's vertex limit."""
+        refined = refined_preset(self.snapshot(), stretched, self.max_vertices)
+        built = build(refined, self.device, self.max_vertices)
+        with self.timeline.step("refine"):
+            self._replace(built, hold=True)
+        return refined.n_vertices
 
     def load_mesh(self, path) -> Preset:
         """Load a mesh file (io.load_mesh) as the new start mesh, shown as it is with controls on it; ValueError for

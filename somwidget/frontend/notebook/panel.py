@@ -84,6 +84,9 @@ class Panel(widgets.VBox):
                                           tooltip="Undo the last step (a drag, a setting, a preset...)")
         self.redo_button = widgets.Button(description="Redo", icon="repeat", layout=widgets.Layout(width="80px"),
                                           tooltip="Redo the step undone last")
+        self.refine_button = widgets.Button(description="Refine", icon="th", layout=widgets.Layout(width="80px"),
+                                            tooltip="Subdivide the clay, its shape kept: every face split in four "
+                                                    "(one undo step)")
         self.progress = widgets.IntProgress(min=0, max=1, value=0, description="progress", style=style,
                                             layout=wide)
         self.status = widgets.HTML()
@@ -115,7 +118,7 @@ class Panel(widgets.VBox):
         self.variants = VariantsSection(self.model, self._intent)
 
         super().__init__([
-            self.title, widgets.HBox([self.preset, self.reload_button]),
+            self.title, widgets.HBox([self.preset, self.reload_button, self.refine_button]),
             widgets.HBox([self.train_button, self.undo_button, self.redo_button, self.reset_button]),
             self.progress, self.status,
             widgets.HTML(_BLOCK.format("<b>Schedule</b> <small>(alpha(s) from l_start to l_end over S cycles)"
@@ -144,6 +147,7 @@ class Panel(widgets.VBox):
         self.reset_button.on_click(lambda _b: self._intent(session.reset))
         self.undo_button.on_click(lambda _b: self._intent(session.undo))
         self.reload_button.on_click(lambda _b: self._reload_preset())
+        self.refine_button.on_click(lambda _b: self._intent(self.model.refine) and self.refresh())
         self.redo_button.on_click(lambda _b: self._intent(session.redo))
 
         self.refresh()

@@ -46,8 +46,8 @@ log = logging.getLogger(__name__)
 
 #: The page's triggers: each calls the method of the same name of the panel's state (panel_state.py) or the app.
 TRIGGERS = ("set_param", "set_metric", "set_colour", "set_radius", "add_control", "remove_control", "toggle_training",
-            "reset", "undo", "redo", "start_fresh", "reload_preset", "export_mesh", "save_session", "sweep_variants",
-            "pick_variant")
+            "reset", "undo", "redo", "start_fresh", "reload_preset", "refine", "export_mesh", "save_session",
+            "sweep_variants", "pick_variant")
 
 
 class _ClientWatch(LinkProtocol):
@@ -141,6 +141,12 @@ class SomApp:
     async def reload_preset(self) -> None:
         """The current preset again, as it starts: its own controls and start mesh (one undo step)."""
         await self._replace(self.panel.reload_preset)
+
+    async def refine(self) -> None:
+        """Subdivide the clay, its shape kept (one undo step), off the event loop."""
+        if await self._replace(self.panel.refine):
+            with self.state:
+                self.state.info_message = f"refined: {self.session.preset.n_vertices:,} nodes"
 
     async def start_fresh(self) -> None:
         """After a recovery: load what the server was started with (one undo step: Undo brings the recovered

@@ -112,6 +112,9 @@ def _panel(panel: PanelModel) -> None:
             v3.VBtn(icon="mdi-reload", variant="text", size="small", id="reload-preset",
                     click="trigger('reload_preset')", disabled=("busy",),
                     title="This preset again as it starts: its own controls and start mesh")
+            v3.VBtn("Refine", variant="tonal", size="small", id="refine", click="trigger('refine')",
+                    disabled=("busy",), prepend_icon="mdi-vector-triangle", classes="ml-1",
+                    title="Subdivide the clay, its shape kept: every face split in four (one undo step)")
         html.Div("{{ preset_description }}", classes="text-caption mb-2")
         v3.VFileInput(v_model=("mesh_upload",), label="Upload a mesh (OBJ, PLY, STL, OFF, GLB)",
                       density="compact", hide_details=True, prepend_icon="mdi-upload", id="mesh-upload",
