@@ -391,3 +391,108 @@ def test_desktop_preview_mouse_drag_and_headset_sees_it(browser, server, session
     finally:
         desk.close()
         headset.close()
+
+
+def test_desktop_drag_of_a_radial_copy_moves_its_control_by_the_inverse_rotation(browser):
+    """A radial group (radial-4-z) on the sphere: the page shows k controls and 3k copies (labelled ′ ″ ‴). Dragging
+    a copy with the mouse (copy 1: the control turned 90 degrees about z) moves its control to the drag point turned
+    back (the inverse map), not to the point itself nor to its mirror image."""
+    from somwidget.frontend.model import Session
+    from somwidget.frontend.transport.display import group_maps
+    from somwidget.frontend.web.standalone import XRServer
+
+    session = Session("sphere", device="cpu")
+    try:
+        assert session.wait_idle(120), "the session did not converge"
+        with XRServer(session) as srv:
+            page = open_page(browser, srv.base + "/xr/")
+            late = None
+            try:
+                assert page.evaluate("somxr.state().group") == "none"
+                # the group comes in a "controls" message, before the first frame with the copies
+                session.set_symmetry("radial-4-z")
+                assert session.wait_idle(60)
+                assert session.symmetry is not None and session.symmetry.spec == "radial-4-z"
+                k = session.frame.n_controls
+                assert len(session.frame.effective_controls) == 4 * k
+                maps = np.array(group_maps("radial-4-z")).reshape(-1, 3, 3)
+                page.wait_for_function(
+                    f"(() => {{ const s = somxr.state(); return s.group === 'radial-4-z' && s.k === {k} "
+                    f"&& s.kEff === {4 * k} && s.seq >= {session.frame.seq}; }})()", timeout=15000)
+                np.testing.assert_allclose(np.array(page.evaluate("somxr.state().groupMaps")).reshape(-1, 3, 3), maps,
+                                           atol=1e-12)
+                view = "document.getElementById('view').somview"
+                page.wait_for_function(f"{view}.describe().labels.some((t) => t.endsWith('\\u2033'))", timeout=10000)
+                assert page.evaluate(f"{view}.describe().group") == "radial-4-z"
+                # a page opened now reads the group from its topology message
+                late = open_page(browser, srv.base + "/xr/")
+                late.wait_for_function(f"somxr.state().group === 'radial-4-z' && somxr.state().kEff === {4 * k}",
+                                       timeout=15000)
+                late.close()
+                late = None
+
+                # a copy under map 1 that is clear on screen and the one the mouse meets
+                box = page.locator("#view canvas").bounding_box()
+                spots = [page.evaluate(f"somxr.controlScreen({j})") for j in range(4 * k)]
+                start = session.controls
+                chosen = None
+                for j in sorted(range(k, 2 * k), key=lambda j: -min(
+                        np.hypot(spots[j][0] - u, spots[j][1] - v) for m, (u, v) in enumerate(spots) if m != j)):
+                    x, y = spots[j]
+                    if not (box["x"] + 60 < x < box["x"] + box["width"] - 60
+                            and box["y"] + 60 < y < box["y"] + box["height"] - 60):
+                        continue
+                    page.mouse.move(x, y)
+                    try:
+                        page.wait_for_function(f"somxr.state().hover.length === 1 && somxr.state().hover[0] === {j}",
+                                               timeout=2000)
+                    except playwright_sync.TimeoutError:
+                        continue
+                    chosen = j
+                    break
+                assert chosen is not None, f"no copy under map 1 is clear on screen: {spots}"
+                j, i = chosen, chosen % k
+                labels = page.evaluate(f"{view}.describe().labels")
+                assert f"{i}\u2032" in labels, labels
+                x, y = spots[j]
+                cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+                d = np.array([cx - x, cy - y])
+                d = 50 * d / max(np.linalg.norm(d), 1.0) + np.array([0.0, -20.0])
+                page.mouse.down()
+                wait_for(lambda: srv.hub.grabs.get(i) is not None, what=f"the server to see control {i} grabbed")
+                for s in range(1, 11):
+                    page.mouse.move(x + d[0] * s / 10, y + d[1] * s / 10)
+                    page.wait_for_timeout(30)
+                page.wait_for_timeout(100)
+                # the copy follows the mouse on screen; its control is drawn at the copy's point turned back
+                copy_end = np.array(page.evaluate(f"somxr.controlModel({j})"))
+                shown = np.array(page.evaluate(f"somxr.controlScreen({j})"))
+                assert np.linalg.norm(shown - [x + d[0], y + d[1]]) < 3, (shown, x + d[0], y + d[1])
+                expected = maps[1].T @ copy_end
+                np.testing.assert_allclose(page.evaluate(f"somxr.controlModel({i})"), expected, atol=1e-5)
+                for g in (2, 3):  # the other copies follow the control
+                    np.testing.assert_allclose(page.evaluate(f"somxr.controlModel({g * k + i})"), maps[g] @ expected,
+                                               atol=1e-5)
+                page.mouse.up()
+                wait_for(lambda: i not in srv.hub.grabs, what=f"control {i} released")
+                wait_for(lambda: np.allclose(session.controls[i, :3], expected, atol=2e-3), timeout=10,
+                         what=f"control {i} at {expected} (now {session.controls[i, :3]})")
+                assert np.linalg.norm(session.controls[i, :3] - start[i, :3]) > 0.1, "the control hardly moved"
+                # the test tells the maps apart: the point itself or its mirror image is far from where it went
+                assert np.linalg.norm(copy_end - expected) > 0.1
+                assert np.linalg.norm(copy_end * [1, -1, 1] - expected) > 0.1
+                others = np.delete(np.arange(k), i)
+                np.testing.assert_allclose(session.controls[others], start[others])
+                assert session.wait_idle(60)
+                frame = session.frame
+                eff = np.asarray(frame.effective_positions).reshape(-1, 3)
+                np.testing.assert_allclose(eff[j], maps[1] @ frame.control_positions[i], atol=1e-5)
+                page.wait_for_function(f"somxr.state().seq >= {frame.seq}", timeout=10000)
+                np.testing.assert_allclose(page.evaluate(f"somxr.serverControl({j})"), eff[j], atol=1e-5)
+                assert not page.errors, page.errors
+            finally:
+                if late is not None:
+                    late.close()
+                page.close()
+    finally:
+        session.close()

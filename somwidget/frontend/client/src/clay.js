@@ -11,6 +11,32 @@ const WIREFRAME_LIMIT = 16384; // display vertices above which a surface is draw
 const LIGHT_SEGMENTS = 4096; // synapses above which moving clay on a software rasteriser shows the points alone
 const WHITE = new THREE.Color(0xffffff);
 const HOVER_LIGHTEN = 0.35; // a hovered control's colour moves this far towards white
+const IDENTITY = [1, 0, 0, 0, 1, 0, 0, 0, 1];
+
+// A 3 x 3 map (row-major, 9 numbers) of a position p: M p, and its inverse (the transpose: the maps are orthogonal).
+export const applyMap = (M, p) => [M[0] * p[0] + M[1] * p[1] + M[2] * p[2], M[3] * p[0] + M[4] * p[1] + M[5] * p[2],
+  M[6] * p[0] + M[7] * p[1] + M[8] * p[2]];
+export const applyInverse = (M, p) => [M[0] * p[0] + M[3] * p[1] + M[6] * p[2],
+  M[1] * p[0] + M[4] * p[1] + M[7] * p[2], M[2] * p[0] + M[5] * p[1] + M[8] * p[2]];
+
+// The symmetry group a server message names: {name, maps} (maps: 3 x 3 row-major, the identity first; effective
+// control j is control j mod k under map floor(j / k)). A message without "group_maps" (an older server) has a
+// mirror group at most: its "mirror_axes" make the one copy's map. null when the message says nothing of the group
+// (a "controls" message of an older server).
+export function groupOf(msg) {
+  const maps = msg.group_maps;
+  if (Array.isArray(maps) && maps.length) {
+    const ok = (m) => Array.isArray(m) && m.length === 9 && m.every((v) => Number.isFinite(v));
+    const name = typeof msg.group === 'string' ? msg.group : 'none';
+    return { name, maps: maps.map((m) => (ok(m) ? [...m] : IDENTITY)) };
+  }
+  const axes = msg.mirror_axes;
+  if (!Array.isArray(axes)) return msg.type === 'topology' ? { name: 'none', maps: [IDENTITY] } : null;
+  const axis = axes.findIndex(Boolean);
+  if (axis < 0) return { name: typeof msg.group === 'string' ? msg.group : 'none', maps: [IDENTITY] };
+  const mirror = [0, 1, 2].flatMap((r) => [0, 1, 2].map((c) => (r === c ? (axes[r] ? -1 : 1) : 0)));
+  return { name: typeof msg.group === 'string' ? msg.group : `mirror-${'xyz'[axis]}`, maps: [IDENTITY, mirror] };
+}
 
 export class Clay {
   // software: the page draws with a software rasteriser, which pays for every triangle (coarser control spheres)
@@ -28,7 +54,10 @@ export class Clay {
     this.k = 0;
     this.kEff = 0;
     this.controlAnchors = []; // per effective control: its place and size (drawn by controlDraws)
-    this.controlDraws = []; // the instanced spheres: originals, mirrored copies
+    this.controlDraws = []; // the instanced spheres: originals, copies (the group's images of them)
+    this.group = 'none'; // the symmetry group's spec ("none", "mirror-y", "radial-8-z", ...)
+    this.groupMaps = [IDENTITY]; // its maps of a position (3 x 3 row-major), the identity first
+    this.pendingGroup = null; // a group a "controls" message announced, in effect from the next frame
     this.local = new Map(); // original index -> [x, y, z] model position while this client drags it
     this.held = new Set(); // original indices held by any client (server's grabs)
     this.hover = new Set(); // effective indices hovered by an input
@@ -59,6 +88,8 @@ export class Clay {
     this.rebuildControls(0);
     this.local.clear();
     this.topology = t;
+    this.pendingGroup = null;
+    this.setGroup(groupOf(t));
     this.controlIds = t.control_ids || [];
     const n = t.n_vertices;
     const pos = new THREE.BufferAttribute(new Float32Array(3 * n), 3);
@@ -117,7 +148,19 @@ export class Clay {
     this.radius = Math.max(hi.distanceTo(lo) / 2, 1e-6);
     this.controlRadius = t.control_radius;
     this.content.position.copy(this.centre).multiplyScalar(-1);
-    this.mirrorAxes = t.mirror_axes || [false, false, false];
+  }
+
+  setGroup(g) {
+    if (!g) return;
+    this.group = g.name;
+    this.groupMaps = g.maps;
+  }
+
+  // A "controls" message (the ids, and the group from a server that sends it): it comes just before the first frame
+  // whose controls changed, so the group takes effect with the next frame drawn.
+  announceGroup(msg) {
+    const g = groupOf(msg);
+    if (g) this.pendingGroup = g;
   }
 
   // While the clay moves (training, or a drag) on a software rasteriser, a point display with many synapses draws
@@ -161,6 +204,10 @@ export class Clay {
     this.colourAttr.array.set(f.colours);
     this.colourAttr.needsUpdate = true;
     if (this.surface) this.surface.geometry.computeVertexNormals();
+    if (this.pendingGroup) {
+      this.setGroup(this.pendingGroup);
+      this.pendingGroup = null;
+    }
     if (f.kEff !== this.kEff || f.k !== this.k) {
       this.k = f.k;
       this.rebuildControls(f.kEff);
@@ -171,8 +218,9 @@ export class Clay {
       m.userData.base = c.setRGB(f.controlColours[3 * j] / 255, f.controlColours[3 * j + 1] / 255,
         f.controlColours[3 * j + 2] / 255).clone();
       m.userData.server = [f.controlPositions[3 * j], f.controlPositions[3 * j + 1], f.controlPositions[3 * j + 2]];
-      m.userData.mirror = j >= this.k;
-      m.userData.original = j >= this.k ? j - this.k : j;
+      m.userData.mirror = j >= this.k; // a copy (the group's image of a control), drawn translucent
+      m.userData.copy = this.copyOf(j); // the map that makes it: 0 for an original
+      m.userData.original = this.originalOf(j);
     }
     this.lastFrame = f;
     this.refreshControls();
@@ -180,7 +228,7 @@ export class Clay {
   }
 
   // The control spheres: an anchor (Object3D) per effective control carries its place and size, and two instanced
-  // meshes draw them, the originals solid and the mirrored copies translucent (two draw calls whatever the count).
+  // meshes draw them, the originals solid and the copies translucent (two draw calls whatever the count).
   rebuildControls(kEff) {
     for (const m of this.controlAnchors) this.content.remove(m);
     for (const d of this.controlDraws) {
@@ -222,10 +270,6 @@ export class Clay {
     return { colour: `#${c.getHexString()}`, scale: m.getMaxScaleOnAxis() / this.controlRadius };
   }
 
-  mirrored(p) {
-    return p.map((v, a) => (this.mirrorAxes[a] ? -v : v));
-  }
-
   // Positions, colours and highlights of the control spheres (local drags win over the server's positions).
   refreshControls() {
     this.onChange?.();
@@ -233,7 +277,7 @@ export class Clay {
       const j = m.userData.index;
       const i = m.userData.original;
       let p = m.userData.server;
-      if (this.local.has(i)) p = m.userData.mirror ? this.mirrored(this.local.get(i)) : this.local.get(i);
+      if (this.local.has(i)) p = this.imageOf(m.userData.copy, this.local.get(i)); // the local drag, echoed
       if (p) m.position.set(p[0], p[1], p[2]);
       const held = this.held.has(i) || this.local.has(i);
       const hovered = this.hover.has(j);
@@ -332,12 +376,31 @@ export class Clay {
     return best;
   }
 
-  // Which original control an effective index moves, and the model point to send for a wanted model point.
+  // Effective control j is control j mod k under the group's map floor(j / k): which control an effective index
+  // moves, which map makes it, and the model point to send for a wanted model point of the copy (the inverse map).
   originalOf(j) {
-    return j >= this.k ? j - this.k : j;
+    return this.k > 0 ? j % this.k : j;
+  }
+
+  copyOf(j) {
+    return this.k > 0 ? Math.floor(j / this.k) : 0;
+  }
+
+  mapOf(g) {
+    return this.groupMaps[g] || IDENTITY; // a copy beyond the group (a group changed mid-drag): as the original
+  }
+
+  // Copy g of a control at modelPos (g = 0: the control itself).
+  imageOf(g, modelPos) {
+    return g > 0 ? applyMap(this.mapOf(g), modelPos) : modelPos;
+  }
+
+  // The control's place for copy g at modelPos.
+  unmap(g, modelPos) {
+    return g > 0 ? applyInverse(this.mapOf(g), modelPos) : modelPos;
   }
 
   toOriginal(j, modelPos) {
-    return j >= this.k ? this.mirrored(modelPos) : modelPos;
+    return this.unmap(this.copyOf(j), modelPos);
   }
 }

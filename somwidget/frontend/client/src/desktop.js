@@ -95,7 +95,7 @@ export class Desktop {
     const normal = this.camera.getWorldDirection(new THREE.Vector3());
     const plane = new THREE.Plane().setFromNormalAndCoplanarPoint(normal, centre);
     const onPlane = this.raycaster.ray.intersectPlane(plane, new THREE.Vector3()) || centre.clone();
-    this.drag = { i, j, plane, offset: centre.clone().sub(onPlane), pointer: ev.pointerId,
+    this.drag = { i, j, copy: this.clay.copyOf(j), plane, offset: centre.clone().sub(onPlane), pointer: ev.pointerId,
       start: this.clay.worldToModel(centre) };
     this.renderer.domElement.setPointerCapture?.(ev.pointerId);
     this.renderer.domElement.style.cursor = 'grabbing';
@@ -121,7 +121,7 @@ export class Desktop {
       const axis = d.reduce((best, v, a) => (Math.abs(v) > Math.abs(d[best]) ? a : best), 0);
       model = this.drag.start.map((v, a) => (a === axis ? v + d[a] : v));
     }
-    this.grabs.update(this.drag.i, this.clay.toOriginal(this.drag.j, model));
+    this.grabs.update(this.drag.i, this.clay.unmap(this.drag.copy, model)); // a copy's point, mapped back
     this.stats.moves += 1;
   }
 

@@ -1,6 +1,6 @@
 // Holding controls: grab / move / release intents, the local preview while dragging, and the move -> mesh latency.
 //
-// While this client drags control i, its sphere (and its mirrored copy) follows the hand at once (a local
+// While this client drags control i, its sphere (and each copy of it) follows the hand at once (a local
 // override); the server's frames bring the clay. Moves go out at most every MOVE_INTERVAL ms, the last one always.
 
 import { intents } from './protocol.js';

@@ -166,6 +166,7 @@ window.somxr = {
     iteration: state.frame ? state.frame.iteration : null, paused: state.paused, running: state.running,
     mode: state.mode, transparent: scene.background === null, xrFrames: state.xrFrames, presenting: renderer.xr.isPresenting, supported: state.supported || null,
     digest: state.digest, k: clay.k, kEff: clay.kEff, held: [...clay.held], local: [...clay.local.keys()],
+    group: clay.group, groupMaps: clay.groupMaps.map((m) => [...m]),
     hover: [...clay.hover], errors: state.errors.map((e) => e.message), lastError: state.lastError,
     link: { ...link.stats }, moves: grabs.moves, latencies: [...grabs.latencies],
     controlLatencies: [...grabs.controlLatencies], xr: { ...xr.stats }, pressed: [...menu.pressed], desktop: { ...desktop.stats },

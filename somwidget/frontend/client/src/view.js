@@ -2,7 +2,7 @@
 // (protocol.js) from any transport (the websocket in the web app and the XR page, the kernel's comm in a notebook)
 // and sending intents back through `send`. The browser draws; every view keeps its own camera.
 //
-// On the canvas: the controls as spheres labelled with their index (a mirrored copy with a prime), hover
+// On the canvas: the controls as spheres labelled with their index (a copy with primes: ′ ″ ‴, then ·g), hover
 // highlight, the held one red and enlarged; orbit, pan, zoom; a fit-to-view button; a status line (iteration,
 // frames/s drawn here, the server's cycle time). The view refits when a control leaves it.
 
@@ -49,6 +49,12 @@ export function digestOf(positions) {
 const FIT_CHECK_MS = 250;
 const STATUS_MS = 250;
 const DRAG_REDRAW_MS = 50;
+const PRIMES = ['', '\u2032', '\u2033', '\u2034']; // ′ ″ ‴
+
+// The label of copy g of control i: "3" (the control), "3′", "3″", "3‴", then "3·4", "3·5", ...
+export function labelOf(i, g) {
+  return g < PRIMES.length ? `${i}${PRIMES[g]}` : `${i}\u00b7${g}`;
+}
 
 // A software rasteriser (SwiftShader, llvmpipe: a browser without a GPU) draws every pixel on the CPU that also
 // trains the clay: there the view skips multisampling and draws at one pixel per CSS pixel.
@@ -102,9 +108,9 @@ export class ClayView {
         this.desktop.keepControlsInView();
       } });
 
-    this.grabs.onMoved = (i, j, k) => { // a control this view drags changed place: its mirror test follows
+    this.grabs.onMoved = (i, j, k) => { // a control this view drags changed place: the copy dragged follows it
       const drag = this.desktop.drag;
-      if (drag && this.grabs.current(drag.i) === i && j >= 0) drag.j = drag.j === i ? j : j + k;
+      if (drag && this.grabs.current(drag.i) === i && j >= 0) drag.j = j + drag.copy * k;
     };
     this.labels = document.createElement('div');
     this.labels.className = 'somview-labels';
@@ -149,7 +155,10 @@ export class ClayView {
       onGrabs: (list) => this.grabs.onGrabs(list),
       onError: (e) => this.showError(e),
       onServerStatus: (s) => { this.state.cycleMs = s.cycle_ms; this.state.serverFps = s.fps; },
-      onControls: (ids) => this.grabs.onControls(ids),
+      onControls: (ids, msg) => {
+        if (msg) this.clay.announceGroup(msg); // the group (a server that sends it), from the next frame on
+        this.grabs.onControls(ids);
+      },
     };
   }
 
@@ -259,8 +268,8 @@ export class ClayView {
         continue;
       }
       const i = clay.originalOf(j);
-      const mirror = j >= clay.k;
-      const text = mirror ? `${i}\u2032` : `${i}`;
+      const mirror = j >= clay.k; // a copy
+      const text = labelOf(i, clay.copyOf(j));
       if (d.textContent !== text) d.textContent = text;
       clay.controlWorld(j, p);
       p.project(this.camera);
@@ -300,6 +309,7 @@ export class ClayView {
       seq: s.frame ? s.frame.seq : null, generation: s.frame ? s.frame.generation : null,
       iteration: s.frame ? s.frame.iteration : null, paused: s.frame ? s.frame.paused : null,
       running: s.frame ? s.frame.running : null, digest: s.digest, k: clay.k, kEff: clay.kEff,
+      group: clay.group, groupMaps: clay.groupMaps.map((m) => [...m]),
       held: [...clay.held], local: [...clay.local.keys()], hover: [...clay.hover],
       errors: s.errors.map((e) => e.message), lastError: s.lastError, moves: this.grabs.moves,
       latencies: [...this.grabs.latencies], controlLatencies: [...this.grabs.controlLatencies],

@@ -324,14 +324,14 @@ export class XRApp {
     const world = this.clay.controlWorld(j);
     this.grabs.begin(i);
     this.stats.grabs += 1;
-    st.grabs.select = { type: 'control', j, i, offset: world.sub(point) };
+    st.grabs.select = { type: 'control', j, i, copy: this.clay.copyOf(j), offset: world.sub(point) };
   }
 
   dragControl(st) {
     const g = st.grabs.select;
     if (!g || g.type !== 'control' || !st.point) return;
     const world = st.point.clone().add(g.offset);
-    this.grabs.update(g.i, this.clay.toOriginal(g.j, this.clay.worldToModel(world)));
+    this.grabs.update(g.i, this.clay.unmap(g.copy, this.clay.worldToModel(world))); // a copy's point, mapped back
   }
 
   beginStage() {
