@@ -194,6 +194,7 @@ class ReferenceSom:
         radii=None,
         group_maps=None,
         smoothing_rule: str = "laplacian",
+        strokes=None,
     ):
         self.n_vertices = int(n_vertices)
         self.reach = float(reach)
@@ -226,6 +227,7 @@ class ReferenceSom:
         self.radii = np.zeros(len(self.controls)) if radii is None else np.array(radii, dtype=np.float64)
         self.group_maps = None if group_maps is None else np.asarray(group_maps, dtype=np.float64)
         self.smoothing_rule = smoothing_rule
+        self.strokes = [1] * len(self.controls) if strokes is None else list(strokes)
         self.rest = self.W.copy()
         self.sigmas = None  # the carrying controls' widths, fitted at a restart's first cycle
         p = self.start_weights[:, :min(3, self.n_dims)]
@@ -293,10 +295,12 @@ class ReferenceSom:
     def winners(self) -> np.ndarray:
         return winners(self.W, self.effective_controls, self.metric_weights)
 
-    def set_controls(self, controls, radii=None):
+    def set_controls(self, controls, radii=None, strokes=None):
         self.controls = np.array(controls, dtype=np.float64, copy=True)
         if radii is not None:
             self.radii = np.array(radii, dtype=np.float64)
+        if strokes is not None or len(self.strokes) and sum(self.strokes) != len(self.controls):
+            self.strokes = [1] * len(self.controls) if strokes is None else list(strokes)
         self._restart()
 
     def set_weights(self, weights):
@@ -317,7 +321,7 @@ class ReferenceSom:
 
     @property
     def shaping(self) -> bool:
-        return bool(self.radii.any()) or self.group_maps is not None or (
+        return bool(self.radii.any()) or self.group_maps is not None or len(self.strokes) < len(self.controls) or (
             self.smoothing_rule == "taubin" and self.smoothing > 0)
 
     def _smooth_dims(self) -> tuple[int, ...]:
@@ -339,8 +343,14 @@ class ReferenceSom:
             flip = np.eye(self.n_dims)
             flip[list(self.mirror), list(self.mirror)] = -1.0
             maps = np.stack([np.eye(self.n_dims), flip])
-        G, k = len(maps), len(self.controls)
-        members = np.array([maps[g] @ self.controls[c] for c in range(k) for g in range(G)])
+        G = len(maps)
+        # each group: a stroke's samples (or one control) and their copies, their rates from the same W
+        groups, first = [], 0
+        for length in self.strokes:
+            groups.append([(c, g) for g in range(G) for c in range(first, first + length)])
+            first += length
+        slots = [slot for group in groups for slot in group]
+        members = np.array([maps[g] @ self.controls[c] for c, g in slots])
         self.margins.append(winner_margins(W, members, self.metric_weights))
         win = winners(W, members, self.metric_weights)
         wu = W[win].copy()
@@ -348,13 +358,14 @@ class ReferenceSom:
         pos = list(range(min(3, self.n_dims)))
         if self.sigmas is None:  # the restart's first cycle: each carrying control's width for its pull
             h = np.linalg.norm((members - wu)[:, pos], axis=1)
-            base = np.repeat(0.5 * self.radii, G)
+            base = np.array([0.5 * self.radii[c] for c, _ in slots])
             self.sigmas = np.where(base > 0, np.maximum(base, np.sqrt(h * self.edge / (np.pi / 10))), 0.0)
-        for c in range(k):
+        j = 0
+        for number, group in enumerate(groups):
             step = np.zeros_like(W)
             total = np.zeros(self.n_vertices)
-            for g in range(G):
-                j = c * G + g
+            nearest = np.zeros(self.n_vertices)
+            for c, _g in group:
                 d = self.dist[win[j]].astype(np.int64)
                 ok = d != UNREACHABLE
                 rate = np.zeros(self.n_vertices)
@@ -368,7 +379,12 @@ class ReferenceSom:
                     falloff = np.where(ok, np.exp(-np.sum(apart**2, axis=1) / (2 * sigma**2)), 0.0)
                     step += (alpha * falloff)[:, None] * (members[j] - wu[j])[None, :]
                     total += falloff
-            if G > 1:
+                    nearest = np.maximum(nearest, falloff)
+                j += 1
+            if self.strokes[number] > 1:  # a stroke: the falloff-weighted mean offset, times the nearest falloff
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    step *= np.where(total > 0, nearest / total, 0.0)[:, None]
+            elif len(group) > 1:
                 step /= np.maximum(1.0, total)[:, None]
             W += step
         dims = list(self._smooth_dims())

@@ -302,3 +302,58 @@ def test_a_session_refines_its_clay_as_one_step():
     with Session("space-grid", device="cpu", autosave=False, start=False) as s:
         with pytest.raises(ValueError, match="refine works on a surface"):
             s.refine()
+
+
+# -- strokes -------------------------------------------------------------------------------------------------------
+def test_a_stroke_matches_the_float64_reference(device):
+    topo, pts, _ = _mesh()
+    controls = np.concatenate([pts[[3]], pts[[30, 31, 32]] * 1.15, pts[[70]]]).astype(np.float32)
+    kw = dict(iterations=200, reach=0.3, radii=[0.0, 0.4, 0.4, 0.4, 0.5], strokes=[1, 3, 1])
+    som = Som(topo, pts, controls, device=device, **kw)
+    ref = ReferenceSom(topo.n_vertices, topo.edges, pts, controls, **kw)
+    som.restore(pts, 200)
+    ref.restore(pts, 200)
+    som.restart()
+    ref.restart()
+    _compare(som, ref, 60, 2e-5)
+    assert som.strokes == (1, 3, 1)
+
+
+def test_a_stroke_drawn_over_the_grid_raises_a_smooth_ridge():
+    """A stroke across the open grid (the controls near it taken away first), lifted by a fifth of the size: after
+    training its points lie within 1% of the size of the clay's surface, and the clay along it has no crease above
+    30 degrees; dragging one sample moves the whole stroke; removing one removes it; undo takes each step back."""
+    from somwidget.frontend.model import Session
+
+    with Session("grid", device="cpu", autosave=False) as s:
+        size = metrics.bounding_diagonal(s.preset.weights)
+        s.remove_control(5)  # the one beside the stroke's end
+        s.remove_control(0)  # the centre's: the four corners' stay
+        line = np.array([[-0.6, -0.3, 0.0], [0.0, 0.1, 0.0], [0.6, 0.3, 0.0]])
+        radius = 0.25 * size
+        first = s.add_stroke(line, radius=radius)
+        n = s.strokes[-1]
+        assert first == 4 and n >= 3 and s.n_controls == 4 + n and s.strokes == (1,) * 4 + (n,)
+        lifted = s.controls
+        lifted[first:, 2] += 0.2 * size
+        with s.gesture():
+            s.move_control(first + 1, lifted[first + 1])  # one sample dragged: the whole stroke follows
+        assert s.wait_applied(30) and s.wait_idle(120)
+        np.testing.assert_allclose(s.controls[first:], lifted[first:], atol=1e-6)
+        w = s.frame.positions.astype(np.float64)
+        faces = s.preset.topology.faces
+        gaps = metrics.surface_distances(s.controls[first:, :3], w, faces)
+        assert gaps.max() < 0.01 * size, gaps.max() / size
+        tris = metrics.triangles_of(faces)
+        centres = s.preset.weights[tris].mean(axis=1)  # where each face was: along the stroke, within its radius
+        along = metrics.nearest_distances(centres[:, :2], lifted[first:, :2]) < radius
+        angles = metrics.dihedral_angles(w, tris)  # one per edge: take the faces along the stroke by their edges
+        near = metrics.dihedral_angles(w, tris[along])
+        assert np.nanmax(near) < 30.0, np.nanmax(near)
+        assert np.isfinite(angles).any() and np.linalg.norm(w - s.preset.weights, axis=1).max() > 0.15 * size
+        s.remove_control(first + 2)  # the whole stroke goes
+        assert s.n_controls == 4 and s.strokes == (1,) * 4
+        assert s.undo() and s.n_controls == 4 + n
+        assert s.undo() and s.undo() and s.n_controls == 4
+        with pytest.raises(ValueError, match="at least 2 points"):
+            s.add_stroke([[0.0, 0.0, 0.0]])

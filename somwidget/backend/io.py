@@ -310,7 +310,7 @@ SESSION_DEFAULTS = {
     "preset": "", "display": "surface", **{key: BY_NAME[key].default for key in KEYS},
     "smooth_dims": None, "metric_weights": None, "mirror": (), "iteration": 0,
     # the shaping rules (files before them: point controls, no radial group, the paper's smoothing)
-    "radii": None, "symmetry": "none", "smoothing_rule": "laplacian",
+    "radii": None, "symmetry": "none", "smoothing_rule": "laplacian", "strokes": None,
 }
 #: How a session file stores each schedule parameter: an int64 or a float64 scalar.
 _SCALAR_KIND = {key: "i" if BY_NAME[key].kind == "int" else "f" for key in KEYS}
@@ -355,6 +355,7 @@ def save_session(path, state: dict) -> None:
         "metric_weights_default": np.bool_(clean["metric_weights"] is None),
         "mirror": np.asarray(clean["mirror"], np.int64),
         "radii": np.asarray(clean["radii"], np.float64),
+        "strokes": np.asarray(clean["strokes"], np.int64),
         "symmetry": np.str_(clean["symmetry"]),
         "smoothing_rule": np.str_(clean["smoothing_rule"]),
         "layout_names": np.asarray(layout.names, dtype=np.str_),
@@ -387,7 +388,7 @@ def save_session(path, state: dict) -> None:
 SESSION_MEMBERS = frozenset({
     "format_version", "preset", "display", "weights", "start_weights", "controls", "n_vertices", "edges",
     *KEYS, "iteration", "smooth_dims", "smooth_dims_default",
-    "metric_weights", "metric_weights_default", "mirror", "radii", "symmetry", "smoothing_rule",
+    "metric_weights", "metric_weights_default", "mirror", "radii", "symmetry", "smoothing_rule", "strokes",
     "layout_names", "layout_position", "layout_colour",
     "layout_colour_space", "layout_direction", "layout_length", "topology_kind", "face_indices", "face_sizes"})
 
@@ -519,6 +520,7 @@ def load_session(path, *, max_vertices: int = MAX_VERTICES, max_iterations: int 
         "metric_weights": None if scalar("metric_weights_default", "b") else get("metric_weights"),
         "mirror": tuple(int(d) for d in ints("mirror")),
         "radii": get("radii") if "radii" in data else None,
+        "strokes": tuple(int(n) for n in ints("strokes")) if "strokes" in data else None,
         "symmetry": scalar("symmetry", "s") if "symmetry" in data else "none",
         "smoothing_rule": scalar("smoothing_rule", "s") if "smoothing_rule" in data else "laplacian",
     }
@@ -574,6 +576,12 @@ def _check_state(state: dict, label: str) -> dict:
     if radii.shape != (k,) or (radii < 0).any():
         raise ValueError(f"{label}: key 'radii': expected {k} values >= 0 (one per control), got {radii.tolist()}")
     out["radii"] = radii
+    strokes = (1,) * k if state.get("strokes") is None else tuple(state["strokes"])
+    if any(isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1 for n in strokes) or \
+            sum(strokes) != k:
+        raise ValueError(f"{label}: key 'strokes': expected run lengths >= 1 that sum to the {k} controls, got "
+                         f"{list(strokes)}")
+    out["strokes"] = tuple(int(n) for n in strokes)
     try:
         group = Symmetry.parse(state.get("symmetry", "none"))
     except ValueError as exc:
@@ -598,13 +606,14 @@ def session_state(preset: Preset, som=None) -> dict:
         **{key: getattr(preset, key) for key in KEYS}, "iteration": 0,
         "smooth_dims": preset.smooth_dims, "metric_weights": preset.metric_weights, "mirror": preset.mirror,
         "radii": preset.control_radii(), "symmetry": preset.symmetry.spec if preset.symmetry else "none",
+        "strokes": preset.strokes,
         "smoothing_rule": preset.smoothing_rule,
     }
     if som is not None:
         state.update({key: getattr(som, key) for key in KEYS})
         radial = som.symmetry if som.symmetry is not None and som.symmetry.kind == "radial" else None
         state.update(weights=som.weights, controls=som.controls, iteration=som.iteration, smooth_dims=som.smooth_dims,
-                     metric_weights=som.metric_weights, mirror=som.mirror, radii=som.radii,
+                     metric_weights=som.metric_weights, mirror=som.mirror, radii=som.radii, strokes=som.strokes,
                      symmetry=radial.spec if radial else "none", smoothing_rule=som.smoothing_rule)
     return state
 
@@ -618,6 +627,7 @@ def preset_from_session(state: dict) -> Preset:
         topology=state["topology"], weights=state["start_weights"], controls=state["controls"],
         layout=state["layout"], mirror=state["mirror"], metric_weights=state["metric_weights"],
         display=state["display"], smooth_dims=state["smooth_dims"], radii=state.get("radii"),
+        strokes=state.get("strokes"),
         symmetry=Symmetry.parse(state.get("symmetry", "none")), smoothing_rule=state.get("smoothing_rule", "laplacian"),
         radius=float(np.max(state["radii"])) if state.get("radii") is not None and len(state["radii"]) else 0.0,
         **{key: state.get(key, BY_NAME[key].default) for key in KEYS})

@@ -234,3 +234,35 @@ def chamfer(a, b) -> float:
     if not len(pa) or not len(pb):
         raise ValueError("chamfer: both point sets must have points")
     return float((nearest_distances(pa, pb).mean() + nearest_distances(pb, pa).mean()) / 2.0)
+
+
+def surface_distances(points, positions, faces) -> np.ndarray:
+    """(len(points),) the distance from each point to the nearest point of the surface (the faces fan-triangulated),
+    float64; each point against every triangle (closest point on a triangle: Ericson, Real-Time Collision
+    Detection, 5.1.5), in blocks."""
+    tris = triangles_of(faces)
+    p = np.asarray(positions, np.float64)
+    a, b, c = p[tris[:, 0]], p[tris[:, 1]], p[tris[:, 2]]
+    ab, ac = b - a, c - a
+    out = np.empty(len(points))
+    for i, q in enumerate(np.asarray(points, np.float64)):
+        ap, bp, cp = q - a, q - b, q - c
+        d1, d2 = np.einsum("ij,ij->i", ab, ap), np.einsum("ij,ij->i", ac, ap)
+        d3, d4 = np.einsum("ij,ij->i", ab, bp), np.einsum("ij,ij->i", ac, bp)
+        d5, d6 = np.einsum("ij,ij->i", ab, cp), np.einsum("ij,ij->i", ac, cp)
+        va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            denom = va + vb + vc
+            v_in, w_in = vb / denom, vc / denom
+            t_ab = np.clip(d1 / (d1 - d3), 0, 1)
+            t_ac = np.clip(d2 / (d2 - d6), 0, 1)
+            t_bc = np.clip((d4 - d3) / ((d4 - d3) + (d5 - d6)), 0, 1)
+        closest = a + v_in[:, None] * ab + w_in[:, None] * ac  # inside the face
+        edges = np.stack([a + t_ab[:, None] * ab, a + t_ac[:, None] * ac, b + t_bc[:, None] * (c - b)])
+        corners = np.stack([a, b, c])
+        inside = (va >= 0) & (vb >= 0) & (vc >= 0) & np.isfinite(v_in) & np.isfinite(w_in)
+        d_face = np.where(inside, np.linalg.norm(q - closest, axis=1), np.inf)
+        d_edge = np.nan_to_num(np.linalg.norm(q - edges, axis=2), nan=np.inf).min(axis=0)
+        d_corner = np.linalg.norm(q - corners, axis=2).min(axis=0)
+        out[i] = min(d_face.min(), d_edge.min(), d_corner.min())
+    return out

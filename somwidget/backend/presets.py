@@ -144,6 +144,7 @@ class Preset:
     radius: float = 0.0  # the radius of influence of its controls (and of new ones), model units (0: a point control)
     radii: np.ndarray | None = None  # each control's own radius, where they differ (a saved session); else `radius`
     symmetry: Symmetry | None = None  # a radial group of its controls (a mirror is `mirror`'s dims)
+    strokes: tuple[int, ...] | None = None  # the lengths of the runs of controls that act as one (None: each alone)
     smoothing_rule: str = "laplacian"  # or "taubin" (keeps the volume): som.SMOOTHING_RULES
 
     def __post_init__(self):
@@ -172,6 +173,11 @@ class Preset:
             if radii.shape != (len(self.controls),) or (radii < 0).any():
                 raise ValueError(f"preset {self.name!r}: radii must be {len(self.controls)} values >= 0, got {radii}")
             self.radii = radii
+        if self.strokes is not None:
+            self.strokes = tuple(checks.integer(f"preset {self.name!r}: strokes", n, 1) for n in self.strokes)
+            if sum(self.strokes) != len(self.controls):
+                raise ValueError(f"preset {self.name!r}: strokes {list(self.strokes)} do not sum to the "
+                                 f"{len(self.controls)} controls")
         if self.symmetry is not None:
             if not isinstance(self.symmetry, Symmetry):
                 raise ValueError(f"preset {self.name!r}: symmetry must be a Symmetry, got {self.symmetry!r}")
@@ -222,7 +228,8 @@ class Preset:
 
         return Som(self.topology, self.weights, self.controls, smooth_dims=self.smooth_dims,
                    metric_weights=self.metric_weights, mirror=self.mirror, device=device,
-                   radii=self.control_radii(), symmetry=self.symmetry, smoothing_rule=self.smoothing_rule,
+                   radii=self.control_radii(), symmetry=self.symmetry, strokes=self.strokes,
+                   smoothing_rule=self.smoothing_rule,
                    **{key: getattr(self, key) for key in KEYS}, **engine_options)
 
 

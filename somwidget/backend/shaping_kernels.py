@@ -14,7 +14,10 @@ One cycle, as the algorithm's three steps, generic on the CPU and on CUDA (a thr
      the winner is drawn onto the control. sigma is r / 2, widened (`fit`, once a restart) where the control is
      so far from its winner that a bump that narrow would crease: the top of a bump of height h turns about
      h e / sigma^2 radians an edge of length e, held to FIT_TURN. A group of such controls is scaled by the sum of
-     its falloffs g (two copies whose regions overlap move the nodes between them by their mean, not their sum);
+     its falloffs g (two copies whose regions overlap move the nodes between them by their mean, not their sum); a
+     stroke's samples (many, close together) move a node by their offsets' mean weighted by g, times the largest g:
+     along the stroke each sample's region follows it as one control's would, and away from it the clay falls off
+     as one sample's falloff does (dividing by the sum alone would leave a flat top with a steep wall);
   3. `smooth`: one Jacobi step of uniform Laplacian smoothing with `strength` on the masked dims (twice per cycle
      for Taubin's pair: lambda, then the negative mu that undoes the shrinking).
 """
@@ -116,6 +119,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         inv_two_sigma2: wp.array(dtype=wp.float32),
         component: wp.array(dtype=wp.int32),
         group_start: wp.array(dtype=wp.int32),
+        stroke: wp.array(dtype=wp.int32),
         n_groups: int,
         table: wp.array2d(dtype=wp.float32),
         s: int,
@@ -134,6 +138,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
             hi = group_start[g + 1]
             step = vec()
             total = wp.float32(0.0)
+            nearest = wp.float32(0.0)
             for j in range(lo, hi):
                 u = wp.int32(keys[j] & INDEX_MASK)
                 k = inv_two_sigma2[j]
@@ -148,7 +153,11 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                     falloff = wp.exp(-k * wp.dot(apart, apart))
                     step += (alpha * falloff) * (controls[j] - winners[j])
                     total += falloff
-            if hi - lo > 1:
+                    nearest = wp.max(nearest, falloff)
+            if stroke[g] != 0:
+                if total > wp.float32(0.0):
+                    step = step * (nearest / total)
+            elif hi - lo > 1:
                 step = step / wp.max(wp.float32(1.0), total)
             w = w + step
         weights[v] = w

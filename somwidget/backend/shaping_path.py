@@ -1,5 +1,6 @@
 """The shaping cycle (a path of `Som`, som.py): controls with a radius of influence, symmetry groups beyond a
-mirrored pair, and Taubin's smoothing, in the generic kernels of shaping_kernels.py. A Som takes this path whenever
+mirrored pair, strokes (runs of controls that act as one), and Taubin's smoothing, in the generic kernels of
+shaping_kernels.py. A Som takes this path whenever
 one of them is in use; with point controls, no symmetry or a mirror, and the paper's Laplacian step, it takes the
 case studies' paths (cpu_path.py, cuda_path.py, rows_path.py) and gives their results bit for bit.
 
@@ -45,13 +46,25 @@ class ShapingPath:
         return float(np.median(np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1))) or 1.0
 
     def _upload_shaping(self) -> None:
-        """The effective controls grouped on the device (each control followed by its copies), each one's sigma
-        (0: a point control), and where each group starts."""
+        """The effective controls grouped on the device (each stroke's samples, or a single control, followed by
+        their copies: the members of one group), each one's sigma (0: a point control), and where each group
+        starts; `_sh_public` maps a device slot to its place in `effective_controls`."""
         maps = self._group_maps()
         order = len(maps)
         k = len(self._controls)
-        grouped = np.einsum("gij,kj->kgi", maps, self._controls.astype(np.float64)).reshape(k * order, self.n_dims)
-        sigma = np.repeat(self._radii.astype(np.float64) * SIGMA_OF_RADIUS, order)
+        slots, starts = [], [0]  # (control, copy) of each device slot; where each group starts
+        first = 0
+        for length in self._strokes:
+            slots += [(c, g) for g in range(order) for c in range(first, first + length)]
+            first += length
+            starts.append(len(slots))
+        stroke = np.array([length > 1 for length in self._strokes], np.int32)
+        c_of = np.array([c for c, _ in slots], np.int64)
+        g_of = np.array([g for _, g in slots], np.int64)
+        c64 = self._controls.astype(np.float64)
+        grouped = np.einsum("sij,sj->si", maps[g_of], c64[c_of])
+        self._sh_public = g_of * k + c_of
+        sigma = self._radii.astype(np.float64)[c_of] * SIGMA_OF_RADIUS
         if self._edge is None:
             self._edge = self._median_edge()
             self._component = wp.array(_components(self.topology)[0].astype(np.int32), dtype=wp.int32,
@@ -60,10 +73,11 @@ class ShapingPath:
         self._sh_controls = wp.array(grouped.astype(np.float32), dtype=self._kernels.vec, device=dev)
         self._sh_sigma = wp.array(sigma.astype(np.float32), dtype=wp.float32, device=dev)
         self._sh_inv = wp.zeros(len(sigma), dtype=wp.float32, device=dev)
-        self._sh_point = np.repeat(self._radii == 0, order)  # the effective controls that read distances
+        self._sh_point = (self._radii == 0)[c_of]  # the effective controls that read distances
         self._sh_fit_pending = True
-        self._sh_groups = wp.array(np.arange(0, k * order + 1, order, dtype=np.int32), dtype=wp.int32, device=dev)
-        self._sh_n_groups = k
+        self._sh_groups = wp.array(np.array(starts, np.int32), dtype=wp.int32, device=dev)
+        self._sh_n_groups = len(starts) - 1
+        self._sh_stroke = wp.array(stroke, dtype=wp.int32, device=dev)
         self._sh_keys = wp.empty(k * order, dtype=wp.uint64, device=dev)
         self._sh_winners = wp.empty(k * order, dtype=self._kernels.vec, device=dev)
         self._sh_order = order
@@ -109,7 +123,8 @@ class ShapingPath:
                 self._cache.fetch(list(dict.fromkeys(winners.tolist())), self._d_max)
             wp.launch(kern.move, dim=n, device=dev,
                       inputs=[self._w, self._sh_rest, self._sh_controls, self._sh_winners, self._sh_keys, self._sh_inv,
-                              self._component, self._sh_groups, self._sh_n_groups, self._table, self._s,
+                              self._component, self._sh_groups, self._sh_stroke, self._sh_n_groups, self._table,
+                              self._s,
                               self._distances, self._slot_of, position])
             for pull in masks:  # into the spare buffer and back (the other paths' graphs hold both buffers' places)
                 wp.launch(kern.smooth, dim=n, device=dev,
@@ -122,5 +137,6 @@ class ShapingPath:
         self._settle_anchor()
         self._shaping_find()
         grouped = (self._sh_keys.numpy() & np.uint64(0xFFFFFFFF)).astype(np.int64)
-        k, order = self._sh_n_groups, self._sh_order
-        return grouped.reshape(k, order).T.reshape(-1)
+        out = np.empty_like(grouped)
+        out[self._sh_public] = grouped
+        return out

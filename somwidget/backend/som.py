@@ -84,7 +84,8 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
     radii (k,): each control's radius of influence in model units (None: all 0, the paper's point controls); a
     control with a radius carries the clay around its winner with a smooth falloff (shaping_kernels.py). symmetry: a
     `Symmetry` group whose copies of each control act together with it (`mirror` is the shorthand for a mirror of
-    any dims). smoothing_rule: "laplacian" (the paper's) or "taubin" (keeps the volume).
+    any dims). strokes: the lengths of consecutive runs of controls that act together as one (the samples of a
+    polyline; None: every control alone). smoothing_rule: "laplacian" (the paper's) or "taubin" (keeps the volume).
     """
 
     @warp_exclusive
@@ -104,6 +105,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         reach: float = DEFAULT_REACH,
         radii: ArrayLike | None = None,
         symmetry: Symmetry | None = None,
+        strokes: Sequence[int] | None = None,
         *,
         smoothing_rule: str = "laplacian",
         cpu_cores: int | None = None,
@@ -133,6 +135,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         self._metric = self._check_metric(metric_weights)
         self._controls = self._check_controls(controls, self._mirror)
         self._radii = self._check_radii(radii, len(self._controls))
+        self._strokes = self._check_strokes(strokes, len(self._controls))
         self._edge: float | None = None  # the start mesh's median edge length, once the shaping path needs it
         self._sh_rest = None  # the shaping path's weights where the latest restart began
         self._sh_rest_pending = True  # taken when the first cycle runs
@@ -221,6 +224,14 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
             return None, mirror_dims_of(symmetry)
         return symmetry, ()
 
+    def _check_strokes(self, strokes, k: int) -> tuple[int, ...]:
+        if strokes is None:
+            return (1,) * k
+        runs = tuple(checks.integer(f"strokes[{i}]", n, 1) for i, n in enumerate(strokes))
+        if sum(runs) != k:
+            raise ValueError(f"strokes: the runs' lengths {list(runs)} sum to {sum(runs)}, not to the {k} controls")
+        return runs
+
     def _check_smoothing_rule(self, rule) -> str:
         if rule not in SMOOTHING_RULES:
             raise ValueError(f"smoothing_rule: expected one of {', '.join(SMOOTHING_RULES)}, got {rule!r}")
@@ -256,7 +267,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
     @property
     def _shaping(self) -> bool:
         """The shaping path runs the cycles: radii, a radial group or Taubin's smoothing in use."""
-        return bool(self._radii.any()) or self._symmetry is not None or (
+        return bool(self._radii.any()) or self._symmetry is not None or len(self._strokes) < len(self._controls) or (
             self._smoothing_rule == "taubin" and self._smoothing > 0.0)
 
     def _smoothing_steps(self) -> list[float]:
@@ -450,6 +461,11 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         self._restart()
 
     @property
+    def strokes(self) -> tuple[int, ...]:
+        """The lengths of the runs of controls that act as one (a stroke's samples); 1 for a control alone."""
+        return self._strokes
+
+    @property
     def smoothing_rule(self) -> str:
         """"laplacian" (the paper's step) or "taubin" (the step, then one that undoes its shrinking)."""
         return self._smoothing_rule
@@ -497,8 +513,10 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
 
     # -- intents ------------------------------------------------------------------------------------------
     @warp_exclusive
-    def set_controls(self, controls: ArrayLike, radii: ArrayLike | None = None, *, from_anchor: bool = False) -> None:
-        """New controls (any count k) and their radii (None: kept where the count stays, else all 0); the schedule
+    def set_controls(self, controls: ArrayLike, radii: ArrayLike | None = None, *, strokes: Sequence[int] | None = None,
+                     from_anchor: bool = False) -> None:
+        """New controls (any count k), their radii (None: kept where the count stays, else all 0) and strokes (None:
+        kept where the count stays, else every control alone); the schedule
         restarts at s0 from the latest weights (local follow), or with `from_anchor` from the weights `anchor()` kept
         (each frame of a drag restarts from the shape the drag began with: on CUDA the copy back is a node of the
         run's first graph, not a call of its own)."""
@@ -507,6 +525,8 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         controls = self._check_controls(controls, self._mirror)
         if radii is not None or len(controls) != len(self._controls):
             self._radii = self._check_radii(radii, len(controls))
+        if strokes is not None or len(controls) != len(self._controls):
+            self._strokes = self._check_strokes(strokes, len(controls))
         self._controls = controls
         self._anchor_pending = from_anchor
         if from_anchor and self.device == "cpu":
@@ -516,18 +536,19 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
 
     @warp_exclusive
     def regroup(self, controls: ArrayLike, radii: ArrayLike | None, symmetry: Symmetry | None = None,
-                mirror: Sequence[int] = (), keep_shape: bool = False) -> None:
+                mirror: Sequence[int] = (), keep_shape: bool = False, strokes: Sequence[int] | None = None) -> None:
         """New controls, radii and symmetry at once (a group turned on or off: the controls change with it); with
         `keep_shape` the weights and s stay as they are and nothing trains until the next change, else a local
         restart. ValueError (nothing changed) if they do not fit together."""
-        old = self._symmetry, self._mirror, self._controls, self._radii
+        old = self._symmetry, self._mirror, self._controls, self._radii, self._strokes
         try:
             self._symmetry, self._mirror = None, ()
             self._symmetry, self._mirror = self._check_symmetry(symmetry, mirror)
             self._controls = self._check_controls(controls, self._mirror)
             self._radii = self._check_radii(radii, len(self._controls))
+            self._strokes = self._check_strokes(strokes, len(self._controls))
         except ValueError:
-            self._symmetry, self._mirror, self._controls, self._radii = old
+            self._symmetry, self._mirror, self._controls, self._radii, self._strokes = old
             raise
         self._upload_controls()
         if keep_shape:

@@ -42,13 +42,15 @@ class VariantPlan:
     position_dims: tuple[int, ...] = (0, 1, 2)
     radii: np.ndarray | None = None  # (k,) the controls' radii, the same in every variant (None: point controls)
     origin: np.ndarray | None = None  # with `restart`: the session's start mesh (its Som's start weights)
+    strokes: tuple[int, ...] | None = None  # the runs of controls that act as one (None: each alone)
     symmetry: Symmetry | None = None  # a radial group (a mirror is `mirror`)
     smoothing_rule: str = "laplacian"
 
     @property
     def shaping(self) -> bool:
         """The variants need the shaping rules (som.py): radii, a radial group or Taubin's smoothing."""
-        return bool(self.radii is not None and np.any(self.radii > 0)) or self.symmetry is not None or (
+        return bool(self.radii is not None and np.any(self.radii > 0)) or self.symmetry is not None or bool(
+            self.strokes and len(self.strokes) < self.controls.shape[1]) or (
             self.smoothing_rule == "taubin" and bool(np.any(self.schedules["smoothing"] > 0)))
 
     @property
@@ -97,7 +99,8 @@ def _draw(name: str, spec, base, n: int, rng: np.random.Generator) -> np.ndarray
 def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: int, jitter: float = 0.05,
                   params: Mapping | None = None, seed: int = 0, restart: bool = False, mirror: Sequence[int] = (),
                   smooth_dims=None, metric_weights=None, position_dims: Sequence[int] = (0, 1, 2), radii=None,
-                  symmetry: Symmetry | None = None, smoothing_rule: str = "laplacian", origin=None) -> VariantPlan:
+                  symmetry: Symmetry | None = None, smoothing_rule: str = "laplacian", origin=None,
+                  strokes=None) -> VariantPlan:
     """n variants around one design. Each control moves by up to `jitter` times the model's size (its bounding
     diagonal), in a direction and by a share drawn uniformly in a ball; `params` maps a schedule parameter to a
     (low, high) range, a list of values or one value (the others keep `base_params`). The same seed gives the same
@@ -127,7 +130,8 @@ def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: 
                        metric_weights=None if metric_weights is None else np.asarray(metric_weights, np.float32),
                        position_dims=tuple(dims), radii=None if radii is None else np.asarray(radii, np.float32),
                        symmetry=symmetry, smoothing_rule=smoothing_rule,
-                       origin=None if origin is None else np.asarray(origin, np.float32))
+                       origin=None if origin is None else np.asarray(origin, np.float32),
+                       strokes=None if strokes is None else tuple(strokes))
 
 
 @functools.lru_cache(maxsize=4)
@@ -168,7 +172,7 @@ def _run_singles(plan: VariantPlan, device: str | None) -> np.ndarray:
     for i in range(plan.n_variants):
         som = Som(topology, origin, plan.controls[i], **plan.params(i), smooth_dims=plan.smooth_dims,
                   metric_weights=plan.metric_weights, mirror=plan.mirror, radii=plan.radii, symmetry=plan.symmetry,
-                  smoothing_rule=plan.smoothing_rule, device=device)
+                  strokes=plan.strokes, smoothing_rule=plan.smoothing_rule, device=device)
         if plan.restart:  # a local restart from the design's shape, as a move of its controls would be
             som.restore(plan.start, som.iterations)
             som.restart()

@@ -110,6 +110,7 @@ class Clay:
         self.preset, self.som, self.layout = preset, som, preset.layout
         self.controls = np.array(som.controls, dtype=np.float32)
         self.radii = np.array(som.radii, dtype=np.float32)
+        self.strokes = tuple(som.strokes)
         self.control_ids = self.applied_ids = self.fresh_ids(len(self.controls))
         self.symmetry = som_group(som, preset.layout)
         self.default_group = self.symmetry or default_group(preset)  # what "symmetry on" brings
@@ -123,6 +124,15 @@ class Clay:
         first = self._next_id
         self._next_id += k
         return tuple(range(first, first + k))
+
+    def run_of(self, i: int) -> range:
+        """The indices of the controls that act as one with control i (a stroke's samples; i alone otherwise)."""
+        first = 0
+        for length in self.strokes:
+            if i < first + length:
+                return range(first, first + length)
+            first += length
+        return range(i, i + 1)
 
     def set_symmetry(self, group: Symmetry | None) -> None:
         """The group in effect (caller holds lock); the one "symmetry on" brings follows a chosen group."""
@@ -144,7 +154,8 @@ class Clay:
         """The state now as an undo step (caller holds both locks, with no operation queued)."""
         params = dict(self.params, metric_weights=list(self.params["metric_weights"]))
         return Step(preset=self.preset, controls=self.controls.copy(), parameters=params, weights=self.som.weights,
-                    iteration=int(self.som.iteration), radii=self.radii.copy(), symmetry=self.symmetry)
+                    iteration=int(self.som.iteration), radii=self.radii.copy(), symmetry=self.symmetry,
+                    strokes=self.strokes)
 
     def put_back(self, step: Step) -> None:
         """Put a recorded state into the Som exactly, and the session's view with it; nothing trains until the next
@@ -156,11 +167,12 @@ class Clay:
         if list(som.metric_weights) != list(p["metric_weights"]):
             som.metric_weights = np.asarray(p["metric_weights"], np.float32)
         radii = np.zeros(len(step.controls), np.float32) if step.radii is None else step.radii
-        som.regroup(step.controls, radii, *engine_symmetry(step.symmetry))
+        som.regroup(step.controls, radii, *engine_symmetry(step.symmetry), strokes=step.strokes)
         som.reach = p["reach"]
         som.restore(step.weights, step.iteration)
         self.controls = np.array(step.controls, np.float32)
         self.radii = np.array(radii, np.float32)
+        self.strokes = tuple(som.strokes)
         self.set_symmetry(step.symmetry)
         if len(self.controls) != len(self.control_ids):  # a control added or removed: new ids (a grab on an id
             self.control_ids = self.fresh_ids(len(self.controls))  # that is gone ends)

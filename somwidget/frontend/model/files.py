@@ -23,7 +23,7 @@ def state_of(snapshot: dict) -> dict:
         "controls": snapshot["controls"], "iteration": snapshot["iteration"], "smooth_dims": preset.smooth_dims,
         **{name: params[name] for name in SCHEDULE_KEYS},
         "metric_weights": np.asarray(params["metric_weights"], np.float32), "mirror": tuple(params["mirror"]),
-        "radii": snapshot["radii"], "smoothing_rule": snapshot["smoothing_rule"],
+        "radii": snapshot["radii"], "strokes": snapshot["strokes"], "smoothing_rule": snapshot["smoothing_rule"],
         "symmetry": group.spec if (group := snapshot["symmetry"]) is not None and group.kind == "radial" else "none",
     }
 

@@ -36,6 +36,7 @@ class Step:
     iteration: int
     radii: np.ndarray | None = None  # each control's radius (None: all 0)
     symmetry: object = None  # the Symmetry group in effect, or None
+    strokes: tuple | None = None  # the lengths of the runs of controls that act as one (None: each alone)
 
     @property
     def nbytes(self) -> int:

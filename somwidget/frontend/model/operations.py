@@ -35,9 +35,10 @@ class Operation:
 
 
 def _controls_back(clay, som) -> None:
-    """The session's controls, radii and ids back to what the Som holds."""
+    """The session's controls, radii, strokes and ids back to what the Som holds."""
     clay.controls = np.array(som.controls, dtype=np.float32)
     clay.radii = np.array(som.radii, dtype=np.float32)
+    clay.strokes = tuple(som.strokes)
     clay.control_ids = clay.applied_ids
 
 
@@ -48,12 +49,13 @@ class SetControls(Operation):
 
     controls: np.ndarray
     radii: np.ndarray
+    strokes: tuple
     anchor: object
     ids: tuple
     key = "controls"
 
     def apply(self, som) -> None:
-        som.set_controls(self.controls, self.radii, from_anchor=self.anchor is som)
+        som.set_controls(self.controls, self.radii, strokes=self.strokes, from_anchor=self.anchor is som)
 
     def applied(self, clay) -> None:
         clay.applied_ids = self.ids  # the ids of the controls the Som now holds
@@ -89,6 +91,7 @@ class SetSymmetry(Operation):
     group: object
     controls: np.ndarray
     radii: np.ndarray
+    strokes: tuple
     ids: tuple
     keep: bool
     key = "controls"
@@ -98,7 +101,8 @@ class SetSymmetry(Operation):
         return not self.keep
 
     def apply(self, som) -> None:
-        som.regroup(self.controls, self.radii, *engine_symmetry(self.group), keep_shape=self.keep)
+        som.regroup(self.controls, self.radii, *engine_symmetry(self.group), keep_shape=self.keep,
+                    strokes=self.strokes)
 
     def applied(self, clay) -> None:
         clay.applied_ids = self.ids

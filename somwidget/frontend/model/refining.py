@@ -37,7 +37,7 @@ def refined_preset(snapshot: dict, stretched: float | None, max_vertices: int) -
         title=preset.title if preset.title.endswith(SUFFIX) else preset.title + SUFFIX,
         description=f"{preset.description} Refined to {len(weights):,} nodes.",
         topology=Topology.from_faces(faces, len(weights)), weights=weights, controls=snapshot["controls"],
-        radii=snapshot["radii"], grow=False, mirror=tuple(p["mirror"]),
+        radii=snapshot["radii"], strokes=snapshot["strokes"], grow=False, mirror=tuple(p["mirror"]),
         symmetry=group if group is not None and group.kind == "radial" else None,
         metric_weights=np.asarray(p["metric_weights"], np.float32), smoothing_rule=snapshot["smoothing_rule"],
         **{key: p[key] for key in SCHEDULE_KEYS})

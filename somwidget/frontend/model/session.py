@@ -341,6 +341,18 @@ class Session:
         None: the preset's, 0 for the case studies); returns its index."""
         return self.edit_controls.add(values, radius)
 
+    def add_stroke(self, points, radius: float | None = None) -> int:
+        """A polyline (m >= 2 points of x, y, z, or all n features) as one control: its samples, spaced evenly along
+        it, pull the clay along its length and act as one (they move, are removed, undone and mirrored together);
+        radius as for a control (None: the preset's). Returns the index of its first sample."""
+        return self.edit_controls.add_stroke(points, radius)
+
+    @property
+    def strokes(self) -> tuple[int, ...]:
+        """The lengths of the runs of controls that act as one (a stroke's samples), in index order."""
+        with self.clay.lock:
+            return tuple(self.clay.strokes)
+
     def set_control_radius(self, index: int, radius: float) -> None:
         """Control `index`'s radius of influence (model units; 0: the paper's point control): moving it then carries
         the clay around its winner with a smooth falloff of about that radius. Set again within a moment (a slider's
@@ -482,6 +494,7 @@ class Session:
         with clay.som_lock, clay.lock:
             return {"preset": clay.preset, "weights": np.asarray(clay.som.weights, np.float32),
                     "controls": clay.controls.copy(), "radii": clay.radii.copy(), "symmetry": clay.symmetry,
+                    "strokes": tuple(clay.strokes),
                     "smoothing_rule": clay.som.smoothing_rule, "iteration": int(clay.som.iteration),
                     "parameters": clay.parameters()}
 

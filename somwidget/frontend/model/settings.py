@@ -68,13 +68,13 @@ class ParameterEdits:
         clay = self.clay
         group = self._group_of(value)
         with self.timeline.step("symmetry"), clay.lock:
-            controls, radii, ids, keep = regroup(clay, group)
+            controls, radii, ids, strokes, keep = regroup(clay, group)
             check_count(controls, group)
-            clay.controls, clay.radii, clay.control_ids = controls, radii, ids
+            clay.controls, clay.radii, clay.control_ids, clay.strokes = controls, radii, ids, strokes
             clay.set_symmetry(group)
             if keep:
                 clay.hold = True
-            self.trainer.enqueue(SetSymmetry(group, controls.copy(), radii.copy(), ids, keep))
+            self.trainer.enqueue(SetSymmetry(group, controls.copy(), radii.copy(), strokes, ids, keep))
 
     def _group_of(self, value) -> Symmetry | None:
         clay = self.clay
@@ -111,45 +111,51 @@ class ParameterEdits:
         self.set_metric_weights(m)
 
 
-def expand(controls: np.ndarray, radii: np.ndarray, group) -> tuple[np.ndarray, np.ndarray]:
-    """Every control and its copies under `group` (None: the controls as they are): [originals..., first copies...]."""
+def expand(controls: np.ndarray, radii: np.ndarray, strokes: tuple, group) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """Every control and its copies under `group` (None: the controls as they are): [originals..., first
+    copies...], with their radii and strokes."""
     if group is None:
-        return controls, radii
+        return controls, radii, strokes
     maps = group.maps(controls.shape[1])
     return (np.concatenate([(controls.astype(np.float64) @ m.T).astype(np.float32) for m in maps]),
-            np.tile(radii, len(maps)))
+            np.tile(radii, len(maps)), strokes * len(maps))
 
 
-def regroup(clay, group) -> tuple[np.ndarray, np.ndarray, tuple, bool]:
-    """(controls, radii, ids, keep) of the clay's controls under a new `group` (caller holds clay.lock): the old
-    group's copies become controls of their own, then, under a group, controls that are images of an earlier one
-    (within PAIR_TOLERANCE of the size) join it as its copies. keep: the effective controls stay the same (every
-    image found), so nothing needs to move."""
-    controls, radii = expand(clay.controls, clay.radii, clay.symmetry)
+def regroup(clay, group) -> tuple[np.ndarray, np.ndarray, tuple, tuple, bool]:
+    """(controls, radii, ids, strokes, keep) of the clay's controls under a new `group` (caller holds clay.lock):
+    the old group's copies become controls of their own, then, under a group, controls (or strokes) that are images
+    of an earlier one (within PAIR_TOLERANCE of the size) join it as its copies. keep: the effective controls stay
+    the same (every image found), so nothing needs to move."""
+    controls, radii, strokes = expand(clay.controls, clay.radii, clay.strokes, clay.symmetry)
     k = len(clay.controls)
     ids = list(clay.control_ids) + list(clay.fresh_ids(len(controls) - k))
     if group is None:
-        return controls, radii, tuple(ids), True
+        return controls, radii, tuple(ids), strokes, True
     pos = list(clay.layout.position)
     size = float(np.linalg.norm(np.ptp(controls[:, pos], axis=0))) if len(controls) > 1 else 1.0
     tol = PAIR_TOLERANCE * (size or 1.0)
     maps = group.maps(controls.shape[1])
-    taken = np.zeros(len(controls), bool)
+    starts = np.concatenate([[0], np.cumsum(strokes)]).astype(int)
+    runs = [np.arange(starts[r], starts[r + 1]) for r in range(len(strokes))]
+    c64 = controls.astype(np.float64)
+    taken = np.zeros(len(runs), bool)
     kept, complete = [], True
-    for i in range(len(controls)):
-        if taken[i]:
+    for r, run in enumerate(runs):
+        if taken[r]:
             continue
-        taken[i] = True
-        kept.append(i)
+        taken[r] = True
+        kept.append(r)
         for m in maps[1:]:
-            d = np.linalg.norm(controls.astype(np.float64) - m @ controls[i], axis=1)
-            d[taken] = np.inf
-            j = int(np.argmin(d))
-            if d[j] <= tol:
-                taken[j] = True
-            else:
+            image = c64[run] @ m.T
+            match = next((o for o, other in enumerate(runs) if not taken[o] and len(other) == len(run)
+                          and np.linalg.norm(c64[other] - image, axis=1).max() <= tol), None)
+            if match is None:
                 complete = False
-    return controls[kept], radii[kept], tuple(ids[i] for i in kept), complete
+            else:
+                taken[match] = True
+    index = np.concatenate([runs[r] for r in kept])
+    return (controls[index], radii[index], tuple(ids[i] for i in index), tuple(len(runs[r]) for r in kept),
+            complete)
 
 
 #: Two controls pair up as a control and its symmetric copy when the copy lies within this share of the controls'

@@ -204,19 +204,19 @@ def sweep(preset_or_session="car", n: int = 64, jitter: float = 0.05, params: Ma
         start, controls = snap["weights"], snap["controls"]
         base = {key: p[key] for key in SCHEDULE_KEYS}
         mirror, metric = tuple(p["mirror"]), np.asarray(p["metric_weights"], np.float32)
-        radii, group, rule = snap["radii"], snap["symmetry"], snap["smoothing_rule"]
+        radii, group, rule, strokes = snap["radii"], snap["symmetry"], snap["smoothing_rule"], snap["strokes"]
     else:
         start, controls = preset.weights, preset.controls
         base = {key: getattr(preset, key) for key in SCHEDULE_KEYS}
         mirror, metric = preset.mirror, preset.metric_weights
-        radii, group, rule = preset.control_radii(), preset.symmetry, preset.smoothing_rule
+        radii, group, rule, strokes = preset.control_radii(), preset.symmetry, preset.smoothing_rule, preset.strokes
     radial = group if group is not None and group.kind == "radial" else None
     if not len(controls):
         raise ValueError("sweep: the design has no controls to vary; add one first")
     plan = plan_variants(preset.topology, start, controls, base, n, jitter=jitter, params=params, seed=seed,
                          restart=source is not None, mirror=mirror, smooth_dims=preset.smooth_dims,
                          metric_weights=metric, position_dims=preset.layout.position, radii=radii, symmetry=radial,
-                         smoothing_rule=rule, origin=preset.weights if source is not None else None)
+                         smoothing_rule=rule, origin=preset.weights if source is not None else None, strokes=strokes)
     report = _text_progress if progress is True else (progress or None)
     weights, figures = run_plan(plan, device=device, client=client, batch_size=batch_size, progress=report)
     return Variants(plan, weights, figures, preset, source)
