@@ -422,3 +422,19 @@ def test_load_session_refuses_a_member_that_would_unpack_too_large(tmp_path):
     assert bomb.stat().st_size < 1_000_000
     with pytest.raises(ValueError, match="bomb.npz.*unpacks to"):
         io.load_session(bomb)
+
+
+def test_a_mesh_past_the_limit_is_refused_with_the_figures_or_loaded_decimated(tmp_path):
+    m = trimesh.creation.icosphere(subdivisions=4)  # 2562 vertices
+    path = tmp_path / "ball.ply"
+    m.export(str(path))
+    with pytest.raises(io.TooManyVertices, match="2,562 vertices .* exceed the limit of 1,000") as info:
+        io.load_mesh(path, max_vertices=1000)
+    assert (info.value.n, info.value.limit) == (2562, 1000)
+    p = io.load_mesh(path, max_vertices=1000, decimate=True)
+    assert 300 < p.n_vertices <= 1000 and "decimated from 2,562" in p.description
+    from somwidget.backend import metrics  # the shape kept: every coarse vertex near the sphere, and the other way
+
+    sphere = np.asarray(m.vertices) / np.abs(m.vertices).max()
+    assert metrics.nearest_distances(p.weights, sphere).max() < 0.1
+    assert metrics.chamfer(p.weights, sphere) < 0.05

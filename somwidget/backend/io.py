@@ -14,6 +14,7 @@ from struct import error as struct_error
 import numpy as np
 
 from . import checks
+from .refine import coarsen
 from .presets import (DISPLAYS, XYZ, FeatureLayout, Preset, colours_of, controls_on, kept_shape,
                       line_display_mesh, positions_of)
 from .schedule import BY_NAME, KEYS
@@ -67,7 +68,19 @@ def _reader_reason(exc: Exception) -> str:
     return "the file is damaged or is not in the format its name says"
 
 
-def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
+class TooManyVertices(ValueError):
+    """A mesh with more vertices than a session takes: `n` of them, `limit` at most (load it with decimate=True)."""
+
+    def __init__(self, message: str, n: int, limit: int):
+        super().__init__(message)
+        self.n, self.limit = n, limit
+
+
+#: The most vertices a mesh may have to be decimated on loading (it is read whole first).
+MAX_DECIMATE_SOURCE = 4_194_304
+
+
+def load_mesh(path, *, max_vertices: int = MAX_VERTICES, decimate: bool = False) -> Preset:
     """A `Preset` (3-D nodes, display "surface") from any mesh file trimesh reads: OBJ, PLY, STL, OFF, GLB...
 
     Duplicate vertices are merged by position (STL stores every triangle's corners apart; glTF splits vertices at
@@ -81,12 +94,19 @@ def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
     `export_mesh(..., transform=...)` to write the original frame back. The mesh is the person's own shape
     (`grow` False: shown as it is, nothing trains until they act), with six controls on its vertices, spread over
     it (`presets.controls_on`).
+
+    A mesh past `max_vertices` is refused with TooManyVertices (a ValueError that says how many and offers
+    decimation); with `decimate` it is coarsened to at most that many vertices (refine.coarsen: vertex clustering on
+    a grid), up to MAX_DECIMATE_SOURCE vertices read.
     """
     import trimesh
 
     label = str(path)
     p = Path(path)
     max_vertices = checks.integer("max_vertices", max_vertices, 1)
+    limit = max_vertices
+    if decimate:  # read past the limit, then coarsen
+        max_vertices = max(max_vertices, MAX_DECIMATE_SOURCE)
     if not p.exists():
         raise ValueError(f"{label}: no such file")
     if not p.is_file():
@@ -135,9 +155,15 @@ def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
     mesh.update_faces(keep)
     mesh.remove_unreferenced_vertices()
     n = len(mesh.vertices)
-    if n > max_vertices:
-        raise ValueError(f"{label}: {n:,} vertices (after merging duplicates) exceed the limit of {max_vertices:,}; "
-                         "decimate the mesh first (e.g. trimesh's simplify_quadric_decimation)")
+    source = ""
+    if n > limit and decimate:
+        vertices, faces = coarsen(mesh.vertices, mesh.faces, limit)
+        mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
+        source, n = f", decimated from {n:,} vertices", len(mesh.vertices)
+    elif n > limit:
+        raise TooManyVertices(f"{label}: {n:,} vertices (after merging duplicates) exceed the limit of {limit:,} on "
+                              f"this device; it can be loaded decimated to at most {limit:,} (vertex clustering: the "
+                              "app's Decimate button, or load_mesh(..., decimate=True))", n, limit)
 
     vertices = np.asarray(mesh.vertices, np.float64)
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
@@ -147,7 +173,7 @@ def load_mesh(path, *, max_vertices: int = MAX_VERTICES) -> Preset:
     topology = Topology.from_faces(np.asarray(mesh.faces, np.int64), n_vertices=n)
     return Preset(
         name=p.stem or p.name, title=p.name,
-        description=f"Loaded from {p.name}: {n} vertices, {len(mesh.faces)} triangles.",
+        description=f"Loaded from {p.name}: {n} vertices, {len(mesh.faces)} triangles{source}.",
         topology=topology, weights=points, controls=controls_on(points), layout=XYZ, display="surface",
         **kept_shape(points),
         meta={"source": str(p), "transform": {"centre": tuple(float(c) for c in centre), "scale": scale}})

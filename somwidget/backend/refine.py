@@ -1,10 +1,14 @@
-"""Refining the clay: more nodes where it needs them, its shape kept.
+"""Refining the clay: more nodes where it needs them, its shape kept; and coarsening a mesh too big to model here.
 
 `subdivide` splits every face at its edges' midpoints (a triangle into four triangles, a quad or n-gon into n quads
 around its centre): the new nodes lie on the old faces, so the surface stays where it was (exactly, for planar
 faces) and only gets finer. `refine_stretched` splits only the edges stretched past `factor` times the median edge
 (each split triangle into two, three or four, so no node hangs on an edge): where a pull has drawn the clay thin.
 A new node's weights (position, colour, every feature) are the mean of the nodes it lies between.
+
+`coarsen` goes the other way, for an upload past a device's limit: the vertices are clustered on a uniform grid
+(`cluster_on_grid`, as fine as the limit allows), each cluster becomes one vertex at its mean, and the faces are
+mapped onto the clusters (those that collapse dropped).
 """
 
 from __future__ import annotations
@@ -110,3 +114,50 @@ def refine_stretched(faces, weights, factor: float = 2.0, position=(0, 1, 2)) ->
                 out += [[a, ab, c], [ab, b, bc], [ab, bc, c]]
     weights_out = np.concatenate([w, np.array(extra).reshape(-1, w.shape[1])]) if extra else w
     return [np.array(t, np.int64) for t in out], weights_out.astype(np.float32)
+
+
+def cluster_on_grid(points, limit: int) -> tuple[np.ndarray, np.ndarray]:
+    """(cluster of each point (N,), the first point of each cluster (m,)) for a uniform grid over the points' bounding
+    box as fine as keeps m <= limit (a surface fills about cells^2 of cells^3 cells)."""
+    pts = np.asarray(points, np.float64)
+    lo, span = pts.min(axis=0), np.ptp(pts, axis=0)
+    span[span <= 0] = 1.0
+    cells = max(2, int(round(limit ** (1 / 3))))
+
+    def clusters(cells: int):
+        key = np.minimum((pts - lo) / span * cells, cells - 1).astype(np.int64)
+        key = (key[:, 0] * cells + key[:, 1]) * cells + key[:, 2]
+        _, first, cluster = np.unique(key, return_index=True, return_inverse=True)
+        return first, cluster.ravel()
+
+    first, cluster = clusters(cells)
+    for _ in range(40):  # coarser while past the limit, finer while well under it
+        if len(first) > limit:
+            cells = max(2, int(cells / 1.15))
+            first, cluster = clusters(cells)
+            continue
+        finer = max(cells + 1, int(cells * min(1.5, (limit / len(first)) ** 0.5)))
+        first2, cluster2 = clusters(finer)
+        if len(first2) > limit:
+            break
+        cells, first, cluster = finer, first2, cluster2
+    return cluster, first.astype(np.int64)
+
+
+def coarsen(points, triangles, limit: int) -> tuple[np.ndarray, np.ndarray]:
+    """(points (m, 3), triangles) of a mesh with at most `limit` vertices: its vertices clustered on a grid, each
+    cluster at its mean, the triangles mapped onto the clusters (the ones that collapse, and repeats, dropped)."""
+    pts = np.asarray(points, np.float64)
+    cluster, first = cluster_on_grid(pts, checks.integer("limit", limit, 4))
+    m = len(first)
+    sums = np.zeros((m, pts.shape[1]))
+    np.add.at(sums, cluster, pts)
+    counts = np.bincount(cluster, minlength=m)[:, None]
+    tris = cluster[np.asarray(triangles, np.int64).reshape(-1, 3)]
+    tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])]
+    _, keep = np.unique(np.sort(tris, axis=1), axis=0, return_index=True)
+    tris = tris[np.sort(keep)]
+    used = np.zeros(m, bool)
+    used[tris.ravel()] = True
+    index = np.cumsum(used) - 1
+    return (sums / counts)[used].astype(np.float32), index[tris]

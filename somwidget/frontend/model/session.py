@@ -478,12 +478,13 @@ class Session:
             self._replace(built, hold=True)
         return refined.n_vertices
 
-    def load_mesh(self, path) -> Preset:
+    def load_mesh(self, path, decimate: bool = False) -> Preset:
         """Load a mesh file (io.load_mesh) as the new start mesh, shown as it is with controls on it; ValueError for
-        a bad file, session unchanged."""
+        a bad file (io.TooManyVertices for one past this session's limit: `decimate` loads it coarsened to the limit),
+        session unchanged."""
         from ...backend import io as sw_io
 
-        preset = sw_io.load_mesh(path, max_vertices=self.max_vertices)
+        preset = sw_io.load_mesh(path, max_vertices=self.max_vertices, decimate=decimate)
         preset.name = f"mesh:{preset.name}"  # never mistaken for a built-in preset of the same name
         self.load_preset(preset)
         return preset

@@ -11,6 +11,7 @@ import numpy as np
 from ...backend import io as _io
 from ...backend import presets as _presets
 from ..model import parameters as _parameters
+from ...backend.refine import cluster_on_grid
 from ...backend.symmetry import Symmetry
 from .messages import MAX_COORDINATE, MAX_MESSAGE_BYTES, PROTOCOL_VERSION
 
@@ -24,23 +25,7 @@ def decimate_display(points: np.ndarray, triangles: np.ndarray, segments: np.nda
     a uniform grid over their start positions (one node stands for each occupied cell), and the triangles and
     segments are mapped onto those nodes (the degenerate ones dropped). Every frame then sends the trained
     positions of those nodes. Returns (nodes (m,), triangles (T, 3), segments (E, 2)) over 0..m-1."""
-    pts = np.asarray(points, np.float64)
-    lo, span = pts.min(axis=0), np.ptp(pts, axis=0)
-    span[span <= 0] = 1.0
-    cells = max(2, int(round(limit ** (1 / 3))))
-    for _ in range(40):  # grow the grid while it keeps under the limit (a surface fills ~cells^2 of cells^3)
-        key = np.minimum((pts - lo) / span * cells, cells - 1).astype(np.int64)
-        key = (key[:, 0] * cells + key[:, 1]) * cells + key[:, 2]
-        _, first, cluster = np.unique(key, return_index=True, return_inverse=True)
-        if len(first) > limit:
-            cells = max(2, int(cells / 1.15))
-            continue
-        finer = max(cells + 1, int(cells * min(1.5, (limit / len(first)) ** 0.5)))
-        key2 = np.minimum((pts - lo) / span * finer, finer - 1).astype(np.int64)
-        if len(np.unique((key2[:, 0] * finer + key2[:, 1]) * finer + key2[:, 2])) > limit:
-            break
-        cells = finer
-    cluster = cluster.ravel()
+    cluster, first = cluster_on_grid(points, limit)
 
     def remap(idx: np.ndarray, width: int) -> np.ndarray:
         m = cluster[np.asarray(idx, np.int64).reshape(-1, width)]
@@ -51,7 +36,7 @@ def decimate_display(points: np.ndarray, triangles: np.ndarray, segments: np.nda
         m = m[distinct]
         return np.unique(np.sort(m, axis=1), axis=0) if width == 2 else m
 
-    return first.astype(np.int64), remap(triangles, 3), remap(segments, 2)
+    return first, remap(triangles, 3), remap(segments, 2)
 
 
 _DISPLAYS: dict[int, tuple] = {}  # id(preset) -> (preset, display): the latest few presets' display geometry

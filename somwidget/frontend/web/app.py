@@ -33,6 +33,7 @@ from wslink.websocket import LinkProtocol
 
 from ...backend import presets as _presets
 from ..model import Session
+from ...backend.io import TooManyVertices
 from ..model.parameters import REACH_HELP
 from ..transport.limits import bound_messages
 from . import lan as _lan
@@ -46,8 +47,8 @@ log = logging.getLogger(__name__)
 
 #: The page's triggers: each calls the method of the same name of the panel's state (panel_state.py) or the app.
 TRIGGERS = ("set_param", "set_metric", "set_colour", "set_radius", "add_control", "remove_control", "toggle_training",
-            "reset", "undo", "redo", "start_fresh", "reload_preset", "refine", "export_mesh", "save_session",
-            "sweep_variants", "pick_variant")
+            "reset", "undo", "redo", "start_fresh", "reload_preset", "refine", "decimate_upload", "export_mesh",
+            "save_session", "sweep_variants", "pick_variant")
 
 
 class _ClientWatch(LinkProtocol):
@@ -81,6 +82,7 @@ class SomApp:
         self.clients: set[str] = set()
         self._pump_task = None
         self._uploaded: dict[str, object] = {}  # the latest mesh uploaded in this server's life, by name
+        self._refused_upload = None  # the latest upload refused as too big (its file value), for the Decimate offer
         if session.preset.name not in _presets.PRESETS:  # started from `somwidget serve --mesh FILE`
             self._uploaded = {session.preset.name: session.preset}
         uploads.sweep_uploads()  # what servers killed mid-upload left behind
@@ -115,6 +117,7 @@ class SomApp:
         s.info_message = ""
         s.busy = False
         s.mesh_upload = None
+        s.decimate_offer = False
         s.session_upload = None
         s.stats = {}
         s.controls_ui = []
@@ -217,12 +220,21 @@ class SomApp:
             with self.state:
                 self.state[field] = None
 
-    async def upload_mesh(self, value) -> None:
-        """A mesh file from the upload field becomes the clay, shown as it is with controls on it."""
+    async def upload_mesh(self, value, decimate: bool = False) -> None:
+        """A mesh file from the upload field becomes the clay, shown as it is with controls on it. One with more
+        vertices than this device takes is refused with an offer: the Decimate button loads it coarsened (the file is
+        kept in memory until then, or until the next upload)."""
         def load(path, name):
-            self.session.load_preset(uploads.read_mesh(path, name, self.session.max_vertices))
+            try:
+                self.session.load_preset(uploads.read_mesh(path, name, self.session.max_vertices, decimate))
+            except TooManyVertices:
+                self._refused_upload = value
+                raise
 
+        self._refused_upload = None
         name = await self._upload(value, "mesh_upload", lambda n: f"upload{uploads.check_mesh_name(n)}", load)
+        with self.state:
+            self.state.decimate_offer = self._refused_upload is not None
         if name is not None:
             preset = self.session.preset
             self._uploaded = {preset.name: preset}  # the latest upload only
@@ -230,6 +242,16 @@ class SomApp:
                 self.state.preset_items = self._preset_items()
                 self.state.preset_name = preset.name
                 self.state.info_message = f"loaded {name}: {preset.n_vertices} vertices"
+
+    async def decimate_upload(self) -> None:
+        """The mesh refused as too big, loaded decimated to this device's limit (one undo step)."""
+        value, self._refused_upload = self._refused_upload, None
+        with self.state:
+            self.state.decimate_offer = False
+        if value is None:
+            self.panel_state.error("decimate: no refused upload to load (upload the mesh again)")
+            return
+        await self.upload_mesh(value, decimate=True)
 
     async def upload_session(self, value) -> None:
         """A saved session (.npz) from the upload field replaces the session, exactly as it was saved."""

@@ -116,6 +116,10 @@ def _panel(panel: PanelModel) -> None:
                     disabled=("busy",), prepend_icon="mdi-vector-triangle", classes="ml-1",
                     title="Subdivide the clay, its shape kept: every face split in four (one undo step)")
         html.Div("{{ preset_description }}", classes="text-caption mb-2")
+        v3.VBtn("Decimate and load", v_if="decimate_offer", size="small", variant="tonal", color="primary",
+                id="decimate-upload", prepend_icon="mdi-vector-polyline-minus", classes="mb-2",
+                click="trigger('decimate_upload')", disabled=("busy",),
+                title="Load the refused mesh coarsened to this device's limit (vertex clustering)")
         v3.VFileInput(v_model=("mesh_upload",), label="Upload a mesh (OBJ, PLY, STL, OFF, GLB)",
                       density="compact", hide_details=True, prepend_icon="mdi-upload", id="mesh-upload",
                       accept=".obj,.ply,.stl,.off,.glb,.gltf", classes="mb-2", disabled=("busy",))

@@ -110,9 +110,10 @@ def check_mesh_name(name: str) -> str:
     return suffix
 
 
-def read_mesh(path: Path, name: str, max_vertices: int):
-    """The preset of an uploaded mesh saved as `path`, named after the browser's file `name` (io.load_mesh)."""
-    preset = sw_io.load_mesh(path, max_vertices=max_vertices)
+def read_mesh(path: Path, name: str, max_vertices: int, decimate: bool = False):
+    """The preset of an uploaded mesh saved as `path`, named after the browser's file `name` (io.load_mesh; with
+    `decimate`, one past `max_vertices` is coarsened to it)."""
+    preset = sw_io.load_mesh(path, max_vertices=max_vertices, decimate=decimate)
     suffix = suffix_of(name)
     stem = name[: -len(suffix)] if suffix else name
     preset.name = f"mesh:{stem or 'upload'}"  # never mistaken for a built-in preset of the same name
