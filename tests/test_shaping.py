@@ -194,7 +194,7 @@ def test_a_session_s_controls_carry_their_radii_through_edits_undo_and_files(tmp
 
     with Session("sphere", device="cpu", autosave=False) as s:
         size = metrics.bounding_diagonal(s.preset.weights)
-        assert np.allclose(s.radii, 0.2 * size)  # a kept shape's controls start with a radius
+        assert np.allclose(s.radii, presets.KEPT_SHAPE_RADIUS * size)  # a kept shape's controls start with a radius
         i = s.add_control([0.0, 0.0, 1.3], radius=0.3)
         s.set_control_radius(0, 0.5)
         s.set_control_radius(0, 0.45)  # a slider's drag: one step
@@ -212,7 +212,8 @@ def test_a_session_s_controls_carry_their_radii_through_edits_undo_and_files(tmp
         s.save(tmp_path / "s.npz")
         radii = s.radii
         assert s.undo() and s.parameters["group"] == "none"
-        assert s.undo() and s.radii[0] == pytest.approx(0.2 * size)  # both radius changes: one step
+        # both radius changes: one step
+        assert s.undo() and s.radii[0] == pytest.approx(presets.KEPT_SHAPE_RADIUS * size)
         s.load(tmp_path / "s.npz")
         assert s.parameters["group"] == "radial-4-z"
         np.testing.assert_allclose(s.radii, radii)

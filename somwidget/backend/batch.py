@@ -25,7 +25,8 @@ from . import checks
 from .batch_kernels import GATHER, SEARCH, variants_kernel
 from .device import resolve, usable_cores, warp_exclusive, warp_lock
 from .schedule import BY_NAME, KEYS, learning_table
-from .som import MAX_CONTROLS, MAX_DIMS, restart_iteration
+from .shaping_path import taubin_mu
+from .som import MAX_CONTROLS, MAX_DIMS, SMOOTHING_RULES, restart_iteration
 from .topology import Topology
 
 #: Learning-table entries (rows of every distinct schedule x (d_max + 1), float32) a batch may hold: 2 GiB.
@@ -53,7 +54,9 @@ class BatchSom:
     weights: (N, n) shared start weights, or (B, N, n); controls: (B, k, n), the same k for every variant.
     iterations, l_start, l_end, smoothing, reach: one value for all or one per variant. device: "cpu", "cuda:N" or
     None (the GPU when there is one). cpu_cores: cores the CPU shares the variants among (None: those this process
-    may use, at most 8 and at most OMP_NUM_THREADS where that is set).
+    may use, at most 8 and at most OMP_NUM_THREADS where that is set). smoothing_rule: "laplacian" (the paper's
+    step) or "taubin" (the volume-keeping pair, as Som's). Controls are points (radius 0): radii and radial groups
+    run as single Soms (variants.run_plan).
     """
 
     @warp_exclusive
@@ -73,6 +76,7 @@ class BatchSom:
         device: str | None = None,
         *,
         cpu_cores: int | None = None,
+        smoothing_rule: str = "laplacian",
     ):
         if not isinstance(topology, Topology):
             raise ValueError(f"topology: expected a Topology, got {type(topology).__name__}")
@@ -115,6 +119,11 @@ class BatchSom:
         self._l_end = _per_variant("l_end", l_end, B)
         self._smoothing = _per_variant("smoothing", smoothing, B)
         self._reach = _per_variant("reach", reach, B)
+        if smoothing_rule not in SMOOTHING_RULES:
+            raise ValueError(f"smoothing_rule: expected one of {', '.join(SMOOTHING_RULES)}, got {smoothing_rule!r}")
+        self.smoothing_rule = smoothing_rule
+        self._taubin = smoothing_rule == "taubin" and bool((self._smoothing > 0).any())
+        second = [taubin_mu(x) if x > 0 else 0.0 for x in self._smoothing.tolist()]
         smooth = tuple(range(min(3, n))) if smooth_dims is None else checks.dims("smooth_dims", smooth_dims, n)
         metric = np.ones(n, np.float32) if metric_weights is None else checks.finite_array(
             "metric_weights", metric_weights, 1)
@@ -143,6 +152,7 @@ class BatchSom:
         self._mask = wp.array(mask[None, :], dtype=vec, device=dev)
         self._table_row = wp.array(rows, dtype=wp.int32, device=dev)
         self._lam = wp.array(self._smoothing.astype(np.float32), dtype=wp.float32, device=dev)
+        self._second = wp.array(np.asarray(second, np.float32), dtype=wp.float32, device=dev)
         self._keys = wp.zeros(B * 3 * k_eff if dev == "cpu" else 1, dtype=wp.uint64, device=dev)
         self._s = np.zeros(B, np.int64)
         self._cores = self._plan_cores(cpu_cores)
@@ -261,12 +271,14 @@ class BatchSom:
 
         def inputs(first: int) -> list:
             return [self._w, self._moved, self._c, self._k_eff, self._m, self._mask, self._tables, self._table_row,
-                    self._lam, s_from, s_to, self._distances, self._offsets, self._neighbors, self._keys, first]
+                    self._lam, self._second, s_from, s_to, self._distances, self._offsets, self._neighbors,
+                    self._keys, first]
 
         if dev == "cpu":
             bounds = np.linspace(0, B, self._cores + 1).astype(int)
             parts = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:]) if hi > lo]
-            kernel = variants_kernel(self.n_dims, self._pairs, False, unit_metric=self._unit_metric)
+            kernel = variants_kernel(self.n_dims, self._pairs, False, unit_metric=self._unit_metric,
+                                     taubin=self._taubin)
 
             def run(part):
                 lo, hi = part
@@ -279,7 +291,8 @@ class BatchSom:
                     list(pool.map(run, parts))
         else:
             shape = cuda_shape(self.n_neurons)
-            kernel = variants_kernel(self.n_dims, self._pairs, True, unit_metric=self._unit_metric, **shape)
+            kernel = variants_kernel(self.n_dims, self._pairs, True, unit_metric=self._unit_metric,
+                                     taubin=self._taubin, **shape)
             wp.launch_tiled(kernel, dim=[B], block_dim=shape["threads"], device=dev, inputs=inputs(0))
             wp.synchronize_device(dev)
         self._s = to.astype(np.int64)

@@ -10,7 +10,9 @@ algorithm's three steps (DESIGN.md, "One iteration s"; the same arithmetic as cy
    shared memory; a barrier;
 2. move: each thread moves its neurons by the controls in list order, W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v), or
    a mirrored pair at once (`move_pair`, scaled by 1 / max(1, l1 + l2));
-3. smoothing (a variant with lambda > 0): the moved weights go to a scratch array, a barrier, then one Jacobi step.
+3. smoothing (a variant with lambda > 0): the moved weights go to a scratch array, a barrier, then one Jacobi step;
+   with Taubin's rule (`taubin`) a barrier and a second step of strength mu < 0 into the scratch array, a barrier and
+   a copy back: the volume-keeping pair of shaping_path.py.
 
 Winner keys rotate through three buffers (cycle s fills buffer s % 3 and clears buffer s + 1), so one barrier a
 cycle is enough without smoothing. On the CPU, where Warp runs a block as one thread, the keys live in a global
@@ -73,12 +75,13 @@ SEARCH = 4
 
 @functools.cache
 def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, min_blocks: int = 1,
-                    gather: int = GATHER, searched: int = SEARCH, unit_metric: bool = False):
+                    gather: int = GATHER, searched: int = SEARCH, unit_metric: bool = False, taubin: bool = False):
     """The kernel for weights of n_dims features; with `pairs` the effective controls come as mirrored pairs, each
     original next to its copy. `cuda`: the keys in shared memory (on the CPU Warp's shared tiles are one static
     buffer, which concurrent launches on several cores would share), blocks of at most `threads` threads of which
     `min_blocks` fit an SM at once (the compiler's register budget); `gather`, `searched`: GATHER, SEARCH.
-    `unit_metric`: every metric weight is 1, so the winner search skips multiplying by them (the same bits)."""
+    `unit_metric`: every metric weight is 1, so the winner search skips multiplying by them (the same bits).
+    `taubin`: each smoothing step is followed by the second step of Taubin's pair (its strength in `second`)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     rates = wp.types.vector(length=gather, dtype=wp.float32)
     keys4 = wp.types.vector(length=searched, dtype=wp.uint64)
@@ -165,6 +168,7 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
         tables: wp.array2d(dtype=wp.float32),
         table_row: wp.array(dtype=wp.int32),
         smoothing: wp.array(dtype=wp.float32),
+        second: wp.array(dtype=wp.float32),
         s_from: wp.array(dtype=wp.int32),
         s_to: wp.array(dtype=wp.int32),
         distances: wp.array2d(dtype=wp.uint16),
@@ -174,7 +178,8 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
         first: int,
     ):
         """Cycles s_from[b] .. s_to[b] - 1 of variant b = first + block (weights[b], controls[b], its table from row
-        table_row[b], its smoothing). `moved` is scratch for smoothing; `keys` holds the winner keys on the CPU."""
+        table_row[b], its smoothing and with `taubin` its second step). `moved` is scratch for smoothing; `keys`
+        holds the winner keys on the CPU."""
         block, t = wp.tid()
         b = first + block
         threads = wp.block_dim()
@@ -219,5 +224,21 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
                             total += moved[b, neighbors[e]]
                         w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
                     weights[b, v] = w
+                if wp.static(taubin):  # Taubin's second step, from the smoothed weights, into `moved` and back
+                    push = second[b] * mask[0]
+                    sync_block()
+                    for v in range(t, n, threads):
+                        w = weights[b, v]
+                        lo = offsets[v]
+                        hi = offsets[v + 1]
+                        if hi > lo:
+                            total = vec()
+                            for e in range(lo, hi):
+                                total += weights[b, neighbors[e]]
+                            w = w + wp.cw_mul(push, total / wp.float32(hi - lo) - w)
+                        moved[b, v] = w
+                    sync_block()
+                    for v in range(t, n, threads):
+                        weights[b, v] = moved[b, v]
 
     return train_variants

@@ -493,10 +493,11 @@ CAR_LON, CAR_RINGS = 25, 24
 #: controls (at 0.2 it stopped 12% of its size short of them, and every restart shrank it further).
 SPACE_GRID_SMOOTHING = 0.02
 #: Shapes kept as they are (the general shapes, uploaded meshes) are shaped by controls with a radius of influence
-#: (som.py): each starts at this share of the shape's size (its bounding diagonal), and a restart runs this reach of
+#: (som.py): each starts at this share of the shape's size (its bounding diagonal: the controls that stay hold the
+#: far half within 2% where 0.2 let it move 2.6%), and a restart runs this reach of
 #: the schedule, enough cycles for a moved control's winner to reach it (BENCHMARKS.md, "Shaping rules"); any
 #: smoothing keeps their volume (Taubin's rule).
-KEPT_SHAPE_RADIUS = 0.2
+KEPT_SHAPE_RADIUS = 0.25
 KEPT_SHAPE_REACH = 0.3
 
 

@@ -48,10 +48,10 @@ class VariantPlan:
 
     @property
     def shaping(self) -> bool:
-        """The variants need the shaping rules (som.py): radii, a radial group or Taubin's smoothing."""
+        """The variants need the shaping rules (som.py), which run as single Soms: radii, a radial group or
+        strokes (Taubin's smoothing alone runs batched)."""
         return bool(self.radii is not None and np.any(self.radii > 0)) or self.symmetry is not None or bool(
-            self.strokes and len(self.strokes) < self.controls.shape[1]) or (
-            self.smoothing_rule == "taubin" and bool(np.any(self.schedules["smoothing"] > 0)))
+            self.strokes and len(self.strokes) < self.controls.shape[1])
 
     @property
     def n_variants(self) -> int:
@@ -154,7 +154,8 @@ def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray,
         return weights, figures(plan, weights)
     som = BatchSom(topology_of(plan), plan.start, plan.controls, iterations=s["iterations"], l_start=s["l_start"],
                    l_end=s["l_end"], smoothing=s["smoothing"], reach=s["reach"], smooth_dims=plan.smooth_dims,
-                   metric_weights=plan.metric_weights, mirror=plan.mirror, device=device)
+                   metric_weights=plan.metric_weights, mirror=plan.mirror, device=device,
+                   smoothing_rule=plan.smoothing_rule)
     if plan.restart:
         som.restart()
     som.train()
