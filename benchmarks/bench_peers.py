@@ -3,7 +3,7 @@
 The task every contender can do: a 64 x 64 grid of neurons with 3-D weights, 8 training vectors, S = 1000.
 
 - somwidget: the engine on the chosen device (the GPU where there is one); a cycle = the 8 vectors applied in
-  order (DESIGN.md), grid distances = BFS hops on the grid's quads.
+  order (som.py, The cycle), grid distances = BFS hops on the grid's quads.
 - cupy: the same cycles written as we would write them in CuPy (broadcast winner search, a gather of the learning
   rates through the same distance table, the 8 updates in order), each cycle captured once as a CUDA graph and
   replayed, so Python launches no kernels inside the timed loop. Same winners as the engine are checked.

@@ -1,6 +1,6 @@
 """Benchmarks: the Warp engine against a vectorised numpy float32 baseline that does the same cycles.
 
-Cases (DESIGN.md, the paper's case studies):
+Cases (the paper's case studies, presets.py):
   space-grid         case study 1: 16^3 lattice, 8 controls, 3-D, S 1000, no smoothing
   space-grid-smooth  the same with the preset's Laplacian step each cycle (lambda 0.2)
   car                case study 2: 602 neurons, 9 controls mirrored = 18, 5-D
@@ -50,7 +50,7 @@ NEAR_TIE = 1e-5  # relative distance gap under which float32 rounding may pick e
 # The numpy baseline
 # ----------------------------------------------------------------------------------------------------------------
 def learning_table(iterations: int, d_max: int, l_start: float, l_end: float) -> np.ndarray:
-    """L[s, d] = alpha(s) theta(d, s) (DESIGN.md), written here from the formulas, float64 then float32."""
+    """L[s, d] = alpha(s) theta(d, s) (som.py, The cycle), written here from the formulas, float64 then float32."""
     s = np.arange(iterations, dtype=np.float64)
     alpha = l_start * l_end / (l_end + (l_start - l_end) * s / iterations)
     sigma = d_max / math.sqrt(2.0 * math.log(2.0))
@@ -64,7 +64,7 @@ def learning_table(iterations: int, d_max: int, l_start: float, l_end: float) ->
 
 
 class NumpySom:
-    """The SOM cycle of DESIGN.md in vectorised numpy, float32, with preallocated buffers and in-place ops.
+    """The SOM cycle (som.py, The cycle) in vectorised numpy, float32, with preallocated buffers and in-place ops.
 
     The weights are stored transposed, (n, N), so every elementwise pass runs along the long neuron axis.
     One cycle s:
@@ -410,7 +410,7 @@ def _time_numpy(som: Som, topo: Topology, start: np.ndarray, res: CaseResult, re
 def _agreement(som: Som, variants: dict[str, NumpySom], res: CaseResult, cycles: int) -> None:
     """Engine and baselines cycle by cycle from the start: same winners, weights equal to float32 rounding.
 
-    Over long runs two nearly equidistant neurons can swap (DESIGN.md): a different order of float32 operations
+    Over long runs two nearly equidistant neurons can swap: a different order of float32 operations
     breaks a near-tie another way. The first such cycle ends the comparison for that baseline, and its relative
     distance gap is kept, so a real difference is told apart from a near-tie. The sequential update does the
     engine's operations in the engine's order and usually stays bit-identical to the CPU engine.

@@ -3,7 +3,7 @@ one launch.
 
 A variant's cycles depend on each other only through its own weights, so one block can run all of them with block
 barriers in between, and B blocks run side by side with no host work and no grid-wide step. A cycle is the
-algorithm's three steps (DESIGN.md, "One iteration s"; the same arithmetic as cycle_kernels.py):
+algorithm's three steps (som.py, The cycle; the same arithmetic as cycle_kernels.py):
 
 1. winners: each thread scans its neurons (v = t, t + T, ...) for each control, the block takes the least winner
    key (distance bits << 32 | index: the lowest index on a tie) with a warp reduction and one atomic min a warp in

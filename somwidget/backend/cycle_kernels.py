@@ -1,4 +1,4 @@
-"""The cycle's kernels (DESIGN.md, "One iteration s"): winner search, move and smoothing, per feature count n (a row
+"""The cycle's kernels (som.py, The cycle): winner search, move and smoothing, per feature count n (a row
 of weights is a Warp vector of length n), in two decompositions of the same cycle.
 
 On CUDA a thread per neuron moves it, a thread per control scans each block of 32 neurons (their new weights shared

@@ -234,7 +234,7 @@ class Preset:
 
 
 def effective_controls(controls, mirror=()) -> np.ndarray:
-    """[originals..., mirrored copies...]: each copy has the `mirror` dims negated (DESIGN.md, Controls)."""
+    """[originals..., mirrored copies...]: each copy has the `mirror` dims negated (som.py, Mirrored pairs)."""
     c = np.asarray(controls, dtype=np.float32)
     if not mirror:
         return c.copy()

@@ -1,4 +1,14 @@
-"""The self-organizing map as computational clay: device state and the training cycle (DESIGN.md, the algorithm).
+"""The self-organizing map as computational clay: device state and the training cycle.
+
+The cycle (the paper's algorithm; tests/reference.py writes it again in float64). D is the BFS hop distance between
+neurons over the mesh's edges, d_max the largest finite one; sigma = d_max / sqrt(2 ln 2), c(s) = sigma (1 - s / S),
+theta(d, s) = exp(-d^2 / (2 c(s)^2)) (1 at d = 0, 0 across components), alpha(s) = l_start l_end / (l_end +
+(l_start - l_end) s / S), and the learning table L[s, d] = alpha(s) theta(d, s) in float32 (schedule.py). Cycle s:
+1. every control's winner from the weights before the cycle, u_c = argmin_v sum_j m_j (C_cj - W_vj)^2 (the lowest
+   index on an exact tie); 2. every neuron applies the controls in list order, W_v <- W_v + L[s, D[u_c, v]] (C_c -
+   W_v); 3. with smoothing lambda > 0, one Jacobi step of the uniform Laplacian on smooth_dims, W_v <- W_v + lambda
+(mean of its neighbours' W - W_v), all from the same weights (a neuron with no neighbour stays). Controls with a
+radius, radial groups and strokes take the shaping rules instead (shaping_path.py).
 
 Restarts. A run is S cycles of the learning table L[s, d], whose neighbourhood starts as wide as the whole mesh and
 narrows to nothing. Restarting at s = 0 when a control moves (the paper's retraining) would pull the clay into a
