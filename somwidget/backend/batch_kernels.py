@@ -98,6 +98,21 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
         return wp.dot(wp.cw_mul(diff, metric), diff)
 
     @wp.func
+    def smoothed(weights: wp.array2d(dtype=vec), b: int, v: int, offsets: wp.array(dtype=wp.int32),
+                 neighbors: wp.array(dtype=wp.int32), pull: vec) -> vec:
+        """Variant b's neuron v after one Jacobi step, W_v + pull (mean of W over v's neighbours - W_v), from
+        `weights`; a neuron without neighbours stays."""
+        w = weights[b, v]
+        lo = offsets[v]
+        hi = offsets[v + 1]
+        if hi > lo:
+            total = vec()
+            for e in range(lo, hi):
+                total += weights[b, neighbors[e]]
+            w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
+        return w
+
+    @wp.func
     def move_pair(w: vec, l1: wp.float32, l2: wp.float32, a: vec, b: vec) -> vec:
         """W + (l1 (A - W) + l2 (B - W)) / max(1, l1 + l2), in the mirror-exact form of cycle_kernels.py."""
         m = wp.float32(0.5) * (l1 + l2)
@@ -215,28 +230,12 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
             if into_moved != 0:
                 sync_block()
                 for v in range(t, n, threads):
-                    w = moved[b, v]
-                    lo = offsets[v]
-                    hi = offsets[v + 1]
-                    if hi > lo:
-                        total = vec()
-                        for e in range(lo, hi):
-                            total += moved[b, neighbors[e]]
-                        w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
-                    weights[b, v] = w
+                    weights[b, v] = smoothed(moved, b, v, offsets, neighbors, pull)
                 if wp.static(taubin):  # Taubin's second step, from the smoothed weights, into `moved` and back
                     push = second[b] * mask[0]
                     sync_block()
                     for v in range(t, n, threads):
-                        w = weights[b, v]
-                        lo = offsets[v]
-                        hi = offsets[v + 1]
-                        if hi > lo:
-                            total = vec()
-                            for e in range(lo, hi):
-                                total += weights[b, neighbors[e]]
-                            w = w + wp.cw_mul(push, total / wp.float32(hi - lo) - w)
-                        moved[b, v] = w
+                        moved[b, v] = smoothed(weights, b, v, offsets, neighbors, push)
                     sync_block()
                     for v in range(t, n, threads):
                         weights[b, v] = moved[b, v]
