@@ -6,9 +6,9 @@ Three parts, each printed as a table:
              KEPT_SHAPE_REACH, Taubin smoothing); each control in turn moved out along its node's normal by 30% of the
              size (and control 0 in by 15%), the torus's first control out by 20%, the grid's centre control up by
              30% and down by 15%, the car (trained by its schedule, point controls) with its nose given a radius of
-             a sixth of the size and moved forward by 10%, an uploaded icosphere (642 nodes) pulled out by 30%; the
-             restarted run trained to S. The last column: the far half with the controls that stay at a radius of
-             0.2 of the size instead.
+             a sixth of the size and moved forward by 10%, each control of an uploaded icosphere (642 nodes) pulled
+             out by 30%; the restarted run trained to S. The last column: the far half with the controls that stay
+             at a radius of 0.2 of the size instead.
              Figures: the largest dihedral angle (degrees, the start's in brackets), the volume over the start's, the
              far half's 90th-percentile move and the moved control's gap to the surface (shares of the size).
   pass band  the sphere with only smoothing (strength 0.2, no control moved, the whole schedule): volume after over
@@ -132,7 +132,8 @@ def main() -> None:
         ("grid centre down 15%", grid, 0, -0.15, up, None),
         ("car nose +x 10%, r 1/6", car, 2, 0.10, (1.0, 0.0, 0.0), 1 / 6)]
     if importlib.util.find_spec("trimesh"):  # the uploaded mesh needs the app's reader (not on a bare GPU machine)
-        cases.append(("uploaded icosphere +30%", _uploaded(), 0, 0.30, None, None))
+        upload = _uploaded()
+        cases += [(f"uploaded icosphere {i} +30%", upload, i, 0.30, None, None) for i in range(6)]
     print(f"pulls ({device}): dihedral max [start] | volume | far half p90 | gap | far half, the others at 0.2")
     for label, preset, i, share, direction, radius in cases:
         f = pull(preset, i, share, device, direction, radius)
