@@ -145,6 +145,26 @@ def test_refused_value_shows_the_message_and_reverts(panel, session):
     assert panel.error.value == "" and session.parameters["metric_weights"][0] == 2.0
 
 
+def test_a_recovered_session_shows_a_banner_that_can_be_dismissed(tmp_path, monkeypatch):
+    from test_recovery import crash_a_session
+
+    monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(tmp_path / "data"))
+    crash_a_session(tmp_path / "data", tmp_path, preset="torus")
+    recovered = Session.recover(device="cpu")
+    plain = Panel(Session("grid", device="cpu", autosave=False), auto_refresh=False)
+    panel = Panel(recovered, auto_refresh=False)
+    try:
+        assert plain.recovered.layout.display == "none"  # nothing to say
+        assert panel.recovered.layout.display != "none"
+        assert "did not close cleanly" in panel.recovered.children[0].value
+        panel.recovered.children[1].click()  # its dismiss button
+        assert panel.recovered.layout.display == "none"
+    finally:
+        for p in (plain, panel):
+            p.close()
+            p.session.close()
+
+
 def test_session_intents_update_the_widgets(panel, session):
     assert session.wait_idle(30)
     wait_for(lambda: panel.progress.value == 1000 and "converged" in panel.status.value, what="converged panel")
@@ -165,7 +185,7 @@ def test_session_intents_update_the_widgets(panel, session):
     wait_for(lambda: panel.progress.value == 460 and "iteration 460 / 500 (paused)" in panel.status.value,
              what="the restarted iteration")
     assert _gap_of(panel, 2) > gap_before + 0.5  # paused: the clay has not followed yet
-    assert panel.train_button.description == "Train"
+    assert panel.train_button.description == "Resume"  # stopped part way through the restarted schedule
 
 
 def test_buttons_and_preset(panel, session):
@@ -174,10 +194,11 @@ def test_buttons_and_preset(panel, session):
              and "/ 100000 (training)" in panel.status.value, what="the Pause label while training")
     panel.train_button.click()
     assert session.paused
-    wait_for(lambda: panel.train_button.description == "Train" and "(paused)" in panel.status.value
-             and panel.progress.value > 0, what="the Train label")
+    wait_for(lambda: panel.train_button.description == "Resume" and "(paused)" in panel.status.value
+             and panel.progress.value > 0, what="the Resume label")
     panel.reset_button.click()
     wait_for(lambda: "iteration 0 / 100000 (paused)" in panel.status.value, what="the reset run in the panel")
+    assert panel.train_button.description == "Resume"
     assert np.allclose(session.frame.weights, session.preset.weights)  # back to the start mesh
     panel.train_button.click()
     assert not session.paused
@@ -187,8 +208,10 @@ def test_buttons_and_preset(panel, session):
     # thread records a graph (the training thread does, at a new step length)
     session.pause()
     wait_for(lambda: "(paused)" in panel.status.value, what="the paused panel")
-    panel.preset.value = "torus"  # the dropdown loads a preset
+    panel.preset.value = "torus"  # the dropdown loads a preset, shown as it is and not left paused
     assert session.preset.name == "torus", panel.error.value
+    assert not session.paused
+    wait_for(lambda: panel.train_button.description == "Train", what="a settled shape's Train label")
     wait_for(lambda: [w.description for w in panel.metric] == ["x", "y", "z"], what="the torus's features")
     assert "Torus" in panel.title.value
     session.load_preset("lines")  # and the other way round

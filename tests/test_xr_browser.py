@@ -319,16 +319,18 @@ def test_menu_undo_and_redo_take_back_a_grab(ar_page, server, session):
 
 
 def test_menu_pause_reset_train_in_xr(ar_page, session):
-    """Point the controller at "Pause" and pull the trigger; touch "Reset" with a finger; point at "Train"."""
+    """Point the controller at "Pause" and pull the trigger; touch "Reset" with a finger; point at "Resume"."""
     dev = device_input(ar_page, "controller")
 
     def point_and_pull_here(name):
         point_and_pull(ar_page, dev, name)
 
     assert not session.paused
+    session.set_iterations(100_000)  # a long run: still training while the menu is used
+    ar_page.wait_for_function("somxr.button('train').label === 'Pause'", timeout=10000)
     point_and_pull_here("train")  # labelled "Pause" while training
     wait_for(lambda: session.paused, what="the session paused from the XR menu")
-    ar_page.wait_for_function("somxr.button('train').label === 'Train'", timeout=5000)
+    ar_page.wait_for_function("somxr.button('train').label === 'Resume'", timeout=5000)  # stopped part way
 
     # reset: touch the button with the right index finger tip
     session.move_control(0, session.controls[0, :3] + np.float32([0.0, 0.0, 0.3]))
@@ -350,6 +352,8 @@ def test_menu_pause_reset_train_in_xr(ar_page, session):
     wait_frames(ar_page, 2)
     point_and_pull_here("train")
     wait_for(lambda: not session.paused, what="the session training again")
+    session.set_iterations(1000)
+    session.reset()  # the converged car again, for the module's other tests
     assert session.wait_idle(60)
 
 

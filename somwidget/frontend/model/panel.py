@@ -3,7 +3,7 @@
 
 - the fields: the parameters' declarations (parameters.py) and their values as the session holds them;
 - the rows: one per feature dimension (name, role, metric weight) and one per control (colour, position, gap);
-- the status line and the Train / Pause button's label, from a frame;
+- the status line and the run button's label (Pause / Resume / Train: what a press does now), from a frame;
 - the actions (ACTIONS: train or pause, undo, redo, reset, the preset again) and the edits (a parameter, a metric
   weight, a control's radius, the symmetry group), each returning the message a panel shows when the session
   refuses it (None when it took it);
@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -47,6 +48,10 @@ ACTIONS: tuple[Action, ...] = (
                                                   "(one undo step)"),
 )
 ACTION_NAMES = tuple(a.name for a in ACTIONS)
+#: The run button's tooltip for each of its labels (PanelModel.train_label).
+TRAIN_HELP = {"Pause": "Pause the training",
+              "Resume": "Go on with the schedule from where it stopped",
+              "Train": "Train again: a local restart from the current shape"}
 #: The radial groups a panel offers (any n from 2 to 32 is one call of Session.set_symmetry away).
 RADIAL_CHOICES = (2, 3, 4, 5, 6, 8, 12, 16)
 RADIAL_MIRRORED_CHOICES = (3, 4, 6, 8)
@@ -133,9 +138,22 @@ class PanelModel:
         out["group"] = p["group"]
         return out
 
+    def recovered_message(self) -> str:
+        """What the panel's banner says about a session recovered after a crash ("" for any other)."""
+        found = self.session.recovered
+        if not found:
+            return ""
+        saved = time.strftime("%Y-%m-%d %H:%M", time.localtime(found["saved"]))
+        return (f"Recovered your session of {saved} ({found['preset'] or 'a session'}), which did not close cleanly: "
+                "everything is as its last completed step left it.")
+
     @staticmethod
     def train_label(frame: Frame) -> str:
-        return "Pause" if frame.running else "Train"
+        """What the run button does now: Pause a running map, Resume one stopped part way through its schedule
+        (paused, or held after an undo), Train a settled one (a local restart)."""
+        if frame.running:
+            return "Pause"
+        return "Resume" if frame.iteration < frame.iterations else "Train"
 
     def status(self, frame: Frame) -> dict:
         k = frame.n_controls
@@ -148,7 +166,7 @@ class PanelModel:
             "fps": fmt(self.session.frames_per_second, 3), "n_vertices": int(frame.positions.shape[0]), "k": k,
             "k_eff": int(len(gaps)), "max_gap": fmt(float(gaps.max()) if len(gaps) else 0.0, 3),
             "can_undo": frame.history[0] > 0, "can_redo": frame.history[1] > 0, "held": frame.held,
-            "train_label": self.train_label(frame),
+            "train_label": self.train_label(frame), "train_help": TRAIN_HELP[self.train_label(frame)],
         }
 
     @staticmethod

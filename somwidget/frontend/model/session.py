@@ -140,6 +140,7 @@ class Session:
             clay.install(*built)
             self.trainer.reset_pace()
             clay.hold = hold
+            clay.paused = False  # a new clay starts by its own rule (a case study grows, a shape waits), never paused
             clay.error = None
             self._install_frame()  # `frame` matches `preset` at once; listeners get the next one
             self.trainer.enqueue(Publish())
@@ -455,7 +456,8 @@ class Session:
     def load_preset(self, preset: str | Preset) -> None:
         """Replace the mesh, layout, controls and parameters with a preset (a name or a Preset): one undo step. A
         preset that grows (the paper's case studies) runs its whole schedule; any other shape is shown as it is.
-        Choosing the current preset again brings back its own controls and start.
+        Either way a Pause does not carry over. Choosing the current preset again brings back its own controls and
+        start.
 
         The new Som is built in the caller's thread (this can take a while for a big mesh); a failure leaves the
         session as it was.

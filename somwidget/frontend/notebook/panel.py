@@ -75,8 +75,7 @@ class Panel(widgets.VBox):
         self.preset = widgets.Dropdown(description="preset", style=style, layout=widgets.Layout(width="290px"))
         self.reload_button = widgets.Button(icon="rotate-left", layout=widgets.Layout(width="36px"),
                                             tooltip="This preset again as it starts: its own controls and start mesh")
-        self.train_button = widgets.Button(description="Pause", icon="pause", layout=widgets.Layout(width="100px"),
-                                           tooltip="Train / pause the map")
+        self.train_button = widgets.Button(description="Pause", icon="pause", layout=widgets.Layout(width="100px"))
         self.reset_button = widgets.Button(description="Reset", icon="refresh", layout=widgets.Layout(width="100px"),
                                            tooltip="Back to the start mesh, the whole schedule again (the controls "
                                                    "stay)")
@@ -115,12 +114,13 @@ class Panel(widgets.VBox):
                                                layout=widgets.Layout(width="110px"))
         self.controls_html = widgets.HTML()
         self.error = widgets.HTML()
+        self.recovered = _banner(self.model.recovered_message())
         self.variants = VariantsSection(self.model, self._intent)
 
         super().__init__([
-            self.title, widgets.HBox([self.preset, self.reload_button, self.refine_button]),
+            self.recovered, self.title, widgets.HBox([self.preset, self.reload_button, self.refine_button]),
             widgets.HBox([self.train_button, self.undo_button, self.redo_button, self.reset_button]),
-            self.progress, self.status,
+            self.progress, self.status, self.error,
             widgets.HTML(_BLOCK.format("<b>Schedule</b> <small>(alpha(s) from l_start to l_end over S cycles)"
                                        "</small>")),
             self.S, self.l_start, self.l_end, self.smoothing, self.reach,
@@ -131,7 +131,7 @@ class Panel(widgets.VBox):
             self.features_box,
             widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(GAP_HELP)}">Controls</b> <small>(gap: distance to '
                                        'the nearest node, original / mirror)</small>')),
-            self.controls_html, widgets.HBox([self.radius_of, self.radius]), self.variants, self.error,
+            self.controls_html, widgets.HBox([self.radius_of, self.radius]), self.variants,
         ], layout=widgets.Layout(width="360px", min_width="360px", padding="4px"))
 
         for w, setter in ((self.S, session.set_iterations), (self.l_start, session.set_l_start),
@@ -261,6 +261,7 @@ class Panel(widgets.VBox):
                 f"</span><br><small>cycle {st['cycle_ms']} ms, {st['fps']} frames/s; "
                 f"{st['n_vertices']} nodes, {st['k']} controls ({st['k_eff']} with mirrors)</small>")
             self.train_button.description = st["train_label"]
+            self.train_button.tooltip = st["train_help"]
             self.train_button.icon = "pause" if frame.running else "play"
             self.undo_button.disabled = not st["can_undo"]
             self.redo_button.disabled = not st["can_redo"]
@@ -309,9 +310,26 @@ class Panel(widgets.VBox):
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(2.0)
         self.variants.close()
-        for w in [*self.children, *self.metric, *self.features_box.children, self.group, self.radius_of, self.radius]:
+        for w in [*self.children, *self.metric, *self.features_box.children, self.group, self.radius_of, self.radius,
+                  *self.recovered.children]:
             w.close()
         super().close()
+
+
+def _banner(message: str) -> widgets.HBox:
+    """The recovered session's banner (hidden when there is none to say) with a button that dismisses it."""
+    dismiss = widgets.Button(icon="times", tooltip="Dismiss", layout=widgets.Layout(width="32px", min_width="32px"))
+    banner = widgets.HBox([widgets.HTML(_BLOCK.format(f"<small>{_html.escape(message)}</small>"),
+                                        layout=widgets.Layout(flex="1 1 auto")), dismiss],
+                          layout=widgets.Layout(display="flex" if message else "none", border="1px solid #9c9",
+                                                padding="2px 4px", margin="0 0 4px 0", align_items="center"))
+    banner.add_class("somwidget-recovered")
+
+    def close(_button) -> None:
+        banner.layout.display = "none"
+
+    dismiss.on_click(close)
+    return banner
 
 
 def _set(widget, value) -> None:

@@ -24,7 +24,6 @@ from __future__ import annotations
 import asyncio
 import logging
 import tempfile
-import time
 from pathlib import Path
 
 from aiohttp import web
@@ -123,8 +122,9 @@ class SomApp:
         s.controls_ui = []
         s.features_ui = []
         s.param_errors = {}
+        s.field_revs = {}  # bumped when a field's value is refused: the page draws it anew (panel_state.py)
         s.reach_help = REACH_HELP
-        s.recovered_message = self._recovered_message()
+        s.recovered_message = self.panel.recovered_message()
         s.variants_n = 12
         s.variants_jitter = 0.05
         s.variants_vary = []
@@ -132,14 +132,6 @@ class SomApp:
         s.variants_progress = 0
         self.panel_state.sync_fields()
         self.panel_state.show_frame(self.session.frame)
-
-    def _recovered_message(self) -> str:
-        found = self.session.recovered
-        if not found:
-            return ""
-        saved = time.strftime("%Y-%m-%d %H:%M", time.localtime(found["saved"]))
-        return (f"Recovered your session of {saved} ({found['preset'] or 'a session'}), which did not close cleanly: "
-                "everything is as its last completed step left it.")
 
     async def reload_preset(self) -> None:
         """The current preset again, as it starts: its own controls and start mesh (one undo step)."""

@@ -1,6 +1,6 @@
 """The web app's page, laid out with trame's vuetify widgets: the toolbar, the panel (fields generated from the
 panel model's declarations, tables bound to the state app.py keeps), and the element the clay view mounts into.
-The page's own scripts: the keyboard shortcuts and the view's mount.
+The page's own scripts: the keyboard shortcuts, the view's mount and the reconnect.
 """
 
 from __future__ import annotations
@@ -40,6 +40,31 @@ if (!window.somwidgetShortcuts) {
 """
 
 
+#: When trame's websocket closes (the server stopped or restarted), a banner says "reconnecting" and the page asks the
+#: server every half second; once it answers, the page reloads. A restarted server is a new process with a new
+#: trame state and page, so a fresh load is the sure way back to the session as it is (trame's own reconnect only
+#: re-attaches to the state of the same process). The clay view's link reconnects by itself (link.js).
+RECONNECT_JS = """
+if (!window.somwidgetReconnect && window.trame) {
+  window.somwidgetReconnect = true;
+  const reconnect = () => {
+    if (document.getElementById('reconnecting')) return;
+    const note = document.createElement('div');
+    note.id = 'reconnecting';
+    note.setAttribute('role', 'status');
+    note.textContent = 'The server is gone: reconnecting\u2026';
+    note.style.cssText = 'position: fixed; top: 0; left: 0; right: 0; z-index: 10000; padding: 10px; '
+      + 'text-align: center; background: #8a1010; color: white; font: 600 15px system-ui, sans-serif';
+    document.body.appendChild(note);
+    const ask = () => fetch(window.location.href, { cache: 'no-store' })
+      .then((r) => (r.ok ? window.location.reload() : setTimeout(ask, 500)), () => setTimeout(ask, 500));
+    setTimeout(ask, 500);
+  };
+  window.trame.addConnectListener(() => window.trame.client.onConnectionClose(reconnect));
+}
+"""
+
+
 #: Mounts the clay view (the module the XR hub serves) into the page's #clay-view, and again should the page
 #: replace that element.
 MOUNT_VIEW_JS = """
@@ -67,9 +92,10 @@ def build_page(server, panel: PanelModel):
         with layout.toolbar:
             v3.VSpacer()
             html.Div("{{ stats.iteration }} / {{ stats.S }}", classes="mr-3 text-body-2", id="iteration-label")
-            v3.VBtn("{{ stats.running ? 'Pause' : 'Train' }}", id="train-button",
-                    click="trigger('toggle_training')",
-                    prepend_icon=("stats.running ? 'mdi-pause' : 'mdi-play'",), variant="tonal", classes="mr-2")
+            # says what a press does: Pause (training), Resume (stopped part way), Train (settled)
+            v3.VBtn("{{ stats.train_label }}", id="train-button", click="trigger('toggle_training')",
+                    title=("stats.train_help",), prepend_icon=("stats.running ? 'mdi-pause' : 'mdi-play'",),
+                    variant="tonal", classes="mr-2")
             v3.VBtn(icon="mdi-undo", id="undo-button", click="trigger('undo')", disabled=("!stats.can_undo",),
                     title="Undo (Ctrl+Z)", variant="text")
             v3.VBtn(icon="mdi-redo", id="redo-button", click="trigger('redo')", disabled=("!stats.can_redo",),
@@ -81,10 +107,19 @@ def build_page(server, panel: PanelModel):
             _panel(panel)
         client.Script(SHORTCUTS_JS)
         client.Script(MOUNT_VIEW_JS)
+        client.Script(RECONNECT_JS)
+        # what trame draws in the page's place while its websocket is closed (instead of "Connection closed")
+        server.state.trame__template_error = '<trame-loading message="The page reloads when the server is back" />'
         with layout.content:
             # the clay view mounts here (MOUNT_VIEW_JS); Vue leaves the element's children alone
             html.Div(id="clay-view", style="position: relative; width: 100%; height: calc(100vh - 88px)")
     return layout
+
+
+def _revision_key(name: str, row: str = "''") -> str:
+    """The Vue key of a field (or a table row) that is drawn anew when the panel state bumps `field_revs[name]`: the
+    value in effect replaces a refused one a person typed."""
+    return f"{row} + ':' + (field_revs['{name}'] || 0)"
 
 
 def _on_enter_or_change(handler: str) -> list[str]:
@@ -135,13 +170,16 @@ def _panel(panel: PanelModel) -> None:
                      "{{ stats.k }} controls ({{ stats.k_eff }} with mirrors)", classes="text-caption",
                      id="speed-text")
 
-        # schedule: the fields come from the parameters' declaration (parameters.py)
+        # schedule: the fields come from the parameters' declaration (parameters.py). Each shows the value in effect
+        # (bound one way: what a person types goes to the session as an intent, never into the state); a refused
+        # value shows its message and the field is drawn anew with the value in effect (field_revs, panel_state.py).
         html.Div("Schedule", classes="text-subtitle-2 mt-2")
         with v3.VRow(dense=True):
             for name in ("iterations", "smoothing", "l_start", "l_end"):
                 p = _PARAM[name]
                 with v3.VCol(cols=6), html.Div(id=f"param-{name}", title=p.help):
-                    v3.VTextField(v_model=(state_key(name),), label=p.label, density="compact", type="number",
+                    v3.VTextField(model_value=(state_key(name),), key=_revision_key(name), label=p.label,
+                                  density="compact", type="number",
                                   error_messages=(f"param_errors['{name}'] || []",), hide_details="auto",
                                   id=f"field-{name}",
                                   raw_attrs=_on_enter_or_change(
@@ -166,7 +204,7 @@ def _panel(panel: PanelModel) -> None:
         html.Div("Feature dimensions (metric weights)", classes="text-subtitle-2 mt-2")
         with v3.VTable(density="compact", id="features-table"):
             with html.Tbody():
-                with html.Tr(v_for="f in features_ui", key="f.d"):
+                with html.Tr(v_for="f in features_ui", key=_revision_key("metric_weights", "f.d")):
                     html.Td("{{ f.d }}")
                     html.Td("{{ f.name }}")
                     html.Td("{{ f.role }}", classes="text-caption")
@@ -186,7 +224,7 @@ def _panel(panel: PanelModel) -> None:
                     id="add-control", title="Add a control")
         with v3.VTable(density="compact", id="controls-table"):
             with html.Tbody():
-                with html.Tr(v_for="c in controls_ui", key="c.i"):
+                with html.Tr(v_for="c in controls_ui", key=_revision_key("radius", "c.i")):
                     html.Td("{{ c.i }}")
                     with html.Td():
                         html.Input(type="color", value=("c.colour",), disabled=("!has_colour",),

@@ -14,6 +14,7 @@ import time
 
 from ..model import Frame, Session
 from ..model.panel import PanelModel, fmt
+from ..model.parameters import BY_NAME
 from ..model.picture import png_bytes
 from .layout import state_key
 
@@ -119,37 +120,50 @@ class PanelState:
             self.error(error)
         return error is None
 
+    def _refused(self, fields: str, key: str, error: str) -> None:
+        """A refused edit: its message in the panel's alert and at its field (`key` of param_errors), and the
+        fields of `fields` (a parameter, "metric_weights" or "radius") drawn anew with the values in effect: the
+        page binds them one way, keyed by field_revs (layout.py), so nothing refused stays in a field, nor comes
+        back with a reload (the state only ever holds the session's values)."""
+        log.info("refused: %s", error)
+        s = self.state
+        revs = dict(s.field_revs or {})
+        revs[fields] = revs.get(fields, 0) + 1
+        with self.state:
+            s.error_message = error
+            s.param_errors = {**(s.param_errors or {}), key: error}
+            s.field_revs = revs
+
     # -- triggers ------------------------------------------------------------------------------------------------
     def set_param(self, name, value) -> None:
-        errors = dict(self.state.param_errors or {})
         error = self.panel.set(name, value)
         if error is None:
-            errors.pop(name, None)
-        else:
-            errors[name] = error
-        self.state.error_message = error or ""
-        with self.state:
-            self.state.param_errors = errors
-            if error is None:
+            with self.state:
+                self.state.error_message = ""
                 self.sync_fields()
+        else:
+            field = name if isinstance(name, str) and name in BY_NAME else "other"
+            self._refused(field, field, error)
 
     def set_metric(self, dim, value) -> None:
-        key = f"metric_weights_{dim}" if isinstance(dim, int) and not isinstance(dim, bool) else "metric_weights"
         error = self.panel.set_metric(dim, value)  # the session checks dim: no truncation here
         if error is None:
-            self.state.error_message = ""
+            with self.state:
+                self.state.error_message = ""
+                self.sync_fields()
         else:
-            self.error(error)
-        with self.state:
-            self.sync_fields()
-            if error is not None:  # at the field that caused it (the sync above cleared the others)
-                self.state.param_errors = {**(self.state.param_errors or {}), key: error}
+            key = f"metric_weights_{dim}" if isinstance(dim, int) and not isinstance(dim, bool) else "metric_weights"
+            self._refused("metric_weights", key, error)
 
     def set_colour(self, index, colour) -> None:
         self._show(self.panel.attempt(self.session.set_control_colour, index, colour))
 
     def set_radius(self, index, value) -> None:
-        self._show(self.panel.set_radius(index, value))
+        error = self.panel.set_radius(index, value)
+        if error is None:
+            self.state.error_message = ""
+        else:
+            self._refused("radius", "radius", error)
 
     def set_group(self, spec) -> None:
         """A symmetry group chosen in the panel; refused, the field goes back to the group in effect."""

@@ -8,7 +8,7 @@
 export const ACTIONS = [
   { name: 'enter-ar', label: 'Enter AR', where: 'hud', hidden: true },
   { name: 'enter-vr', label: 'Enter VR', where: 'hud', hidden: true },
-  { name: 'train', label: 'Pause', where: 'both' }, // "Train" while paused (main.js relabels it)
+  { name: 'train', label: 'Train', where: 'both' }, // relabelled by trainLabel as frames come
   { name: 'undo', label: 'Undo', title: 'Undo (Ctrl+Z)', where: 'both', disabled: true },
   { name: 'redo', label: 'Redo', title: 'Redo (Ctrl+Shift+Z)', where: 'both', disabled: true },
   { name: 'reset', label: 'Reset', where: 'both' },
@@ -20,3 +20,11 @@ export const ACTIONS = [
 
 export const HUD_ACTIONS = ACTIONS.filter((a) => a.where !== 'menu');
 export const MENU_ACTIONS = ACTIONS.filter((a) => a.where !== 'hud');
+
+// What the run button does now (the panels' rule, model/panel.py): Pause a running map, Resume one stopped part way
+// through its schedule, Train a settled one.
+export function trainLabel(frame) {
+  if (!frame) return 'Train';
+  if (frame.running) return 'Pause';
+  return frame.iteration < frame.iterations ? 'Resume' : 'Train';
+}

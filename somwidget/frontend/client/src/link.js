@@ -1,4 +1,6 @@
-// The websocket to the server (/xr/ws next to the page), reconnecting with a growing pause when it drops.
+// The websocket to the server (/xr/ws next to the page). When it drops (the server stopped, restarted, the network
+// went), the view says "reconnecting" and the link tries again, every RETRY_MS at first, then at most every
+// MAX_RETRY_MS, until the server answers; the server then sends the topology and the latest frame as to any new view.
 
 import { parseFrame } from './protocol.js';
 
@@ -19,13 +21,16 @@ export function socketURL(loc = window.location) {
   return `${scheme}//${loc.host}${base}ws${token ? `?token=${encodeURIComponent(token)}` : ''}`;
 }
 
+const RETRY_MS = 250;
+const MAX_RETRY_MS = 2000;
+
 export class Link {
   constructor(url, handlers) {
     this.url = url;
     this.handlers = handlers; // {onTopology, onFrame, onGrabs, onError, onPong, onStatus, onServerStatus, onControls}
     this.ws = null;
     this.connected = false;
-    this.retry = 500;
+    this.retry = RETRY_MS;
     this.stats = { frames: 0, bytes: 0, messages: 0, sent: 0, reconnects: 0, badFrames: 0 };
     this.closedByUser = false;
     this.connect();
@@ -37,19 +42,23 @@ export class Link {
     this.ws = ws;
     ws.onopen = () => {
       this.connected = true;
-      this.retry = 500;
+      this.retry = RETRY_MS;
       this.handlers.onStatus?.('connected');
     };
     ws.onmessage = (ev) => this.receive(ev.data);
     ws.onclose = (ev) => {
       this.connected = false;
-      this.handlers.onStatus?.(`disconnected (${ev.code}${ev.reason ? ` ${ev.reason}` : ''})`);
-      if (this.closedByUser) return;
+      this.stats.closeCode = ev.code;
+      if (this.closedByUser) {
+        this.handlers.onStatus?.('closed');
+        return;
+      }
+      this.handlers.onStatus?.('reconnecting');
       setTimeout(() => {
         this.stats.reconnects += 1;
         this.connect();
       }, this.retry);
-      this.retry = Math.min(this.retry * 2, 8000);
+      this.retry = Math.min(this.retry * 2, MAX_RETRY_MS);
     };
     ws.onerror = () => {};
   }

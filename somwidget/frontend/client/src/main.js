@@ -2,7 +2,7 @@
 // It shares the server's modelling session through the websocket /xr/ws (see protocol.js).
 
 import * as THREE from 'three';
-import { HUD_ACTIONS } from './actions.js';
+import { HUD_ACTIONS, trainLabel } from './actions.js';
 import { Link, socketURL } from './link.js';
 import { Menu } from './menu.js';
 import { intents } from './protocol.js';
@@ -81,7 +81,7 @@ async function enter(mode) {
 const perform = {
   'enter-ar': () => enter('immersive-ar'),
   'enter-vr': () => enter('immersive-vr'),
-  train: () => link.send(state.paused ? intents.train() : intents.pause()),
+  train: () => link.send(state.running ? intents.pause() : intents.train()),
   undo: () => link.send(intents.undo()),
   redo: () => link.send(intents.redo()),
   reset: () => link.send(intents.reset()),
@@ -137,10 +137,10 @@ function showStatus() {
   if (state.mode) parts.push(state.mode.replace('immersive-', '').toUpperCase());
   const text = parts.join(' \u00b7 ');
   ui.status.textContent = text;
-  ui.train.textContent = state.paused ? 'Train' : 'Pause';
+  ui.train.textContent = trainLabel(f);
   ui.undo.disabled = !(f && f.canUndo);
   ui.redo.disabled = !(f && f.canRedo);
-  menu.setLabel('train', state.paused ? 'Train' : 'Pause');
+  menu.setLabel('train', trainLabel(f));
   menu.setStatus(f ? `${t ? t.title : ''}  ${f.iteration}/${f.iterations}  ${f.running ? 'training' : f.paused
     ? 'paused' : 'converged'}` : text);
 }

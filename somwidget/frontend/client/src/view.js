@@ -22,6 +22,7 @@ const CSS = `
 .somview-label.held { background: #d32f2f; color: white; }
 .somview-status { position: absolute; left: 6px; bottom: 4px; font-size: 11px; color: #445;
   background: rgba(255,255,255,0.7); padding: 1px 5px; border-radius: 3px; pointer-events: none; }
+.somview-status.offline { background: #fde2e2; color: #8a1010; font-weight: 600; }
 .somview-fit { position: absolute; right: 6px; top: 6px; font-size: 12px; padding: 2px 8px; cursor: pointer;
   border: 1px solid #99a; border-radius: 4px; background: rgba(255,255,255,0.85); }
 .somview-picture { position: absolute; inset: 0; width: 100%; height: 100%; object-fit: contain;
@@ -30,12 +31,13 @@ const CSS = `
   background: #fde2e2; color: #8a1010; border-radius: 4px; pointer-events: none; }
 `;
 
-function addStyle() {
-  if (document.getElementById('somview-style')) return;
+// The view's stylesheet, inside its own element (anywidget's way): it applies wherever the element lives, in a page
+// or in a shadow root (marimo renders widgets in one), and goes with it.
+function addStyle(container) {
   const style = document.createElement('style');
-  style.id = 'somview-style';
+  style.className = 'somview-style';
   style.textContent = CSS;
-  document.head.appendChild(style);
+  container.appendChild(style);
 }
 
 // A cheap checksum of the positions (to tell a changed mesh from an unchanged one).
@@ -78,7 +80,7 @@ export class ClayView {
   // container: the element to fill; send(intent): deliver an intent object (false when it could not be sent);
   // xr: let the renderer present immersive sessions (the XR page).
   constructor(container, { send, xr = false, background = 0xeef0f4 } = {}) {
-    addStyle();
+    addStyle(container);
     this.container = container;
     container.classList.add('somview');
     if (!container.style.height && container.clientHeight === 0) container.style.height = '480px';
@@ -291,8 +293,11 @@ export class ClayView {
   updateStatus() {
     const s = this.state;
     const f = s.frame;
-    let text = s.connected ? 'connected' : (s.linkStatus || 'connecting');
-    if (f) {
+    // a link that dropped says so until it is back (link.js tries again every few seconds at most)
+    let text = s.connected ? 'connected' : s.linkStatus === 'reconnecting' ? 'reconnecting\u2026'
+      : (s.linkStatus || 'connecting');
+    this.statusLine.classList.toggle('offline', !s.connected && !!s.linkStatus);
+    if (f && s.connected) {
       const what = f.running ? 'training' : f.paused ? 'paused' : 'converged';
       text = `iteration ${f.iteration} / ${f.iterations} \u00b7 ${what} \u00b7 ${s.fps.toFixed(0)} frames/s`;
       if (s.cycleMs !== null && s.cycleMs !== undefined) text += ` \u00b7 cycle ${Number(s.cycleMs).toFixed(3)} ms`;
