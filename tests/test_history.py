@@ -175,7 +175,7 @@ def test_history_bounds_its_memory_and_keeps_older_steps_on_disk(tmp_path):
     for s in steps:
         h.push(s)
     assert h.undo_count == 120 and h.memory_used <= h.memory_bytes
-    spilled = list(tmp_path.rglob("*.npy"))
+    spilled = list(tmp_path.rglob("*.npz"))
     assert len(spilled) == 110
     current = Step(preset=None, controls=np.zeros((1, 3), np.float32), parameters={}, weights=np.zeros((4096, 3),
                    np.float32), iteration=0)
@@ -186,4 +186,4 @@ def test_history_bounds_its_memory_and_keeps_older_steps_on_disk(tmp_path):
         current = back
     assert h.undo(current) is None and h.redo_count == 120
     h.close()
-    assert not list(tmp_path.rglob("*.npy"))
+    assert not list(tmp_path.rglob("*.npz"))

@@ -1,10 +1,14 @@
-"""Nothing lost: the autosave (frontend/model/autosave.py) and `Session.recover()` after a real SIGKILL, and
-`somwidget serve` recovering by itself (with `--fresh` to start anew)."""
+"""Work is never lost (issue 27), each test written as the fault: a real `somwidget serve` stopped by SIGTERM, SIGINT
+and SIGKILL (mid-drag too), then started again; two servers and a Python session at once; many stopped sessions;
+a directory and a corrupt file where a saved session should be. The servers are driven through the views' websocket
+(/xr/ws) and read through GET /api/state (positions are the weights' position dims, exactly)."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -12,165 +16,323 @@ import textwrap
 import time
 
 import numpy as np
-import pytest
 from helpers import ROOT, Serve, wait_for
 
-from somwidget.backend import io
-from somwidget.frontend.model import autosave, storage
-from somwidget.frontend.model import Session
+from somwidget.frontend.model import Session, autosave, storage
+from somwidget.frontend.model import store as _store
 
-#: A session that makes three steps (a drag, a new control, a setting), waits until its own autosave holds the
-#: last one (written by itself when training settles: no flush), writes what it holds, says READY and waits to be
-#: killed.
+
+# -- driving a server as its views do -----------------------------------------------------------------------------
+async def _send(base: str, messages: list, pause: float = 0.05, hold=None) -> None:
+    """Send `messages` (intents) on the views' websocket; with `hold`, call `await hold()` before closing it (a
+    client that goes away mid-drag ends the drag: a test that kills the server mid-drag keeps it open)."""
+    import aiohttp
+
+    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/xr/ws") as ws:
+        for m in messages:
+            await ws.send_json(m)
+            await asyncio.sleep(pause)
+        await ws.send_json({"type": "ping", "t": 1})  # every intent before it is applied once its pong comes
+        while True:
+            msg = await ws.receive(timeout=30)
+            if msg.type == aiohttp.WSMsgType.TEXT and '"pong"' in msg.data:
+                break
+            assert msg.type in (aiohttp.WSMsgType.TEXT, aiohttp.WSMsgType.BINARY), msg
+            assert '"error"' not in (msg.data if msg.type == aiohttp.WSMsgType.TEXT else ""), msg.data
+        if hold is not None:
+            await hold()
+
+
+def send(srv: Serve, messages: list, hold=None) -> None:
+    asyncio.run(_send(srv.base, messages, hold=hold))
+
+
+def drag(index: int, to) -> list:
+    """A drag as a view makes it: grab, a few moves, release at `to`."""
+    return [{"type": "grab", "index": index}, *({"type": "move", "index": index, "position": list(p)}
+            for p in np.linspace(np.asarray(to) - 0.06, to, 4).tolist()),
+            {"type": "release", "index": index}]
+
+
+def settled(srv: Serve) -> dict:
+    """The state once training has stopped and every intent is applied, after the autosave has written it: its
+    manifest names as many undo and redo steps, and its current step holds these controls and positions."""
+    st = srv.idle(60)
+    folder, session = _folder(srv), st["session"]
+
+    def saved() -> bool:
+        manifest = _store.peek(folder)
+        if manifest is None or [len(manifest["undo"]), len(manifest["redo"])] != session["history"]:
+            return False
+        try:
+            with np.load(folder / manifest["current"]["file"]) as z:
+                return manifest["current"]["iteration"] == session["frame"]["iteration"] and \
+                    np.array_equal(z["controls"], np.float32(session["controls"])) and \
+                    np.array_equal(z["weights"][:, :3], np.float32(session["frame"]["positions"]))
+        except OSError:  # replaced meanwhile
+            return False
+    wait_for(saved, 30, "the autosave of the settled state")
+    return st
+
+
+def _folder(srv: Serve):
+    from pathlib import Path
+
+    return Path(srv.state()["session"]["autosave"]["path"])
+
+
+def same(a: dict, b: dict) -> None:
+    """Controls, radii, parameters, weights (positions) and s alike, exactly."""
+    sa, sb = a["session"], b["session"]
+    assert sa["preset"] == sb["preset"]
+    np.testing.assert_array_equal(sa["controls"], sb["controls"])
+    np.testing.assert_array_equal(sa["radii"], sb["radii"])
+    assert sa["parameters"] == sb["parameters"]
+    np.testing.assert_array_equal(sa["frame"]["positions"], sb["frame"]["positions"])
+    assert sa["frame"]["iteration"] == sb["frame"]["iteration"]
+
+
+def stop(srv: Serve, sig) -> None:
+    srv.proc.send_signal(sig)
+    srv.proc.wait(30)
+    srv.stop()
+
+
+def test_sigterm_and_sigint_keep_the_work_and_its_undo(tmp_path):
+    env = {"SOMWIDGET_DATA_DIR": str(tmp_path / "data")}
+    srv = Serve(env=env)
+    try:
+        send(srv, drag(2, [3.0, 0.6, 0.2]))
+        send(srv, [{"type": "set", "name": "reach", "value": 0.1}])
+        before = settled(srv)
+        send(srv, drag(4, [-0.2, 0.7, 1.3]))
+        after = settled(srv)
+        assert after["session"]["history"] == [3, 0]
+        stop(srv, signal.SIGTERM)
+        srv = Serve(env=env)  # a stop by SIGTERM: the next start brings it back, undo history and all
+        back = srv.state(positions=True)
+        same(back, after)
+        assert back["session"]["history"] == [3, 0] and back["session"]["recovered"]
+        message = back["session"]["recovered_message"]
+        assert "as its last completed step; Undo reaches the 3 steps before it" in message, message
+        assert message in srv.output() and back["panel"]["recovered_message"] == message
+        send(srv, [{"type": "undo"}])
+        same(srv.idle(), before)  # the step before the last one, exactly
+        send(srv, [{"type": "redo"}])
+        same(srv.idle(), after)
+        send(srv, drag(1, [2.5, -0.5, 0.4]))
+        third = settled(srv)
+        stop(srv, signal.SIGINT)  # Ctrl+C
+        srv = Serve(env=env)
+        back = srv.state(positions=True)
+        same(back, third)
+        assert back["session"]["history"] == [4, 0]
+        send(srv, [{"type": "undo"}])
+        same(srv.idle(), after)
+    finally:
+        srv.stop()
+    srv = Serve("--fresh", env=env)  # --fresh starts anew, the saved session stays for later
+    try:
+        st = srv.state()
+        assert st["session"]["preset"] == "car" and not st["session"]["recovered"]
+        assert st["session"]["history"] == [0, 0] and st["panel"]["recovered_message"] == ""
+    finally:
+        srv.stop()
+    folders = [p for p in (tmp_path / "data" / "autosave").iterdir() if p.is_dir()]
+    assert len(folders) == 2, folders
+
+
+def test_sigkill_mid_drag_brings_back_what_the_message_says(tmp_path):
+    """A kill during a drag: either the last completed step comes back, or the drag as a step of its own that Undo
+    removes; the message says which, and what came back is that. A short drag after a save is the first, a drag
+    held past AUTOSAVE_SECONDS the second."""
+    env = {"SOMWIDGET_DATA_DIR": str(tmp_path / "data")}
+    seen = set()
+    for hold in (0.0, autosave.AUTOSAVE_SECONDS + 1.5):
+        srv = Serve(env=env)
+        try:
+            send(srv, [{"type": "set", "name": "reach", "value": 0.12}])
+            pre = settled(srv)
+            target = [3.2, 0.5, 0.3]
+
+            async def kill_while_held():
+                await asyncio.sleep(hold)
+                os.kill(srv.proc.pid, signal.SIGKILL)  # the drag is still held: its websocket is open
+                srv.proc.wait(10)
+
+            send(srv, [{"type": "grab", "index": 2}, {"type": "move", "index": 2, "position": target}],
+                 hold=kill_while_held)
+        finally:
+            srv.stop()
+        srv = Serve(env=env)
+        try:
+            back = srv.state(positions=True)
+            message = back["session"]["recovered_message"]
+            if "during a drag that was not released" in message:
+                seen.add("drag")
+                np.testing.assert_array_equal(back["session"]["controls"][2][:3], np.float32(target))
+                assert back["session"]["history"] == [pre["session"]["history"][0] + 1, 0]
+                send(srv, [{"type": "undo"}])
+                same(srv.idle(), pre)  # Undo removes the drag
+            else:
+                assert "as its last completed step" in message, message
+                seen.add("step")
+                same(back, pre)
+                assert back["session"]["history"] == pre["session"]["history"]
+            send(srv, [{"type": "reset"}])  # the next round starts from a settled, saved state
+            settled(srv)
+        finally:
+            stop(srv, signal.SIGTERM)
+    assert "drag" in seen, "a drag held past the autosave interval was not kept"
+
+
+# A Python session (a notebook's kernel): three steps, then it waits to be killed.
 CHILD = textwrap.dedent("""
     import json, sys, time
     import numpy as np
-    from somwidget.backend import io
     from somwidget.frontend.model import Session
 
-    preset, out = sys.argv[1], sys.argv[2]
-    s = Session(preset, device="cpu")
+    s = Session("grid", device="cpu")
     assert s.wait_idle(60)
     with s.gesture():
-        for t in np.linspace(0.1, 1.0, 6):
+        for t in np.linspace(0.1, 1.0, 4):
             s.move_control(1, s.controls[1, :3] + t * np.float32([0.0, 0.05, 0.1]))
-    s.add_control()
     s.set_reach(0.09)
-    assert s.wait_idle(60)
-    want = s.snapshot()
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:  # the autosave of the settled state
-        try:
-            saved = io.load_session(s.autosave_path)
-            if saved["iteration"] == want["iteration"] and np.array_equal(saved["weights"], want["weights"]) \\
-                    and np.array_equal(saved["controls"], want["controls"]) and saved["reach"] == 0.09:
-                break
-        except ValueError:
-            pass
-        time.sleep(0.05)
-    else:
-        raise SystemExit("the autosave never held the last step")
-    np.save(out + "/weights.npy", want["weights"])
-    np.save(out + "/controls.npy", want["controls"])
-    json.dump({"iteration": want["iteration"], "parameters": want["parameters"], "path": str(s.autosave_path)},
-              open(out + "/state.json", "w"))
-    print("READY", flush=True)
+    assert s.wait_idle(60) and s.flush_autosave()
+    print(json.dumps({"controls": s.controls.tolist(), "weights": s.frame.weights.tolist(),
+                      "history": list(s.history)}), flush=True)
     time.sleep(600)
 """)
 
 
-def crash_a_session(data_dir, out, preset: str = "car") -> dict:
-    """Run CHILD with its own data directory, SIGKILL it once it is READY; returns what it held."""
-    env = dict(os.environ, SOMWIDGET_DATA_DIR=str(data_dir), PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, preset, str(out)], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, cwd=ROOT)
-    try:
-        lines = []
-        for line in proc.stdout:
-            lines.append(line)
-            if line.strip() == "READY":
-                break
-        else:
-            raise AssertionError("the child session ended early:\n" + "".join(lines)[-3000:])
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    state = json.loads((out / "state.json").read_text())
-    state["weights"] = np.load(out / "weights.npy")
-    state["controls"] = np.load(out / "controls.npy")
-    return state
-
-
-def test_recover_after_sigkill_brings_back_the_last_step_exactly(tmp_path, monkeypatch):
+def test_two_servers_and_a_python_session_each_keep_their_own(tmp_path, monkeypatch):
     data = tmp_path / "data"
+    env = {"SOMWIDGET_DATA_DIR": str(data)}
     monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(data))
-    assert Session.recover(device="cpu") is None  # nothing crashed yet
-    held = crash_a_session(data, tmp_path)
-    assert autosave.crashed() == [storage.autosave_dir() / os.path.basename(held["path"])]
-    s = Session.recover(device="cpu")
+    child = subprocess.Popen([sys.executable, "-c", CHILD], env={**os.environ, "PYTHONPATH": str(ROOT), **env},
+                             stdout=subprocess.PIPE, text=True, cwd=ROOT)
     try:
-        assert s is not None and s.recovered["preset"] == "car"
-        f = s.frame
-        np.testing.assert_array_equal(f.weights, held["weights"])
-        np.testing.assert_array_equal(s.controls, held["controls"])
-        assert f.iteration == held["iteration"] and s.parameters == held["parameters"]
-        assert f.held and not f.running
-        time.sleep(0.3)
-        np.testing.assert_array_equal(s.frame.weights, held["weights"])  # nothing trains until the next intent
-        # the recovered session took the autosave over: the crashed one is gone, its own is there
-        assert autosave.crashed() == []
-        assert s.autosave_path.exists()
-        assert Session.recover(device="cpu") is None
+        held = json.loads(child.stdout.readline())
+    finally:
+        child.kill()  # the kernel dies
+        child.wait(10)
+    a, b = Serve("--preset", "torus", env=env), Serve("--preset", "sphere", env=env)
+    try:
+        send(a, drag(1, [0.2, 1.4, 0.3]))
+        send(b, drag(3, [-0.3, 0.1, 1.5]))
+        want = {"torus": settled(a), "sphere": settled(b)}
+    finally:
+        stop(a, signal.SIGTERM)
+        stop(b, signal.SIGINT)
+    a, b = Serve(env=env), Serve(env=env)  # two servers again: each brings back one, never the same one
+    try:
+        got = {s.state()["session"]["preset"]: s.state(positions=True) for s in (a, b)}
+        assert sorted(got) == ["sphere", "torus"], sorted(got)
+        for name in got:
+            same(got[name], want[name])
+            assert got[name]["session"]["history"] == [1, 0]
+    finally:
+        a.stop()
+        b.stop()
+    s = Session.recover(device="cpu")  # the Python session: left for Session.recover(), never taken by serve
+    try:
+        assert s is not None and s.preset.name == "grid" and list(s.history) == held["history"]
+        np.testing.assert_array_equal(s.controls, np.float32(held["controls"]))
+        np.testing.assert_array_equal(s.frame.weights, np.float32(held["weights"]))
+        assert s.frame.held and not s.frame.running
     finally:
         s.close()
-    assert not list(storage.autosave_dir().iterdir())  # a clean close leaves nothing to recover
 
 
-def test_a_clean_close_leaves_nothing_and_a_live_session_is_not_taken(tmp_path, monkeypatch):
+def test_stopped_sessions_are_pruned_by_age_count_and_size(tmp_path, monkeypatch):
     monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(tmp_path))
-    a = Session("sphere", device="cpu")
-    try:
-        a.move_control(0, a.controls[0] + 0.1)
-        assert a.wait_idle(30) and a.flush_autosave()
-        saved = io.load_session(a.autosave_path)
-        np.testing.assert_array_equal(saved["controls"], a.controls)
-        assert Session.recover(device="cpu") is None  # its lock is held: alive, not crashed
-        files = sorted(p.name for p in storage.autosave_dir().iterdir())
-        assert len(files) == 2 and files[0].endswith(".lock") and files[1].endswith(".npz")  # no temporary left
-    finally:
-        a.close()
-    assert not list(storage.autosave_dir().iterdir())
-
-
-def test_crashed_autosaves_are_bounded(tmp_path, monkeypatch):
-    monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(tmp_path))
+    s = Session("grid", device="cpu", start=False)
+    s.add_control()
+    assert s.flush_autosave()
+    s.close()
+    source = s.autosave_path
     folder = storage.autosave_dir()
-    folder.mkdir(parents=True)
-    source = Session("grid", device="cpu", start=False, autosave=False)
-    state = source.session_state()
-    source.close()
-    for i in range(autosave.KEEP_CRASHED + 3):  # states whose sessions are gone: free locks
-        io.save_session(folder / f"old-{i}.npz", state)
-        (folder / f"old-{i}.lock").touch()
-        os.utime(folder / f"old-{i}.npz", (1000 + i, 1000 + i))
-    found = autosave.crashed()
-    assert [p.name for p in found] == [f"old-{i}.npz" for i in range(autosave.KEEP_CRASHED + 2, 2, -1)]
-    assert len(list(folder.glob("*.npz"))) == autosave.KEEP_CRASHED
+    now = time.time()
+    ages_days = [0.1 * i for i in range(60)] + [40.0, 45.0]  # 62 stopped sessions; two past KEEP_DAYS
+    for i, age in enumerate(ages_days):
+        target = folder / f"old-{i:02d}"
+        shutil.copytree(source, target)
+        t = now - age * 86400 - 120
+        os.utime(target / _store.MANIFEST, (t, t))
+    shutil.rmtree(source)
+    size = _store._size(folder / "old-00")
+    gone = _store.prune()  # the defaults: 30 days, 50 sessions, 4 GiB
+    left = sorted(p.name for p in folder.iterdir())
+    assert len(left) == _store.KEEP_SESSIONS and left == [f"old-{i:02d}" for i in range(_store.KEEP_SESSIONS)]
+    assert len(gone) == 12
+    _store.prune(keep_bytes=3 * size)  # the size bound: as many as fit, newest first
+    assert sorted(p.name for p in folder.iterdir()) == ["old-00", "old-01", "old-02"]
+    _store.prune(keep_bytes=0)  # the newest stopped session is always kept
+    assert sorted(p.name for p in folder.iterdir()) == ["old-00"]
 
 
-def test_serve_recovers_by_itself_and_fresh_starts_anew(tmp_path):
+def _listing(path):
+    """What a folder holds (relative paths), or a file's bytes."""
+    return sorted(str(p.relative_to(path)) for p in path.rglob("*")) if path.is_dir() else path.read_bytes()
+
+
+def test_serve_starts_past_unreadable_saved_sessions_and_keeps_them_aside(tmp_path, monkeypatch):
+    """A folder where the manifest should be, a manifest cut short, a step file cut short: the server starts anew,
+    says what is wrong and where (printed, and in the panel's notices), and each is renamed aside, whole."""
     data = tmp_path / "data"
-    held = crash_a_session(data, tmp_path, preset="torus")
+    monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(data))
+    s = Session("torus", device="cpu", start=False, origin="serve")
+    s.add_control()
+    assert s.flush_autosave()
+    s.close()
+    good = s.autosave_path
+    damaged = {}
+    for i, damage in enumerate(["manifest is a folder", "manifest cut short", "step file cut short"]):
+        folder = good.with_name(f"damaged-{i}")
+        shutil.copytree(good, folder)
+        manifest = folder / _store.MANIFEST
+        if damage == "manifest is a folder":
+            manifest.unlink()
+            manifest.mkdir()
+            where = manifest
+        elif damage == "manifest cut short":
+            manifest.write_bytes(manifest.read_bytes()[:40])
+            where = manifest
+        else:
+            where = folder / json.loads(manifest.read_text())["current"]["file"]
+            where.write_bytes(where.read_bytes()[:300])
+        damaged[folder] = (str(where), _listing(folder))
+    shutil.rmtree(good)
     srv = Serve(env={"SOMWIDGET_DATA_DIR": str(data)})
     try:
-        assert "recovered the session" in srv.output()
-        st = srv.state(positions=True)
-        assert st["session"]["preset"] == "torus" and st["session"]["recovered"]
-        assert "did not close cleanly" in st["panel"]["recovered_message"]
-        np.testing.assert_allclose(st["session"]["controls"], held["controls"], rtol=0, atol=0)
-        np.testing.assert_allclose(st["session"]["frame"]["positions"], held["weights"], rtol=0, atol=0)
-    finally:
-        srv.stop()  # a clean stop (SIGTERM): the recovered session's autosave goes too
-    wait_for(lambda: not list(autosave.crashed(data / "autosave")), what="no crashed session left")
-    crash_a_session(data, tmp_path, preset="sphere")
-    srv = Serve("--fresh", env={"SOMWIDGET_DATA_DIR": str(data)})
-    try:
         st = srv.state()
-        assert st["session"]["preset"] == "car" and not st["session"]["recovered"]
-        assert st["panel"]["recovered_message"] == ""
+        assert st["session"]["preset"] == "car" and not st["session"]["recovered"]  # started anew
+        notices = st["session"]["notices"]
+        assert len(notices) == 3, notices
+        for folder, (where, listing) in damaged.items():
+            said = [n for n in notices if where in n]
+            assert len(said) == 1 and "kept at" in said[0], (where, notices)
+            assert where in srv.output()
+            aside, = [p for p in data.joinpath("autosave").iterdir() if p.name.startswith(folder.name + ".unreadable")]
+            assert _listing(aside) == listing  # nothing in it deleted
+        send(srv, drag(2, [3.0, 0.6, 0.2]))  # and the new session saves as any other
+        settled(srv)
     finally:
         srv.stop()
-    assert len(autosave.crashed(data / "autosave")) == 1  # --fresh left the crashed one for later
 
 
-@pytest.mark.parametrize("bad", [b"", b"PK\x03\x04 not a zip", b"\x93NUMPY"])
-def test_an_unreadable_autosave_is_set_aside(tmp_path, monkeypatch, bad):
-    monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(tmp_path))
-    folder = storage.autosave_dir()
-    folder.mkdir(parents=True)
-    (folder / "broken.npz").write_bytes(bad)
-    (folder / "broken.lock").touch()
-    assert Session.recover(device="cpu") is None
-    assert not list(folder.iterdir())
+def test_serve_starts_when_a_file_is_where_the_autosave_folder_should_be(tmp_path):
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "autosave").write_bytes(b"not a folder")
+    srv = Serve(env={"SOMWIDGET_DATA_DIR": str(data)})
+    try:
+        st = srv.state()
+        notices = " ".join(st["session"]["notices"])
+        assert f"the autosave folder {data / 'autosave'} was a file" in notices and "kept at" in notices, notices
+        aside, = [p for p in data.iterdir() if p.name.startswith("autosave.unreadable")]
+        assert aside.read_bytes() == b"not a folder"
+        send(srv, drag(2, [3.0, 0.6, 0.2]))
+        settled(srv)
+    finally:
+        srv.stop()

@@ -1,85 +1,63 @@
-"""The autosave that a crash cannot take away: each step a session completes goes to disk, and `Session.recover()`
-brings back a session that did not close cleanly.
+"""Work is never lost: each step a session completes goes to its folder on disk (store.py) with its undo history, and
+`recover` brings back a stopped session, however it stopped.
 
-Each live session that autosaves owns two files in data_dir()/autosave: `<id>.npz`, its latest state (a session
-file, io.save_session: written to a temporary file, then renamed over the old one, so a kill mid-write leaves the
-previous state whole), and `<id>.lock`, locked for as long as its process lives. A clean close deletes both. The
-operating system drops the lock of a process that dies however it dies (SIGKILL included), so a state file whose
-lock can be taken belongs to a session that did not close cleanly: `crashed()` lists those, newest first. Disk use
-is bounded: one state per live session, and at most KEEP_CRASHED states of crashed ones (older ones are deleted).
+When a session writes (`SessionAutosave`): at once when a step completes (a drag released, a control added, a
+setting, a reset, an undo...), and while training goes on or a drag is held, when training settles or every
+AUTOSAVE_SECONDS; never what is not whole. A save of a drag not yet released is marked as one: brought back, the drag
+is a step of its own that Undo removes, and the message says so.
+
+A save that fails (a full disk, a folder that cannot be written) is kept and tried again every RETRY_SECONDS, a newer
+state taking its place, until one is on disk; meanwhile `Autosave.error` says what is wrong and where, and the
+session's views show it. Nothing is called saved before its manifest is on disk.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
-import uuid
 from collections.abc import Callable
-from pathlib import Path
 
-from .storage import autosave_dir
+from . import store as _store
+from .store import SessionStore, Saving, Unreadable
 
 log = logging.getLogger(__name__)
 
-#: States of sessions that did not close cleanly kept for `Session.recover()`; older ones are deleted.
-KEEP_CRASHED = 5
-_SUFFIX = ".npz"
-
-
-def _try_lock(handle) -> bool:
-    """An exclusive, non-blocking lock on an open file: True if taken (the OS releases it when the process ends)."""
-    try:
-        import fcntl
-
-        fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        return True
-    except ImportError:  # Windows
-        import msvcrt
-
-        try:
-            msvcrt.locking(handle.fileno(), msvcrt.LK_NBLCK, 1)
-            return True
-        except OSError:
-            return False
-    except OSError:
-        return False
+#: While training or dragging, a session writes at most this often (it writes at once when a step completes, and
+#: when training settles).
+AUTOSAVE_SECONDS = 2.0
+#: A failed save is tried again after this many seconds.
+RETRY_SECONDS = 1.0
 
 
 class Autosave:
-    """The autosave of one live session: `submit(write)` hands over a function that writes the latest state to a
-    path; a background thread runs the newest one (older ones not yet written are skipped) and renames the result
-    into place. `close(clean=True)` writes what is pending, then deletes the files (a clean exit)."""
+    """The writer of one session's store: `submit(saving)` hands over the latest state; a thread of its own commits
+    the newest (older ones not yet written are skipped), and keeps trying a save that failed. `on_status()` is called
+    (on that thread) whenever `error` changes."""
 
-    def __init__(self, directory: str | os.PathLike | None = None):
-        self.directory = Path(directory) if directory is not None else autosave_dir()
-        self.directory.mkdir(parents=True, exist_ok=True)
-        self.id = f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-        self.path = self.directory / f"{self.id}{_SUFFIX}"
-        self.lock_path = self.directory / f"{self.id}.lock"
-        self._lock_file = open(self.lock_path, "a+b")  # noqa: SIM115 (held open for the session's life)
-        if not _try_lock(self._lock_file):  # pragma: no cover - a fresh, unique name
-            raise RuntimeError(f"autosave: cannot lock {self.lock_path}")
-        self._pending = None
+    def __init__(self, store: SessionStore, on_status: Callable[[], None] = lambda: None):
+        self.store = store
+        self.on_status = on_status
+        self.error: str | None = None  # why the latest save failed; None once one is on disk
+        self.saves = 0  # saves on disk
+        self.saved_at: float | None = None  # time.time() of the latest save on disk
+        self._pending: Saving | None = None
         self._writing = False
         self._cond = threading.Condition()
         self._closed = False
-        self.saves = 0
-        self.error: str | None = None
         self._thread = threading.Thread(target=self._run, name="somwidget-autosave", daemon=True)
         self._thread.start()
 
-    def submit(self, write) -> None:
-        """Save soon: `write(path)` writes the state (the latest call wins)."""
+    def submit(self, saving: Saving) -> None:
+        """Save `saving` soon (the latest call wins)."""
         with self._cond:
             if self._closed:
                 return
-            self._pending = write
+            self._pending = saving
             self._cond.notify_all()
 
     def flush(self, timeout: float = 10.0) -> bool:
-        """Wait until nothing is pending; False at the timeout."""
+        """Wait until what was submitted is on disk; False at the timeout or while saves fail."""
         deadline = time.monotonic() + timeout
         with self._cond:
             while self._pending is not None or self._writing:
@@ -87,163 +65,198 @@ class Autosave:
                 if left <= 0:
                     return False
                 self._cond.wait(min(left, 0.05))
-        return True
+            return self.error is None
 
     def _run(self) -> None:
         while True:
             with self._cond:
                 while self._pending is None and not self._closed:
                     self._cond.wait()
-                if self._pending is None and self._closed:
+                if self._pending is None:
                     return
-                write, self._pending = self._pending, None
+                saving, self._pending = self._pending, None
                 self._writing = True
             try:
-                write(self.path)  # io.save_session writes a temporary file and renames it over the old one
-                self.saves += 1
-                self.error = None
-            except Exception as exc:  # a full disk must not stop the session
-                self.error = f"autosave to {self.path} failed: {exc}"
-                log.warning("%s", self.error)
-            finally:
+                self.store.commit(saving)
+                error = None
+            except (OSError, ValueError) as exc:  # a full disk must not stop the session
+                where = getattr(exc, "filename", None) or self.store.folder
+                error = (f"autosave failed: cannot write {where}: {getattr(exc, 'strerror', None) or exc}. "
+                         f"Trying again every {RETRY_SECONDS:g} s; the steps since the last save are not on disk yet")
+            with self._cond:
+                self._writing = False
+                if error is None:
+                    self.saves += 1
+                    self.saved_at = time.time()
+                elif self._pending is None:
+                    self._pending = saving  # tried again, unless a newer state comes first
+                changed, self.error = error != self.error, error
+                self._cond.notify_all()
+            if changed:
+                (log.warning if error else log.info)("%s", error or f"autosave works again: {self.store.folder}")
+                try:
+                    self.on_status()
+                except Exception:  # pragma: no cover - a view's trouble must not stop the saves
+                    log.exception("autosave: telling the views failed")
+            if error is not None:
                 with self._cond:
-                    self._writing = False
-                    self._cond.notify_all()
+                    if not self._closed:
+                        self._cond.wait(RETRY_SECONDS)
+                    elif self._pending is saving:  # closing: give up on a disk that keeps refusing
+                        self._pending = None
 
-    def close(self, clean: bool = True, timeout: float = 10.0) -> None:
-        """Stop the writer after what is pending; with `clean`, delete the state and the lock (a clean exit)."""
+    def close(self, timeout: float = 10.0) -> bool:
+        """Write what is pending (for up to `timeout` seconds), stop the thread and let go of the folder (it stays
+        for the next start). False when the latest state could not be written."""
+        ok = self.flush(timeout)
         with self._cond:
-            if self._closed:
-                return
             self._closed = True
             self._cond.notify_all()
-        self._thread.join(timeout)
-        if clean:
-            for p in (self.path, self.lock_path):
-                try:
-                    p.unlink()
-                except FileNotFoundError:
-                    pass
-        self._lock_file.close()
-
-
-def crashed(directory: str | os.PathLike | None = None) -> list[Path]:
-    """State files of sessions that did not close cleanly (their lock is free), newest first; those past
-    KEEP_CRASHED are deleted, as are lock files left without a state."""
-    folder = Path(directory) if directory is not None else autosave_dir()
-    if not folder.is_dir():
-        return []
-    found = []
-    for lock_path in folder.glob("*.lock"):
-        state = lock_path.with_suffix(_SUFFIX)
-        try:
-            with open(lock_path, "a+b") as handle:
-                if not _try_lock(handle):
-                    continue  # a live session
-        except OSError:
-            continue
-        if state.exists():
-            found.append(state)
-        else:
-            _unlink(lock_path)
-    found.sort(key=lambda p: p.stat().st_mtime, reverse=True)
-    for old in found[KEEP_CRASHED:]:
-        discard(old)
-    return found[:KEEP_CRASHED]
-
-
-def discard(state: Path) -> None:
-    """Delete a crashed session's state and lock."""
-    _unlink(state)
-    _unlink(state.with_suffix(".lock"))
-
-
-def _unlink(path: Path) -> None:
-    try:
-        path.unlink()
-    except FileNotFoundError:
-        pass
-
-
-#: While training, the autosave writes at most this often (it always writes when training settles).
-AUTOSAVE_SECONDS = 2.0
+        self._thread.join(max(timeout, 1.0))
+        self.store.release()
+        return ok
 
 
 class SessionAutosave:
-    """When a session's state is written: after a change, once training settles or AUTOSAVE_SECONDS have passed
-    (the training thread asks after each turn), or at once on `flush`. `state()` reads the state to write (io's
-    session dict), `write(path, state)` writes it."""
+    """When a session's state is written (the module's docstring). `snapshot()` gives the Saving of the session now
+    (called under the Som's lock and the clay's lock, with no intent queued); `quiet()`: no intent is queued;
+    `settled()`: training has nothing to do; `drain()`: apply the queued intents now (caller holds the Som's lock)."""
 
-    def __init__(self, clay, state: Callable[[], dict], write: Callable[[Path, dict], None],
-                 settled: Callable[[], bool]):
+    def __init__(self, clay, store: SessionStore, snapshot: Callable[[], Saving], quiet: Callable[[], bool],
+                 settled: Callable[[], bool], drain: Callable[[], object], on_status: Callable[[], None]):
         self.clay = clay
-        self.state = state
-        self.write = write
+        self.snapshot = snapshot
+        self.quiet = quiet
         self.settled = settled
-        self.writer = Autosave()
+        self.drain = drain
+        self.writer = Autosave(store, on_status)
         self._saved_at = 0.0
+        self._completed = -1  # clay.completed at the latest save (-1: a new session's first state is due)
 
     @property
-    def path(self) -> Path:
-        return self.writer.path
+    def path(self):
+        """The session's folder."""
+        return self.writer.store.folder
 
-    def if_due(self, closed: bool) -> None:
-        """Training thread: write the state if something changed since the last save and training has settled (or
-        AUTOSAVE_SECONDS have passed)."""
+    @property
+    def error(self) -> str | None:
+        return self.writer.error
+
+    def _due(self) -> bool:
+        clay = self.clay
+        if clay.completed != self._completed:
+            return True
+        return clay.unsaved and (self.settled() or time.monotonic() - self._saved_at >= AUTOSAVE_SECONDS)
+
+    def if_due(self) -> None:
+        """Training thread, after each turn: write the state if a step completed since the last save, or if it
+        changed and training has settled (or AUTOSAVE_SECONDS have passed)."""
         clay = self.clay
         with clay.lock:
-            if not clay.unsaved or closed:
+            if not self._due():
                 return
-            if not self.settled() and time.monotonic() - self._saved_at < AUTOSAVE_SECONDS:
-                return
-            clay.unsaved = False
-            self._saved_at = time.monotonic()
-        self._submit()
+        with clay.som_lock, clay.lock:
+            if not self._due() or not self.quiet():
+                return  # an intent is on its way: the next turn saves with it
+            saving = self._take()
+        self.writer.submit(saving)
+
+    def _take(self) -> Saving:
+        """The state to save now (caller holds both locks), marked as saved."""
+        saving = self.snapshot()
+        self.clay.unsaved = False
+        self._completed = self.clay.completed
+        self._saved_at = time.monotonic()
+        return saving
 
     def flush(self, timeout: float) -> bool:
-        """Write the current state now and wait until it is on disk; False at the timeout."""
-        with self.clay.lock:
-            self.clay.unsaved = False
-            self._saved_at = time.monotonic()
-        self._submit()
+        """Write the current state now (the queued intents applied first) and wait until it is on disk; False at the
+        timeout or while saves fail."""
+        clay = self.clay
+        with clay.som_lock:
+            self.drain()
+            with clay.lock:
+                saving = self._take()
+        self.writer.submit(saving)
         return self.writer.flush(timeout)
 
-    def _submit(self) -> None:
+    def close(self, timeout: float) -> bool:
+        """Write what changed since the last save and let go of the folder; False when it could not be written."""
+        clay = self.clay
+        with clay.lock:
+            due = clay.unsaved or clay.completed != self._completed
         try:
-            state = self.state()
-        except Exception:  # pragma: no cover - a state that cannot be read now is saved at the next change
-            log.exception("autosave: could not read the session's state")
-            return
-        self.writer.submit(lambda path: self.write(path, state))
+            if due:
+                with clay.som_lock:
+                    self.drain()
+                    with clay.lock:
+                        saving = self._take()
+                self.writer.submit(saving)
+        except Exception:  # pragma: no cover - closing must go on
+            log.exception("autosave: could not read the session's last state")
+        ok = self.writer.close(timeout)
+        if not ok:
+            log.error("somwidget: the session's last steps could not be saved to %s: %s", self.path, self.error)
+        return ok
 
-    def close(self) -> None:
-        self.writer.close(clean=True)
+
+def recovered_message(saved_at: float, preset: str, gesture: bool, undo_steps: int) -> str:
+    """What a view says about a session brought back: when it was saved, and which state it is."""
+    when = time.strftime("%Y-%m-%d %H:%M", time.localtime(saved_at))
+    if gesture:
+        return (f"Brought back your session of {when} ({preset}) as it was during a drag that was not released: "
+                "the drag is kept as a step of its own, which Undo removes.")
+    steps = f"; Undo reaches the {undo_steps} step{'s' if undo_steps != 1 else ''} before it" if undo_steps else ""
+    return f"Brought back your session of {when} ({preset}) as its last completed step{steps}."
 
 
-def recover(session_class, **options):
-    """A session of `session_class` brought back from the newest readable crashed autosave (nothing trains until the
-    next intent), or None; `options` go to the class (device, start...). An unreadable autosave is discarded with
-    the reason in the log. The crashed file goes once the new session has saved its own."""
-    from . import files
+def recover(session_class, origin: str | None = None, **options):
+    """(the newest stopped session of `origin` (None: any) brought back, or None; notices): the session has its undo
+    history and its folder (it goes on saving there), and nothing trains until the next intent; `options` go to
+    `session_class` (device, start...). A folder that cannot be read is set aside (renamed, never deleted) and the next
+    one tried; each notice says what was wrong and where."""
     from .clay import max_vertices_for
 
+    notices: list[str] = []
     start = options.pop("start", True)
     max_vertices = options.get("max_vertices") or max_vertices_for(options.get("device"))
-    for path in crashed():
-        try:
-            state = files.read(path, max_vertices)
-            preset, weights, iteration = files.preset_of(state)
-            saved = path.stat().st_mtime
-        except (ValueError, OSError) as exc:
-            log.warning("autosave %s cannot be read (%s): discarded", path, exc)
-            discard(path)
+    for folder in _store.stopped(notices):
+        manifest = _store.peek(folder)
+        if manifest is not None and origin is not None and manifest.get("origin") != origin:
             continue
-        session = session_class(preset, start=False, **options)
-        session._restore_into(weights, iteration)
-        session.recovered = {"path": str(path), "saved": saved, "preset": state["preset"]}
-        session.flush_autosave()
-        discard(path)
+        try:
+            store = SessionStore.adopt(folder)
+        except OSError as exc:
+            notices.append(f"cannot open the saved session {folder}: {exc.strerror or exc}")
+            continue
+        if store is None:
+            continue  # live: another process has it
+        try:
+            saved = store.read(max_vertices)
+        except Unreadable as exc:
+            try:
+                aside = store.set_aside()
+                notices.append(f"the saved session in {folder} cannot be read ({exc}); it is kept at {aside}")
+            except OSError as err:
+                store.release()
+                notices.append(f"the saved session in {folder} cannot be read ({exc}) nor set aside ({err})")
+            continue
+        if origin is not None and saved.origin != origin:
+            store.release()
+            continue
+        try:
+            session = session_class(saved.current.preset, start=False, origin=saved.origin, _store=store, **options)
+        except ValueError as exc:  # it does not fit this device
+            store.release()
+            notices.append(f"the saved session in {folder} cannot be brought back here: {exc}")
+            continue
+        session._bring_back(saved)
+        session.recovered = {"path": str(folder), "saved": saved.saved, "preset": saved.current.preset.name,
+                             "gesture": saved.gesture, "undo": len(saved.undo), "redo": len(saved.redo),
+                             "message": recovered_message(saved.saved, saved.current.preset.title or
+                                                          saved.current.preset.name, saved.gesture, len(saved.undo))}
+        session.notices.extend(notices)
         if start:
             session.start()
-        return session
-    return None
+        return session, notices
+    return None, notices

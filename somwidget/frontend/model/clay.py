@@ -101,6 +101,7 @@ class Clay:
         self.error: str | None = None  # the latest refused intent or failed step, for the views
         self.gesture = False  # a gesture (a drag) is open: its intents make one undo step
         self.unsaved = True  # a change the autosave has not written yet (a new session: its first state)
+        self.completed = 0  # steps completed (and undos, redos) so far: the autosave writes each at once
         self._next_id = 0
         self.install(preset, som)
 

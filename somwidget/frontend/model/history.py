@@ -1,33 +1,43 @@
-"""Undo and redo: the states a session passed through, one per completed gesture.
+"""Undo and redo: the states a session passed through, one per completed step.
 
 A `Step` is everything a session needs to be put back exactly: the preset (mesh, layout), the controls, the
 parameters, the weights and s. `History` keeps two stacks of them. Their weights are the bulk: the newest steps keep
-theirs in memory up to `memory_bytes`; older ones are written to `spill_dir` (one .npy each) up to `disk_bytes`
-and read back when reached; the oldest beyond both bounds are forgotten. So a 65,536-vertex session (768 KiB of
-weights a step at 3 dims) keeps MAX_STEPS steps with about 100 MiB in memory, never MAX_STEPS copies.
+theirs in memory up to `memory_bytes`; older ones are handed to a shelf (a folder of files: a temporary one, or the
+session's autosave store, which keeps every step on disk) and read back when reached; past `disk_bytes` of steps in
+all, or MAX_STEPS a stack, the oldest are forgotten. So a 65,536-vertex session (768 KiB of weights a step at 3 dims)
+keeps MAX_STEPS steps with about 100 MiB in memory, never MAX_STEPS copies.
 """
 
 from __future__ import annotations
 
+import itertools
+import logging
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass, replace
+import zipfile
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
+log = logging.getLogger(__name__)
+
 #: The most steps kept for undo (and as many for redo).
 MAX_STEPS = 200
-#: Weights of the newest steps kept in memory, in bytes; older steps' weights go to disk.
+#: Weights of the newest steps kept in memory, in bytes; older steps' weights are read back from disk when reached.
 MEMORY_BYTES = 128 << 20
-#: Weights written to disk for older steps, in bytes; past this the oldest steps are forgotten.
+#: Weights of all the steps kept, in bytes (in memory and on disk); past this the oldest steps are forgotten.
 DISK_BYTES = 2 << 30
+
+_KEYS = itertools.count(1)
 
 
 @dataclass(frozen=True)
 class Step:
-    """One state of a session. `weights` is an (N, n) float32 array, or a Path to one saved with np.save."""
+    """One state of a session. `weights` is an (N, n) float32 array, or the Path of a step file (`load_weights`).
+    `key` names the step while the process lives (a copy with its weights elsewhere keeps it)."""
 
     preset: object
     controls: np.ndarray
@@ -37,31 +47,101 @@ class Step:
     radii: np.ndarray | None = None  # each control's radius (None: all 0)
     symmetry: object = None  # the Symmetry group in effect, or None
     strokes: tuple | None = None  # the lengths of the runs of controls that act as one (None: each alone)
+    key: int = field(default_factory=lambda: next(_KEYS), compare=False)
 
     @property
     def nbytes(self) -> int:
+        """Bytes of weights this step holds in memory."""
         return int(self.weights.nbytes) if isinstance(self.weights, np.ndarray) else 0
 
+    @property
+    def size(self) -> int:
+        """Bytes of weights this step keeps, in memory or on disk."""
+        if isinstance(self.weights, np.ndarray):
+            return int(self.weights.nbytes)
+        try:
+            return self.weights.stat().st_size
+        except OSError:
+            return 0
+
     def loaded(self) -> Step:
-        """This step with its weights in memory."""
+        """This step with its weights in memory (OSError or ValueError when its file cannot be read)."""
         if isinstance(self.weights, np.ndarray):
             return self
-        return replace(self, weights=np.load(self.weights, allow_pickle=False))
+        return replace(self, weights=load_weights(self.weights))
+
+
+def load_weights(path: Path) -> np.ndarray:
+    """The weights of a step file (an .npz with a "weights" member)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            weights = z["weights"]
+    except (zipfile.BadZipFile, KeyError, EOFError) as exc:
+        raise ValueError(f"{path}: not a step file ({exc})") from None
+    if weights.dtype != np.float32 or weights.ndim != 2 or not np.isfinite(weights).all():
+        raise ValueError(f"{path}: not the weights of a step ({weights.dtype} {weights.shape})")
+    return weights
+
+
+class Shelf(Protocol):
+    """Where a History's steps go on disk: `put(step)` writes the step (once) and returns its file; `drop(step)`:
+    the history forgot it; `close()`: the history is closed."""
+
+    def put(self, step: Step) -> Path: ...
+
+    def drop(self, step: Step) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class TemporaryShelf:
+    """Steps' weights in a temporary folder of their own (made when first needed), deleted with it."""
+
+    def __init__(self, parent: str | os.PathLike | None = None):
+        self.parent = parent
+        self.folder: Path | None = None
+        self._files: dict[int, Path] = {}
+
+    def put(self, step: Step) -> Path:
+        if step.key in self._files:
+            return self._files[step.key]
+        if self.folder is None:
+            if self.parent is not None:
+                Path(self.parent).mkdir(parents=True, exist_ok=True)
+            self.folder = Path(tempfile.mkdtemp(prefix="history-", dir=self.parent))
+        path = self.folder / f"step-{step.key}.npz"
+        with open(path, "wb") as f:
+            np.savez(f, weights=np.asarray(step.weights, np.float32))
+        self._files[step.key] = path
+        return path
+
+    def drop(self, step: Step) -> None:
+        path = self._files.pop(step.key, None)
+        if path is not None:
+            try:
+                path.unlink()
+            except OSError:
+                pass
+
+    def close(self) -> None:
+        self._files.clear()
+        if self.folder is not None:
+            shutil.rmtree(self.folder, ignore_errors=True)
+            self.folder = None
 
 
 class History:
-    """Undo and redo stacks of Steps with bounded memory and disk (see the module's docstring)."""
+    """Undo and redo stacks of Steps with bounded memory and disk (see the module's docstring). `shelf`: where
+    steps go on disk (default: a TemporaryShelf under `spill_dir`)."""
 
     def __init__(self, max_steps: int = MAX_STEPS, memory_bytes: int = MEMORY_BYTES, disk_bytes: int = DISK_BYTES,
-                 spill_dir: str | os.PathLike | None = None):
+                 spill_dir: str | os.PathLike | None = None, shelf: Shelf | None = None):
         self.max_steps = max_steps
         self.memory_bytes = memory_bytes
         self.disk_bytes = disk_bytes
-        self._spill_root = spill_dir
-        self._spill: Path | None = None
+        self.shelf: Shelf = shelf if shelf is not None else TemporaryShelf(spill_dir)
         self._undo: list[Step] = []
         self._redo: list[Step] = []
-        self._files = 0
 
     @property
     def undo_count(self) -> int:
@@ -71,8 +151,18 @@ class History:
     def redo_count(self) -> int:
         return len(self._redo)
 
+    def steps(self) -> tuple[list[Step], list[Step]]:
+        """(undo steps, redo steps), oldest first: copies of the stacks (what the autosave writes)."""
+        return list(self._undo), list(self._redo)
+
+    def restore(self, undo: list[Step], redo: list[Step]) -> None:
+        """Take over the stacks of a recovered session (its steps on the shelf already), then keep the bounds."""
+        self.clear()
+        self._undo, self._redo = list(undo), list(redo)
+        self._bound()
+
     def push(self, before: Step) -> None:
-        """A gesture completes: `before` is the state it started from. Redo steps are dropped."""
+        """A step begins: `before` is the state it started from. Redo steps are dropped."""
         self._discard(self._redo)
         self._redo = []
         self._undo.append(before)
@@ -92,23 +182,28 @@ class History:
         return self._travel(self._redo, self._undo, current)
 
     def _travel(self, source: list[Step], dest: list[Step], current: Step) -> Step | None:
-        """Take the top of `source` (in memory), leave `current` on `dest`."""
+        """Take the top of `source` (in memory), leave `current` on `dest`. A step whose file cannot be read is
+        forgotten, with a ValueError that says so."""
         if not source:
             return None
         step = source.pop()
+        try:
+            out = step.loaded()
+        except (OSError, ValueError) as exc:
+            self._discard([step])
+            raise ValueError(f"this step cannot be read back from {step.weights} ({exc}); it is forgotten") from None
         dest.append(current)
+        self._discard([step])
         self._bound()
-        return self._load(step)
+        return out
 
     def clear(self) -> None:
         self._discard(self._undo + self._redo)
         self._undo, self._redo = [], []
 
     def close(self) -> None:
-        self.clear()
-        if self._spill is not None:
-            shutil.rmtree(self._spill, ignore_errors=True)
-            self._spill = None
+        self._undo, self._redo = [], []
+        self.shelf.close()
 
     @property
     def memory_used(self) -> int:
@@ -125,44 +220,29 @@ class History:
                 if in_memory + step.nbytes <= self.memory_bytes:
                     in_memory += step.nbytes
                 else:
-                    self._spill_step(step)
+                    self._spill(step)
         self._forget_past_disk()
 
-    def _spill_step(self, step: Step) -> None:
-        if self._spill is None:
-            root = self._spill_root
-            if root is not None:
-                Path(root).mkdir(parents=True, exist_ok=True)
-            self._spill = Path(tempfile.mkdtemp(prefix="history-", dir=root))
-        self._files += 1
-        path = self._spill / f"step-{self._files}.npy"
-        np.save(path, step.weights, allow_pickle=False)
+    def _spill(self, step: Step) -> None:
+        """Keep `step`'s weights on the shelf only (a disk that refuses keeps them in memory for now)."""
+        try:
+            path = self.shelf.put(step)
+        except OSError as exc:
+            log.warning("history: could not write a step to disk (%s); it stays in memory", exc)
+            return
         for stack in (self._undo, self._redo):
             for i, s in enumerate(stack):
                 if s is step:
                     stack[i] = replace(step, weights=path)
 
     def _forget_past_disk(self) -> None:
-        """Oldest undo steps go first once the files pass disk_bytes."""
-        def size(s: Step) -> int:
-            return s.weights.stat().st_size if isinstance(s.weights, Path) and s.weights.exists() else 0
-
-        total = sum(size(s) for s in self._undo + self._redo)
+        """Oldest undo steps go first once all the steps' weights pass disk_bytes."""
+        total = sum(s.size for s in self._undo + self._redo)
         while total > self.disk_bytes and self._undo:
             old = self._undo.pop(0)
-            total -= size(old)
+            total -= old.size
             self._discard([old])
 
-    def _load(self, step: Step) -> Step:
-        out = step.loaded()
-        self._discard([step])
-        return out
-
-    @staticmethod
-    def _discard(steps: list[Step]) -> None:
+    def _discard(self, steps: list[Step]) -> None:
         for s in steps:
-            if isinstance(s.weights, Path):
-                try:
-                    s.weights.unlink()
-                except OSError:
-                    pass
+            self.shelf.drop(s)

@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -139,13 +138,8 @@ class PanelModel:
         return out
 
     def recovered_message(self) -> str:
-        """What the panel's banner says about a session recovered after a crash ("" for any other)."""
-        found = self.session.recovered
-        if not found:
-            return ""
-        saved = time.strftime("%Y-%m-%d %H:%M", time.localtime(found["saved"]))
-        return (f"Recovered your session of {saved} ({found['preset'] or 'a session'}), which did not close cleanly: "
-                "everything is as its last completed step left it.")
+        """What the panel's banner says about a session brought back (which state came back), "" for any other."""
+        return (self.session.recovered or {}).get("message", "")
 
     @staticmethod
     def train_label(frame: Frame) -> str:

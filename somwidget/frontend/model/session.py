@@ -2,8 +2,9 @@
 
 A `Session` owns the clay (clay.py: the preset, its Som, the controls and parameters) and composes its parts: the
 training thread (trainer.py), the frames it publishes (frames.py), the undo history (timeline.py), the autosave
-(autosave.py) and the files (files.py). Views send *intents* (move control i, set a parameter, reset, train, pause,
-load a preset) and receive *frames* through listeners:
+(autosave.py: each completed step and the history in the session's folder, store.py) and the files (files.py).
+Views send *intents* (move control i, set a parameter, reset, train, pause, load a preset) and receive *frames*
+through listeners:
 
     view --intent--> Session --Operation--> training thread (som.step(k)) --Frame--> every listener
 
@@ -36,6 +37,7 @@ from ...backend import presets as _presets
 from ...backend.presets import FeatureLayout, Preset
 from . import autosave as _autosave
 from . import files
+from . import store as _store
 from .clay import GPU_MAX_VERTICES, Clay, build, max_vertices_for
 from .frames import Frame, FrameListener, FrameStream
 from .controls import ControlEdits
@@ -54,7 +56,7 @@ _LIVE: weakref.WeakSet = weakref.WeakSet()
 
 @atexit.register
 def _close_live_sessions() -> None:
-    """A process that ends normally closes its sessions cleanly (their autosaves go); a crash leaves them."""
+    """A process that ends normally closes its sessions: what changed since their last save is written."""
     for session in list(_LIVE):
         try:
             session.close(timeout=2.0)
@@ -71,29 +73,34 @@ class Session:
     step_fraction: share of each frame interval spent in som.step (the rest is left to rendering)
     start:      start the training thread now (else call `start()`)
     paused:     begin paused (no training until `train()`)
-    autosave:   keep each completed step on disk (autosave.py) so that `Session.recover()` can bring it back after a
-                crash; False for a session nothing should outlive
+    autosave:   keep each completed step and the undo history on disk (autosave.py), so that `Session.recover()`
+                brings the session back however it stopped; False for a session nothing should outlive
+    origin:     what made the session, kept with its autosave: `Session.recover(origin=...)` takes only those
+                (`somwidget serve` makes and recovers "serve" sessions)
     """
 
     def __init__(self, preset: str | Preset | None = "car", device: str | None = "auto", frame_rate: float = 60.0,
                  step_fraction: float = 0.6, start: bool = True, paused: bool = False,
-                 max_vertices: int | None = None, autosave: bool = True):
+                 max_vertices: int | None = None, autosave: bool = True, origin: str = "python", *, _store=None):
         frame_rate = checks.real("frame_rate", frame_rate, 0.0, 1000.0, low_open=True)
         step_fraction = checks.real("step_fraction", step_fraction, 0.0, 1.0, low_open=True)
         self.device = "auto" if device is None else device
         if max_vertices is None:
             max_vertices = max_vertices_for(self.device)
         self.max_vertices = checks.integer_text("max_vertices", max_vertices, 1, GPU_MAX_VERTICES)
-        self.recovered: dict | None = None  # set by `recover()`: where the state came from and when it was saved
+        self.recovered: dict | None = None  # set by `recover()`: where the state came from, when, and its "message"
+        self.notices: list[str] = []  # what went wrong with the saved sessions (set aside, unreadable), to show
         self.clay = Clay(*build(preset, self.device, self.max_vertices), paused=paused)
         self.frames = FrameStream(self.clay.wake)
         self.trainer = Trainer(self.clay, self.frames, self._make_frame, self._after_turn, frame_rate, step_fraction)
-        self.timeline = Timeline(self.clay, self.trainer, self._rebuild, self._install_frame)
+        store = _store if _store is not None or not autosave else _store_for(origin, self.notices)
+        self.timeline = Timeline(self.clay, self.trainer, self._rebuild, self._install_frame, shelf=store)
         self.edit_controls = ControlEdits(self.clay, self.timeline, self.trainer, self.frames)
         self.edit_parameters = ParameterEdits(self.clay, self.timeline, self.trainer)
         self.frames.install(self._make_frame(0))
-        self.autosave = (_autosave.SessionAutosave(self.clay, self.session_state, files.write, self._settled)
-                         if autosave else None)
+        self.autosave = None if store is None else _autosave.SessionAutosave(
+            self.clay, store, self._saving, lambda: not self.trainer.ops, self._settled, self.trainer.drain,
+            self._publish)
         _LIVE.add(self)
         if start:
             self.start()
@@ -117,8 +124,19 @@ class Session:
         self.frames.install(self._make_frame(0))
 
     def _after_turn(self) -> None:
-        if self.autosave is not None:
-            self.autosave.if_due(self.trainer.closed)
+        if self.autosave is not None and not self.trainer.closed:
+            self.autosave.if_due()
+
+    def _saving(self) -> _store.Saving:
+        """What the autosave writes now (caller holds both locks, no intent queued)."""
+        undo, redo = self.timeline.history.steps()
+        return _store.Saving(self.clay.capture(), undo, redo, gesture=self.timeline.gesture_recorded)
+
+    def _publish(self) -> None:
+        """A frame for every view now (the autosave's status changed: the views show it)."""
+        with self.clay.lock:
+            if not self.trainer.closed:
+                self.trainer.enqueue(Publish(), intent=False)
 
     def _settled(self) -> bool:
         return not self.trainer.should_step() and not self.trainer.ops
@@ -151,12 +169,13 @@ class Session:
         self.trainer.start()
 
     def close(self, timeout: float = 5.0) -> None:
-        """Stop the training thread; the session accepts no more intents. A clean close: its autosave goes."""
+        """Stop the training thread; the session accepts no more intents. What changed since the last save is
+        written (for up to `timeout` seconds), and the session's folder stays for `Session.recover()`."""
         if not self.trainer.close(timeout):
             return
         _LIVE.discard(self)
         if self.autosave is not None:
-            self.autosave.close()
+            self.autosave.close(timeout)
         self.timeline.close()
 
     def __enter__(self):
@@ -257,6 +276,11 @@ class Session:
     def error(self) -> str | None:
         """The latest failure (a refused intent, a failed step), or why the training thread stopped."""
         return self.trainer.thread_error or self.clay.error
+
+    @property
+    def save_error(self) -> str | None:
+        """Why the autosave cannot write now (what and where; it tries again every second), None while it works."""
+        return None if self.autosave is None else self.autosave.error
 
     @property
     def training_device(self) -> str:
@@ -540,28 +564,49 @@ class Session:
     # -- autosave and recovery ---------------------------------------------------------------------------------
     @property
     def autosave_path(self) -> Path | None:
-        """Where this session's latest state is kept while it lives (None without autosave)."""
+        """The folder this session's steps and history are kept in (store.py; None without autosave)."""
         return None if self.autosave is None else self.autosave.path
 
     def flush_autosave(self, timeout: float = 10.0) -> bool:
-        """Write the current state to the autosave now and wait until it is on disk; False at the timeout or
-        without autosave."""
+        """Write the current state to the autosave now and wait until it is on disk; False at the timeout, while
+        saves fail, or without autosave."""
         return False if self.autosave is None else self.autosave.flush(timeout)
 
     @classmethod
-    def recover(cls, **options) -> Session | None:
-        """The session of the latest exit that did not close cleanly (a crash, a kill), restored exactly as its
-        autosave left it (nothing trains until the next intent); None if there is none. `options` go to Session
-        (device, start...). Its autosave is taken over: it is deleted once the new session has saved its own."""
-        return _autosave.recover(cls, **options)
+    def recover(cls, origin: str | None = "python", **options) -> Session | None:
+        """The session that stopped last (however it stopped: closed, interrupted, killed, crashed), of `origin`
+        ("python": made from Python, a notebook's included; "serve": `somwidget serve`'s; None: any), brought back
+        as its autosave left it: its last completed step (or a drag not released, as a step of its own) with its
+        undo history; nothing trains until the next intent. None if there is none. `session.recovered["message"]`
+        says which state came back. `options` go to Session (device, start...). It goes on saving in the same
+        folder. A saved session that cannot be read is set aside (renamed, never deleted; `session.notices` and the
+        log say where) and the next one tried."""
+        session, notices = _autosave.recover(cls, origin, **options)
+        for notice in notices:
+            log.warning("%s", notice)
+        return session
 
-    def _restore_into(self, weights, iteration: int) -> None:
-        """Weights and s into the Som of the installed preset (which holds the rest), held: nothing trains."""
+    def _bring_back(self, saved) -> None:
+        """Put a session read from its folder in place (its preset is the installed one): the current step exactly,
+        held, and its undo and redo steps."""
         clay = self.clay
-        with clay.som_lock, clay.lock:
-            clay.som.restore(weights, iteration)
-            clay.hold = True
-            self._install_frame()
+        with clay.som_lock:
+            self.timeline.put_back(saved.current)
+            with clay.lock:
+                self.timeline.history.restore(saved.undo, saved.redo)
+                clay.unsaved = True
+                self._install_frame()
+
+
+def _store_for(origin: str, notices: list[str]) -> _store.SessionStore:
+    """A new session's folder (made with its first save), after the stopped sessions past the bounds are pruned."""
+    store = _store.SessionStore.new(origin)
+    try:
+        store.open(notices)
+    except OSError as exc:  # the autosave says so, and tries again
+        log.warning("autosave: cannot make %s (%s); trying again with each save", store.folder, exc.strerror or exc)
+    _store.prune()
+    return store
 
 
 __all__ = ["Frame", "Session"]

@@ -25,6 +25,9 @@ def summary(session, positions: bool = False) -> dict:
         },
         "frames_per_second": session.frames_per_second, "error": session.error,
         "history": list(frame.history), "held": frame.held, "recovered": session.recovered is not None,
+        "recovered_message": (session.recovered or {}).get("message", ""), "notices": list(session.notices),
+        "autosave": {"path": None if session.autosave_path is None else str(session.autosave_path),
+                     "error": session.save_error},
     }
     if positions:
         out["frame"]["positions"] = frame.positions.tolist()

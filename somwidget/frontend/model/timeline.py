@@ -2,7 +2,8 @@
 
 Every completed gesture is one undo step (history.py keeps them): a drag from `begin_gesture()` to `end_gesture()`,
 and each other intent call (a control added, removed or recoloured, a parameter set, a reset, a preset, a mesh, a
-loaded session); the same parameter set again within PARAMETER_STEP_SECONDS joins its step (a slider's drag).
+loaded session); the same parameter set again within PARAMETER_STEP_SECONDS joins its step (a slider's drag). Each
+completed step (and each undo or redo) counts in `clay.completed`: the autosave writes it at once.
 
 Drags: each frame of a drag is the local restart from the shape the drag began with (the Som anchors it,
 `Som.anchor`), to the hand's latest position; so a drag ends exactly as one move there would, however many frames it
@@ -16,7 +17,7 @@ import time
 from collections.abc import Callable
 
 from .clay import Clay
-from .history import History, Step
+from .history import History, Shelf, Step
 from .operations import Publish
 from .trainer import Trainer
 
@@ -28,18 +29,24 @@ class Timeline:
     """The undo history of one session and the gesture in progress.
 
     rebuild(preset): install another preset's Som (a step of an earlier preset); install_frame(): make and keep a
-    frame of the state put back."""
+    frame of the state put back; shelf: where the history's steps go on disk (None: a temporary folder)."""
 
     def __init__(self, clay: Clay, trainer: Trainer, rebuild: Callable[[object], None],
-                 install_frame: Callable[[], None]):
+                 install_frame: Callable[[], None], shelf: Shelf | None = None):
         self.clay = clay
         self.trainer = trainer
         self.rebuild = rebuild
         self.install_frame = install_frame
-        self.history = History()
+        self.history = History(shelf=shelf)
         self._gesture_step: Step | None = None  # the step the open gesture recorded, once it changed something
         self.anchor = None  # in a drag: the Som that anchored its weights (where each frame restarts)
         self._last_step: tuple[str, float] = ("", 0.0)  # kind and time of the latest recorded step
+
+    @property
+    def gesture_recorded(self) -> bool:
+        """A gesture is open and has changed something (its step is recorded): the state now is a drag not yet
+        released (caller holds clay.lock)."""
+        return self.clay.gesture and self._gesture_step is not None
 
     @property
     def counts(self) -> tuple[int, int]:
@@ -61,6 +68,8 @@ class Timeline:
             clay.gesture = False
             self.anchor = None
             clay.unsaved = True
+            if self._gesture_step is not None:
+                clay.completed += 1
             clay.wake.notify_all()
 
     def drag_anchor(self):
@@ -92,6 +101,8 @@ class Timeline:
                 self._gesture_step, self.anchor = step, anchor
             self._last_step = (kind, time.monotonic())
             clay.unsaved = True
+            if not clay.gesture:
+                clay.completed += 1
 
     def _record(self) -> tuple[Step, object]:
         """Push the current state (every queued intent applied first) as an undo step. Returns it, and inside a
@@ -131,6 +142,7 @@ class Timeline:
         with clay.lock:
             self._last_step = ("", 0.0)
             clay.unsaved = True
+            clay.completed += 1
             self.trainer.enqueue(Publish(), intent=False)
         return True
 

@@ -1,5 +1,6 @@
-"""`somwidget serve`: one session (recovered when the last one did not close cleanly), its web app, served until
-interrupted; beyond loopback over HTTPS with an access token (lan.py).
+"""`somwidget serve`: one session (the one the last serve left, however it stopped, unless --fresh), its web app,
+served until interrupted (Ctrl+C, SIGTERM: what changed since the last save is written); beyond loopback over HTTPS
+with an access token (lan.py).
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ import sys
 
 from ...backend import device as _device
 from ..model import Session
+from ..model import autosave as _autosave
 from ..model.clay import max_vertices_for
 from . import lan as _lan
 from .app import build_app
@@ -23,8 +25,9 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
     preset: a preset name (default "car", case study 2); mesh: a mesh file to start from instead (io.load_mesh);
     host: interface to listen on (loopback by default; "0.0.0.0" every interface; "" is refused); port: 0 picks a
     free one (the printed URL has it); device: "auto", "cpu", "cuda" or "cuda:N" for the training. Unless `fresh`,
-    a session that did not close cleanly (a crash, a kill) comes back as its autosave left it, and the panel says so
-    with a "Start fresh" button that loads `preset` or `mesh` instead. lan: serve on
+    the session the last `somwidget serve` left comes back as its autosave left it (its last completed step and its
+    undo history, however that server stopped), and the panel says so with a "Start fresh" button that loads
+    `preset` or `mesh` instead; a saved session that cannot be read is set aside and the panel says where. lan: serve on
     this machine's LAN address. Any address beyond loopback is served over HTTPS (a self-signed certificate, made
     once and reused) with an access token on every route, and the URL, certificate fingerprint and a QR code for a
     headset are printed.
@@ -43,12 +46,15 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
 
         start = sw_io.load_mesh(mesh, max_vertices=max_vertices_for(device))
         start.name = f"mesh:{start.name}"
-    session = None if fresh else Session.recover(device=device, start=False)
+    session, notices = (None, []) if fresh else _autosave.recover(Session, "serve", device=device, start=False)
+    for notice in notices:
+        print(f"somwidget: {notice}", flush=True)
     if session is not None:
-        print(f"somwidget: recovered the session that did not close cleanly ({session.recovered['path']}); "
-              "`somwidget serve --fresh` starts anew", flush=True)
+        print(f"somwidget: {session.recovered['message']} (from {session.recovered['path']}; "
+              "`somwidget serve --fresh` starts anew)", flush=True)
     else:
-        session = Session(start, device=device, start=False)
+        session = Session(start, device=device, start=False, origin="serve")
+        session.notices[:0] = notices
     app = build_app(session, fresh=start)
     if lan_cfg is not None:
         app.xr_token = lan_cfg.token

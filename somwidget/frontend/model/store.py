@@ -1,0 +1,527 @@
+"""A session's home on disk: the folder its autosave keeps under storage.autosave_dir(), one per session, so that
+whatever ends the process (a clean stop, a kill, a crash, the power) the next start can bring the session back with
+its undo history.
+
+A session's folder holds:
+
+    lock            locked (flock) for as long as a process has the session: a folder whose lock is held is never
+                    read, pruned or taken by another process
+    manifest.json   the session: its current step, the undo and redo steps (oldest first), each with its preset and
+                    settings; whether the current step is a drag not yet released ("gesture"); when it was saved
+                    ("saved") and which program made it ("origin": "serve" for `somwidget serve`)
+    s<n>.npz        one step's arrays (weights, controls, radii): written once, never changed
+    p<n>.npz        one preset's start (a session file, io.save_session): written once
+
+Every file is written whole under a temporary name, flushed to the disk (fsync) and renamed into place, the manifest
+last; so a kill at any moment leaves the previous manifest and every file it names whole. A file that no manifest
+names any more is deleted once the next manifest is on disk.
+
+Stopped sessions are pruned (`prune`): those older than KEEP_DAYS go, and past KEEP_SESSIONS of them or KEEP_BYTES
+in all the oldest go first; the newest stopped session is always kept. A folder or file that cannot be read is set
+aside under a name ending ".unreadable" (`set_aside`), never deleted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import os
+import re
+import shutil
+import threading
+import time
+import uuid
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ...backend import io as sw_io
+from ...backend.presets import MAX_CONTROLS, Preset
+from ...backend.schedule import KEYS as SCHEDULE_KEYS
+from ...backend.schedule import MAX_ITERATIONS, Schedule
+from ...backend.symmetry import Symmetry
+from .history import Step
+from .storage import autosave_dir
+
+log = logging.getLogger(__name__)
+
+#: The manifest's format; `read` takes this one.
+FORMAT = 1
+MANIFEST = "manifest.json"
+LOCK = "lock"
+#: Stopped sessions are kept this many days...
+KEEP_DAYS = 30
+#: ...at most this many of them...
+KEEP_SESSIONS = 50
+#: ...and at most this many bytes in all (the newest stopped session is always kept).
+KEEP_BYTES = 4 << 30
+#: A folder changed within this many seconds is never pruned (a session being made).
+FRESH_SECONDS = 60.0
+UNREADABLE = ".unreadable"
+_STEP_FILE = re.compile(r"s(\d+)\.npz")
+_PRESET_FILE = re.compile(r"p(\d+)\.npz")
+#: The parameters a step keeps (Clay.params): the schedule, the symmetry switch, the metric weights.
+PARAMETER_KEYS = frozenset({*SCHEDULE_KEYS, "symmetry", "metric_weights"})
+
+
+class Unreadable(ValueError):
+    """A stored session that cannot be read back: the message names the file and what is wrong."""
+
+
+@dataclass(frozen=True)
+class Saving:
+    """What one save writes: the current step, the undo and redo stacks (oldest first), and whether the current step
+    is a drag not yet released."""
+
+    current: Step
+    undo: list
+    redo: list
+    gesture: bool = False
+
+
+@dataclass(frozen=True)
+class Saved:
+    """A session read back from its folder (`SessionStore.read`)."""
+
+    current: Step
+    undo: list
+    redo: list
+    gesture: bool
+    saved: float  # when it was written (time.time())
+    origin: str
+
+
+# -- files --------------------------------------------------------------------------------------------------------
+def write_atomic(path: Path, write) -> None:
+    """`write(f)` into a temporary file beside `path`, flushed to the disk, then renamed over `path`: `path` is
+    either its old content or the whole new one, whatever happens meanwhile."""
+    tmp = path.with_name(f".tmp-{path.name}-{uuid.uuid4().hex[:8]}")
+    try:
+        with open(tmp, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise
+
+
+def sync_folder(folder: Path) -> None:
+    """Flush a folder's entries (the names just renamed into it) to the disk."""
+    if os.name != "posix":  # pragma: no cover - Windows has no directory handles to flush
+        return
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def lock(path: Path):
+    """The open lock file at `path`, locked exclusively (the OS drops the lock when the process ends, however it
+    ends), or None when another process holds it. OSError when the file cannot be opened."""
+    handle = open(path, "a+b")  # noqa: SIM115 (held open for as long as the lock is)
+    try:
+        import fcntl
+
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return handle
+        except OSError:
+            pass
+    except ImportError:  # pragma: no cover - Windows
+        import msvcrt
+
+        try:
+            msvcrt.locking(handle.fileno(), msvcrt.LK_NBLCK, 1)
+            return handle
+        except OSError:
+            pass
+    handle.close()
+    return None
+
+
+def set_aside(path: Path) -> Path:
+    """Rename `path` (a file or a folder that cannot be read) to a free name ending ".unreadable", beside it; the new
+    path. Nothing is deleted."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    for i in range(1000):
+        target = path.with_name(f"{path.name}{UNREADABLE}-{stamp}" + (f"-{i}" if i else ""))
+        if not target.exists():
+            os.replace(path, target)
+            return target
+    raise OSError(f"no free name to set {path} aside")  # pragma: no cover
+
+
+def sessions_folder(notices: list[str] | None = None) -> Path:
+    """The folder of every session's folder (storage.autosave_dir()). Something else at its path (a file) is set aside
+    and a notice says where; OSError when it cannot be made."""
+    folder = autosave_dir()
+    if folder.exists() and not folder.is_dir():
+        aside = set_aside(folder)
+        message = f"the autosave folder {folder} was a file, not a folder: it is kept at {aside}"
+        log.warning("%s", message)
+        if notices is not None:
+            notices.append(message)
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def _session_folders(folder: Path) -> list[tuple[float, Path]]:
+    """(when it was last saved, folder) of each session folder under `folder`, newest first."""
+    found = []
+    for entry in folder.iterdir():
+        if UNREADABLE in entry.name or not entry.is_dir():
+            continue
+        manifest, lock_path = entry / MANIFEST, entry / LOCK
+        try:
+            when = (manifest if manifest.exists() else lock_path).stat().st_mtime
+        except OSError:
+            continue  # neither: not a session's folder
+        found.append((when, entry))
+    found.sort(key=lambda item: item[0], reverse=True)
+    return found
+
+
+def stopped(notices: list[str] | None = None) -> list[Path]:
+    """The folders of saved sessions, newest first (a live one among them is skipped by `SessionStore.adopt`)."""
+    try:
+        folder = sessions_folder(notices)
+        return [p for _, p in _session_folders(folder) if (p / MANIFEST).exists() or (p / MANIFEST).is_symlink()]
+    except OSError as exc:
+        message = f"cannot read the autosave folder {autosave_dir()}: {exc.strerror or exc}"
+        log.warning("%s", message)
+        if notices is not None:
+            notices.append(message)
+        return []
+
+
+def peek(folder: Path) -> dict | None:
+    """A session folder's manifest, or None when it cannot be read."""
+    try:
+        data = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))
+        return data if isinstance(data, dict) else None
+    except (OSError, ValueError):
+        return None
+
+
+def _size(folder: Path) -> int:
+    total = 0
+    for entry in os.scandir(folder):
+        try:
+            total += entry.stat(follow_symlinks=False).st_size
+        except OSError:
+            pass
+    return total
+
+
+def prune(keep_days: float = KEEP_DAYS, keep_sessions: int = KEEP_SESSIONS, keep_bytes: int = KEEP_BYTES) -> list[Path]:
+    """Delete stopped sessions by age, count and size (the module's docstring says the rule); returns what went.
+    Live sessions, folders changed within FRESH_SECONDS and unreadable ones set aside are left alone."""
+    try:
+        folder = autosave_dir()
+        if not folder.is_dir():
+            return []
+        entries = _session_folders(folder)
+    except OSError:
+        return []
+    now, kept, kept_bytes, gone = time.time(), 0, 0, []
+    for when, entry in entries:
+        if now - when < FRESH_SECONDS:
+            continue
+        try:
+            handle = lock(entry / LOCK)
+        except OSError:
+            continue
+        if handle is None:
+            continue  # live
+        try:
+            size = _size(entry)
+            has_manifest = (entry / MANIFEST).exists()
+            if has_manifest and (kept == 0 or (now - when <= keep_days * 86400 and kept < keep_sessions
+                                               and kept_bytes + size <= keep_bytes)):
+                kept, kept_bytes = kept + 1, kept_bytes + size
+                continue
+            shutil.rmtree(entry, ignore_errors=True)
+            gone.append(entry)
+        finally:
+            handle.close()
+    return gone
+
+
+# -- one session's folder ------------------------------------------------------------------------------------------
+def _jsonable(value):
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (np.floating,)):
+        return float(value)
+    if isinstance(value, (np.ndarray, tuple)):
+        return list(value)
+    raise TypeError(f"cannot write {type(value).__name__} to a manifest")
+
+
+class SessionStore:
+    """One session's folder (see the module's docstring). `put` and `drop` make it the shelf of the session's
+    History; `commit` writes a save; `read` reads the folder back. Made with `new` (the folder and its lock come with
+    the first write) or `adopt` (a stopped session's folder, locked at once)."""
+
+    def __init__(self, folder: Path, origin: str, handle=None):
+        self.folder = Path(folder)
+        self.origin = origin
+        self._handle = handle  # the lock file, open and locked
+        self._lock = threading.Lock()
+        self._files: dict[int, str] = {}  # step key -> its file's name
+        self._presets: dict[int, tuple[Preset, str]] = {}  # id(preset) -> (the preset, its file's name)
+        self._current: int | None = None  # the key of the current step the manifest on disk names
+        self._counter = 0
+
+    @classmethod
+    def new(cls, origin: str) -> SessionStore:
+        """A store for a new session (nothing on disk until its first write)."""
+        name = f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        return cls(autosave_dir() / name, origin)
+
+    @classmethod
+    def adopt(cls, folder: Path) -> SessionStore | None:
+        """The store of a stopped session's folder, locked for this process; None when it is live (another process
+        holds it). OSError when its lock cannot be opened."""
+        handle = lock(Path(folder) / LOCK)
+        if handle is None:
+            return None
+        manifest = peek(folder) or {}
+        store = cls(folder, str(manifest.get("origin", "python")), handle)
+        store._count_files()
+        return store
+
+    @property
+    def locked(self) -> bool:
+        return self._handle is not None
+
+    def open(self, notices: list[str] | None = None) -> None:
+        """Make the folder and take its lock (once); OSError when the disk refuses."""
+        if self._handle is not None:
+            return
+        sessions_folder(notices)
+        self.folder.mkdir(exist_ok=True)
+        handle = lock(self.folder / LOCK)
+        if handle is None:  # pragma: no cover - a fresh, unique name
+            raise OSError(f"{self.folder / LOCK} is locked by another process")
+        self._handle = handle
+        self._count_files()
+
+    def release(self) -> None:
+        """Let go of the folder (it stays on disk for the next start)."""
+        with self._lock:
+            if self._handle is not None:
+                self._handle.close()
+                self._handle = None
+
+    def set_aside(self) -> Path:
+        """Rename this (unreadable) folder aside and let go of it; the new path."""
+        aside = set_aside(self.folder)
+        self.release()
+        return aside
+
+    def _count_files(self) -> None:
+        for entry in os.listdir(self.folder):
+            m = _STEP_FILE.fullmatch(entry) or _PRESET_FILE.fullmatch(entry)
+            if m:
+                self._counter = max(self._counter, int(m.group(1)))
+
+    def _next(self) -> int:
+        self._counter += 1
+        return self._counter
+
+    # -- the history's shelf ------------------------------------------------------------------------------------
+    def put(self, step: Step) -> Path:
+        """Write `step`'s arrays (once) and return its file."""
+        with self._lock:
+            return self.folder / self._put(step)
+
+    def drop(self, step: Step) -> None:
+        """The history forgot `step`: its file goes once a manifest without it is on disk."""
+        with self._lock:
+            self._files.pop(step.key, None)
+
+    def close(self) -> None:
+        """The history closed: the files stay (the autosave lets go of the folder)."""
+
+    def _put(self, step: Step) -> str:
+        name = self._files.get(step.key)
+        if name is not None:
+            return name
+        self.open()
+        weights = step.loaded().weights
+        controls = np.asarray(step.controls, np.float32)
+        radii = np.zeros(len(controls), np.float32) if step.radii is None else np.asarray(step.radii, np.float32)
+        name = f"s{self._next()}.npz"
+        write_atomic(self.folder / name, lambda f: np.savez(f, weights=np.asarray(weights, np.float32),
+                                                             controls=controls, radii=radii))
+        self._files[step.key] = name
+        return name
+
+    def _preset(self, preset: Preset) -> str:
+        known = self._presets.get(id(preset))
+        if known is not None and known[0] is preset:
+            return known[1]
+        name = f"p{self._next()}.npz"
+        sw_io.save_session(self.folder / name, sw_io.session_state(preset))  # written, flushed and renamed
+        self._presets[id(preset)] = (preset, name)
+        return name
+
+    # -- saves --------------------------------------------------------------------------------------------------
+    def commit(self, saving: Saving) -> None:
+        """Write a save: the files of its steps and presets not yet on disk, then the manifest that names them, then
+        delete the files no manifest names any more. OSError (a full disk, a folder that cannot be written) or
+        ValueError leaves the previous manifest and its files as they were."""
+        with self._lock:
+            self.open()
+            presets: dict[str, dict] = {}
+
+            def record(step: Step) -> dict:
+                preset = step.preset
+                name = self._preset(preset)
+                presets[name] = {"name": preset.name, "title": preset.title, "description": preset.description,
+                                 "grow": bool(preset.grow), "radius": float(preset.radius), "meta": preset.meta}
+                group = step.symmetry
+                return {"file": self._put(step), "preset": name, "iteration": int(step.iteration),
+                        "parameters": step.parameters,
+                        "symmetry": None if group is None else dataclasses.asdict(group),
+                        "strokes": None if step.strokes is None else [int(n) for n in step.strokes]}
+
+            manifest = {"format": FORMAT, "origin": self.origin, "saved": time.time(), "gesture": bool(saving.gesture),
+                        "current": record(saving.current), "undo": [record(s) for s in saving.undo],
+                        "redo": [record(s) for s in saving.redo]}
+            manifest["presets"] = presets
+            text = json.dumps(manifest, default=_jsonable, allow_nan=False).encode("utf-8")
+            sync_folder(self.folder)  # the new files' names, before the manifest that names them
+            write_atomic(self.folder / MANIFEST, lambda f: f.write(text))
+            sync_folder(self.folder)
+            self._presets = {k: v for k, v in self._presets.items() if v[1] in presets}
+            if self._current not in (None, saving.current.key):  # the previous current step: no history has it
+                self._files.pop(self._current, None)
+            self._current = saving.current.key
+            self._collect(manifest)
+
+    def _collect(self, manifest: dict) -> None:
+        """Delete the files that neither `manifest` nor the history names (and temporaries a kill left behind)."""
+        named = {LOCK, MANIFEST, *manifest["presets"], *self._files.values()}
+        for r in [manifest["current"], *manifest["undo"], *manifest["redo"]]:
+            named.add(r["file"])
+        for entry in os.listdir(self.folder):
+            if entry not in named and (_STEP_FILE.fullmatch(entry) or _PRESET_FILE.fullmatch(entry)
+                                       or entry.startswith(".tmp-")):
+                try:
+                    os.unlink(self.folder / entry)
+                except OSError:
+                    pass
+
+    # -- reading back -------------------------------------------------------------------------------------------
+    def read(self, max_vertices: int) -> Saved:
+        """The session this folder holds: its current step with its weights in memory, its undo and redo steps with
+        theirs on disk (read when reached). Unreadable naming the file and what is wrong."""
+        path = self.folder / MANIFEST
+        try:
+            manifest = json.loads(path.read_text(encoding="utf-8"))
+            if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
+                raise ValueError(f"not a somwidget session manifest of format {FORMAT}")
+            presets = {name: self._read_preset(name, record, max_vertices)
+                       for name, record in dict(manifest["presets"]).items()}
+            current = self._read_step(manifest["current"], presets, load=True)
+            undo = [self._read_step(r, presets, load=False) for r in list(manifest["undo"])]
+            redo = [self._read_step(r, presets, load=False) for r in list(manifest["redo"])]
+            saved = float(manifest["saved"])
+            gesture = bool(manifest.get("gesture", False))
+        except Unreadable:
+            raise
+        except IsADirectoryError:
+            raise Unreadable(f"{path}: a folder where the session's manifest should be") from None
+        except OSError as exc:
+            raise Unreadable(f"{getattr(exc, 'filename', None) or path}: {exc.strerror or exc}") from None
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise Unreadable(f"{path}: {exc}") from None
+        for name, preset in presets.items():
+            self._presets[id(preset)] = (preset, name)
+        self._current = current.key
+        self.origin = str(manifest.get("origin", self.origin))
+        return Saved(current, undo, redo, gesture, saved, self.origin)
+
+    def _read_preset(self, name: str, record: dict, max_vertices: int) -> Preset:
+        if not _PRESET_FILE.fullmatch(str(name)):
+            raise ValueError(f"a preset file named {str(name)[:40]!r}")
+        try:
+            state = sw_io.load_session(self.folder / name, max_vertices=max_vertices, max_iterations=MAX_ITERATIONS)
+        except ValueError as exc:
+            raise Unreadable(str(exc)) from None
+        preset = sw_io.preset_from_session(state)
+        return dataclasses.replace(preset, name=str(record["name"]), title=str(record["title"]),
+                                   description=str(record["description"]), grow=bool(record["grow"]),
+                                   radius=float(record["radius"]), meta=dict(record["meta"]))
+
+    def _read_step(self, record: dict, presets: dict[str, Preset], load: bool) -> Step:
+        name = str(record["file"])
+        if not _STEP_FILE.fullmatch(name):
+            raise ValueError(f"a step file named {name[:40]!r}")
+        path = self.folder / name
+        preset = presets[record["preset"]]
+        n_nodes, n_dims = preset.weights.shape
+        weights_bytes = 4 * n_nodes * n_dims
+        if path.stat().st_size > weights_bytes + 8 * MAX_CONTROLS * (n_dims + 1) + 65536:
+            raise Unreadable(f"{path}: {path.stat().st_size:,} bytes, more than a step of this mesh holds")
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if set(z.files) != {"weights", "controls", "radii"}:
+                    raise ValueError(f"members {sorted(z.files)[:5]}, expected weights, controls, radii")
+                controls, radii = z["controls"], z["radii"]
+                if load:
+                    weights = z["weights"]
+                    if weights.shape != (n_nodes, n_dims) or weights.dtype != np.float32 \
+                            or not np.isfinite(weights).all():
+                        raise ValueError(f"weights {weights.dtype} {weights.shape}, expected finite float32 "
+                                         f"({n_nodes}, {n_dims})")
+                else:
+                    stored = z.zip.getinfo("weights.npy").file_size
+                    if not weights_bytes <= stored <= weights_bytes + 4096:
+                        raise ValueError(f"weights of {stored:,} bytes, expected a ({n_nodes}, {n_dims}) float32 array")
+                    weights = path
+        except Unreadable:
+            raise
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            raise Unreadable(f"{path}: {reason or 'cut short or damaged'}") from None
+        k = len(controls)
+        if controls.ndim != 2 or controls.shape[1] != n_dims or not 1 <= k <= MAX_CONTROLS \
+                or not np.isfinite(controls).all():
+            raise Unreadable(f"{path}: controls of shape {controls.shape}, expected (k, {n_dims}) finite values")
+        if radii.shape != (k,) or not np.isfinite(radii).all() or (radii < 0).any():
+            raise Unreadable(f"{path}: radii of shape {radii.shape}, expected {k} values >= 0")
+        parameters = dict(record["parameters"])
+        if set(parameters) != PARAMETER_KEYS:
+            raise ValueError(f"a step's parameters {sorted(parameters)}, expected {sorted(PARAMETER_KEYS)}")
+        schedule = Schedule.of(parameters)
+        metric = [float(x) for x in parameters["metric_weights"]]
+        if len(metric) != n_dims:
+            raise ValueError(f"{len(metric)} metric weights for {n_dims} dims")
+        parameters = dict(parameters, **schedule.as_dict(), symmetry=bool(parameters["symmetry"]),
+                          metric_weights=metric)
+        iteration = int(record["iteration"])
+        if not 0 <= iteration <= schedule.iterations:
+            raise ValueError(f"iteration {iteration} outside 0..{schedule.iterations}")
+        group = record.get("symmetry")
+        group = None if group is None else Symmetry(**{k: tuple(v) if isinstance(v, list) else v
+                                                       for k, v in dict(group).items()})
+        strokes = record.get("strokes")
+        strokes = None if strokes is None else tuple(int(n) for n in strokes)
+        if strokes is not None and (sum(strokes) != k or min(strokes, default=1) < 1):
+            raise ValueError(f"strokes {list(strokes)[:8]} do not cover the {k} controls")
+        step = Step(preset=preset, controls=np.array(controls, np.float32), parameters=parameters, weights=weights,
+                    iteration=iteration, radii=np.array(radii, np.float32), symmetry=group, strokes=strokes)
+        self._files[step.key] = name
+        return step
