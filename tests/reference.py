@@ -112,11 +112,19 @@ def theta(d, s, S: int, d_max: int):
     return out
 
 
-def learning_table(S: int, d_max: int, l_start: float = 0.25, l_end: float = 0.03) -> np.ndarray:
-    """L[s, d] = alpha(s) * theta(d, s), s = 0 .. S-1, d = 0 .. d_max, float64."""
+#: Past the dense table (distance rows) the neighbourhood is cut: theta below 2^-24 counts as 0.
+ROWS_CUT = 2.0**-24
+#: A group of carrying controls leaves node v as it is where alpha * sum_j g_j(v) * max_d |C_jd - W_u_j,d| (the most
+#: it could move v in a dim) is below CARRY_CUT times the start shape's bounding diagonal.
+CARRY_CUT = 2.0**-24
+
+
+def learning_table(S: int, d_max: int, l_start: float = 0.25, l_end: float = 0.03, cut: float = 0.0) -> np.ndarray:
+    """L[s, d] = alpha(s) * theta(d, s), s = 0 .. S-1, d = 0 .. d_max, float64; theta < cut taken as 0."""
     s = np.arange(S, dtype=np.float64)[:, None]
     d = np.arange(d_max + 1, dtype=np.float64)[None, :]
-    return alpha(s, S, l_start, l_end) * theta(d, s, S, d_max)
+    t = theta(d, s, S, d_max)
+    return alpha(s, S, l_start, l_end) * np.where(t >= cut, t, 0.0)
 
 
 def restart_iteration(reach: float, S: int) -> int:
@@ -195,8 +203,10 @@ class ReferenceSom:
         group_maps=None,
         smoothing_rule: str = "laplacian",
         strokes=None,
+        cut: float = 0.0,
     ):
         self.n_vertices = int(n_vertices)
+        self.cut = float(cut)  # ROWS_CUT for the engine's distance rows mode
         self.reach = float(reach)
         self.edges = edges_from_edges(edges)
         self.dist = bfs_distances(self.n_vertices, self.edges)
@@ -233,6 +243,8 @@ class ReferenceSom:
         p = self.start_weights[:, :min(3, self.n_dims)]
         lengths = np.linalg.norm(p[self.edges[:, 0]] - p[self.edges[:, 1]], axis=1) if len(self.edges) else [1.0]
         self.edge = float(np.median(lengths)) or 1.0
+        # a carrying group leaves a node where the most it could move it is below 2^-24 of the start shape's size
+        self.floor = CARRY_CUT * (float(np.linalg.norm(p.max(axis=0) - p.min(axis=0))) or 1.0)
 
     # schedule parameters: changing one restarts at s0 from the latest weights
     def _restart(self):
@@ -245,7 +257,7 @@ class ReferenceSom:
         self._restart()
 
     def _table(self):
-        self.L = learning_table(self._iterations, self.d_max, self._l_start, self._l_end)
+        self.L = learning_table(self._iterations, self.d_max, self._l_start, self._l_end, self.cut)
 
     @property
     def iterations(self):
@@ -365,6 +377,8 @@ class ReferenceSom:
             step = np.zeros_like(W)
             total = np.zeros(self.n_vertices)
             nearest = np.zeros(self.n_vertices)
+            carried = np.zeros(self.n_vertices)  # sum of falloff x the member's largest offset
+            pulled = np.zeros(self.n_vertices, bool)  # a point member with a rate
             for c, _g in group:
                 d = self.dist[win[j]].astype(np.int64)
                 ok = d != UNREACHABLE
@@ -373,6 +387,7 @@ class ReferenceSom:
                     rate[ok] = self.L[s, d[ok]]
                     step += rate[:, None] * (members[j][None, :] - W)
                     total += rate
+                    pulled |= rate > 0
                 else:
                     sigma = self.sigmas[j]
                     apart = self.rest[:, pos] - self.rest[win[j], pos]
@@ -380,12 +395,14 @@ class ReferenceSom:
                     step += (alpha * falloff)[:, None] * (members[j] - wu[j])[None, :]
                     total += falloff
                     nearest = np.maximum(nearest, falloff)
+                    carried += falloff * np.abs(members[j] - wu[j]).max()
                 j += 1
             if self.strokes[number] > 1:  # a stroke: the falloff-weighted mean offset, times the nearest falloff
                 with np.errstate(invalid="ignore", divide="ignore"):
                     step *= np.where(total > 0, nearest / total, 0.0)[:, None]
             elif len(group) > 1:
                 step /= np.maximum(1.0, total)[:, None]
+            step[~pulled & (alpha * carried < self.floor)] = 0.0  # too little to move the node
             W += step
         dims = list(self._smooth_dims())
         lams = [] if self.smoothing <= 0 else [self.smoothing]

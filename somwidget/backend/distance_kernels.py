@@ -165,9 +165,11 @@ def bfs_wide(
     rows: wp.array2d(dtype=wp.int32),
     queue: wp.array2d(dtype=wp.int32),
     far: wp.array(dtype=wp.int32),
+    levels: int,
 ):
     """A breadth-first search per thread b into rows[slots[b]] from the sources first[b] .. first[b + 1] - 1 (the
-    hops to the nearest of them; -1 where none is reachable). far[b]: the largest distance found."""
+    hops to the nearest of them, up to `levels`; -1 where none is reachable so). far[b]: the largest distance
+    found."""
     b = wp.tid()
     slot = slots[b]
     for v in range(rows.shape[1]):
@@ -180,6 +182,8 @@ def bfs_wide(
         head += 1
         du = rows[slot, u]
         deepest = du
+        if du >= levels:
+            continue
         for e in range(offsets[u], offsets[u + 1]):
             w = neighbors[e]
             if rows[slot, w] < 0:

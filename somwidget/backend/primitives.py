@@ -19,6 +19,10 @@ FLOAT_MAX = wp.constant(wp.float32(3.4028234663852886e38))
 def float_bits(x: wp.float32) -> wp.uint32: ...
 
 
+@wp.func_native("union { float f; uint32_t u; } c; c.u = x; return c.f;")
+def bits_float(x: wp.uint32) -> wp.float32: ...
+
+
 @wp.func
 def winner_key(distance: wp.float32, v: int) -> wp.uint64:
     return (wp.uint64(float_bits(distance)) << wp.uint64(32)) | wp.uint64(v)

@@ -12,11 +12,12 @@ import warp as wp
 
 from .cycle_kernels import CUDA_BLOCK, LONGEST_GRAPH, MAX_CONTROLS
 from .distance_kernels import assign_slots
+from .local_kernels import block_count, nearest_hops
 from .topology import RowSearch, Topology
 
 #: Distance rows mode: the cache's default size in bytes (int32 rows of N), at least 2 x MAX_CONTROLS rows: on the
-#: CPU 1 GiB, on a GPU a sixteenth of its memory up to 8 GiB.
-_CACHE_BYTES = {"cpu": 1 << 30, "cuda": 8 << 30}
+#: CPU 512 MiB, on a GPU a sixteenth of its memory up to 8 GiB.
+_CACHE_BYTES = {"cpu": 512 << 20, "cuda": 8 << 30}
 _CACHE_MOST_ROWS = 4096
 #: Distance rows mode on CUDA: rings of neurons around the winners whose rows a search brings along (see _around).
 _PREFETCH_RINGS = 8
@@ -40,39 +41,52 @@ class RowCache:
         self._offsets, self._neighbors = topology.offsets, topology.neighbors
         self._lru: OrderedDict[int, int] = OrderedDict()  # neuron -> row, least recently used first
         self._free = list(range(self.size - 1, -1, -1))
+        # on the CPU rows are searched only as deep as a cycle reads them (local_path.py): each one's depth, and the
+        # least hop count of each block of neurons, which tells the local cycle where a winner's rates are non-zero
+        self._depth: dict[int, int] = {}
+        self.near = wp.empty((self.size, block_count(n)), dtype=wp.int32, device=device) if device == "cpu" else None
         self.computed = 0  # rows searched so far for winners
         self.prefetched = 0  # rows searched ahead for their neighbours
         self.stalls = 0  # graphs that stopped on a missing row
         self.span = LONGEST_GRAPH  # cycles in the next graph: fewer while winners keep lacking rows
 
     def fetch(self, neurons: list[int], levels: int) -> None:
-        """Rows for `neurons` (distinct, at most `size`), searching those not kept; levels: the deepest search."""
-        missing = []
+        """Rows for `neurons` (distinct, at most `size`), searching those not kept or kept less deep than `levels` (a
+        row holds the hops up to its depth, -1 past it)."""
+        missing, deeper = [], []
         for u in neurons:
             if u in self._lru:
                 self._lru.move_to_end(u)
+                if self._depth.get(u, levels) < levels:
+                    deeper.append(u)
             else:
                 missing.append(u)
-        if not missing:
+        if not missing and not deeper:
             return
-        asked = len(missing)
-        missing = self._around(missing, neurons) + missing  # least recent first: asked-for rows stay longest
+        fresh = self._around(missing, neurons) + missing  # least recent first: asked-for rows stay longest
         slots, evicted = [], []
-        for u in missing:  # the neurons asked for are the most recent: the oldest row is never one of them
+        for u in fresh:  # the neurons asked for are the most recent: the oldest row is never one of them
             if self._free:
                 slot = self._free.pop()
             else:
                 old, slot = self._lru.popitem(last=False)
+                self._depth.pop(old, None)
                 evicted.append(old)
             self._lru[u] = slot
             slots.append(slot)
-        self._search.run([[u] for u in missing], slots, self.rows, levels)
-        neurons_changed = wp.array(np.array(evicted + missing, dtype=np.int32), device=self.device)
-        values = wp.array(np.array([-1] * len(evicted) + slots, dtype=np.int32), device=self.device)
-        wp.launch(assign_slots, dim=len(neurons_changed), device=self.device,
-                  inputs=[self.slot_of, neurons_changed, values])
-        self.computed += asked
-        self.prefetched += len(missing) - asked
+        searched, at = deeper + fresh, [self._lru[u] for u in deeper] + slots
+        self._search.run([[u] for u in searched], at, self.rows, levels)
+        if self.near is not None:
+            wp.launch(nearest_hops, dim=len(at), device=self.device,
+                      inputs=[self.rows, wp.array(np.array(at, np.int32), device=self.device), self.near])
+            self._depth.update(dict.fromkeys(searched, levels))
+        if fresh:
+            neurons_changed = wp.array(np.array(evicted + fresh, dtype=np.int32), device=self.device)
+            values = wp.array(np.array([-1] * len(evicted) + slots, dtype=np.int32), device=self.device)
+            wp.launch(assign_slots, dim=len(neurons_changed), device=self.device,
+                      inputs=[self.slot_of, neurons_changed, values])
+        self.computed += len(missing) + len(deeper)
+        self.prefetched += len(fresh) - len(missing)
 
     def _around(self, missing: list[int], neurons: list[int]) -> list[int]:
         """On CUDA, uncached neurons around the winners, ring by ring (one hop from each winner, those lacking rows

@@ -114,14 +114,20 @@ def sigma_of(d_max: int) -> float:
 
 #: Entries of the table computed at once in float64 (8 MiB a temporary).
 TABLE_BLOCK = 1 << 20
+#: Past the dense table the neighbourhood is cut where theta(d, s) < NEIGHBOURHOOD_CUT = 2^-24 (half of float32's
+#: epsilon): such a rate moves a node by less than 2^-24 of its distance from the control, below the rounding of a
+#: coordinate of the control's magnitude. A restart at s0 then touches only the nodes within `reach_hops(table)[s0]`
+#: hops of the winners (the CPU's cycle skips the rest: local_path.py); the dense table keeps the paper's exact tail.
+NEIGHBOURHOOD_CUT = 2.0**-24
 
 
-def learning_table(iterations: int, d_max: int, l_start: float = 0.25, l_end: float = 0.03) -> np.ndarray:
+def learning_table(iterations: int, d_max: int, l_start: float = 0.25, l_end: float = 0.03,
+                   cut: float = 0.0) -> np.ndarray:
     """(S, d_max + 1) float32 table, computed in float64.
 
     alpha(s) = l_start * l_end / (l_end + (l_start - l_end) * s / S)        (learning rate)
     c(s) = sigma - sigma * s / S;  theta(d, s) = exp(-d^2 / (2 c(s)^2))     (neighbourhood)
-    theta(0, s) = 1 always (also for d_max = 0, where c is 0).
+    theta(0, s) = 1 always (also for d_max = 0, where c is 0); theta < cut is taken as 0 (NEIGHBOURHOOD_CUT).
     """
     S = BY_NAME["iterations"].check(iterations, "iterations")
     d_max = checks.integer("d_max", d_max, 0, 2**31 - 2)
@@ -138,6 +144,12 @@ def learning_table(iterations: int, d_max: int, l_start: float = 0.25, l_end: fl
         with np.errstate(divide="ignore", invalid="ignore"):
             theta = np.exp(-(d**2) / (2.0 * c**2))
         theta[:, 0] = 1.0
-        theta = np.where(np.isfinite(theta), theta, 0.0)
+        theta = np.where(np.isfinite(theta) & (theta >= cut), theta, 0.0)
         out[start:start + len(s)] = alpha * theta
     return out
+
+
+def reach_hops(table: np.ndarray) -> np.ndarray:
+    """(S,) int32: the farthest hop count with a non-zero rate at each cycle s (theta falls with d, so the non-zero
+    rates of a row are its first reach_hops[s] + 1; c(s) narrows, so it never grows with s)."""
+    return ((table > 0).sum(axis=1) - 1).astype(np.int32)

@@ -17,7 +17,11 @@ One cycle, as the algorithm's three steps, generic on the CPU and on CUDA (a thr
      its falloffs g (two copies whose regions overlap move the nodes between them by their mean, not their sum); a
      stroke's samples (many, close together) move a node by their offsets' mean weighted by g, times the largest g:
      along the stroke each sample's region follows it as one control's would, and away from it the clay falls off
-     as one sample's falloff does (dividing by the sum alone would leave a flat top with a steep wall);
+     as one sample's falloff does (dividing by the sum alone would leave a flat top with a steep wall). A group of
+     carrying controls leaves node v as it is where alpha sum_j g_j(v) |C_j - W_u_j| (the most it could move v, in
+     the largest dim) is below `floor` (CARRY_CUT of the start shape's size: under the rounding of its
+     coordinates), so a drag touches only the nodes within reach of a control that moves (local_path.py skips the
+     rest on the CPU; `balls` gives each control's reach);
   3. `smooth`: one Jacobi step of uniform Laplacian smoothing with `strength` on the masked dims (twice per cycle
      for Taubin's pair: lambda, then the negative mu that undoes the shrinking).
 """
@@ -28,6 +32,7 @@ from typing import Any
 
 import warp as wp
 
+from .local_kernels import BLOCK, local_kernels
 from .primitives import FLOAT_MAX, INDEX_MASK, UNREACHABLE, winner_key
 
 #: Neurons one thread of `find` scans for one control.
@@ -35,6 +40,13 @@ FIND_STRETCH = 256
 #: The most a carried bump's top may turn from one edge to the next (radians): 18 degrees, chosen by measurement
 #: (BENCHMARKS.md, "Shaping rules": the sphere's own 11 degrees an edge plus this stay under 30).
 FIT_TURN = wp.constant(0.3141592653589793)
+#: A carrying group leaves a node as it is where the most it could move it in a cycle is below CARRY_CUT times the
+#: start shape's size (its bounding diagonal): 2^-24, half of float32's epsilon.
+CARRY_CUT = 2.0**-24
+#: The balls of `balls` are drawn for a floor this much lower, and their squared radii widened by BALL_SLACK, so a
+#: block outside every ball of a group holds no node the group moves, whatever float32 rounding does.
+BALL_FLOOR_SHARE = 0.99
+BALL_SLACK = wp.constant(wp.float32(1.001))
 
 
 @wp.func
@@ -67,6 +79,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     """The shaping cycle's kernels for weights of n_dims features (compiled once per device on first use)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     options = {"max_unroll": 32}
+    update_box = local_kernels(n_dims).update_box
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def find(weights: wp.array(dtype=vec), controls: wp.array(dtype=vec), metric: wp.array(dtype=vec),
@@ -90,10 +103,17 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         wp.atomic_min(keys, c, winner_key(best, best_v))
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
-    def gather(weights: wp.array(dtype=vec), keys: wp.array(dtype=wp.uint64), winners: wp.array(dtype=vec)):
-        """Each control's winner's weights before the move."""
+    def gather(weights: wp.array(dtype=vec), keys: wp.array(dtype=wp.uint64), controls: wp.array(dtype=vec),
+               winners: wp.array(dtype=vec), offsets: wp.array(dtype=wp.float32)):
+        """Each control's winner's weights before the move, and how far the control lies from it (largest dim)."""
         c = wp.tid()
-        winners[c] = weights[wp.int32(keys[c] & INDEX_MASK)]
+        w = weights[wp.int32(keys[c] & INDEX_MASK)]
+        winners[c] = w
+        apart = controls[c] - w
+        largest = wp.float32(0.0)
+        for i in range(wp.static(n_dims)):
+            largest = wp.max(largest, wp.abs(apart[i]))
+        offsets[c] = largest
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def fit(controls: wp.array(dtype=vec), winners: wp.array(dtype=vec), sigma: wp.array(dtype=wp.float32),
@@ -109,6 +129,46 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         else:
             inv_two_sigma2[j] = wp.float32(0.0)
 
+    @wp.func
+    def moved_by_group(w: vec, v: int, lo: int, hi: int, stroke: int, rest: wp.array(dtype=vec),
+                       controls: wp.array(dtype=vec), winners: wp.array(dtype=vec), keys: wp.array(dtype=wp.uint64),
+                       inv_two_sigma2: wp.array(dtype=wp.float32), offsets: wp.array(dtype=wp.float32),
+                       component: wp.array(dtype=wp.int32), table: wp.array2d(dtype=wp.float32), s: int,
+                       distances: Any, slot_of: wp.array(dtype=wp.int32), position: vec, floor: wp.float32) -> vec:
+        """Step 2 of one group (members lo .. hi - 1) for neuron v of weights w (see the module's docstring)."""
+        alpha = table[s, 0]
+        last = table.shape[1] - 1
+        step = vec()
+        total = wp.float32(0.0)
+        nearest = wp.float32(0.0)
+        carried = wp.float32(0.0)  # sum of falloff x offset: alpha times it bounds the carrying members' step
+        pulled = int(0)  # a point member with a rate
+        for j in range(lo, hi):
+            u = wp.int32(keys[j] & INDEX_MASK)
+            k = inv_two_sigma2[j]
+            if k == wp.float32(0.0):  # the paper's point control: towards the control
+                d = hops_at(distances, row_of(distances, slot_of, u), v)
+                if d >= 0:
+                    rate = table[s, wp.min(d, last)]
+                    step += rate * (controls[j] - w)
+                    total += rate
+                    pulled = wp.where(rate > wp.float32(0.0), 1, pulled)
+            elif component[u] == component[v]:  # a control with a radius: along with its winner
+                apart = wp.cw_mul(rest[v] - rest[u], position)
+                falloff = wp.exp(-k * wp.dot(apart, apart))
+                step += (alpha * falloff) * (controls[j] - winners[j])
+                total += falloff
+                nearest = wp.max(nearest, falloff)
+                carried += falloff * offsets[j]
+        if pulled == 0 and alpha * carried < floor:
+            return w
+        if stroke != 0:
+            if total > wp.float32(0.0):
+                step = step * (nearest / total)
+        elif hi - lo > 1:
+            step = step / wp.max(wp.float32(1.0), total)
+        return w + step
+
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def move(
         weights: wp.array(dtype=vec),
@@ -117,6 +177,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         winners: wp.array(dtype=vec),
         keys: wp.array(dtype=wp.uint64),
         inv_two_sigma2: wp.array(dtype=wp.float32),
+        offsets: wp.array(dtype=wp.float32),
         component: wp.array(dtype=wp.int32),
         group_start: wp.array(dtype=wp.int32),
         stroke: wp.array(dtype=wp.int32),
@@ -126,41 +187,115 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         distances: Any,
         slot_of: wp.array(dtype=wp.int32),
         position: vec,
+        floor: wp.float32,
     ):
-        """Step 2 for neuron v (see the module's docstring), in place: v reads only its own weights and the
-        gathered winners."""
+        """Step 2 for neuron v, group after group, in place: v reads only its own weights and the gathered
+        winners."""
         v = wp.tid()
         w = weights[v]
-        alpha = table[s, 0]
-        last = table.shape[1] - 1
         for g in range(n_groups):
-            lo = group_start[g]
-            hi = group_start[g + 1]
-            step = vec()
-            total = wp.float32(0.0)
-            nearest = wp.float32(0.0)
-            for j in range(lo, hi):
-                u = wp.int32(keys[j] & INDEX_MASK)
-                k = inv_two_sigma2[j]
-                if k == wp.float32(0.0):  # the paper's point control: towards the control
-                    d = hops_at(distances, row_of(distances, slot_of, u), v)
-                    if d >= 0:
-                        rate = table[s, wp.min(d, last)]
-                        step += rate * (controls[j] - w)
-                        total += rate
-                elif component[u] == component[v]:  # a control with a radius: along with its winner
-                    apart = wp.cw_mul(rest[v] - rest[u], position)
-                    falloff = wp.exp(-k * wp.dot(apart, apart))
-                    step += (alpha * falloff) * (controls[j] - winners[j])
-                    total += falloff
-                    nearest = wp.max(nearest, falloff)
-            if stroke[g] != 0:
-                if total > wp.float32(0.0):
-                    step = step * (nearest / total)
-            elif hi - lo > 1:
-                step = step / wp.max(wp.float32(1.0), total)
-            w = w + step
+            w = moved_by_group(w, v, group_start[g], group_start[g + 1], stroke[g], rest, controls, winners, keys,
+                               inv_two_sigma2, offsets, component, table, s, distances, slot_of, position, floor)
         weights[v] = w
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def balls(inv_two_sigma2: wp.array(dtype=wp.float32), offsets: wp.array(dtype=wp.float32),
+              group_of: wp.array(dtype=wp.int32), group_start: wp.array(dtype=wp.int32),
+              table: wp.array2d(dtype=wp.float32), s: int, floor: wp.float32, radius2: wp.array(dtype=wp.float32)):
+        """Each carrying control's reach this cycle: the squared distance (in rest positions) beyond which alpha g
+        |C - W_u| falls below floor / (its group's size), so that no node outside every ball of a group is moved by
+        it; -1 for none (a control at its winner moves nothing), 0 for a point control (rows tell its reach)."""
+        j = wp.tid()
+        k = inv_two_sigma2[j]
+        radius2[j] = wp.float32(0.0)
+        if k > wp.float32(0.0):
+            g = group_of[j]
+            size = wp.float32(group_start[g + 1] - group_start[g])
+            ratio = table[s, 0] * offsets[j] * size / (floor * wp.float32(BALL_FLOOR_SHARE))
+            radius2[j] = wp.where(ratio > wp.float32(1.0), BALL_SLACK * wp.log(ratio) / k, wp.float32(-1.0))
+
+    @wp.func
+    def touches(b: int, lo: int, hi: int, rest: wp.array(dtype=vec), rest_lo: wp.array(dtype=vec),
+                rest_hi: wp.array(dtype=vec), keys: wp.array(dtype=wp.uint64), radius2: wp.array(dtype=wp.float32),
+                near: wp.array2d(dtype=wp.int32), slot_of: wp.array(dtype=wp.int32), reach: int, rows: int,
+                position: vec) -> int:
+        """1 when the group lo .. hi - 1 may move a neuron of block b: a carrying member's ball meets the block's
+        box of rest positions, or a point member's winner lies within reach of the block (always, for the dense
+        table)."""
+        for j in range(lo, hi):
+            u = wp.int32(keys[j] & INDEX_MASK)
+            r2 = radius2[j]
+            if r2 == wp.float32(0.0):
+                if rows == 0 or near[slot_of[u], b] <= reach:
+                    return 1
+            elif r2 > wp.float32(0.0):
+                centre = rest[u]
+                gap = wp.cw_mul(wp.max(wp.max(rest_lo[b] - centre, centre - rest_hi[b]), vec()), position)
+                if wp.dot(gap, gap) <= r2:
+                    return 1
+        return 0
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def move_blocks(
+        weights: wp.array(dtype=vec),
+        rest: wp.array(dtype=vec),
+        controls: wp.array(dtype=vec),
+        winners: wp.array(dtype=vec),
+        keys: wp.array(dtype=wp.uint64),
+        inv_two_sigma2: wp.array(dtype=wp.float32),
+        offsets: wp.array(dtype=wp.float32),
+        component: wp.array(dtype=wp.int32),
+        group_start: wp.array(dtype=wp.int32),
+        stroke: wp.array(dtype=wp.int32),
+        n_groups: int,
+        table: wp.array2d(dtype=wp.float32),
+        s: int,
+        distances: Any,
+        slot_of: wp.array(dtype=wp.int32),
+        position: vec,
+        floor: wp.float32,
+        radius2: wp.array(dtype=wp.float32),
+        rest_lo: wp.array(dtype=vec),
+        rest_hi: wp.array(dtype=vec),
+        near: wp.array2d(dtype=wp.int32),
+        reach: int,
+        rows: int,
+        lo_box: wp.array(dtype=vec),
+        hi_box: wp.array(dtype=vec),
+        b_lo: int,
+        b_hi: int,
+    ):
+        """`move` on the CPU for blocks b_lo .. b_hi - 1, a group at a time over each block's neurons, skipping the
+        groups that cannot move them (`touches`); then the moved blocks' boxes."""
+        n = weights.shape[0]
+        for b in range(b_lo, b_hi):
+            moved = int(0)
+            for g in range(n_groups):
+                lo = group_start[g]
+                hi = group_start[g + 1]
+                if touches(b, lo, hi, rest, rest_lo, rest_hi, keys, radius2, near, slot_of, reach, rows, position):
+                    moved = 1
+                    k = inv_two_sigma2[lo]
+                    if hi - lo == 1 and k > wp.float32(0.0):  # one carrying control: moved_by_group, its terms kept
+                        u = wp.int32(keys[lo] & INDEX_MASK)
+                        alpha = table[s, 0]
+                        centre = rest[u]
+                        part = component[u]
+                        offset = controls[lo] - winners[lo]
+                        largest = offsets[lo]
+                        for v in range(b * BLOCK, wp.min(b * BLOCK + BLOCK, n)):
+                            if component[v] == part:
+                                apart = wp.cw_mul(rest[v] - centre, position)
+                                falloff = wp.exp(-k * wp.dot(apart, apart))
+                                if alpha * (falloff * largest) >= floor:
+                                    weights[v] = weights[v] + (alpha * falloff) * offset
+                    else:
+                        for v in range(b * BLOCK, wp.min(b * BLOCK + BLOCK, n)):
+                            weights[v] = moved_by_group(weights[v], v, lo, hi, stroke[g], rest, controls, winners,
+                                                        keys, inv_two_sigma2, offsets, component, table, s,
+                                                        distances, slot_of, position, floor)
+            if moved != 0:
+                update_box(weights, lo_box, hi_box, b)
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def smooth(weights_in: wp.array(dtype=vec), weights_out: wp.array(dtype=vec), offsets: wp.array(dtype=wp.int32),
@@ -180,4 +315,6 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
 
     for source in (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32)):
         wp.overload(move, {"distances": source})
-    return SimpleNamespace(vec=vec, find=find, gather=gather, fit=fit, move=move, smooth=smooth)
+        wp.overload(move_blocks, {"distances": source})
+    return SimpleNamespace(vec=vec, find=find, gather=gather, fit=fit, move=move, balls=balls,
+                           move_blocks=move_blocks, smooth=smooth)

@@ -6,7 +6,9 @@ case studies' paths (cpu_path.py, cuda_path.py, rows_path.py) and gives their re
 
 Each cycle launches its kernels from here (no captured graphs): find, gather (and, at a restart, fit), move, then one
 or two smoothing steps. In distance rows mode the point controls' winners come back to the host each cycle and their
-rows are fetched before the move; controls with a radius read only which part of the mesh a node is in.
+rows are fetched before the move; controls with a radius read only which part of the mesh a node is in. On the CPU
+the search and the move are local_path.py's: only the blocks of neurons a group can move are moved (each carrying
+control's reach from `balls`, the blocks' boxes of rest positions), and only those that may hold a winner searched.
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ import math
 import numpy as np
 import warp as wp
 
-from .shaping_kernels import FIND_STRETCH, shaping_kernels
+from .metrics import bounding_diagonal
+from .shaping_kernels import CARRY_CUT, FIND_STRETCH, shaping_kernels
 from .topology import _components
 
 #: A control's radius r is the distance at which its pull has fallen to exp(-2) = 0.14 of the winner's: the
@@ -59,6 +62,7 @@ class ShapingPath:
             first += length
             starts.append(len(slots))
         stroke = np.array([length > 1 for length in self._strokes], np.int32)
+        group_of = np.repeat(np.arange(len(starts) - 1), np.diff(starts)).astype(np.int32)
         c_of = np.array([c for c, _ in slots], np.int64)
         g_of = np.array([g for _, g in slots], np.int64)
         c64 = self._controls.astype(np.float64)
@@ -67,6 +71,7 @@ class ShapingPath:
         sigma = self._radii.astype(np.float64)[c_of] * SIGMA_OF_RADIUS
         if self._edge is None:
             self._edge = self._median_edge()
+            self._floor = CARRY_CUT * (bounding_diagonal(self._start[:, self._position_dims]) or 1.0)
             self._component = wp.array(_components(self.topology)[0].astype(np.int32), dtype=wp.int32,
                                        device=self.device)
         dev = self.device
@@ -78,15 +83,24 @@ class ShapingPath:
         self._sh_groups = wp.array(np.array(starts, np.int32), dtype=wp.int32, device=dev)
         self._sh_n_groups = len(starts) - 1
         self._sh_stroke = wp.array(stroke, dtype=wp.int32, device=dev)
-        self._sh_keys = wp.empty(k * order, dtype=wp.uint64, device=dev)
+        if getattr(self, "_sh_keys", None) is None or len(self._sh_keys) != k * order:  # else: the last winners,
+            self._sh_keys = wp.full(k * order, np.uint64(0xFFFFFFFFFFFFFFFF), dtype=wp.uint64, device=dev)  # hints
         self._sh_winners = wp.empty(k * order, dtype=self._kernels.vec, device=dev)
+        self._sh_offsets = wp.zeros(k * order, dtype=wp.float32, device=dev)
+        self._sh_radius2 = wp.zeros(k * order, dtype=wp.float32, device=dev)
+        self._sh_group_of = wp.array(group_of, dtype=wp.int32, device=dev)
         self._sh_order = order
         if getattr(self, "_sh_rest", None) is None:
             self._sh_rest = wp.empty_like(self._w)
+            if dev == "cpu":  # the boxes of the rest positions' blocks
+                self._rest_lo, self._rest_hi = wp.empty_like(self._box_lo), wp.empty_like(self._box_hi)
 
     def _shaping_find(self) -> None:
         if self._sh_controls is None:
             self._upload_shaping()
+        if self.device == "cpu":  # from each control's last winner, in the blocks that may hold a nearer one
+            self._local_find(self._sh_controls, len(self._sh_keys), self._sh_keys, 0, 0)
+            return
         kern = shaping_kernels(self.n_dims)
         stretches = max(1, math.ceil(self.n_neurons / FIND_STRETCH))
         self._sh_keys.fill_(np.uint64(0xFFFFFFFFFFFFFFFF))
@@ -100,6 +114,10 @@ class ShapingPath:
             self._upload_shaping()
         if self._sh_rest_pending:  # a restart: the falloffs measure distances on the shape it began from
             wp.copy(self._sh_rest, self._w)
+            if self.device == "cpu":
+                self._ensure_boxes()
+                wp.copy(self._rest_lo, self._box_lo)
+                wp.copy(self._rest_hi, self._box_hi)
             self._sh_rest_pending = False
             self._sh_fit_pending = True
         kern = shaping_kernels(self.n_dims)
@@ -109,27 +127,38 @@ class ShapingPath:
         position[self._position_dims] = 1.0
         position = self._kernels.vec(*position.tolist())
         masks = [self._kernels.vec(*(strength * self._mask_of(self._smooth_dims)).tolist()) for strength in steps]
+        rows = int(self._rows_mode)
+        near = self._cache.near if rows and dev == "cpu" else self._no_near
         for _ in range(cycles):
             self._shaping_find()
             wp.launch(kern.gather, dim=len(self._sh_keys), device=dev,
-                      inputs=[self._w, self._sh_keys, self._sh_winners])
+                      inputs=[self._w, self._sh_keys, self._sh_controls, self._sh_winners, self._sh_offsets])
             if self._sh_fit_pending:  # the first cycle of a restart: each carrying control's width for its pull
                 wp.launch(kern.fit, dim=len(self._sh_keys), device=dev,
                           inputs=[self._sh_controls, self._sh_winners, self._sh_sigma, float(self._edge), position,
                                   self._sh_inv])
                 self._sh_fit_pending = False
+            reach = int(self._reach_hops[self._s]) if dev == "cpu" else self._d_max  # CPU rows: only this deep
             if self._rows_mode and self._sh_point.any():
                 winners = (self._sh_keys.numpy() & np.uint64(0xFFFFFFFF)).astype(np.int64)[self._sh_point]
-                self._cache.fetch(list(dict.fromkeys(winners.tolist())), self._d_max)
-            wp.launch(kern.move, dim=n, device=dev,
-                      inputs=[self._w, self._sh_rest, self._sh_controls, self._sh_winners, self._sh_keys, self._sh_inv,
-                              self._component, self._sh_groups, self._sh_stroke, self._sh_n_groups, self._table,
-                              self._s,
-                              self._distances, self._slot_of, position])
+                self._cache.fetch(list(dict.fromkeys(winners.tolist())), reach)
+            moving = [self._w, self._sh_rest, self._sh_controls, self._sh_winners, self._sh_keys, self._sh_inv,
+                      self._sh_offsets, self._component, self._sh_groups, self._sh_stroke, self._sh_n_groups,
+                      self._table, self._s, self._distances, self._slot_of, position, self._floor]
+            if dev == "cpu":
+                wp.launch(kern.balls, dim=len(self._sh_keys), device=dev,
+                          inputs=[self._sh_inv, self._sh_offsets, self._sh_group_of, self._sh_groups, self._table,
+                                  self._s, self._floor, self._sh_radius2])
+                self._on_cores(kern.move_blocks, lambda b_lo, b_hi: [
+                    *moving, self._sh_radius2, self._rest_lo, self._rest_hi, near, reach, rows, self._box_lo,
+                    self._box_hi, b_lo, b_hi])
+            else:
+                wp.launch(kern.move, dim=n, device=dev, inputs=moving)
             for pull in masks:  # into the spare buffer and back (the other paths' graphs hold both buffers' places)
                 wp.launch(kern.smooth, dim=n, device=dev,
                           inputs=[self._w, self._w_moved, self._offsets, self._neighbors, pull])
                 wp.copy(self._w, self._w_moved)
+                self._boxes_valid = False
             self._s += 1
 
     def _shaping_winners(self) -> np.ndarray:

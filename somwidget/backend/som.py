@@ -49,8 +49,9 @@ from .device import resolve, warp_exclusive
 from .cpu_path import CpuPath
 from .cuda_path import CudaPath
 from .cycle_kernels import CUDA_BLOCK, LONGEST_GRAPH, MAX_CONTROLS, PAIRS, SCALED_PAIRS, SINGLES, cycle_kernels
+from .local_path import LocalPath
 from .rows_path import RowCache, RowsPath
-from .schedule import BY_NAME, DEFAULT_REACH, learning_table
+from .schedule import BY_NAME, DEFAULT_REACH, NEIGHBOURHOOD_CUT, learning_table
 from .shaping_path import ShapingPath, taubin_mu
 from .symmetry import Symmetry, mirror_dims_of, mirror_of_dims
 from .topology import MAX_DENSE_NEURONS, Topology
@@ -73,7 +74,7 @@ SMOOTHING_RULES = ("laplacian", "taubin")
 MAX_RADIUS = 1e6
 
 
-class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
+class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
     """A SOM whose neurons are the vertices of `topology`, trained towards `controls`.
 
     weights (N, n) and controls (k, n) share the n feature dimensions (1..32). State stays on `device`
@@ -165,6 +166,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         else:
             self._distances = topology.distance_table(dev)
             self._slot_of = wp.full(1, -1, dtype=wp.int32, device=dev)  # unread: the dense table has every row
+        self._no_near = wp.zeros((1, 1), dtype=wp.int32, device=dev)  # unread: the shaping path's dense table
         self._stalled = wp.zeros(1, dtype=wp.int32, device=dev)  # set only by a distance-rows cycle that stalls
         self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=dev)
         neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
@@ -196,6 +198,9 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         self._m = wp.array(self._metric[None, :], dtype=vec, device=dev)
         self._mask = wp.array(self._mask_of(self._smooth_dims)[None, :], dtype=vec, device=dev)
         self._keys = wp.full((3, MAX_CONTROLS), _KEY_NONE, dtype=wp.uint64, device=dev)
+        self._box_anchor = None  # the anchored weights' block boxes (CPU)
+        if dev == "cpu":
+            self._local_setup()
         self._meet = wp.zeros(1, dtype=wp.int64, device=dev)
         self._meet_failed = wp.zeros(1, dtype=wp.int32, device=dev)
         self._graphs: dict[tuple, tuple] = {}  # key -> (graph, the packed arguments of its dependent launches)
@@ -575,12 +580,16 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         if self._w_anchor is None:
             self._w_anchor = wp.empty_like(self._w)
         wp.copy(self._w_anchor, self._w)
+        if self.device == "cpu":  # the local cycle's boxes go with them
+            self._ensure_boxes()
+            self._box_anchor = (wp.clone(self._box_lo), wp.clone(self._box_hi))
 
     @warp_exclusive
     def set_weights(self, weights: ArrayLike) -> None:
         """Replace the current weights (same shape); the schedule restarts at s0 from them."""
         self._anchor_pending = False
         self._w.assign(self._checked_weights(weights))
+        self._boxes_valid = False
         self._restart()
 
     @warp_exclusive
@@ -593,6 +602,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         """Back to the start weights and s = 0 (the whole schedule); the controls stay."""
         self._anchor_pending = False
         self._w.assign(self._start)
+        self._boxes_valid = False
         self._restart(0)
 
     @warp_exclusive
@@ -602,6 +612,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         w = self._checked_weights(weights)
         self._anchor_pending = False
         self._w.assign(w)
+        self._boxes_valid = False
         self._restart(s)
 
     @warp_exclusive
@@ -621,6 +632,10 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         if self._anchor_pending:
             self._anchor_pending = False
             _copy(self._w, self._w_anchor)
+            if self._box_anchor is not None:
+                wp.copy(self._box_lo, self._box_anchor[0])
+                wp.copy(self._box_hi, self._box_anchor[1])
+                self._boxes_valid = True
 
     def _checked_weights(self, weights: ArrayLike) -> np.ndarray:
         w = checks.finite_array("weights", weights, 2)
@@ -655,10 +670,12 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         if self._iterations * (d_max + 1) > _MAX_TABLE_ENTRIES:
             raise ValueError(f"iterations: the learning table S x (d_max + 1) = {self._iterations:,} x {d_max + 1:,} "
                              f"exceeds {_MAX_TABLE_ENTRIES:,} entries (2 GiB); use fewer iterations")
-        self._table_host = learning_table(self._iterations, d_max, self._l_start, self._l_end)
+        cut = NEIGHBOURHOOD_CUT if self._rows_mode else 0.0  # past the dense table: the cut neighbourhood
+        self._table_host = learning_table(self._iterations, d_max, self._l_start, self._l_end, cut)
         self._table_max = float(self._table_host.max())
         self._d_max = d_max
         self._table = wp.array(self._table_host, dtype=wp.float32, device=self.device)
+        self._local_table()
         self._graphs.clear()
 
     def _upload_controls(self) -> None:
@@ -745,6 +762,9 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
             self._winners_valid = False
             return
         if self._rows_mode:
+            if self.device == "cpu":
+                self._run_local(cycles)
+                return
             self._settle_anchor()
             self._run_rows(cycles)
             return
@@ -754,6 +774,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath):
         smoothing = self._smoothing > 0.0
         if self.device == "cpu":
             self._run_cpu(cycles, fresh, smoothing)
+            self._boxes_valid = False
         else:
             parity = 0 if fresh else self._parity
             two_kernels = smoothing and self._smoothing_in_one_kernel() is None

@@ -273,7 +273,7 @@ class RowSearch:
         else:
             wp.launch(distance_kernels.bfs_wide, dim=count, device=self.device,
                       inputs=[self._offsets, self._neighbors, b["sources"], b["first"], b["slots"], rows, b["queue"],
-                              b["far"]])
+                              b["far"], levels])
         return b["far"].numpy()[:count] if far else None
 
     def _record_levels(self, rows: wp.array, levels: int) -> None:

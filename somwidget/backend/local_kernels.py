@@ -1,0 +1,184 @@
+"""The CPU's local cycle kernels (local_path.py runs them): the neurons in blocks of BLOCK consecutive indices, each
+block with the bounding box of its weights, so that a cycle touches only the blocks it changes and searches only the
+blocks that may hold a winner. Every result is the full computation's, bit for bit:
+
+- `find`: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2 (the lowest index on a tie), by the smallest winner key. The
+  search starts in the block of the control's last winner, then scans every block whose box may hold a nearer
+  neuron: a box's lower bound sum_j m_j gap_j^2 (gap_j: how far C_cj lies outside the box's range of dim j) never
+  exceeds the distance of a neuron inside it (float rounding is monotonic; BOUND_SLACK covers a different rounding
+  of the sums), so a skipped block holds no neuron whose key could win.
+- `move`: step 2 of the paper's rule for the blocks with a neuron within reach_hops[s] hops of a winner (the rates
+  past it are 0 in the cut table, schedule.NEIGHBOURHOOD_CUT), each neuron applying the controls in list order (with
+  mirroring, pair by pair) exactly as cycle_kernels' move does, then the block's box again.
+- `boxes`: the boxes of a range of blocks from the weights (after smoothing, or when the weights were replaced).
+"""
+
+import functools
+from types import SimpleNamespace
+
+import warp as wp
+
+from .cycle_kernels import SINGLES, cycle_kernels
+from .primitives import FLOAT_MAX, INDEX_MASK, bits_float, winner_key
+
+#: Neurons a block: its box is kept with it, and a cycle moves or searches whole blocks.
+BLOCK = wp.constant(64)
+#: A block is searched unless its box's bound exceeds the best distance found times this (the bound and a neuron's
+#: distance are sums of the same squares, rounded the same way up to the order of n <= 32 terms: a relative error
+#: under 1e-5), plus BOUND_TINY (distances that underflow).
+BOUND_SLACK = wp.constant(wp.float32(1.0001))
+BOUND_TINY = wp.constant(wp.float32(1e-30))
+#: Controls whose rates a neuron looks up together (kept in registers for a block).
+GATHER = 8
+#: No winner's row reaches this far: a block with no neuron within a row's searched depth.
+FAR = wp.constant(1 << 30)
+
+
+def block_count(n_neurons: int) -> int:
+    """Blocks of BLOCK neurons covering n_neurons."""
+    return -(-n_neurons // int(BLOCK))
+
+
+@wp.kernel(enable_backward=False)
+def nearest_hops(rows: wp.array2d(dtype=wp.int32), slots: wp.array(dtype=wp.int32), near: wp.array2d(dtype=wp.int32)):
+    """near[slot, b]: the least hop count in block b of the distance row in that slot (FAR: none within the depth
+    it was searched to)."""
+    slot = slots[wp.tid()]
+    n = rows.shape[1]
+    for b in range(near.shape[1]):
+        least = int(FAR)
+        for v in range(b * BLOCK, wp.min(b * BLOCK + BLOCK, n)):
+            d = rows[slot, v]
+            if d >= 0:
+                least = wp.min(least, d)
+        near[slot, b] = least
+
+
+@functools.cache
+def local_kernels(n_dims: int, pairs: int = SINGLES) -> SimpleNamespace:
+    """The local cycle's kernels for weights of n_dims features; with `pairs` the controls come as mirrored pairs
+    (cycle_kernels.PAIRS, SCALED_PAIRS)."""
+    vec = wp.types.vector(length=n_dims, dtype=wp.float32)
+    held = wp.types.matrix(shape=(GATHER, n_dims), dtype=wp.float32)
+    slots8 = wp.types.vector(length=GATHER, dtype=wp.int32)
+    cycle = cycle_kernels(n_dims, 8, pairs)
+    distance, move_pair = cycle.distance, cycle.move_pair
+    options = {"max_unroll": 32}
+
+    @wp.func
+    def box_bound(target: vec, lo: vec, hi: vec, metric: vec) -> wp.float32:
+        """A lower bound of the metric distance from target to any point of the box [lo, hi]."""
+        gap = wp.max(wp.max(lo - target, target - hi), vec())
+        return wp.dot(wp.cw_mul(gap, metric), gap)
+
+    @wp.func
+    def nearest_in_block(weights: wp.array(dtype=vec), target: vec, metric: vec, b: int) -> wp.uint64:
+        """The smallest winner key of block b's neurons for target."""
+        lo = b * BLOCK
+        hi = wp.min(lo + BLOCK, weights.shape[0])
+        best = FLOAT_MAX
+        best_v = lo
+        for v in range(lo, hi):
+            dist = distance(target, weights[v], metric)
+            nearer = dist < best  # strict: the lowest index wins a tie
+            best = wp.where(nearer, dist, best)
+            best_v = wp.where(nearer, v, best_v)
+        return winner_key(best, best_v)
+
+    @wp.func
+    def update_box(weights: wp.array(dtype=vec), lo_box: wp.array(dtype=vec), hi_box: wp.array(dtype=vec), b: int):
+        lo = b * BLOCK
+        hi = wp.min(lo + BLOCK, weights.shape[0])
+        w = weights[lo]
+        low = w
+        high = w
+        for v in range(lo + 1, hi):
+            w = weights[v]
+            low = wp.min(low, w)
+            high = wp.max(high, w)
+        lo_box[b] = low
+        hi_box[b] = high
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def boxes(weights: wp.array(dtype=vec), lo_box: wp.array(dtype=vec), hi_box: wp.array(dtype=vec), b_lo: int,
+              b_hi: int):
+        """The boxes of blocks b_lo .. b_hi - 1."""
+        for b in range(b_lo, b_hi):
+            update_box(weights, lo_box, hi_box, b)
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def find(weights: wp.array(dtype=vec), controls: wp.array(dtype=vec), first: int, step: int, n_controls: int,
+             metric: wp.array(dtype=vec), keys: wp.array(dtype=wp.uint64), hint_at: int, out_at: int,
+             lo_box: wp.array(dtype=vec), hi_box: wp.array(dtype=vec)):
+        """Step 1 for controls first, first + step, ...: each one's winner key into keys[out_at + c], starting from the
+        block of the neuron in keys[hint_at + c] (any value will do: it only speeds the search)."""
+        m = metric[0]
+        n = weights.shape[0]
+        for c in range(first, n_controls, step):
+            target = controls[c]
+            hint = wp.int32(keys[hint_at + c] & INDEX_MASK)
+            start = wp.where(hint >= 0 and hint < n, hint, 0) // BLOCK
+            best = nearest_in_block(weights, target, m, start)
+            best_d = bits_float(wp.uint32(best >> wp.uint64(32)))
+            for b in range(lo_box.shape[0]):
+                if b != start:
+                    if box_bound(target, lo_box[b], hi_box[b], m) <= best_d * BOUND_SLACK + BOUND_TINY:
+                        key = nearest_in_block(weights, target, m, b)
+                        if key < best:
+                            best = key
+                            best_d = bits_float(wp.uint32(best >> wp.uint64(32)))
+            keys[out_at + c] = best
+
+    @wp.func
+    def within_reach(near: wp.array2d(dtype=wp.int32), slot_of: wp.array(dtype=wp.int32),
+                     keys: wp.array(dtype=wp.uint64), at: int, c_lo: int, c_hi: int, b: int, reach: int) -> int:
+        """1 when block b holds a neuron within `reach` hops of a winner of controls c_lo .. c_hi - 1."""
+        for c in range(c_lo, c_hi):
+            if near[slot_of[wp.int32(keys[at + c] & INDEX_MASK)], b] <= reach:
+                return 1
+        return 0
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def move(weights: wp.array(dtype=vec), controls: wp.array(dtype=vec), c_lo: int, c_hi: int,
+             table: wp.array2d(dtype=wp.float32), s: int, reach_hops: wp.array(dtype=wp.int32),
+             rows: wp.array2d(dtype=wp.int32), slot_of: wp.array(dtype=wp.int32), near: wp.array2d(dtype=wp.int32),
+             keys: wp.array(dtype=wp.uint64), at: int, lo_box: wp.array(dtype=vec), hi_box: wp.array(dtype=vec),
+             b_lo: int, b_hi: int, every: int):
+        """Step 2 of cycle s for controls c_lo .. c_hi - 1 (winners in keys[at + c], their rows cached with
+        `near`: each block's least hop count) in blocks b_lo .. b_hi - 1 that hold a neuron within reach (all of
+        them with `every`), in place; then those blocks' boxes."""
+        last = table.shape[1] - 1
+        reach = reach_hops[s]
+        n = weights.shape[0]
+        for b in range(b_lo, b_hi):
+            if every != 0 or within_reach(near, slot_of, keys, at, c_lo, c_hi, b, reach) != 0:
+                v_lo = b * BLOCK
+                v_hi = wp.min(v_lo + BLOCK, n)
+                for c0 in range(c_lo, c_hi, GATHER):
+                    targets = held()
+                    slots = slots8()
+                    for g in range(GATHER):
+                        c = wp.min(c0 + g, c_hi - 1)
+                        targets[g] = controls[c]
+                        slots[g] = wp.where(c0 + g < c_hi, slot_of[wp.int32(keys[at + c] & INDEX_MASK)], -1)
+                    for v in range(v_lo, v_hi):
+                        w = weights[v]
+                        if wp.static(pairs != SINGLES):
+                            for g in range(0, GATHER, 2):
+                                if slots[g] >= 0:
+                                    da = rows[slots[g], v]
+                                    db = rows[slots[g + 1], v]
+                                    ra = wp.where(da >= 0, table[s, wp.min(da, last)], wp.float32(0.0))
+                                    rb = wp.where(db >= 0, table[s, wp.min(db, last)], wp.float32(0.0))
+                                    w = move_pair(w, ra, rb, targets[g], targets[g + 1])
+                        else:
+                            for g in range(GATHER):
+                                if slots[g] >= 0:
+                                    d = rows[slots[g], v]
+                                    rate = wp.where(d >= 0, table[s, wp.min(d, last)], wp.float32(0.0))
+                                    w = w + rate * (targets[g] - w)
+                        weights[v] = w
+                update_box(weights, lo_box, hi_box, b)
+
+    return SimpleNamespace(vec=vec, box_bound=box_bound, nearest_in_block=nearest_in_block, update_box=update_box,
+                           boxes=boxes, find=find, move=move)

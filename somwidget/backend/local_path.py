@@ -1,0 +1,111 @@
+"""The CPU's local cycle (a path of `Som`, som.py): a drag costs what it touches. The neurons are kept in blocks of
+local_kernels.BLOCK, each with the bounding box of its weights; a cycle moves only the blocks within reach of a
+winner and searches only the blocks that may hold one (local_kernels.py), and gives the full computation's weights
+bit for bit.
+
+It runs the paper's rule past the dense table (distance rows, rows_path.RowCache, searched only as deep as the cut
+table's reach, schedule.NEIGHBOURHOOD_CUT) and, on the CPU, the shaping path's search and move (shaping_path.py).
+The host drives each cycle: it reads the winners, fetches their rows, and launches each phase on every core (the
+blocks, or the controls, split between them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .cycle_kernels import MAX_CONTROLS
+from .local_kernels import block_count, local_kernels
+from .schedule import reach_hops
+
+
+class LocalPath:
+    """The CPU's local cycle of a Som (mixed into `Som`; its state lives there)."""
+
+    # -- the blocks' boxes ------------------------------------------------------------------------------------
+    def _local_setup(self) -> None:
+        """The boxes of the weights' blocks and the flat view of the winner keys (once, on the CPU)."""
+        vec = self._kernels.vec
+        n_blocks = block_count(self.n_neurons)
+        self._box_lo = wp.empty(n_blocks, dtype=vec, device="cpu")
+        self._box_hi = wp.empty(n_blocks, dtype=vec, device="cpu")
+        self._boxes_valid = False
+        self._flat_keys = wp.array(ptr=self._keys.ptr, dtype=wp.uint64, shape=(3 * MAX_CONTROLS,), device="cpu")
+        self._keys_host = self._keys.numpy()  # a view of the keys (CPU memory)
+
+    def _block_ranges(self) -> list[tuple[int, int]]:
+        """Each core's range of blocks."""
+        bounds = np.linspace(0, len(self._box_lo), self._cores + 1).astype(int)
+        return list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
+
+    def _ensure_boxes(self) -> None:
+        if not self._boxes_valid:
+            kern = local_kernels(self.n_dims)
+            self._on_cores(kern.boxes, lambda lo, hi: [self._w, self._box_lo, self._box_hi, lo, hi])
+            self._boxes_valid = True
+
+    def _on_cores(self, kernel, inputs, split=None) -> None:
+        """`kernel` on every core at once, core i given inputs(*split[i]) (default: its range of blocks)."""
+        parts = split if split is not None else self._block_ranges()
+        others = [self._pool.submit(wp.launch, kernel, dim=1, device="cpu", inputs=inputs(*part))
+                  for part in parts[1:]] if len(parts) > 1 else []
+        wp.launch(kernel, dim=1, device="cpu", inputs=inputs(*parts[0]))
+        for job in others:
+            job.result()
+
+    def _local_find(self, controls: wp.array, count: int, keys: wp.array, hint_at: int, out_at: int) -> None:
+        """Step 1 for `count` controls into keys[out_at + c], the controls split between the cores."""
+        self._ensure_boxes()
+        kern = local_kernels(self.n_dims)
+        cores = min(self._cores, count)
+        self._on_cores(kern.find, lambda first: [self._w, controls, first, cores, count, self._m, keys, hint_at,
+                                                 out_at, self._box_lo, self._box_hi],
+                       split=[(core,) for core in range(cores)])
+
+    # -- the paper's rule past the dense table -------------------------------------------------------------------
+    def _run_local(self, cycles: int) -> None:
+        """`cycles` cycles of the paper's rule reading distance rows: per cycle, the winners' rows (searched as deep
+        as the cycle's reach), the move of the blocks within reach (all of them with smoothing, which moves every
+        neuron), smoothing, and the next winners. Controls whose winners outnumber the cache move in parts."""
+        self._settle_anchor()
+        kern = local_kernels(self.n_dims, self._pairs)
+        smoothing = self._smoothing > 0.0
+        keys = self._flat_keys
+        if not self._winners_valid:
+            self._local_find(self._c, self._k_eff, keys, (self._s % 3) * MAX_CONTROLS, (self._s % 3) * MAX_CONTROLS)
+            self._winners_valid = True
+        for _ in range(cycles):
+            s = self._s
+            at = (s % 3) * MAX_CONTROLS
+            winners = (self._keys_host[s % 3, : self._k_eff] & np.uint64(0xFFFFFFFF)).astype(np.int64)
+            for lo, hi in self._parts(winners):
+                self._cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), int(self._reach_hops[s]))
+                self._on_cores(kern.move, lambda b_lo, b_hi, lo=lo, hi=hi: [
+                    self._w, self._c, lo, hi, self._table, s, self._reach_dev, self._distances, self._slot_of,
+                    self._cache.near, keys, at, self._box_lo, self._box_hi, b_lo, b_hi, int(smoothing)])
+            if smoothing:
+                wp.copy(self._w_moved, self._w)
+                self._on_cores(self._kernels.smooth_part, lambda lo, hi: [
+                    self._w_moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing, lo, hi,
+                    self._stalled], split=self._ranges)
+                self._boxes_valid = False
+            self._local_find(self._c, self._k_eff, keys, at, ((s + 1) % 3) * MAX_CONTROLS)
+            self._s += 1
+
+    def _parts(self, winners: np.ndarray) -> list[tuple[int, int]]:
+        """Consecutive runs of controls whose distinct winners fit in the cache (a mirrored pair is never split)."""
+        parts, lo, seen = [], 0, set()
+        unit = 2 if self._mirror else 1
+        for c in range(0, len(winners), unit):
+            group = set(winners[c:c + unit].tolist())
+            if len(seen | group) > self._cache.size:
+                parts.append((lo, c))
+                lo, seen = c, set()
+            seen |= group
+        parts.append((lo, len(winners)))
+        return parts
+
+    def _local_table(self) -> None:
+        """The cut table's reach per cycle, on the host and the device (after the table is built)."""
+        self._reach_hops = reach_hops(self._table_host)
+        self._reach_dev = wp.array(self._reach_hops, dtype=wp.int32, device=self.device)

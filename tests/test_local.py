@@ -1,0 +1,200 @@
+"""A drag costs what it touches (backend/local_path.py): the CPU's local cycle, which moves only the blocks of neurons
+within reach of a winner and searches only the blocks that may hold one, against the full computation (every
+neuron moved and searched by the engine's full kernels: the same weights bit for bit) and against the float64
+reference with the cuts the engine states: past the dense table theta < 2^-24 is 0 (schedule.NEIGHBOURHOOD_CUT), and
+a carrying group leaves a node where it could move it by less than 2^-24 of the start shape's size
+(shaping_kernels.CARRY_CUT). Past the cuts the nodes stay exactly where they were.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import warp as wp
+from reference import ROWS_CUT, ReferenceSom, edges_from_faces, grid_quads
+from test_engine import _assert_matches, _scale
+
+from somwidget import Som, Topology
+from somwidget.backend.cycle_kernels import MAX_CONTROLS, cycle_kernels
+from somwidget.backend.local_kernels import BLOCK
+from somwidget.backend.shaping_kernels import shaping_kernels
+
+S = 200
+
+
+def _strip(nx: int = 16, ny: int = 40):
+    """An open nx x ny sheet 0.1 apart, gently waved (no two nodes equally near a control)."""
+    quads = grid_quads(nx, ny)
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")
+    i, j = i.ravel(), j.ravel()
+    pts = np.stack([0.1 * i - 0.05 * (nx - 1), 0.1 * j - 0.05 * (ny - 1), 0.03 * np.sin(0.7 * i + 0.3 * j)], 1)
+    return Topology.from_faces(quads), edges_from_faces(quads), pts.astype(np.float32)
+
+
+def _full_cycle(som: Som) -> None:
+    """One cycle of the paper's rule as the full computation runs it, with the Som's own state and cut table: every
+    neuron moved (cycle_kernels' move_part) and searched (find_part)."""
+    kern = cycle_kernels(som.n_dims, 8, som._pairs)
+    winners = som._current_winners()
+    som._cache.fetch(list(dict.fromkeys(winners.tolist())), som._d_max)
+    som._counter_words[:] = som._s
+    wp.launch(kern.move_part, dim=1, device="cpu", inputs=[som._w, som._w, som._c, 0, som._k_eff, som._table,
+                                                             som._distances, som._slot_of, som._keys, som._cycle[0],
+                                                             0, som.n_neurons, som._stalled])
+    wp.launch(kern.find_part, dim=1, device="cpu", inputs=[som._w, som._c, som._k_eff, som._m, som._keys,
+                                                             som._cycle[0], 0, 1, 1, som._stalled])
+    som._s += 1
+
+
+def _drag(pts: np.ndarray, controls: np.ndarray, frames: int = 4):
+    """The controls of each frame of a drag of control 0."""
+    moved = controls.copy()
+    for _ in range(frames):
+        moved[0] += np.float32([0.03, 0.012, 0.05])
+        yield moved.copy()
+
+
+@pytest.mark.parametrize("mirror", [(), (1,)])
+def test_paper_rule_local_equals_full_computation(mirror):
+    """Rows mode on the CPU, a drag restarted from its anchor each frame: the local cycle gives the full computation's
+    weights and winners bit for bit, and leaves the blocks out of reach exactly as they were."""
+    topo, _, pts = _strip()
+    controls = pts[[291, 328, 348]] + np.float32([0.004, 0.003, 0.02])  # mid-sheet: the mirrored copies too
+    local, full = (Som(topo, pts, controls, iterations=S, reach=0.04, mirror=mirror, distances="rows", device="cpu")
+                   for _ in range(2))
+    for som in (local, full):
+        som.restore(pts, S)
+        som.anchor()
+    untouched = 0
+    for moved in _drag(pts, controls):
+        local.set_controls(moved, from_anchor=True)
+        local.step(5)
+        full.set_controls(moved, from_anchor=True)
+        full.winners()  # the first winners by the full search
+        for _ in range(5):
+            _full_cycle(full)
+        np.testing.assert_array_equal(local.weights, full.weights)
+        assert local._current_winners().tolist() == full._current_winners().tolist()
+        same = (local.weights == pts).all(axis=1)
+        untouched = max(untouched, int(same.reshape(-1)[: len(same) // BLOCK * BLOCK].reshape(-1, BLOCK)
+                                       .all(axis=1).sum()))
+    assert untouched >= 1  # whole blocks lay out of reach (and stayed bit for bit)
+
+
+def test_paper_rule_local_matches_reference_with_the_cut():
+    """The same drag against the float64 reference with theta < 2^-24 taken as 0: equal within float32 rounding, and
+    every node the reference leaves exactly in place (out of reach) stays exactly in place."""
+    topo, edges, pts = _strip()
+    controls = pts[[291, 328, 348]] + np.float32([0.004, 0.003, 0.02])
+    som = Som(topo, pts, controls, iterations=S, reach=0.04, distances="rows", device="cpu")
+    ref = ReferenceSom(len(pts), edges, pts.astype(np.float64), controls.astype(np.float64), iterations=S,
+                       reach=0.04, cut=ROWS_CUT)
+    som.restore(pts, S)
+    som.anchor()
+    for moved in _drag(pts, controls):
+        som.set_controls(moved, from_anchor=True)
+        som.step(6)
+        ref.restore(pts.astype(np.float64), S)
+        ref.set_controls(moved.astype(np.float64))
+        ref.step(6)
+        _assert_matches(som, ref, _scale(pts, moved))
+        still = (ref.W == pts).all(axis=1)
+        assert 0 < still.sum() < len(pts)
+        np.testing.assert_array_equal(som.weights[still], pts[still])
+
+
+def _shaping_full_cycle(som: Som) -> None:
+    """One cycle of the shaping rules with the full kernels: the winners by the full scan, every neuron moved by the
+    thread-per-neuron `move`."""
+    kern = shaping_kernels(som.n_dims)
+    if som._sh_controls is None:
+        som._upload_shaping()
+    if som._sh_rest_pending:
+        wp.copy(som._sh_rest, som._w)
+        som._sh_rest_pending, som._sh_fit_pending = False, True
+    som._sh_keys.fill_(np.uint64(0xFFFFFFFFFFFFFFFF))
+    stretches = -(-som.n_neurons // 256)
+    wp.launch(kern.find, dim=len(som._sh_keys) * stretches, device="cpu",
+              inputs=[som._w, som._sh_controls, som._m, som._sh_keys, stretches])
+    wp.launch(kern.gather, dim=len(som._sh_keys), device="cpu",
+              inputs=[som._w, som._sh_keys, som._sh_controls, som._sh_winners, som._sh_offsets])
+    if som._rows_mode:  # the point controls' rows, whole
+        winners = (som._sh_keys.numpy() & np.uint64(0xFFFFFFFF)).astype(np.int64)
+        som._cache.fetch(list(dict.fromkeys(winners.tolist())), som._d_max)
+    position = som._kernels.vec(1.0, 1.0, 1.0)
+    if som._sh_fit_pending:
+        wp.launch(kern.fit, dim=len(som._sh_keys), device="cpu",
+                  inputs=[som._sh_controls, som._sh_winners, som._sh_sigma, float(som._edge), position, som._sh_inv])
+        som._sh_fit_pending = False
+    wp.launch(kern.move, dim=som.n_neurons, device="cpu",
+              inputs=[som._w, som._sh_rest, som._sh_controls, som._sh_winners, som._sh_keys, som._sh_inv,
+                      som._sh_offsets, som._component, som._sh_groups, som._sh_stroke, som._sh_n_groups, som._table,
+                      som._s, som._distances, som._slot_of, position, som._floor])
+    som._s += 1
+
+
+@pytest.mark.parametrize("distances", ["dense", "rows"])
+def test_shaping_local_equals_full_computation(distances):
+    """Controls with a radius (a kept shape) and a point control: the CPU's move of the blocks a group can reach gives
+    the thread-per-neuron kernel's weights bit for bit; the far end of the strip stays as it was."""
+    topo, _, pts = _strip()
+    controls = pts[[19, 136, 204, 250]].copy()
+    radii = [0.25, 0.25, 0.0, 0.25]
+    local, full = (Som(topo, pts, controls, iterations=S, reach=0.04, radii=radii, distances=distances,
+                       device="cpu") for _ in range(2))
+    for som in (local, full):
+        som.restore(pts, S)
+        som.anchor()
+    for moved in _drag(pts, controls, 3):
+        local.set_controls(moved, from_anchor=True)
+        local.step(5)
+        full.set_controls(moved, from_anchor=True)
+        full._settle_anchor()
+        for _ in range(5):
+            _shaping_full_cycle(full)
+        np.testing.assert_array_equal(local.weights, full.weights)
+    assert (local.weights[-64:] == pts[-64:]).all()
+
+
+def test_shaping_local_matches_reference_with_the_floor():
+    """The drag of a carrying control against the float64 reference with the carry floor: equal within float32
+    rounding; the nodes it leaves in place stay bit for bit."""
+    topo, edges, pts = _strip()
+    controls = pts[[19, 136, 250]].copy()
+    radii = [0.25, 0.3, 0.25]
+    som = Som(topo, pts, controls, iterations=S, reach=0.3, radii=radii, distances="rows", device="cpu")
+    ref = ReferenceSom(len(pts), edges, pts.astype(np.float64), controls.astype(np.float64), iterations=S,
+                       reach=0.3, radii=radii, cut=ROWS_CUT)
+    som.restore(pts, S)
+    som.anchor()
+    for moved in _drag(pts, controls, 3):
+        som.set_controls(moved, from_anchor=True)
+        som.step(6)
+        ref.restore(pts.astype(np.float64), S)
+        ref.set_controls(moved.astype(np.float64))
+        ref.step(6)
+        _assert_matches(som, ref, _scale(pts, moved))
+        still = (ref.W == pts).all(axis=1)
+        assert 0 < still.sum() < len(pts)
+        np.testing.assert_array_equal(som.weights[still], pts[still])
+
+
+def test_block_search_equals_full_scan():
+    """The search that skips blocks whose box cannot hold a nearer neuron finds the full scan's winners, with metric
+    weights, blocks in no spatial order, and exact ties (the lowest index wins)."""
+    rng = np.random.default_rng(4)
+    n = 40 * int(BLOCK) + 17
+    pts = rng.normal(size=(n, 4)).astype(np.float32)
+    pts[: n // 2] = np.sort(pts[: n // 2], axis=0)  # half the blocks tight, half spread
+    pts[n - 5] = pts[7]  # a tie: 7 wins
+    pts[n - 9] = pts[n // 3]
+    controls = np.concatenate([pts[[7, n // 3, 100, n - 1]], rng.normal(size=(12, 4)).astype(np.float32)])
+    topo = Topology.from_edges(np.stack([np.arange(n - 1), np.arange(1, n)], 1), n)
+    som = Som(topo, pts, controls, metric_weights=[1.0, 0.5, 2.0, 0.0], distances="rows", device="cpu")
+    full = som.winners()
+    for hint in (0, n - 1, 777):  # the search starts in a hinted block: any will do
+        som._keys_host[1, : len(controls)] = hint
+        som._local_find(som._c, len(controls), som._flat_keys, MAX_CONTROLS, 2 * MAX_CONTROLS)
+        found = (som._keys_host[2, : len(controls)] & np.uint64(0xFFFFFFFF)).astype(np.int64)
+        assert found.tolist() == full.tolist()
+    assert full[0] == 7 and full[1] == n // 3
