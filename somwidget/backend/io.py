@@ -403,6 +403,8 @@ def save_session(path, state: dict) -> None:
     try:
         with os.fdopen(fd, "wb") as f:
             np.savez_compressed(f, **arrays)
+            f.flush()
+            os.fsync(f.fileno())  # on the disk before it takes the name: a crash leaves the old file or the new
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

@@ -115,10 +115,12 @@ class Panel(widgets.VBox):
         self.controls_html = widgets.HTML()
         self.error = widgets.HTML()
         self.recovered = _banner(self.model.recovered_message())
+        self.saving = widgets.HTML()  # the autosave's failure, until a save is on disk again
         self.variants = VariantsSection(self.model, self._intent)
 
         super().__init__([
-            self.recovered, self.title, widgets.HBox([self.preset, self.reload_button, self.refine_button]),
+            self.recovered, self.saving, self.title,
+            widgets.HBox([self.preset, self.reload_button, self.refine_button]),
             widgets.HBox([self.train_button, self.undo_button, self.redo_button, self.reset_button]),
             self.progress, self.status, self.error,
             widgets.HTML(_BLOCK.format("<b>Schedule</b> <small>(alpha(s) from l_start to l_end over S cycles)"
@@ -268,6 +270,8 @@ class Panel(widgets.VBox):
             self.controls_html.value = _controls_table(self.model.control_rows(frame))
             if session.error and not self.error.value:
                 self.error.value = f'<span style="color:#b00020">{_html.escape(session.error)}</span>'
+            failed = session.save_error
+            _set(self.saving, _BLOCK.format(f'<b style="color:#b00020">{_html.escape(failed)}</b>') if failed else "")
             self.last_frame_seq = frame.seq
             self.refreshes += 1
 

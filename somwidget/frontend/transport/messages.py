@@ -61,6 +61,9 @@ Server -> client
    {"type": "status", "cycle_ms": c, "fps": f}                     the engine's time per cycle and the frames
                                                                    published per second (about twice a second
                                                                    while frames flow)
+   {"type": "autosave", "ok": false, "message": "..."}             the autosave cannot write (what and where; it
+                                                                   tries again every second): shown until a message
+                                                                   with "ok": true says a save is on disk again
 
 Client -> server: JSON text, one intent per message, at most MAX_MESSAGE_BYTES bytes
 ------------------------------------------------------------------------------------
@@ -127,7 +130,7 @@ INTENTS = {
 }
 
 #: Server -> client JSON messages (besides binary frames), by their "type".
-SERVER_MESSAGES = ("topology", "grabs", "controls", "error", "pong", "status")
+SERVER_MESSAGES = ("topology", "grabs", "controls", "error", "pong", "status", "autosave")
 
 
 class IntentError(ValueError):
@@ -243,6 +246,11 @@ def error_message(message: str, intent: str | None = None) -> dict:
 
 def status_message(cycle_time: float, frames_per_second: float) -> dict:
     return {"type": "status", "cycle_ms": round(float(cycle_time) * 1e3, 6), "fps": round(float(frames_per_second), 2)}
+
+
+def autosave_message(error: str | None) -> dict:
+    """The autosave's state: `error` (what and where) while saves fail, None once one is on disk again."""
+    return {"type": "autosave", "ok": error is None, "message": error or "autosave works again: all is on disk"}
 
 
 def controls_message(control_ids, group: str = "none", maps: list | None = None) -> dict:

@@ -3,8 +3,8 @@
 The websocket hub (web/hub.py) and every notebook widget (notebook/widget.py) of a session send from the same
 outbox: each published frame is encoded once (frames.py), the topology message once per generation (display.py),
 and each view (a `Peer`) gets, in order, the topology when its generation is new (else the control ids when they
-changed), the frame, and a status line every STATUS_PERIOD seconds. A view that falls behind skips frames: it is
-only ever handed the latest.
+changed), the frame, the autosave's state when it changed (a save failed, or works again), and a status line every
+STATUS_PERIOD seconds. A view that falls behind skips frames: it is only ever handed the latest.
 
 Threads: the session calls `_on_frame` on its training thread, which only keeps the frame and wakes the
 subscribers; encoding happens in `packets`, on whichever thread sends (the event loop, a widget's sender).
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from ..model import Frame, Session
 from .display import group_maps, mirror_axes, topology_message
 from .frames import encode_frame
-from .messages import STATUS_PERIOD, controls_message, status_message
+from .messages import STATUS_PERIOD, autosave_message, controls_message, status_message
 
 
 @dataclass
@@ -33,6 +33,7 @@ class Peer:
     control_ids: tuple = ()  # with the group: the controls it knows
     last_status: float = 0.0
     seq: int = -1  # the latest frame handed to it
+    save_error: str | None = None  # the autosave's failure it was told of (None: saves work)
 
     def forget(self) -> None:
         """Send the topology again with the next frame (a new output on the same connection: a hello)."""
@@ -113,6 +114,9 @@ class Outbox:
         now = time.monotonic()
         if now - peer.last_status >= STATUS_PERIOD:
             peer.last_status = now
+        if session.save_error != peer.save_error:  # a save failed, or works again: every view says so
+            peer.save_error = session.save_error
+            out.append(autosave_message(peer.save_error))
             out.append(status_message(frame.cycle_time, session.frames_per_second))
         return out
 

@@ -125,6 +125,8 @@ class SomApp:
         s.field_revs = {}  # bumped when a field's value is refused: the page draws it anew (panel_state.py)
         s.reach_help = REACH_HELP
         s.recovered_message = self.panel.recovered_message()
+        s.notice_message = " ".join(self.session.notices)  # saved sessions set aside: what and where
+        s.save_error = ""  # the autosave's failure while saves fail (panel_state.py)
         s.variants_n = 12
         s.variants_jitter = 0.05
         s.variants_vary = []
@@ -330,6 +332,7 @@ class SomApp:
                           "grabs": {str(i): cid for i, cid in hub.grabs.items()} if hub else {}},
                 "panel": {"error_message": self.state.error_message, "param_S": self.state.param_S,
                           "recovered_message": self.state.recovered_message,
+                          "notice_message": self.state.notice_message, "save_error": self.state.save_error,
                           "preset_name": self.state.preset_name}}
         return web.json_response(body, headers={"Cache-Control": "no-store"})
 

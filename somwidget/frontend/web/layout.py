@@ -138,6 +138,10 @@ def _panel(panel: PanelModel) -> None:
             v3.VBtn("Start fresh", size="small", variant="tonal", classes="mt-1", id="start-fresh",
                     click="trigger('start_fresh')", title="Load the preset the server was started with (Undo "
                                                        "brings the recovered session back)")
+        v3.VAlert(v_if="save_error", text=("save_error",), type="error", density="compact", id="save-alert",
+                  classes="mb-2", icon="mdi-content-save-alert")  # until a save is on disk again: not closable
+        v3.VAlert(v_if="notice_message", text=("notice_message",), type="warning", density="compact",
+                  id="notice-alert", closable=True, classes="mb-2", click_close="notice_message = ''")
         v3.VProgressLinear(v_if="busy", indeterminate=True, classes="mb-2")
 
         # preset and files

@@ -109,6 +109,7 @@ class PanelState:
             if self.session.error and not s.error_message:
                 s.error_message = self.session.error
 
+            s.save_error = self.session.save_error or ""  # shown until a save is on disk again
     def error(self, message: str) -> None:
         log.info("refused: %s", message)
         self.state.error_message = message

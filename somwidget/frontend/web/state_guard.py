@@ -64,6 +64,7 @@ WRITABLE = {
     "error_message": _cleared,
     "info_message": _cleared,
     "recovered_message": _cleared,
+    "notice_message": _cleared,
 }
 
 

@@ -11,6 +11,7 @@ export function dispatchText(msg, handlers) {
   else if (msg.type === 'error') handlers.onError?.(msg);
   else if (msg.type === 'pong') handlers.onPong?.(msg);
   else if (msg.type === 'status') handlers.onServerStatus?.(msg);
+  else if (msg.type === 'autosave') handlers.onAutosave?.(msg); // a save failed ({ok: false, message}), or works again
   else if (msg.type === 'controls') handlers.onControls?.(msg.ids, msg); // the whole message: its group too
 }
 

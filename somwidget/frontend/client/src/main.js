@@ -55,9 +55,21 @@ link = new Link(socketURL(), {
     ui.error.textContent = e.message;
     ui.error.hidden = false;
     clearTimeout(state.hudErrorTimer);
-    state.hudErrorTimer = setTimeout(() => { ui.error.hidden = true; }, 4000);
+    state.hudErrorTimer = setTimeout(showSaving, 4000);
+  },
+  // a failed autosave stays on the HUD (and the headset menu's status) until a save is on disk again
+  onAutosave: (msg) => {
+    state.autosave = msg.ok ? null : msg.message;
+    showSaving();
+    showStatus();
   },
 });
+
+// The HUD's error line: the autosave's failure while saves fail, else nothing (a refused intent shows for 4 s).
+function showSaving() {
+  ui.error.textContent = state.autosave || '';
+  ui.error.hidden = !state.autosave;
+}
 view.transport = link;
 view.onTopology = (t) => { ui.title.textContent = `somwidget XR: ${t.title}`; };
 view.onFirstFrame = () => {
@@ -141,8 +153,8 @@ function showStatus() {
   ui.undo.disabled = !(f && f.canUndo);
   ui.redo.disabled = !(f && f.canRedo);
   menu.setLabel('train', trainLabel(f));
-  menu.setStatus(f ? `${t ? t.title : ''}  ${f.iteration}/${f.iterations}  ${f.running ? 'training' : f.paused
-    ? 'paused' : 'converged'}` : text);
+  menu.setStatus(state.autosave ? 'NOT SAVED: autosave failed, trying again' : f ? `${t ? t.title : ''}  ${
+    f.iteration}/${f.iterations}  ${f.running ? 'training' : f.paused ? 'paused' : 'converged'}` : text);
 }
 
 let lastStatus = 0;
@@ -168,7 +180,8 @@ window.somxr = {
     digest: state.digest, k: clay.k, kEff: clay.kEff, held: [...clay.held], local: [...clay.local.keys()],
     group: clay.group, groupMaps: clay.groupMaps.map((m) => [...m]),
     hover: [...clay.hover], errors: state.errors.map((e) => e.message), lastError: state.lastError,
-    link: { ...link.stats }, moves: grabs.moves, latencies: [...grabs.latencies],
+    autosave: state.autosave || null, hudError: ui.error.hidden ? null : ui.error.textContent,
+    menuStatus: menu.statusText, link: { ...link.stats }, moves: grabs.moves, latencies: [...grabs.latencies],
     controlLatencies: [...grabs.controlLatencies], xr: { ...xr.stats }, pressed: [...menu.pressed], desktop: { ...desktop.stats },
     scale: clay.scale, stage: clay.stage.position.toArray(), inputs: xr.describeInputs(),
   }),
