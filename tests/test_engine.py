@@ -760,6 +760,7 @@ def test_two_threads_can_build_and_train_at_once():
     every launch on the device during a capture, so without the engine's lock the other thread's work lands in
     (or breaks) the capture."""
     import threading
+    import time
 
     faces = torus_quads(8, 6)
     points = torus_points(8, 6).astype(np.float32)
@@ -767,28 +768,33 @@ def test_two_threads_can_build_and_train_at_once():
     controls = np.array([[2.0, 1.0, 0.5], [-1.5, 0.5, 1.0]], np.float32)
     trainer = Som(topo, points, controls, iterations=50, device="cpu")
     errors: list[BaseException] = []
-    stop = threading.Event()
+    done = threading.Event()
+    trained = 0
 
     def train():
+        nonlocal trained
         try:
-            for i in range(200):
-                trainer.set_controls(controls + np.float32(0.01 * (i % 7)))  # new controls: graphs recaptured
+            while not done.is_set():  # until the other thread has built its Soms, however the two are scheduled
+                trainer.set_controls(controls + np.float32(0.01 * (trained % 7)))  # new controls: graphs recaptured
                 trainer.step(3)
+                trained += 1
         except BaseException as exc:  # noqa: BLE001 - reported below
             errors.append(exc)
-        finally:
-            stop.set()
 
     thread = threading.Thread(target=train)
     thread.start()
     built = 0
     try:
-        while not stop.is_set() and built < 200:
+        while built < 20 and not errors:
             other = Som(Topology.from_faces(faces), points, controls, iterations=10, device="cpu")
             other.set_weights(points * np.float32(1.01))
             other.step(2)
             built += 1
+        deadline = time.monotonic() + 60.0
+        while trained < 3 and not errors and time.monotonic() < deadline:  # a starved trainer gets its turn
+            time.sleep(0.01)
     finally:
+        done.set()
         thread.join()
     assert not errors, errors
-    assert built > 0
+    assert built == 20 and trained > 0
