@@ -27,6 +27,21 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
 ANNOUNCED = re.compile(r"somwidget serving .* at (http)://(\S+?):(\d+)/|desktop: (https)://(\S+?):(\d+)/")
 
 
+def wave_mesh(path: Path, side: int) -> Path:
+    """A side x side wave sheet (triangles) written to `path` (binary PLY: a big mesh uploads in a few MB); 513 makes
+    263,169 vertices, just past a CPU session's 262,144."""
+    import numpy as np
+    import trimesh
+
+    xs = np.linspace(-1.0, 1.0, side)
+    x, y = np.meshgrid(xs, xs, indexing="xy")
+    pts = np.stack([x.ravel(), y.ravel(), 0.2 * np.sin(3 * x.ravel())], 1)
+    v = np.arange(side * side).reshape(side, side)
+    quads = np.stack([v[:-1, :-1], v[:-1, 1:], v[1:, 1:], v[1:, :-1]], -1).reshape(-1, 4)
+    trimesh.Trimesh(pts, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]), process=False).export(path)
+    return path
+
+
 def free_port() -> int:
     import socket
 

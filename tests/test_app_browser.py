@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, CHROMIUM_ARGS, Serve
+from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, wave_mesh
 
 VIEWPORT = {"width": 1200, "height": 800}
 
@@ -453,14 +453,8 @@ def test_bad_upload_shows_an_error_and_the_session_goes_on(browser, server, tmp_
         page.locator("#mesh-upload").set_input_files(str(flat))
         page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('degenerate')",
                                timeout=20000)
-        # too many vertices for the session (a 130 x 130 grid: 16900 > 16384)
-        n = 130
-        big = tmp_path / "big.obj"
-        idx = np.arange(n * n).reshape(n, n) + 1
-        verts = "".join(f"v {i % n} {i // n} 0\n" for i in range(n * n))
-        faces = "".join(f"f {a} {b} {c} {d}\n" for a, b, c, d in zip(idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(),
-                                                                     idx[1:, 1:].ravel(), idx[1:, :-1].ravel()))
-        big.write_text(verts + faces)
+        # too many vertices for the session (a 513 x 513 sheet: 263,169 > 262,144 on the CPU)
+        big = wave_mesh(tmp_path / "big.ply", 513)
         page.locator("#mesh-upload").set_input_files(str(big))
         page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('exceed the limit')",
                                timeout=30000)

@@ -247,13 +247,21 @@ def test_rows_match_reference(device, name, smoothing, seed):
 def test_distances_argument():
     topo = _case("lattice").topo
     W = np.zeros((topo.n_vertices, 3), np.float32)
-    assert Som(topo, W, [[1.0, 0.0, 0.0]], device="cpu").distances == "dense"  # N <= 65,536: dense by default
+    assert Som(topo, W, [[1.0, 0.0, 0.0]], device="cpu").distances == "dense"  # N <= 16,384: dense by default
     for bad in ("sparse", 1, True):
         with pytest.raises(ValueError, match=r"^distances: "):
             Som(topo, W, [[1.0, 0.0, 0.0]], device="cpu", distances=bad)
     for bad in (0, -3, 1.5):
         with pytest.raises(ValueError, match=r"^cache_rows: "):
             Som(topo, W, [[1.0, 0.0, 0.0]], device="cpu", distances="rows", cache_rows=bad)
+
+
+def test_rows_by_default_on_the_cpu_past_16384():
+    """On the CPU a mesh past 16,384 neurons takes distance rows by default (its dense table would take the CPU's
+    cores a long time and 8 GiB at 65,536); a GPU keeps the dense table up to 65,536."""
+    topo = _grid(130, 130)
+    W = np.zeros((topo.n_vertices, 3), np.float32)
+    assert Som(topo, W, [[1.0, 0.0, 0.0]], device="cpu").distances == "rows"
 
 
 def test_dense_refused_past_cap_rows_by_default():

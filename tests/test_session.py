@@ -587,3 +587,38 @@ def test_a_dead_training_thread_shows_in_error_and_waits_return_at_once():
         assert time.monotonic() - t < 5
     finally:
         s.close()
+
+
+def test_a_65536_vertex_upload_trains_on_the_cpu(tmp_path):
+    """Issue 28: a CPU session takes meshes up to 262,144 vertices. A 256 x 256 wave (65,536 vertices) uploads, trains
+    on distance rows, and a drag of one control given a small radius carries the clay around it to the control,
+    while the far side stays exactly where it was (the local cycle touches only what the drag reaches)."""
+    import trimesh
+
+    from somwidget.frontend.model.clay import DEFAULT_MAX_VERTICES
+
+    faces, pts = presets.open_grid(256, 256)
+    pts[:, 2] = 0.2 * np.sin(3 * pts[:, 0]) * np.cos(2 * pts[:, 1])
+    path = tmp_path / "wave.ply"
+    trimesh.Trimesh(pts, np.concatenate([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]]), process=False).export(path)
+    s = Session("car", device="cpu", autosave=False, start=False)
+    try:
+        assert s.max_vertices == DEFAULT_MAX_VERTICES == 262_144
+        s.load_mesh(str(path))
+        s.start()
+        assert s.preset.n_vertices == 65_536 and s.clay.som.distances == "rows"
+        assert s.wait_idle(60)
+        before = s.frame.positions.copy()
+        s.set_control_radius(0, 0.1)
+        start = np.array(s.controls[0][:3], np.float64)
+        target = start + [0.0, 0.0, 0.2]
+        with s.gesture():
+            for k in range(1, 5):
+                s.move_control(0, (start + [0.0, 0.0, 0.05 * k]).tolist())
+        assert s.wait_idle(120)
+        after = s.frame.positions
+        assert _nearest(after, target) < 0.01  # the clay reached the control
+        far = np.linalg.norm(before - start.astype(np.float32), axis=1) > 1.0
+        assert far.sum() > 10_000 and (after[far] == before[far]).all()
+    finally:
+        s.close()

@@ -9,7 +9,7 @@ import re
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, wait_for
+from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, wait_for, wave_mesh
 
 from somwidget.frontend.model import Session
 from somwidget.frontend.notebook import Panel
@@ -87,14 +87,7 @@ def test_the_notebook_panel_sets_a_radius_and_a_symmetry_group():
 def test_a_mesh_past_the_limit_is_offered_decimated(tmp_path):
     """An upload with more vertices than the session takes is refused with the figures, and the panel offers to load
     it decimated: pressing Decimate loads it with at most the limit, its shape kept."""
-    n = 140  # 19,600 vertices > 16,384 on the CPU
-    big = tmp_path / "wave.obj"
-    idx = np.arange(n * n).reshape(n, n) + 1
-    xs = np.linspace(-1, 1, n)
-    verts = "".join(f"v {xs[i % n]:.5f} {xs[i // n]:.5f} {0.2 * np.sin(3 * xs[i % n]):.5f}\n" for i in range(n * n))
-    faces = "".join(f"f {a} {b} {c} {d}\n" for a, b, c, d in zip(idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(),
-                                                                 idx[1:, 1:].ravel(), idx[1:, :-1].ravel()))
-    big.write_text(verts + faces)
+    big = wave_mesh(tmp_path / "wave.ply", 513)  # 263,169 vertices > 262,144 on the CPU
     srv = Serve()
     try:
         with playwright_sync.sync_playwright() as p:
@@ -103,13 +96,13 @@ def test_a_mesh_past_the_limit_is_offered_decimated(tmp_path):
             page.goto(srv.url)
             page.wait_for_selector("#mesh-upload", timeout=30000)
             page.locator("#mesh-upload").set_input_files(str(big))
-            page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('19,600')",
+            page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('263,169')",
                                    timeout=30000)
             assert "decimated" in page.locator("#error-alert").inner_text()
             page.locator("#decimate-upload").click()
             st = srv.wait(lambda s: s["session"]["preset"].startswith("mesh:wave"), timeout=60, what="decimated mesh")
-            assert 1000 < st["session"]["n_vertices"] <= 16384
-            assert "decimated from 19,600" in page.locator("body").inner_text()
+            assert 100_000 < st["session"]["n_vertices"] <= 262_144
+            assert "decimated from 263,169" in page.locator("body").inner_text()
             browser.close()
     finally:
         srv.stop()

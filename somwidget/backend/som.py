@@ -57,6 +57,9 @@ from .symmetry import Symmetry, mirror_dims_of, mirror_of_dims
 from .topology import MAX_DENSE_NEURONS, Topology
 
 MAX_DIMS = 32
+#: On the CPU the dense table is the default up to this many neurons (512 MiB, built by the CPU's cores); past it,
+#: distance rows (the local cycle, local_path.py).
+CPU_DENSE_NEURONS = 16384
 _KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
 #: Learning table entries (S x (d_max + 1) float32) a Som may hold: 2 GiB.
 _MAX_TABLE_ENTRIES = 1 << 29
@@ -83,9 +86,10 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
 
     distances: "dense" reads D[u, v] from the topology's dense N x N table (N <= 65,536); "rows" computes the
     distance rows of the current winners on demand and keeps the `cache_rows` most recently used on the device
-    (None: as many as fit in 1 GiB on the CPU, on a GPU in a sixteenth of its memory up to 8 GiB; at least 512 and at
-    most 4096; 2 at the least); None picks dense up to 65,536 neurons, else rows.
-    Both give the same weights.
+    (None: as many as fit in 512 MiB on the CPU, on a GPU in a sixteenth of its memory up to 8 GiB; at least 512 and
+    at most 4096; 2 at the least); None picks dense up to 65,536 neurons on a GPU and 16,384 on the CPU, else rows.
+    Past the dense table the neighbourhood is cut where theta < 2^-24 (schedule.NEIGHBOURHOOD_CUT).
+    Both give the same weights, but for that cut.
 
     reach (0, 1]: the neighbourhood radius a restart begins with, as a share of the full radius (Restarts, in the
     module's docstring). Moving controls and changing S, l_start, l_end, smoothing or metric weights restart at
@@ -216,7 +220,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
     def _check_distances(self, distances) -> bool:
         """True for distance rows on demand, False for the dense table."""
         if distances is None:
-            return self.n_neurons > MAX_DENSE_NEURONS
+            return self.n_neurons > (CPU_DENSE_NEURONS if self.device == "cpu" else MAX_DENSE_NEURONS)
         if distances not in ("dense", "rows"):
             raise ValueError(f"distances: expected 'dense', 'rows' or None, got {distances!r}")
         if distances == "dense" and self.n_neurons > MAX_DENSE_NEURONS:

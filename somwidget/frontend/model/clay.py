@@ -18,17 +18,19 @@ from ...backend.schedule import KEYS as SCHEDULE_KEYS
 from ...backend.symmetry import Symmetry, mirror_dims_of, mirror_of_dims
 from .history import Step
 
-#: Largest mesh a session on the CPU accepts by default: the dense distance table is N^2 uint16 (16384 -> 512 MiB),
-#: built and searched on the CPU's cores.
-DEFAULT_MAX_VERTICES = 16384
+#: Largest mesh a session on the CPU accepts by default: past 16,384 neurons the engine reads distance rows searched
+#: as deep as a restart reaches (512 MiB of them at most) and moves only the blocks of neurons within reach of a
+#: winner (backend/local_path.py), so a drag costs what it touches; at 262,144 a drag frame (10 cycles) stays in a
+#: frame's time on two cores.
+DEFAULT_MAX_VERTICES = 262_144
 #: Largest mesh a session on a GPU accepts by default: past 65,536 neurons the engine computes distance rows for the
 #: current winners on demand instead of a table, and the views stream a decimated display mesh past 32,768.
 GPU_MAX_VERTICES = 4_194_304
 
 
 def max_vertices_for(device: str | None) -> int:
-    """The largest mesh a session on `device` takes by default: the engine's on a GPU, the dense table's on the
-    CPU."""
+    """The largest mesh a session on `device` takes by default: GPU_MAX_VERTICES on a GPU, DEFAULT_MAX_VERTICES on
+    the CPU."""
     on_gpu = _device.resolve(None if device in (None, "auto") else device).startswith("cuda")
     return GPU_MAX_VERTICES if on_gpu else DEFAULT_MAX_VERTICES
 
@@ -77,9 +79,9 @@ def build(preset: str | Preset | None, device: str | None, max_vertices: int) ->
     if not isinstance(preset, Preset):
         raise ValueError(f"preset: expected a preset name or a Preset, got {type(preset).__name__}")
     if preset.n_vertices > max_vertices:
-        raise ValueError(f"mesh has {preset.n_vertices} vertices; this session accepts at most {max_vertices} on its "
-                         f"device ({device}; on the CPU the distance table grows as N^2, a GPU session takes up to "
-                         f"{GPU_MAX_VERTICES:,})")
+        raise ValueError(f"mesh has {preset.n_vertices:,} vertices; this session accepts at most {max_vertices:,} on "
+                         f"its device ({device}; a session takes up to {DEFAULT_MAX_VERTICES:,} on the CPU, "
+                         f"{GPU_MAX_VERTICES:,} on a GPU)")
     if preset.controls.shape[0] < 1:
         raise ValueError(f"preset {preset.name!r} has no controls; at least one is needed")
     som = preset.make_som(device=None if device in (None, "auto") else device)
