@@ -1,5 +1,6 @@
 """The batched engine (backend/batch.py): each of B variants equals its own single `Som` run and the float64
-reference, on the CPU and (where there is one) the GPU; per-variant schedules; restarts; partial steps; bad input."""
+reference, on the CPU and (where there is one) the GPU; per-variant schedules; restarts; partial steps; controls with
+radii (the shaping rules, mirrored pairs included); bad input."""
 
 from __future__ import annotations
 
@@ -124,6 +125,100 @@ def test_taubin_variants_match_the_float64_reference_and_keep_the_sphere_s_volum
     assert volumes["laplacian"][2] / plain < 0.6  # the paper's step at 0.3: a check that can fail
 
 
+def test_sphere_variants_with_radii_equal_their_single_runs(device):
+    """The sphere preset with its radii (a quarter of the size) and Taubin's smoothing: a kept shape pulled once by a
+    single Som, then variants that each pull one more control from that shape (a local restart, as a move in the
+    session), each equal to the Som that makes the same move; partial steps first. The falloffs' scale comes from
+    the start mesh (origin), as the session's Som measures it."""
+    p = presets.get_preset("sphere")
+    radii = p.control_radii()
+    size = metrics.bounding_diagonal(p.weights)
+    kw = {"iterations": 200, "reach": p.reach, "smoothing_rule": p.smoothing_rule}
+    pulled = p.controls.copy()
+    pulled[0] *= 1.3
+    first = Som(p.topology, p.weights, p.controls, radii=radii, device=device, **kw)
+    first.restore(p.weights, 200)
+    first.set_controls(pulled)
+    first.train()
+    shape = first.weights
+    controls = np.stack([pulled] * 3)
+    for b, share in enumerate([0.3, -0.15, 0.15]):  # out, in, out: one control each
+        controls[b, b + 1] += share * size * pulled[b + 1] / np.linalg.norm(pulled[b + 1])
+    smoothing = [0.0, 0.1, 0.3]
+    som = BatchSom(p.topology, shape, controls, radii=radii, origin=p.weights, smoothing=smoothing, device=device,
+                   **kw)
+    som.restart()
+    assert som.step(13) == 13 and som.train() == 47
+    np.testing.assert_array_equal(som.radii, radii)
+    for b in range(3):
+        single = Som(p.topology, p.weights, pulled, radii=radii, smoothing=smoothing[b], device=device, **kw)
+        single.restore(shape, 200)
+        single.set_controls(controls[b])
+        single.train()
+        _match(device, som.weights[b], single.weights)
+        moved = np.linalg.norm(som.weights[b] - shape, axis=1)
+        assert moved[single.winners()[b + 1]] > 0.1 * size  # the pulled control's region went with it
+
+
+def test_car_variants_with_a_radius_equal_their_single_runs(device):
+    """The car's mirrored pairs with the nose's pair given a radius (a carrying pair among point pairs), colour dims
+    weighed apart, each variant its own schedule: whole runs, then a local restart with other controls."""
+    p = presets.get_preset("car")
+    radii = np.zeros(len(p.controls), np.float32)
+    radii[0] = 0.6
+    controls = _jittered(p.controls, 3, 0.03, 4)
+    schedule = {"iterations": [200, 150, 120], "l_start": [0.25, 0.3, 0.2], "reach": [0.08, 0.2, 1.0]}
+    metric = np.float32([1.0, 1.0, 1.0, 0.5, 2.0])
+    som = BatchSom(p.topology, p.weights, controls, radii=radii, mirror=p.mirror, metric_weights=metric,
+                   smooth_dims=p.smooth_dims, device=device, **schedule)
+    som.train()
+    trained = som.weights
+    moved = _jittered(p.controls, 3, 0.03, 5)
+    restarted = BatchSom(p.topology, trained, moved, radii=radii, mirror=p.mirror, metric_weights=metric,
+                         smooth_dims=p.smooth_dims, origin=p.weights, device=device, **schedule)
+    restarted.restart()
+    restarted.train()
+    for b in range(3):
+        one = {key: values[b] for key, values in schedule.items()}
+        single = Som(p.topology, p.weights, controls[b], radii=radii, mirror=p.mirror, metric_weights=metric,
+                     smooth_dims=p.smooth_dims, device=device, **one)
+        single.train()
+        _match(device, trained[b], single.weights)
+        single.set_controls(moved[b])
+        single.train()
+        _match(device, restarted.weights[b], single.weights)
+    assert metrics.symmetry_error(trained[0, :, :3], metrics.mirror_map(p.weights[:, :3], 1), 1) < 1e-4
+
+
+def test_variants_with_radii_match_the_float64_reference(device):
+    """Controls with radii among a point control, mirrored, on a small ellipsoid: two variants, each its own
+    controls and schedule, against the float64 reference's shaping rules (well-separated winners)."""
+    faces, pts = presets.uv_ellipsoid(12, 7, (1.0, 0.8, 0.6))
+    pts = pts.astype(np.float32)
+    topology = Topology.from_faces(faces, len(pts))
+    radii = [0.6, 0.0, 0.4]
+    controls = np.stack([pts[[3, 40, 70]]] * 2)
+    controls[0, 0, :3] += [0.0, 0.0, 0.35]  # pulled out
+    controls[0, 1, :3] *= 0.85  # pushed in
+    controls[1, 2, :3] *= 1.3
+    controls[1, 0, :3] *= 0.9
+    schedule = {"iterations": [300, 240], "l_start": [0.25, 0.35], "reach": [0.3, 0.4], "smoothing": [0.0, 0.05]}
+    som = BatchSom(topology, pts, controls, radii=radii, mirror=(1,), device=device, **schedule)
+    som.restart()
+    som.train()
+    size = metrics.bounding_diagonal(pts)
+    for b in range(2):
+        one = {key: values[b] for key, values in schedule.items()}
+        ref = ReferenceSom(topology.n_vertices, topology.edges, pts.astype(np.float64), controls[b].astype(np.float64),
+                           radii=radii, mirror=(1,), **one)
+        ref.restore(pts, one["iterations"])
+        ref.set_controls(controls[b])
+        ref.train()
+        assert ref.min_margin() > 1e-4
+        assert np.abs(som.weights[b] - ref.W).max() / size < 2e-5
+        assert np.linalg.norm(som.weights[b] - pts, axis=1).max() > 0.05  # the run did something worth comparing
+
+
 def test_steps_then_train_equal_one_train_and_reset_starts_again():
     p = presets.get_preset("lattice")
     controls = _jittered(p.controls, 2, 0.1, 3)
@@ -149,6 +244,10 @@ def test_steps_then_train_equal_one_train_and_reset_starts_again():
     ({"reach": 0.0}, "reach[0]"),
     ({"mirror": (7,)}, "mirror"),
     ({"metric_weights": [1, -1, 1]}, "metric_weights: expected 3 weights >= 0"),
+    ({"radii": [0.5, 0.5]}, "radii: expected one radius per control (6), got 2"),
+    ({"radii": [0.5, -0.1, 0, 0, 0, 0]}, "radii: each radius must lie in [0, 1e+06]"),
+    ({"radii": [0.5, np.inf, 0, 0, 0, 0]}, "radii: entries must be finite"),
+    ({"origin": np.zeros((5, 3))}, "origin: expected shape (512, 3) (the start mesh)"),
 ])
 def test_bad_input_is_named(kwargs, message):
     p = presets.get_preset("lattice")

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import checks, metrics
-from .batch import MAX_TABLE_ENTRIES, BatchSom
+from .batch import MAX_BATCH_NEURONS, MAX_TABLE_ENTRIES, BatchSom
 from .schedule import BY_NAME, KEYS
 from .symmetry import Symmetry
 from .topology import Topology
@@ -47,11 +47,12 @@ class VariantPlan:
     smoothing_rule: str = "laplacian"
 
     @property
-    def shaping(self) -> bool:
-        """The variants need the shaping rules (som.py), which run as single Soms: radii, a radial group or
-        strokes (Taubin's smoothing alone runs batched)."""
-        return bool(self.radii is not None and np.any(self.radii > 0)) or self.symmetry is not None or bool(
-            self.strokes and len(self.strokes) < self.controls.shape[1])
+    def singles(self) -> bool:
+        """The variants run as single Soms, one after another: a radial group or strokes (the batched kernels have
+        the shaping rules for controls with radii and mirrored pairs only), or a mesh past a batch's dense table
+        (batch.MAX_BATCH_NEURONS)."""
+        return self.symmetry is not None or bool(self.strokes and len(self.strokes) < self.controls.shape[1]) or (
+            self.n_vertices > MAX_BATCH_NEURONS)
 
     @property
     def n_variants(self) -> int:
@@ -149,13 +150,13 @@ def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray,
     """Train every variant of `plan` in one batch on `device` (None: this process's GPU when there is one):
     (weights (n, N, dims) float32, figures: each of FIGURES an (n,) array)."""
     s = plan.schedules
-    if plan.shaping:
+    if plan.singles:
         weights = _run_singles(plan, device)
         return weights, figures(plan, weights)
     som = BatchSom(topology_of(plan), plan.start, plan.controls, iterations=s["iterations"], l_start=s["l_start"],
                    l_end=s["l_end"], smoothing=s["smoothing"], reach=s["reach"], smooth_dims=plan.smooth_dims,
                    metric_weights=plan.metric_weights, mirror=plan.mirror, device=device,
-                   smoothing_rule=plan.smoothing_rule)
+                   smoothing_rule=plan.smoothing_rule, radii=plan.radii, origin=plan.origin)
     if plan.restart:
         som.restart()
     som.train()
@@ -164,8 +165,8 @@ def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray,
 
 
 def _run_singles(plan: VariantPlan, device: str | None) -> np.ndarray:
-    """The variants one Som after another (the batched kernels have no shaping rules yet): the same results as
-    their own runs."""
+    """The variants one Som after another (radial groups, strokes, big meshes): the same results as their own
+    runs."""
     from .som import Som
 
     topology, out = topology_of(plan), []
