@@ -151,5 +151,10 @@ def learning_table(iterations: int, d_max: int, l_start: float = 0.25, l_end: fl
 
 def reach_hops(table: np.ndarray) -> np.ndarray:
     """(S,) int32: the farthest hop count with a non-zero rate at each cycle s (theta falls with d, so the non-zero
-    rates of a row are its first reach_hops[s] + 1; c(s) narrows, so it never grows with s)."""
-    return ((table > 0).sum(axis=1) - 1).astype(np.int32)
+    rates of a row are its first reach_hops[s] + 1; c(s) narrows, so it never grows with s). Counted a block of rows
+    at a time: no temporary of the table's size."""
+    out = np.empty(len(table), np.int32)
+    rows = max(1, TABLE_BLOCK // max(1, table.shape[1]))
+    for start in range(0, len(table), rows):
+        out[start:start + rows] = (table[start:start + rows] > 0).sum(axis=1) - 1
+    return out

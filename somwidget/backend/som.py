@@ -527,8 +527,8 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         return self._start.copy()
 
     def learning_table(self) -> np.ndarray:
-        """L[s, d] (S, d_max + 1) float32."""
-        return self._table_host.copy()
+        """L[s, d] (S, d_max + 1) float32 (a copy)."""
+        return self._table_host.copy() if self._table_host is not None else self._table.numpy()
 
     # -- intents ------------------------------------------------------------------------------------------
     @warp_exclusive
@@ -675,12 +675,18 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
             raise ValueError(f"iterations: the learning table S x (d_max + 1) = {self._iterations:,} x {d_max + 1:,} "
                              f"exceeds {_MAX_TABLE_ENTRIES:,} entries (2 GiB); use fewer iterations")
         cut = NEIGHBOURHOOD_CUT if self._rows_mode else 0.0  # past the dense table: the cut neighbourhood
-        self._table_host = learning_table(self._iterations, d_max, self._l_start, self._l_end, cut)
-        self._table_max = float(self._table_host.max())
-        self._d_max = d_max
-        self._table = wp.array(self._table_host, dtype=wp.float32, device=self.device)
-        self._local_table()
+        # one table at a time: the old one (and the graphs that hold it) goes before the new one is made, and on the
+        # CPU the device array is the host array itself, so an S change costs at most one table's bytes
         self._graphs.clear()
+        self._table = self._table_host = None
+        host = learning_table(self._iterations, d_max, self._l_start, self._l_end, cut)
+        self._table_max = float(host.max())
+        self._d_max = d_max
+        self._table_host = host
+        self._table = wp.array(host, dtype=wp.float32, device=self.device, copy=self.device != "cpu")
+        self._local_table()
+        if self.device != "cpu":  # the device holds it; `learning_table()` reads it back
+            self._table_host = None
 
     def _upload_controls(self) -> None:
         """The effective controls into the fixed-size device buffer, so that the captured graphs stay valid while
