@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import somwidget
-from somwidget import Som, presets
+from somwidget import Som, Symmetry, presets
+from somwidget.backend.variants import plan_variants, run_batch
 from somwidget.cli import main as cli_main
 from somwidget.frontend.model import Session
 
@@ -70,6 +71,24 @@ def test_a_sweep_from_a_session_restarts_from_its_shape_and_a_variant_is_one_und
         assert not session.frame.running
         session.undo()
         np.testing.assert_array_equal(session.frame.weights, shape)
+
+
+def test_plans_with_radii_run_batched_and_radial_groups_as_single_soms():
+    """Controls with radii and a mirror: one batch (BatchSom's shaping rules); a radial group: single Soms; either
+    way each variant equals its own Som (whole runs of the sphere, its radii, Taubin's smoothing)."""
+    p = presets.get_preset("sphere")
+    radii = p.control_radii()[:2]
+    base = {"iterations": 60, "l_start": p.l_start, "l_end": p.l_end, "smoothing": 0.1, "reach": p.reach}
+    for symmetry, mirror in ((None, (1,)), (Symmetry.radial(4, "z"), ())):
+        plan = plan_variants(p.topology, p.weights, p.controls[:2], base, 2, jitter=0.1, seed=1, mirror=mirror,
+                             radii=radii, symmetry=symmetry, smoothing_rule="taubin")
+        assert plan.singles == (symmetry is not None)
+        weights, _ = run_batch(plan, "cpu")
+        for i in range(2):
+            som = Som(p.topology, p.weights, plan.controls[i], **plan.params(i), mirror=mirror, radii=radii,
+                      symmetry=symmetry, smoothing_rule="taubin", device="cpu")
+            som.train()
+            np.testing.assert_array_equal(weights[i], som.weights)
 
 
 def test_the_gallery_shows_each_variant():
