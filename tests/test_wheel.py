@@ -1,5 +1,7 @@
 """The wheel: `python -m build` makes one that holds the built browser client, and installed in a fresh venv (no npm,
-no checkout on the path) it serves the app with its clay view and makes the notebook widget."""
+no checkout on the path) it serves the app with its clay view and makes the notebook widget. From a fresh clone (no
+client built) the build builds the client, or stops with a message that says how where npm is missing (issue 27,
+item 6); a widget whose client is missing raises one clear error."""
 
 from __future__ import annotations
 
@@ -71,3 +73,52 @@ def test_the_installed_wheel_serves_the_app_and_makes_the_widget(installed):
         proc.terminate()
         proc.wait(20)
         log.close()
+
+
+def fresh_clone(tmp_path):
+    """A clone of this repository as a new user gets it: the committed files, no client build, no node_modules."""
+    clone = tmp_path / "clone"
+    subprocess.run(["git", "clone", "-q", str(helpers.ROOT), str(clone)], check=True, timeout=120)
+    assert not (clone / "somwidget" / "frontend" / "client" / "dist").exists()
+    return clone
+
+
+def test_a_build_from_a_fresh_clone_without_npm_stops_and_says_how(tmp_path):
+    clone = fresh_clone(tmp_path)
+    out = subprocess.run([sys.executable, "-m", "build", "--outdir", str(tmp_path / "dist"), str(clone)],
+                         capture_output=True, text=True, timeout=600, env={**os.environ, "PATH": "/nonexistent"})
+    text = out.stdout + out.stderr
+    assert out.returncode != 0, text[-2000:]
+    assert "the browser client is not built (its dist/ is missing) and npm is not on the PATH" in text, text[-3000:]
+    assert "`npm ci && npm run build` in somwidget/frontend/client" in text
+    assert not list((tmp_path / "dist").glob("*.whl"))
+
+
+def test_a_build_from_a_clone_builds_the_client_into_the_wheel(tmp_path):
+    clone = fresh_clone(tmp_path)
+    client = clone / "somwidget" / "frontend" / "client"
+    (client / "node_modules").symlink_to(DIST.parent / "node_modules")  # as `npm ci` leaves them (no network here)
+    out = subprocess.run([sys.executable, "-m", "build", "--wheel", "--outdir", str(tmp_path / "dist"), str(clone)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, (out.stdout + out.stderr)[-3000:]
+    assert "somwidget: building the browser client: run build" in out.stdout
+    wheel, = (tmp_path / "dist").glob("somwidget-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    assert "somwidget/frontend/client/dist/somview.js" in names and "somwidget/frontend/client/dist/index.html" in names
+
+
+def test_a_widget_without_its_client_raises_one_clear_error(tmp_path):
+    """A checkout without the npm step: show() says what to run, once, and makes no session."""
+    archive = subprocess.run(["git", "archive", "HEAD", "somwidget"], cwd=helpers.ROOT, capture_output=True,
+                             check=True, timeout=120).stdout
+    subprocess.run(["tar", "-x", "-C", str(tmp_path)], input=archive, check=True, timeout=120)
+    assert not (tmp_path / "somwidget" / "frontend" / "client" / "dist").exists()
+    code = "from somwidget.frontend.notebook import show\nshow('car', device='cpu')\n"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                         env={**os.environ, "PYTHONPATH": str(tmp_path), "SOMWIDGET_DATA_DIR": str(tmp_path / "data")})
+    assert out.returncode == 1
+    errors = [line for line in out.stderr.splitlines() if "Error" in line or "Exception" in line]
+    assert len(errors) == 1 and errors[0].startswith("somwidget.frontend.client.ClientNotBuilt: the clay view is not "
+                                                     "built"), out.stderr[-2000:]
+    assert "npm ci && npm run build" in errors[0]
+    assert "training on" not in out.stdout and not (tmp_path / "data").exists()  # no session was made

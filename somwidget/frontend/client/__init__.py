@@ -13,7 +13,8 @@ HERE = Path(__file__).resolve().parent
 #: The client's build: the headset pages (index.html, emulator.html, assets/) and the clay view's module somview.js.
 DIST = HERE / "dist"
 #: What to run when the build is missing.
-BUILD_HINT = f"run `bash scripts/setup.sh` (or `npm ci && npm run build` in {HERE})"
+BUILD_HINT = (f"build it with `npm ci && npm run build` in {HERE} (in a checkout `bash scripts/setup.sh` does it; a "
+              "wheel made with Node.js on the PATH carries it)")
 
 
 class ClientNotBuilt(RuntimeError):

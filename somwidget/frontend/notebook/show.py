@@ -14,6 +14,7 @@ import ipywidgets as widgets  # noqa: E402
 
 from ...backend import presets as _presets  # noqa: E402
 from ...backend.presets import Preset  # noqa: E402
+from ..client import view_module  # noqa: E402
 from ..model import Session  # noqa: E402
 from .panel import Panel  # noqa: E402
 from .widget import ClayWidget  # noqa: E402
@@ -117,6 +118,8 @@ def show(what="car", *, device: str | None = "auto", paused: bool = False, view:
     Session to script (`move_control`, `set_iterations`, `wait_idle`, `export_mesh`...), `.close()` closes it.
     The view draws in the browser from frames the kernel sends over the widget's comm: no server, no port.
     """
+    if view:
+        view_module()  # ClientNotBuilt (what to run) before a session is made, where the client is not built
     session, owned = _session_of(what, device, paused)
     _say_device(session)
     try:

@@ -138,6 +138,8 @@ class ClayWidget(anywidget.AnyWidget):
 
     def close(self) -> None:
         """Stop following the session (the session goes on) and close the widget."""
+        if not hasattr(self, "outbox"):  # __init__ stopped before it followed the session (ClientNotBuilt)
+            return super().close()
         self.outbox.unsubscribe(self._on_frame)
         self.gestures.drop(_CLIENT)
         with self._wake:
