@@ -43,6 +43,7 @@ def _full_cycle(som: Som) -> None:
                                                              0, som.n_neurons, som._stalled])
     wp.launch(kern.find_part, dim=1, device="cpu", inputs=[som._w, som._c, som._k_eff, som._m, som._keys,
                                                              som._cycle[0], 0, 1, 1, som._stalled])
+    som._weights_replaced()  # (going back to the anchor then copies every neuron)
     som._s += 1
 
 
@@ -54,14 +55,16 @@ def _drag(pts: np.ndarray, controls: np.ndarray, frames: int = 4):
         yield moved.copy()
 
 
-@pytest.mark.parametrize("mirror", [(), (1,)])
-def test_paper_rule_local_equals_full_computation(mirror):
-    """Rows mode on the CPU, a drag restarted from its anchor each frame: the local cycle gives the full computation's
-    weights and winners bit for bit, and leaves the blocks out of reach exactly as they were."""
+@pytest.mark.parametrize(("mirror", "cores"), [((), 1), ((1,), 1), ((1,), 2)])
+def test_paper_rule_local_equals_full_computation(mirror, cores):
+    """Rows mode on the CPU, a drag restarted from its anchor each frame: the local cycle (on one core, or the blocks
+    and controls split between two) gives the full computation's weights and winners bit for bit, and leaves the
+    blocks out of reach exactly as they were."""
     topo, _, pts = _strip()
     controls = pts[[291, 328, 348]] + np.float32([0.004, 0.003, 0.02])  # mid-sheet: the mirrored copies too
-    local, full = (Som(topo, pts, controls, iterations=S, reach=0.04, mirror=mirror, distances="rows", device="cpu")
-                   for _ in range(2))
+    local = Som(topo, pts, controls, iterations=S, reach=0.04, mirror=mirror, distances="rows", device="cpu",
+                cpu_cores=cores)
+    full = Som(topo, pts, controls, iterations=S, reach=0.04, mirror=mirror, distances="rows", device="cpu")
     for som in (local, full):
         som.restore(pts, S)
         som.anchor()
@@ -130,18 +133,19 @@ def _shaping_full_cycle(som: Som) -> None:
               inputs=[som._w, som._sh_rest, som._sh_controls, som._sh_winners, som._sh_keys, som._sh_inv,
                       som._sh_offsets, som._component, som._sh_groups, som._sh_stroke, som._sh_n_groups, som._table,
                       som._s, som._distances, som._slot_of, position, som._floor])
+    som._weights_replaced()
     som._s += 1
 
 
-@pytest.mark.parametrize("distances", ["dense", "rows"])
-def test_shaping_local_equals_full_computation(distances):
+@pytest.mark.parametrize(("distances", "cores"), [("dense", 1), ("rows", 1), ("rows", 2)])
+def test_shaping_local_equals_full_computation(distances, cores):
     """Controls with a radius (a kept shape) and a point control: the CPU's move of the blocks a group can reach gives
     the thread-per-neuron kernel's weights bit for bit; the far end of the strip stays as it was."""
     topo, _, pts = _strip()
     controls = pts[[19, 136, 204, 250]].copy()
     radii = [0.25, 0.25, 0.0, 0.25]
     local, full = (Som(topo, pts, controls, iterations=S, reach=0.04, radii=radii, distances=distances,
-                       device="cpu") for _ in range(2))
+                       device="cpu", cpu_cores=n) for n in (cores, 1))
     for som in (local, full):
         som.restore(pts, S)
         som.anchor()

@@ -15,15 +15,15 @@ from .primitives import barrier, sched_yield_address
 
 _YIELD = sched_yield_address()
 #: Neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each).
-_PAIRS_PER_EXTRA_CORE = 1 << 18
+PAIRS_PER_EXTRA_CORE = 1 << 18
 
 
 def _cpu_cores(n_neurons: int, n_controls: int) -> int:
     """Cores for a CPU Som: one for small cycles (a barrier costs more than it saves on a busy machine), else
     those this process may use, at most 8."""
-    if n_neurons * n_controls < _PAIRS_PER_EXTRA_CORE:
+    if n_neurons * n_controls < PAIRS_PER_EXTRA_CORE:
         return 1
-    return max(1, min(usable_cores(), 8, n_neurons * n_controls // _PAIRS_PER_EXTRA_CORE))
+    return max(1, min(usable_cores(), 8, n_neurons * n_controls // PAIRS_PER_EXTRA_CORE))
 
 
 class CpuPath:

@@ -40,18 +40,40 @@ def block_count(n_neurons: int) -> int:
 
 
 @wp.kernel(enable_backward=False)
-def nearest_hops(rows: wp.array2d(dtype=wp.int32), slots: wp.array(dtype=wp.int32), near: wp.array2d(dtype=wp.int32)):
-    """near[slot, b]: the least hop count in block b of the distance row in that slot (FAR: none within the depth
-    it was searched to)."""
-    slot = slots[wp.tid()]
+def search_row(offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32), source: int, slot: int,
+               rows: wp.array2d(dtype=wp.int32), near: wp.array2d(dtype=wp.int32), queue: wp.array(dtype=wp.int32),
+               depth: int, fresh: int):
+    """rows[slot]: the hops from `source` up to `depth` (-1 past it), and near[slot, b]: the least of them in block b
+    (FAR for none). A breadth-first search that costs what it visits: the row's earlier entries are cleared block by
+    block where its earlier `near` says it had any (all of it when `fresh`, a slot never used)."""
     n = rows.shape[1]
+    if fresh != 0:
+        for v in range(n):
+            rows[slot, v] = -1
+    else:
+        for b in range(near.shape[1]):
+            if near[slot, b] < FAR:
+                for v in range(b * BLOCK, wp.min(b * BLOCK + BLOCK, n)):
+                    rows[slot, v] = -1
     for b in range(near.shape[1]):
-        least = int(FAR)
-        for v in range(b * BLOCK, wp.min(b * BLOCK + BLOCK, n)):
-            d = rows[slot, v]
-            if d >= 0:
-                least = wp.min(least, d)
-        near[slot, b] = least
+        near[slot, b] = FAR
+    rows[slot, source] = 0
+    near[slot, source // BLOCK] = 0
+    queue[0] = source
+    head = int(0)
+    tail = int(1)
+    while head < tail:
+        u = queue[head]
+        head += 1
+        du = rows[slot, u]
+        if du < depth:
+            for e in range(offsets[u], offsets[u + 1]):
+                w = neighbors[e]
+                if rows[slot, w] < 0:
+                    rows[slot, w] = du + 1
+                    near[slot, w // BLOCK] = wp.min(near[slot, w // BLOCK], du + 1)
+                    queue[tail] = w
+                    tail += 1
 
 
 @functools.cache
@@ -143,10 +165,10 @@ def local_kernels(n_dims: int, pairs: int = SINGLES) -> SimpleNamespace:
              table: wp.array2d(dtype=wp.float32), s: int, reach_hops: wp.array(dtype=wp.int32),
              rows: wp.array2d(dtype=wp.int32), slot_of: wp.array(dtype=wp.int32), near: wp.array2d(dtype=wp.int32),
              keys: wp.array(dtype=wp.uint64), at: int, lo_box: wp.array(dtype=vec), hi_box: wp.array(dtype=vec),
-             b_lo: int, b_hi: int, every: int):
+             moved: wp.array(dtype=wp.int32), b_lo: int, b_hi: int, every: int):
         """Step 2 of cycle s for controls c_lo .. c_hi - 1 (winners in keys[at + c], their rows cached with
         `near`: each block's least hop count) in blocks b_lo .. b_hi - 1 that hold a neuron within reach (all of
-        them with `every`), in place; then those blocks' boxes."""
+        them with `every`), in place; then those blocks' boxes, and each is marked `moved`."""
         last = table.shape[1] - 1
         reach = reach_hops[s]
         n = weights.shape[0]
@@ -179,6 +201,21 @@ def local_kernels(n_dims: int, pairs: int = SINGLES) -> SimpleNamespace:
                                     w = w + rate * (targets[g] - w)
                         weights[v] = w
                 update_box(weights, lo_box, hi_box, b)
+                moved[b] = 1
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def back_to_anchor(weights: wp.array(dtype=vec), anchor: wp.array(dtype=vec), lo_box: wp.array(dtype=vec),
+                       hi_box: wp.array(dtype=vec), anchor_lo: wp.array(dtype=vec), anchor_hi: wp.array(dtype=vec),
+                       moved: wp.array(dtype=wp.int32)):
+        """The anchored weights and boxes back into the blocks marked `moved` (the others hold them still)."""
+        n = weights.shape[0]
+        for b in range(moved.shape[0]):
+            if moved[b] != 0:
+                for v in range(b * BLOCK, wp.min(b * BLOCK + BLOCK, n)):
+                    weights[v] = anchor[v]
+                lo_box[b] = anchor_lo[b]
+                hi_box[b] = anchor_hi[b]
+                moved[b] = 0
 
     return SimpleNamespace(vec=vec, box_bound=box_bound, nearest_in_block=nearest_in_block, update_box=update_box,
-                           boxes=boxes, find=find, move=move)
+                           boxes=boxes, find=find, move=move, back_to_anchor=back_to_anchor)

@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .cpu_path import PAIRS_PER_EXTRA_CORE
 from .cycle_kernels import MAX_CONTROLS
-from .local_kernels import block_count, local_kernels
+from .local_kernels import BLOCK, block_count, local_kernels
 from .schedule import reach_hops
 
 
@@ -30,12 +31,54 @@ class LocalPath:
         self._box_lo = wp.empty(n_blocks, dtype=vec, device="cpu")
         self._box_hi = wp.empty(n_blocks, dtype=vec, device="cpu")
         self._boxes_valid = False
+        self._moved = wp.zeros(n_blocks, dtype=wp.int32, device="cpu")  # blocks moved since the anchor was kept
+        self._all_moved = True  # or any neuron since (the weights replaced, smoothed)
+        self._region = n_blocks  # blocks the last run moved: the next one's work, which sets how many cores share it
+        self._busy_cores = 1
         self._flat_keys = wp.array(ptr=self._keys.ptr, dtype=wp.uint64, shape=(3 * MAX_CONTROLS,), device="cpu")
         self._keys_host = self._keys.numpy()  # a view of the keys (CPU memory)
 
+    def _weights_replaced(self) -> None:
+        """Any weight may have changed (outside the local cycle's moves): the boxes are made again when next needed,
+        and going back to the anchor copies every neuron."""
+        self._boxes_valid = False
+        self._all_moved = True
+
+    def _anchor_boxes(self) -> None:
+        """`anchor()` on the CPU: the boxes kept with the weights; nothing moved since."""
+        self._ensure_boxes()
+        self._box_anchor = (wp.clone(self._box_lo), wp.clone(self._box_hi))
+        self._moved.zero_()
+        self._all_moved = False
+
+    def _back_to_anchor(self) -> None:
+        """The anchored weights and boxes back: the blocks moved since (all, after anything else changed them)."""
+        if self._all_moved:
+            wp.copy(self._w, self._w_anchor)
+            wp.copy(self._box_lo, self._box_anchor[0])
+            wp.copy(self._box_hi, self._box_anchor[1])
+            self._moved.zero_()
+        else:
+            wp.launch(local_kernels(self.n_dims).back_to_anchor, dim=1, device="cpu",
+                      inputs=[self._w, self._w_anchor, self._box_lo, self._box_hi, *self._box_anchor, self._moved])
+        self._boxes_valid = True
+        self._all_moved = False
+
+    def _share_cores(self) -> None:
+        """Before a run: the cores it splits its work between. One unless the last run moved blocks enough for more
+        (as for the full cycle, cpu_path._cpu_cores: a core's share of neuron-control pairs a cycle), so a drag that
+        touches a small region waits for no other core; all of `cpu_cores` when given."""
+        region = len(self._box_lo) if self._all_moved else self._region
+        enough = region * int(BLOCK) * max(1, self._k_eff) >= 2 * PAIRS_PER_EXTRA_CORE
+        self._busy_cores = self._cores if enough or self._cpu_cores is not None else 1
+
+    def _count_region(self) -> None:
+        """After a run: the blocks it moved (since the anchor), for the next run's `_share_cores`."""
+        self._region = len(self._box_lo) if self._all_moved else int(np.count_nonzero(self._moved.numpy()))
+
     def _block_ranges(self) -> list[tuple[int, int]]:
-        """Each core's range of blocks."""
-        bounds = np.linspace(0, len(self._box_lo), self._cores + 1).astype(int)
+        """Each busy core's range of blocks."""
+        bounds = np.linspace(0, len(self._box_lo), self._busy_cores + 1).astype(int)
         return list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
 
     def _ensure_boxes(self) -> None:
@@ -57,7 +100,7 @@ class LocalPath:
         """Step 1 for `count` controls into keys[out_at + c], the controls split between the cores."""
         self._ensure_boxes()
         kern = local_kernels(self.n_dims)
-        cores = min(self._cores, count)
+        cores = min(self._busy_cores, count)
         self._on_cores(kern.find, lambda first: [self._w, controls, first, cores, count, self._m, keys, hint_at,
                                                  out_at, self._box_lo, self._box_hi],
                        split=[(core,) for core in range(cores)])
@@ -68,6 +111,7 @@ class LocalPath:
         as the cycle's reach), the move of the blocks within reach (all of them with smoothing, which moves every
         neuron), smoothing, and the next winners. Controls whose winners outnumber the cache move in parts."""
         self._settle_anchor()
+        self._share_cores()
         kern = local_kernels(self.n_dims, self._pairs)
         smoothing = self._smoothing > 0.0
         keys = self._flat_keys
@@ -82,15 +126,17 @@ class LocalPath:
                 self._cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), int(self._reach_hops[s]))
                 self._on_cores(kern.move, lambda b_lo, b_hi, lo=lo, hi=hi: [
                     self._w, self._c, lo, hi, self._table, s, self._reach_dev, self._distances, self._slot_of,
-                    self._cache.near, keys, at, self._box_lo, self._box_hi, b_lo, b_hi, int(smoothing)])
+                    self._cache.near, keys, at, self._box_lo, self._box_hi, self._moved, b_lo, b_hi,
+                    int(smoothing)])
             if smoothing:
                 wp.copy(self._w_moved, self._w)
                 self._on_cores(self._kernels.smooth_part, lambda lo, hi: [
                     self._w_moved, self._w, self._offsets, self._neighbors, self._mask, self._smoothing, lo, hi,
-                    self._stalled], split=self._ranges)
-                self._boxes_valid = False
+                    self._stalled], split=self._ranges if self._busy_cores > 1 else [(0, self.n_neurons)])
+                self._weights_replaced()
             self._local_find(self._c, self._k_eff, keys, at, ((s + 1) % 3) * MAX_CONTROLS)
             self._s += 1
+        self._count_region()
 
     def _parts(self, winners: np.ndarray) -> list[tuple[int, int]]:
         """Consecutive runs of controls whose distinct winners fit in the cache (a mirrored pair is never split)."""

@@ -12,7 +12,7 @@ import warp as wp
 
 from .cycle_kernels import CUDA_BLOCK, LONGEST_GRAPH, MAX_CONTROLS
 from .distance_kernels import assign_slots
-from .local_kernels import block_count, nearest_hops
+from .local_kernels import block_count, search_row
 from .topology import RowSearch, Topology
 
 #: Distance rows mode: the cache's default size in bytes (int32 rows of N), at least 2 x MAX_CONTROLS rows: on the
@@ -45,6 +45,12 @@ class RowCache:
         # least hop count of each block of neurons, which tells the local cycle where a winner's rates are non-zero
         self._depth: dict[int, int] = {}
         self.near = wp.empty((self.size, block_count(n)), dtype=wp.int32, device=device) if device == "cpu" else None
+        if self.near is not None:
+            self._used = np.zeros(self.size, bool)  # slots searched into before (their `near` tells what to clear)
+            self._queue = wp.empty(n, dtype=wp.int32, device=device)
+            self._topology_arrays = (wp.array(topology.offsets, dtype=wp.int32, device=device),
+                                     wp.array(topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32),
+                                              dtype=wp.int32, device=device))
         self.computed = 0  # rows searched so far for winners
         self.prefetched = 0  # rows searched ahead for their neighbours
         self.stalls = 0  # graphs that stopped on a missing row
@@ -75,10 +81,14 @@ class RowCache:
             self._lru[u] = slot
             slots.append(slot)
         searched, at = deeper + fresh, [self._lru[u] for u in deeper] + slots
-        self._search.run([[u] for u in searched], at, self.rows, levels)
-        if self.near is not None:
-            wp.launch(nearest_hops, dim=len(at), device=self.device,
-                      inputs=[self.rows, wp.array(np.array(at, np.int32), device=self.device), self.near])
+        if self.near is None:
+            self._search.run([[u] for u in searched], at, self.rows, levels)
+        else:  # the CPU: searches that cost what they visit (local_kernels.search_row)
+            for u, slot in zip(searched, at):
+                wp.launch(search_row, dim=1, device="cpu", inputs=[*self._topology_arrays, u, slot, self.rows,
+                                                                    self.near, self._queue, levels,
+                                                                    int(not self._used[slot])])
+                self._used[slot] = True
             self._depth.update(dict.fromkeys(searched, levels))
         if fresh:
             neurons_changed = wp.array(np.array(evicted + fresh, dtype=np.int32), device=self.device)

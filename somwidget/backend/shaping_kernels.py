@@ -262,11 +262,12 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         rows: int,
         lo_box: wp.array(dtype=vec),
         hi_box: wp.array(dtype=vec),
+        moved_blocks: wp.array(dtype=wp.int32),
         b_lo: int,
         b_hi: int,
     ):
         """`move` on the CPU for blocks b_lo .. b_hi - 1, a group at a time over each block's neurons, skipping the
-        groups that cannot move them (`touches`); then the moved blocks' boxes."""
+        groups that cannot move them (`touches`); then the moved blocks' boxes, each marked in `moved_blocks`."""
         n = weights.shape[0]
         for b in range(b_lo, b_hi):
             moved = int(0)
@@ -296,6 +297,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                                                         distances, slot_of, position, floor)
             if moved != 0:
                 update_box(weights, lo_box, hi_box, b)
+                moved_blocks[b] = 1
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def smooth(weights_in: wp.array(dtype=vec), weights_out: wp.array(dtype=vec), offsets: wp.array(dtype=wp.int32),

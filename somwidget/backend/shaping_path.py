@@ -113,11 +113,13 @@ class ShapingPath:
         if self._sh_controls is None:
             self._upload_shaping()
         if self._sh_rest_pending:  # a restart: the falloffs measure distances on the shape it began from
-            wp.copy(self._sh_rest, self._w)
-            if self.device == "cpu":
-                self._ensure_boxes()
-                wp.copy(self._rest_lo, self._box_lo)
-                wp.copy(self._rest_hi, self._box_hi)
+            if self._rest_source is None or self._rest_source != self._rest_taken:  # (a drag's frames: the anchor's)
+                wp.copy(self._sh_rest, self._w)
+                if self.device == "cpu":
+                    self._ensure_boxes()
+                    wp.copy(self._rest_lo, self._box_lo)
+                    wp.copy(self._rest_hi, self._box_hi)
+            self._rest_taken = self._rest_source
             self._sh_rest_pending = False
             self._sh_fit_pending = True
         kern = shaping_kernels(self.n_dims)
@@ -129,6 +131,8 @@ class ShapingPath:
         masks = [self._kernels.vec(*(strength * self._mask_of(self._smooth_dims)).tolist()) for strength in steps]
         rows = int(self._rows_mode)
         near = self._cache.near if rows and dev == "cpu" else self._no_near
+        if dev == "cpu":
+            self._share_cores()
         for _ in range(cycles):
             self._shaping_find()
             wp.launch(kern.gather, dim=len(self._sh_keys), device=dev,
@@ -151,15 +155,17 @@ class ShapingPath:
                                   self._s, self._floor, self._sh_radius2])
                 self._on_cores(kern.move_blocks, lambda b_lo, b_hi: [
                     *moving, self._sh_radius2, self._rest_lo, self._rest_hi, near, reach, rows, self._box_lo,
-                    self._box_hi, b_lo, b_hi])
+                    self._box_hi, self._moved, b_lo, b_hi])
             else:
                 wp.launch(kern.move, dim=n, device=dev, inputs=moving)
             for pull in masks:  # into the spare buffer and back (the other paths' graphs hold both buffers' places)
                 wp.launch(kern.smooth, dim=n, device=dev,
                           inputs=[self._w, self._w_moved, self._offsets, self._neighbors, pull])
                 wp.copy(self._w, self._w_moved)
-                self._boxes_valid = False
+                self._weights_replaced()
             self._s += 1
+        if dev == "cpu":
+            self._count_region()
 
     def _shaping_winners(self) -> np.ndarray:
         """(k_eff,) the winners now, in the order of `effective_controls` (copies by group element)."""

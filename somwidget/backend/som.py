@@ -154,6 +154,8 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         self._edge: float | None = None  # the start mesh's median edge length, once the shaping path needs it
         self._sh_rest = None  # the shaping path's weights where the latest restart began
         self._sh_rest_pending = True  # taken when the first cycle runs
+        self._anchor_version = 0  # counts `anchor()` calls
+        self._rest_source = self._rest_taken = None  # the anchor a restart begins from, and the one the rest holds
 
         dev = self.device
         self._blocks = (self.n_neurons + int(CUDA_BLOCK) - 1) // int(CUDA_BLOCK)
@@ -515,7 +517,8 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
     def weights(self) -> np.ndarray:
         """(N, n) float32 host copy of the current weights."""
         self._settle_anchor()
-        return self._w.numpy().reshape(self.n_neurons, self.n_dims).copy()
+        w = self._w.numpy().reshape(self.n_neurons, self.n_dims)
+        return w.copy() if self.device == "cpu" else w  # from a GPU numpy() is a copy already
 
     @property
     def distances(self) -> str:
@@ -552,6 +555,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
             self._settle_anchor()
         self._upload_controls()
         self._restart()
+        self._rest_source = self._anchor_version if from_anchor else None
 
     @warp_exclusive
     def regroup(self, controls: ArrayLike, radii: ArrayLike | None, symmetry: Symmetry | None = None,
@@ -581,19 +585,19 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
     def anchor(self) -> None:
         """Keep a copy of the current weights on the device, for `set_controls(..., from_anchor=True)`."""
         self._settle_anchor()
+        self._anchor_version += 1
         if self._w_anchor is None:
             self._w_anchor = wp.empty_like(self._w)
         wp.copy(self._w_anchor, self._w)
         if self.device == "cpu":  # the local cycle's boxes go with them
-            self._ensure_boxes()
-            self._box_anchor = (wp.clone(self._box_lo), wp.clone(self._box_hi))
+            self._anchor_boxes()
 
     @warp_exclusive
     def set_weights(self, weights: ArrayLike) -> None:
         """Replace the current weights (same shape); the schedule restarts at s0 from them."""
         self._anchor_pending = False
         self._w.assign(self._checked_weights(weights))
-        self._boxes_valid = False
+        self._weights_replaced()
         self._restart()
 
     @warp_exclusive
@@ -606,7 +610,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         """Back to the start weights and s = 0 (the whole schedule); the controls stay."""
         self._anchor_pending = False
         self._w.assign(self._start)
-        self._boxes_valid = False
+        self._weights_replaced()
         self._restart(0)
 
     @warp_exclusive
@@ -616,7 +620,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         w = self._checked_weights(weights)
         self._anchor_pending = False
         self._w.assign(w)
-        self._boxes_valid = False
+        self._weights_replaced()
         self._restart(s)
 
     @warp_exclusive
@@ -635,11 +639,10 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         """The anchored weights into the current ones now, if a restart from the anchor still waits for its run."""
         if self._anchor_pending:
             self._anchor_pending = False
-            _copy(self._w, self._w_anchor)
-            if self._box_anchor is not None:
-                wp.copy(self._box_lo, self._box_anchor[0])
-                wp.copy(self._box_hi, self._box_anchor[1])
-                self._boxes_valid = True
+            if self._box_anchor is not None:  # the CPU: only the blocks moved since (with their boxes)
+                self._back_to_anchor()
+            else:
+                _copy(self._w, self._w_anchor)
 
     def _checked_weights(self, weights: ArrayLike) -> np.ndarray:
         w = checks.finite_array("weights", weights, 2)
@@ -727,6 +730,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         self._s = restart_iteration(self._reach, self._iterations) if s is None else s
         self._winners_valid = False
         self._sh_rest_pending = True  # the shaping path's falloffs measure from the shape a restart begins with
+        self._rest_source = None
 
     def _set_cycle(self) -> None:
         """Every cycle counter to s; on CUDA the staged controls go up with them, in one asynchronous copy."""
@@ -784,7 +788,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         smoothing = self._smoothing > 0.0
         if self.device == "cpu":
             self._run_cpu(cycles, fresh, smoothing)
-            self._boxes_valid = False
+            self._weights_replaced()
         else:
             parity = 0 if fresh else self._parity
             two_kernels = smoothing and self._smoothing_in_one_kernel() is None

@@ -5,6 +5,7 @@ published to every listener (on the training thread: a listener copies what it n
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import threading
 import time
@@ -37,7 +38,8 @@ class Frame:
     control_positions / effective_positions: (k, 3) / (k_eff, 3) their position dims
     cycle_time:         seconds per training cycle (moving average over the recent steps; 0 before any step)
     step_cycles:        cycles run by the step that produced this frame (0 for a frame after an intent only)
-    gaps:               (k_eff,) distance in position space from each effective control to its nearest node
+    gaps:               (k_eff,) distance in position space from each effective control to its nearest node, worked
+                        out when first read (a panel reads it a few times a second; a frame need not)
     preset:             the Preset (topology, layout, display) this frame belongs to: draw with these, not with
                         the session's current ones, which may already be the next generation's
     time:               time.monotonic() when the frame was made
@@ -67,7 +69,6 @@ class Frame:
     effective_positions: np.ndarray
     cycle_time: float
     step_cycles: int
-    gaps: np.ndarray
     preset: Preset | None = None
     time: float = field(default_factory=time.monotonic)
     applied: int = 0
@@ -76,6 +77,10 @@ class Frame:
     control_ids: tuple[int, ...] = ()
     radii: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     group: str = "none"
+
+    @functools.cached_property
+    def gaps(self) -> np.ndarray:
+        return _readonly(nearest_gaps(self.positions, self.effective_positions))
 
     @property
     def layout(self) -> FeatureLayout:
@@ -107,6 +112,17 @@ class Frame:
 
 
 FrameListener = Callable[[Frame], None]
+
+
+@functools.lru_cache(maxsize=4)
+def _grey(n: int) -> np.ndarray:
+    """(n, 3) the colour of nodes without colour dims, one read-only array shared by every frame of n nodes."""
+    return _readonly(np.tile(np.asarray(_presets.NEUTRAL_GREY, np.float32), (n, 1)))
+
+
+def _node_colours(weights: np.ndarray, layout: FeatureLayout) -> np.ndarray:
+    """(N, 3) the nodes' colours (presets.colours_of); the shared grey where the layout has no colour dims."""
+    return _grey(len(weights)) if layout.colour_space == "none" else _presets.colours_of(weights, layout)
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -149,10 +165,9 @@ class FrameStream:
         w = np.asarray(som.weights, dtype=np.float32)
         controls = np.asarray(som.controls, dtype=np.float32)
         eff = np.asarray(som.effective_controls, dtype=np.float32)
-        pos = _presets.positions_of(w, layout)
+        pos = w if layout.position == (0, 1, 2) and w.shape[1] == 3 else _presets.positions_of(w, layout)
         cpos = _presets.positions_of(controls, layout)
         epos = _presets.positions_of(eff, layout)
-        gaps = nearest_gaps(pos, epos)
         with self._lock:
             self._seq += 1
             seq = self._seq
@@ -162,11 +177,11 @@ class FrameStream:
         return Frame(
             seq=seq, generation=generation, iteration=s, iterations=S, running=(not paused and not held and s < S),
             paused=paused, weights=_readonly(w), positions=_readonly(pos),
-            colours=_readonly(_presets.colours_of(w, layout)), controls=_readonly(controls),
+            colours=_readonly(_node_colours(w, layout)), controls=_readonly(controls),
             control_colours=_readonly(_presets.colours_of(controls, layout)), effective_controls=_readonly(eff),
             effective_colours=_readonly(_presets.colours_of(eff, layout)), control_positions=_readonly(cpos),
             effective_positions=_readonly(epos), cycle_time=float(cycle_time), step_cycles=int(cycles),
-            gaps=_readonly(gaps), preset=preset, applied=st["applied"], held=held, history=st["history"],
+            preset=preset, applied=st["applied"], held=held, history=st["history"],
             control_ids=tuple(st["control_ids"]), radii=_readonly(np.asarray(som.radii, np.float32)),
             group=st.get("group", "none"))
 
