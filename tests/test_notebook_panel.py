@@ -146,17 +146,19 @@ def test_refused_value_shows_the_message_and_reverts(panel, session):
 
 
 def test_a_recovered_session_shows_a_banner_that_can_be_dismissed(tmp_path, monkeypatch):
-    from test_recovery import crash_a_session
-
     monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(tmp_path / "data"))
-    crash_a_session(tmp_path / "data", tmp_path, preset="torus")
+    stopped = Session("torus", device="cpu")  # a kernel's session: a step, then the kernel goes
+    stopped.set_reach(0.2)
+    assert stopped.wait_idle(30) and stopped.flush_autosave()
+    stopped.close()
     recovered = Session.recover(device="cpu")
     plain = Panel(Session("grid", device="cpu", autosave=False), auto_refresh=False)
     panel = Panel(recovered, auto_refresh=False)
     try:
         assert plain.recovered.layout.display == "none"  # nothing to say
         assert panel.recovered.layout.display != "none"
-        assert "did not close cleanly" in panel.recovered.children[0].value
+        assert "Brought back your session" in panel.recovered.children[0].value
+        assert recovered.recovered["message"] in panel.recovered.children[0].value
         panel.recovered.children[1].click()  # its dismiss button
         assert panel.recovered.layout.display == "none"
     finally:

@@ -13,13 +13,12 @@
 from __future__ import annotations
 
 import glob
+import json
 import time
 
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, free_port, sync_playwright, wait_for
 from test_app_browser import VIEW, VIEWPORT, open_page
-
-from somwidget.backend import io as sw_io
 
 
 @pytest.fixture(scope="module")
@@ -145,11 +144,11 @@ def test_the_run_button_says_what_a_press_does_and_a_new_preset_is_not_left_paus
 
 
 def saved_smoothing(data_dir) -> list[float]:
-    """The smoothing of each autosaved state in a server's data directory."""
+    """The smoothing of each autosaved session's current step in a server's data directory."""
     out = []
-    for path in glob.glob(str(data_dir / "autosave" / "*.npz")):
+    for path in glob.glob(str(data_dir / "autosave" / "*" / "manifest.json")):
         try:
-            out.append(float(sw_io.load_session(path)["smoothing"]))
+            out.append(float(json.loads(open(path).read())["current"]["parameters"]["smoothing"]))
         except (OSError, ValueError, KeyError):  # being renamed into place
             pass
     return out
@@ -186,7 +185,7 @@ def test_the_page_and_the_xr_page_reconnect_by_themselves_after_the_server_resta
         assert field(page, "smoothing") == "0.05"  # the session as the restarted server has it
         assert second.state()["session"]["parameters"]["smoothing"] == 0.05
         banner = page.locator("#recovered-alert")
-        assert "did not close cleanly" in banner.inner_text()
+        assert "Brought back your session" in banner.inner_text()
         banner.locator("button[aria-label='Close']").click()
         banner.wait_for(state="detached", timeout=5000)
         wait_for(lambda: second.state()["panel"]["recovered_message"] == "", what="the banner dismissed")
