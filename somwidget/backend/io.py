@@ -307,6 +307,7 @@ def _apart(p: np.ndarray, tris: np.ndarray, tol: float) -> tuple[np.ndarray, np.
 def triangulate(faces) -> np.ndarray:
     """(T, 3) int64 triangles from faces of any size by a fan from each face's first vertex (a k-gon gives k - 2
     triangles, in face order); faces of fewer than 3 vertices give none."""
+    faces = getattr(faces, "array", faces)  # topology.Faces: faces of one size, one array
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
         groups = {faces.shape[1]: np.asarray(faces, np.int64)} if faces.shape[1] >= 3 else {}
         order = None

@@ -6,7 +6,7 @@ demand for its current winners (`RowSearch`, int32), and d_max comes from an exa
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 import warp as wp
@@ -68,8 +68,17 @@ class Topology:
     def from_faces(cls, faces, n_vertices: int | None = None) -> Topology:
         """Faces of any size (triangles, quads, n-gons), as a list of index sequences or an (F, k) int array.
 
-        Each face's consecutive vertices and its closing pair are edges; duplicates and self-loops are dropped.
+        Each face's consecutive vertices and its closing pair are edges; duplicates and self-loops are dropped. An
+        array is kept as it is (`Faces`: no Python object per face, which a mesh of millions would take seconds to
+        make).
         """
+        if isinstance(faces, np.ndarray):
+            arr = checks.index_array("faces", faces)
+            if arr.ndim != 2:
+                raise ValueError(f"faces: an array of faces must have shape (F, k), got {arr.shape}")
+            n = _vertex_count(arr.ravel(), n_vertices, "faces")
+            pairs = np.stack([arr.ravel(), np.roll(arr, -1, axis=1).ravel()], axis=1)
+            return cls(n, _clean_edges(pairs), Faces(arr))
         face_list = _face_list(faces)
         flat = np.concatenate(face_list) if face_list else np.zeros(0, np.int64)
         n = _vertex_count(flat, n_vertices, "faces")
@@ -450,7 +459,29 @@ def _vertex_count(flat: np.ndarray, n_vertices: int | None, name: str) -> int:
 
 
 def _clean_edges(pairs: np.ndarray) -> np.ndarray:
-    """Sorted unique undirected edges (i < j), self-loops dropped."""
+    """Sorted unique undirected edges (i < j), self-loops dropped (sorted as one int64 key a pair: fast)."""
     pairs = np.sort(pairs.astype(np.int64), axis=1)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    return np.unique(pairs, axis=0) if len(pairs) else np.zeros((0, 2), np.int64)
+    if not len(pairs):
+        return np.zeros((0, 2), np.int64)
+    width = int(pairs[:, 1].max()) + 1
+    keys = np.sort(pairs[:, 0] * width + pairs[:, 1])
+    keys = keys[np.concatenate([[True], keys[1:] != keys[:-1]])]
+    return np.stack([keys // width, keys % width], axis=1)
+
+
+class Faces(Sequence):
+    """Faces of one size held as an (F, k) int64 array (`array`), seen as the sequence of its rows: what
+    `Topology.faces` is for an array given to `from_faces`."""
+
+    def __init__(self, array: np.ndarray):
+        self.array = array
+
+    def __len__(self) -> int:
+        return len(self.array)
+
+    def __getitem__(self, i):
+        return self.array[i]
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return iter(self.array)
