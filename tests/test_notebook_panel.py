@@ -354,7 +354,8 @@ def lab(request, tmp_path_factory):
         "import somwidget\nview = somwidget.show('car', device='cpu')\nview",
         "view  # a second output of the same widget",
         "import hashlib\npng = view.view.picture_png() or b''\n"
-        "print('picture', png[:8] == b'\\x89PNG\\r\\n\\x1a\\n', len(png), hashlib.md5(png).hexdigest())"])
+        "print('picture', png[:8] == b'\\x89PNG\\r\\n\\x1a\\n', len(png), hashlib.md5(png).hexdigest())",
+        "print('session', view.session.history[0], *view.session.parameters['metric_weights'])"])
     with jupyter_server(request.param, root) as port:
         page = "lab/tree" if request.param == "jupyterlab" else "notebooks"
         yield f"http://127.0.0.1:{port}/{page}/clay.ipynb?token=t0k"
@@ -414,6 +415,71 @@ def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
             assert view_errors(page, views) == []
             after = picture(page, unlike=shown)  # a new picture of the clay after the drag, in the kernel
             assert after[1] > 5000, after  # a PNG of a drawn clay, not an empty canvas
+        finally:
+            browser.close()
+
+
+def kernel_session(page) -> list[float]:
+    """Run the notebook's fourth cell: [undo steps, metric weights...] as the kernel's session holds them."""
+    cell = page.locator(".jp-Notebook .jp-Cell").nth(3)
+    out = cell.locator(".jp-OutputArea-output")
+    before = out.last.inner_text() if out.count() else None
+    run_cell(page, 3)
+    page.wait_for_function("([el, b]) => !el.innerText.includes('[*]')",
+                           arg=[cell.locator(".jp-InputPrompt").element_handle(), before], timeout=30000)
+    page.wait_for_timeout(200)
+    words = out.last.inner_text().split()
+    assert words[0] == "session", words
+    return [float(x) for x in words[1:]]
+
+
+def metric_field(page, name: str):
+    """The panel's metric weight field of feature `name` (the first output's)."""
+    return page.locator(".jp-OutputArea-output .widget-text").filter(
+        has=page.locator(f"label:text-is('{name}')")).first.locator("input")
+
+
+def type_in(page, field, text: str) -> None:
+    """Click a field, replace its text by typing, press Enter (as a person does)."""
+    field.click()
+    page.keyboard.press("Control+a")
+    page.keyboard.type(text)
+    page.keyboard.press("Enter")
+
+
+def test_a_refused_value_snaps_back_and_ctrl_z_in_a_field_edits_only_the_field(lab):
+    """In JupyterLab 4 and Notebook 7, with the keyboard in the panel's metric weight fields: every weight 0 is
+    refused (the last one): the message shows and the field goes back to the value in effect. Ctrl+Z in a field
+    undoes the typing there and nothing of the session."""
+    views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
+    names = ["x", "y", "z", "hue", "saturation"]
+    with helpers.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            page = open_notebook(browser, lab)
+            run_cell(page, 0)
+            metric_field(page, names[-1]).wait_for(timeout=120000)
+            page.wait_for_function(f"() => {views}.length > 0", timeout=30000)  # the view beside the panel
+            steps = kernel_session(page)[0]
+            for name in names[:-1]:
+                type_in(page, metric_field(page, name), "0")
+            last = metric_field(page, names[-1])
+            type_in(page, last, "0")
+            page.get_by_text("at least one weight must be positive").wait_for(timeout=15000)
+            page.wait_for_function("(el) => el.value === '1'", arg=last.element_handle(), timeout=15000)
+            state = kernel_session(page)
+            assert state[1:] == [0.0, 0.0, 0.0, 0.0, 1.0] and state[0] > steps  # taken, the last refused
+            field = metric_field(page, "x")
+            field.click()
+            page.keyboard.press("Control+a")
+            page.keyboard.type("3")
+            page.keyboard.press("Control+z")  # the field's own undo
+            page.wait_for_function("(el) => el.value === '0'", arg=field.element_handle(), timeout=5000)
+            page.keyboard.press("Tab")
+            assert kernel_session(page) == state  # nothing of the session changed or was undone
+            for name in names[:-1]:  # the car's weights again
+                type_in(page, metric_field(page, name), "1")
+            assert kernel_session(page)[1:] == [1.0] * 5
         finally:
             browser.close()
 

@@ -23,7 +23,7 @@ from ...backend.symmetry import Symmetry
 from .frames import Frame
 from .parameters import BY_NAME, METRIC_WEIGHT, PARAMETERS
 from .session import Session
-from .variants import MAX_GALLERY_VARIANTS, VARIED, vary_around
+from .variants import MAX_GALLERY_VARIANTS, THUMBNAIL, VARIED, vary_around
 from .variants import sweep as sweep_variants
 
 
@@ -78,6 +78,7 @@ class PanelModel:
     fields = PARAMETERS
     metric = METRIC_WEIGHT
     max_variants = MAX_GALLERY_VARIANTS
+    thumbnail = THUMBNAIL  # a gallery thumbnail's size on screen (CSS pixels)
     varied = tuple(VARIED)
 
     def __init__(self, session: Session):
@@ -225,7 +226,7 @@ class PanelModel:
         return options
 
     # -- variants ----------------------------------------------------------------------------------------------
-    def sweep(self, n, jitter, vary, progress: Callable[[int, int], None] | None = None, thumbnail_size=None):
+    def sweep(self, n, jitter, vary, progress: Callable[[int, int], None] | None = None):
         """Train n variants of the current design (a local restart each, with the controls jittered and the chosen
         parameters varied around their values) on the session's device; returns (Variants, thumbnails)."""
         from ...backend import checks
@@ -235,7 +236,7 @@ class PanelModel:
         params = vary_around([name for name in vary if name in VARIED], self.session.parameters)
         variants = sweep_variants(self.session, n=n, jitter=jitter, params=params, progress=progress,
                                   device=self.session.training_device)
-        thumbs = variants.thumbnails() if thumbnail_size is None else variants.thumbnails(size=thumbnail_size)
+        thumbs = variants.thumbnails()
         self.variants = variants
         return variants, thumbs
 

@@ -27,6 +27,10 @@ from ...backend.topology import Topology  # noqa: E402
 
 #: The pictures' background: the clay view's, so a picture looks like the live view.
 BACKGROUND = (0.933, 0.941, 0.957)
+#: The clay's material and edges as the live view shows them (its hemisphere light keeps the shaded side bright, its
+#: wireframe is a faint dark line over the colours).
+CLAY_LOOK = {"ambient": 0.45, "diffuse": 0.7, "specular": 0.1}
+EDGE_COLOUR = (0.5, 0.5, 0.56)
 
 
 def cell_array(faces) -> np.ndarray:
@@ -151,7 +155,7 @@ def render(what, path=None, *, weights=None, layout: FeatureLayout | None = None
             both = np.concatenate([rgb, rgb])
             sheet = pv.PolyData(pts, faces=cell_array(quads))
             sheet.point_data["rgb"] = both
-            pl.add_mesh(sheet, scalars="rgb", rgb=True, opacity=0.8)
+            pl.add_mesh(sheet, scalars="rgb", rgb=True, opacity=0.8, **CLAY_LOOK)
             segs = np.hstack([np.full((n, 1), 2), np.arange(n)[:, None], np.arange(n, 2 * n)[:, None]]).ravel()
             strokes = pv.PolyData(pts, lines=segs)
             strokes.point_data["rgb"] = both
@@ -170,8 +174,8 @@ def render(what, path=None, *, weights=None, layout: FeatureLayout | None = None
         else:
             surface = pv.PolyData(positions, faces=cell_array(pic.topology.faces))
             surface.point_data["rgb"] = rgb
-            pl.add_mesh(surface, scalars="rgb", rgb=True, show_edges=edges, edge_color=(0.35, 0.35, 0.4),
-                        line_width=0.5)
+            pl.add_mesh(surface, scalars="rgb", rgb=True, show_edges=edges, edge_color=EDGE_COLOUR, line_width=0.5,
+                        **CLAY_LOOK)
             shown = positions
         everything = shown
         if controls and len(pic.effective_controls):

@@ -27,6 +27,9 @@ from ...backend.schedule import BY_NAME, MAX_ITERATIONS
 
 #: Thumbnails a gallery shows when no indices are given.
 GALLERY_COUNT = 16
+#: The apps' gallery thumbnails in CSS pixels: two to a row in a panel, large enough to compare designs by eye; drawn
+#: at twice that, so they stay sharp on a high-density screen.
+THUMBNAIL = (170, 136)
 #: The apps' Variants sections: how many variants a sweep there trains at most (each gets a thumbnail), and the
 #: range each varied schedule parameter takes around its current value.
 MAX_GALLERY_VARIANTS = 48
@@ -126,9 +129,10 @@ class Variants:
             save_image(path, sheet)
         return sheet
 
-    def thumbnails(self, size: tuple[int, int] = (150, 120)) -> list[np.ndarray]:
-        """One small picture per variant, uncaptioned (the apps' galleries label them), (H, W, 3) uint8 each."""
-        return [self._render(i, size) for i in range(len(self))]
+    def thumbnails(self, size: tuple[int, int] = (2 * THUMBNAIL[0], 2 * THUMBNAIL[1])) -> list[np.ndarray]:
+        """One picture per variant, uncaptioned (the apps' galleries label them), framed closer than `picture`'s
+        tiles: (H, W, 3) uint8 each."""
+        return [self._render(i, size, zoom=1.1) for i in range(len(self))]
 
     def _render(self, i: int, size: tuple[int, int], **options) -> np.ndarray:
         """Variant i as picture.render draws a preset: its clay and its controls."""

@@ -38,6 +38,7 @@ class SomWidget(widgets.HBox):
         if view is not None:
             view.layout = widgets.Layout(flex="1 1 auto", min_width="360px")
         super().__init__(children, layout=widgets.Layout(width="100%", align_items="flex-start"))
+        self.add_class("somwidget-show")  # the view's module keeps the keys typed in here from Jupyter's shortcuts
 
     def _repr_mimebundle_(self, **kwargs):
         bundle = super()._repr_mimebundle_(**kwargs)

@@ -11,8 +11,6 @@ from ..model.panel import PanelModel
 from ..model.picture import png_bytes
 from ..model.variants import VARIANTS_HELP
 
-#: The gallery's thumbnails, in pixels.
-THUMBNAIL = (104, 84)
 #: Text blocks: the notebook's default line height spreads small print apart.
 _BLOCK = '<div style="line-height:1.35">{}</div>'
 
@@ -37,8 +35,9 @@ class VariantsSection(widgets.VBox):
         self.sweep_button = widgets.Button(description="Sweep", icon="th", tooltip=VARIANTS_HELP,
                                            layout=widgets.Layout(width="100px"))
         self.progress = widgets.IntProgress(min=0, max=1, value=0, layout=widgets.Layout(width="220px"))
-        self.gallery = widgets.GridBox(layout=widgets.Layout(grid_template_columns="repeat(3, 108px)",
-                                                             grid_gap="2px"))
+        width = f"{model.thumbnail[0]}px"
+        self.gallery = widgets.GridBox(layout=widgets.Layout(grid_template_columns=f"repeat(2, {width})",
+                                                             grid_gap="4px"))
         self.sweep_button.on_click(lambda _b: self.sweep())
         super().__init__([
             widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(VARIANTS_HELP)}">Variants</b> <small>(many '
@@ -57,8 +56,7 @@ class VariantsSection(widgets.VBox):
         def run():
             self.progress.max, self.progress.value = int(self.count.value), 0
             variants, thumbs = self.model.sweep(self.count.value, float(self.jitter.value), list(self.vary.value),
-                                                progress=lambda done, total: setattr(self.progress, "value", done),
-                                                thumbnail_size=THUMBNAIL)
+                                                progress=lambda done, total: setattr(self.progress, "value", done))
             self._show(variants, thumbs)
 
         self.sweep_button.disabled = True
@@ -69,9 +67,11 @@ class VariantsSection(widgets.VBox):
 
     def _show(self, variants, thumbs) -> None:
         cells = []
+        width, height = (f"{x}px" for x in self.model.thumbnail)
         for i, image in enumerate(thumbs):
-            picture = widgets.Image(value=png_bytes(image), format="png", layout=widgets.Layout(width="104px"))
-            use = widgets.Button(description=f"use #{i}", layout=widgets.Layout(width="104px", height="24px"),
+            picture = widgets.Image(value=png_bytes(image), format="png",
+                                    layout=widgets.Layout(width=width, height=height))
+            use = widgets.Button(description=f"use #{i}", layout=widgets.Layout(width=width, height="24px"),
                                  tooltip=self.model.caption(i))
             use.on_click(lambda _b, i=i: self.pick(i))
             cells.append(widgets.VBox([picture, use]))

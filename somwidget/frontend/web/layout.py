@@ -270,8 +270,8 @@ def _panel(panel: PanelModel) -> None:
         with html.Div(classes="d-flex flex-wrap ga-1 mb-2", id="variants-gallery"):
             with html.Div(v_for="v in variants_gallery", key="v.i", style="position: relative"):
                 html.Img(src=("v.src",), title=("v.title",), classes="variant-thumb",
-                         style="width: 96px; height: 77px; cursor: pointer; border: 1px solid #ccd; "
-                               "border-radius: 4px; display: block",
+                         style=f"width: {panel.thumbnail[0]}px; height: {panel.thumbnail[1]}px; cursor: pointer; "
+                               "border: 1px solid #ccd; border-radius: 4px; display: block",
                          click="trigger('pick_variant', [v.i])")
                 html.Span("#{{ v.i }}", classes="text-caption",
                           style="position: absolute; left: 4px; top: 1px; pointer-events: none")

@@ -61,7 +61,23 @@ function keepPicture(view, model, box) {
   return () => clearInterval(timer);
 }
 
+const SHOW_BOX = 'somwidget-show'; // the class of show()'s box around the panel and the view (notebook/show.py)
+
+// Keys typed in the panel's fields or on the view are theirs: Jupyter's shortcuts skip whatever lies under an element
+// marked data-lm-suppress-shortcuts (Notebook 7 otherwise takes Ctrl+Z in a field for the notebook's undo). The mark
+// goes on show()'s box once the output is in the page (it may not be when render runs), else on the view's element.
+function keepKeys(el) {
+  let tries = 50;
+  const mark = () => {
+    const box = el.closest(`.${SHOW_BOX}`);
+    (box || el).setAttribute('data-lm-suppress-shortcuts', 'true');
+    if (!box && tries-- > 0) setTimeout(mark, 100);
+  };
+  mark();
+}
+
 function render({ model, el }) {
+  keepKeys(el);
   const box = document.createElement('div');
   box.style.height = `${model.get('height')}px`;
   box.style.width = '100%';
