@@ -59,8 +59,9 @@ def _build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--open", action="store_true", help="open the app in the default web browser once it is up")
     serve.add_argument("--lan", action="store_true", help="serve on the LAN for an AR headset: HTTPS with a "
                        "self-signed certificate, an access token in the URL, and a QR code to open it")
-    serve.add_argument("--fresh", action="store_true", help="start from --preset / --mesh even if a session did not "
-                       "close cleanly (by default the app brings that session back, as its autosave left it)")
+    serve.add_argument("--fresh", action="store_true", help="start from --preset / --mesh (by default the app brings "
+                       "back the session the last serve left, however it stopped, with its undo history; that "
+                       "session stays saved for later)")
 
     bench = sub.add_parser(
         "bench",
