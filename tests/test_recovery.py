@@ -259,16 +259,22 @@ def test_stopped_sessions_are_pruned_by_age_count_and_size(tmp_path, monkeypatch
         shutil.copytree(source, target)
         t = now - age * 86400 - 120
         os.utime(target / _store.MANIFEST, (t, t))
+    served = folder / "served"  # the web app's last session, older than 50 of Python's
+    shutil.copytree(source, served)
+    manifest = json.loads((served / _store.MANIFEST).read_text())
+    (served / _store.MANIFEST).write_text(json.dumps(dict(manifest, origin="serve")))
+    t = now - 20 * 86400
+    os.utime(served / _store.MANIFEST, (t, t))
     shutil.rmtree(source)
     size = _store._size(folder / "old-00")
     gone = _store.prune()  # the defaults: 30 days, 50 sessions, 4 GiB
     left = sorted(p.name for p in folder.iterdir())
-    assert len(left) == _store.KEEP_SESSIONS and left == [f"old-{i:02d}" for i in range(_store.KEEP_SESSIONS)]
+    assert left == [f"old-{i:02d}" for i in range(_store.KEEP_SESSIONS)] + ["served"]
     assert len(gone) == 12
     _store.prune(keep_bytes=3 * size)  # the size bound: as many as fit, newest first
-    assert sorted(p.name for p in folder.iterdir()) == ["old-00", "old-01", "old-02"]
-    _store.prune(keep_bytes=0)  # the newest stopped session is always kept
-    assert sorted(p.name for p in folder.iterdir()) == ["old-00"]
+    assert sorted(p.name for p in folder.iterdir()) == ["old-00", "old-01", "old-02", "served"]
+    _store.prune(keep_bytes=0)  # the newest stopped session of each origin is always kept
+    assert sorted(p.name for p in folder.iterdir()) == ["old-00", "served"]
 
 
 def _listing(path):

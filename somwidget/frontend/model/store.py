@@ -17,7 +17,8 @@ last; so a kill at any moment leaves the previous manifest and every file it nam
 names any more is deleted once the next manifest is on disk.
 
 Stopped sessions are pruned (`prune`): those older than KEEP_DAYS go, and past KEEP_SESSIONS of them or KEEP_BYTES
-in all the oldest go first; the newest stopped session is always kept. A folder or file that cannot be read is set
+in all the oldest go first; the newest stopped session of each origin is always kept (a notebook's many sessions
+never push out the web app's last one). A folder or file that cannot be read is set
 aside under a name ending ".unreadable" (`set_aside`), never deleted.
 """
 
@@ -56,7 +57,7 @@ LOCK = "lock"
 KEEP_DAYS = 30
 #: ...at most this many of them...
 KEEP_SESSIONS = 50
-#: ...and at most this many bytes in all (the newest stopped session is always kept).
+#: ...and at most this many bytes in all (the newest stopped session of each origin is always kept).
 KEEP_BYTES = 4 << 30
 #: A folder changed within this many seconds is never pruned (a session being made).
 FRESH_SECONDS = 60.0
@@ -232,7 +233,7 @@ def prune(keep_days: float = KEEP_DAYS, keep_sessions: int = KEEP_SESSIONS, keep
         entries = _session_folders(folder)
     except OSError:
         return []
-    now, kept, kept_bytes, gone = time.time(), 0, 0, []
+    now, kept, kept_bytes, gone, origins = time.time(), 0, 0, [], set()
     for when, entry in entries:
         if now - when < FRESH_SECONDS:
             continue
@@ -244,10 +245,14 @@ def prune(keep_days: float = KEEP_DAYS, keep_sessions: int = KEEP_SESSIONS, keep
             continue  # live
         try:
             size = _size(entry)
-            has_manifest = (entry / MANIFEST).exists()
-            if has_manifest and (kept == 0 or (now - when <= keep_days * 86400 and kept < keep_sessions
-                                               and kept_bytes + size <= keep_bytes)):
+            manifest = peek(entry)
+            origin = None if manifest is None else manifest.get("origin")
+            newest_of_its_origin = manifest is not None and origin not in origins
+            if manifest is not None and (newest_of_its_origin or (now - when <= keep_days * 86400
+                                                                   and kept < keep_sessions
+                                                                   and kept_bytes + size <= keep_bytes)):
                 kept, kept_bytes = kept + 1, kept_bytes + size
+                origins.add(origin)
                 continue
             shutil.rmtree(entry, ignore_errors=True)
             gone.append(entry)
