@@ -123,6 +123,7 @@ def test_a_full_disk_is_shown_in_every_view_retried_and_then_nothing_is_lost(dis
             alert.wait_for(timeout=10000)
             text = alert.inner_text()
             assert "autosave failed" in text and str(disk.path / "data") in text, text  # what and where
+            assert "autosave failed: cannot write" in srv.output()  # and the console says it too
             hud = browser.new_page(viewport={"width": 900, "height": 700})
             hud.goto(srv.url + "xr/")
             hud.wait_for_function("() => window.somxr && window.somxr.state().frames > 0", timeout=30000)
