@@ -244,6 +244,39 @@ def test_two_servers_and_a_python_session_each_keep_their_own(tmp_path, monkeypa
         s.close()
 
 
+def test_a_notebook_kernel_that_closes_keeps_its_session(tmp_path, monkeypatch):
+    """A real IPython kernel makes a session and a step that nothing has written yet (its training thread not
+    started), then is shut down as a notebook closes it (a shutdown request: the kernel exits): the session is written
+    on the way out, and Session.recover() brings it back with its step."""
+    from jupyter_client.manager import start_new_kernel
+
+    data = tmp_path / "data"
+    monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(data))
+    km, kc = start_new_kernel(env={**os.environ, "PYTHONPATH": str(ROOT)}, cwd=str(ROOT))
+    printed: list[str] = []
+    try:
+        reply = kc.execute_interactive(textwrap.dedent("""
+            import json
+            from somwidget.frontend.model import Session
+            s = Session("sphere", device="cpu", start=False)
+            s.move_control(1, s.controls[1, :3] + 0.1)
+            print(json.dumps([(s.autosave_path / "manifest.json").exists(), s.controls.tolist()]))
+        """), timeout=120, output_hook=lambda m: printed.append(m["content"].get("text", "")))
+        assert reply["content"]["status"] == "ok", reply["content"]
+    finally:
+        km.shutdown_kernel(now=False)  # what closing the notebook does
+        kc.stop_channels()
+    saved_before, controls = json.loads("".join(printed))
+    assert not saved_before  # nothing on disk until the kernel closed
+    s = Session.recover(device="cpu")
+    try:
+        assert s is not None and s.preset.name == "sphere" and s.history == (1, 0)
+        np.testing.assert_array_equal(s.controls, np.float32(controls))
+        assert "as its last completed step" in s.recovered["message"]
+    finally:
+        s.close()
+
+
 def test_stopped_sessions_are_pruned_by_age_count_and_size(tmp_path, monkeypatch):
     monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(tmp_path))
     s = Session("grid", device="cpu", start=False)
