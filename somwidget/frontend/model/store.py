@@ -195,7 +195,7 @@ def stopped(notices: list[str] | None = None) -> list[Path]:
     """The folders of saved sessions, newest first (a live one among them is skipped by `SessionStore.adopt`)."""
     try:
         folder = sessions_folder(notices)
-        return [p for _, p in _session_folders(folder) if (p / MANIFEST).exists() or (p / MANIFEST).is_symlink()]
+        return [p for _, p in _session_folders(folder) if (p / MANIFEST).exists()]
     except OSError as exc:
         message = f"cannot read the autosave folder {autosave_dir()}: {exc.strerror or exc}"
         log.warning("%s", message)
