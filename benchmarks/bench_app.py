@@ -4,8 +4,8 @@ Starts `python -m somwidget.cli serve` on a free loopback port for each preset a
 Playwright (no `playwright install`). For each preset it reports:
 
   training  frames applied to the page's scene per second while the map trains a long run (S set to 1,000,000 in
-            the panel's field, as a person would), next to the session's own frames/s and the changed meshes the
-            page drew per second
+            the panel's field, as a person would; 50,000 for a wave, whose table has 511 rates a cycle), next to
+            the session's own frames/s and the changed meshes the page drew per second
   drag      frames applied per second while the mouse drags a control round a circle (a real Playwright press,
             then pointer moves at 60 a second dispatched in the page), and changed meshes drawn per second
   latency   from a mouse move of a held control (the view sends it; page clock) to the first paint of a frame that
@@ -13,11 +13,13 @@ Playwright (no `playwright install`). For each preset it reports:
             (and, apart, to that frame's arrival)
 
 Usage:
-    python benchmarks/bench_app.py [--presets car,space-grid] [--seconds 5] [--device cpu]
+    python benchmarks/bench_app.py [--presets car,space-grid] [--waves 256] [--seconds 5] [--device cpu]
                                    [--viewport 1200x800] [--json results.json]
 
-car has 602 nodes (case study 2), space-grid 4096 (case study 1). The figures depend on the CPU (the page draws
-with a software rasteriser when there is no GPU, on the same cores that train) and on the view's pixel count.
+car has 602 nodes (case study 2), space-grid 4096 (case study 1); --waves 256 adds an uploaded mesh, a 256 x 256
+wave sheet (65,536 vertices: the views draw its decimated display mesh), served with `--mesh`. The figures depend
+on the CPU (the page draws with a software rasteriser when there is no GPU, on the same cores that train) and on the
+view's pixel count.
 """
 
 from __future__ import annotations
@@ -49,6 +51,20 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def wave(side: int, folder: str) -> str:
+    """A side x side wave sheet written as a binary PLY in `folder` (what a person uploads)."""
+    import trimesh
+
+    xs = np.linspace(-1.0, 1.0, side)
+    x, y = np.meshgrid(xs, xs, indexing="xy")
+    pts = np.stack([x.ravel(), y.ravel(), 0.2 * np.sin(3 * x.ravel()) * np.cos(2 * y.ravel())], 1)
+    v = np.arange(side * side).reshape(side, side)
+    quads = np.stack([v[:-1, :-1], v[:-1, 1:], v[1:, 1:], v[1:, :-1]], -1).reshape(-1, 4)
+    path = str(Path(folder) / f"wave-{side}.ply")
+    trimesh.Trimesh(pts, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]), process=False).export(path)
+    return path
+
+
 class Server:
     def __init__(self, preset: str, device: str):
         self.port = free_port()
@@ -58,8 +74,9 @@ class Server:
         self.data = tempfile.TemporaryDirectory(prefix="bench-app-")
         env["SOMWIDGET_DATA_DIR"] = self.data.name
         self.log = open(Path(self.data.name) / "serve.log", "w")
+        start = ["--mesh", preset] if Path(preset).suffix else ["--preset", preset]
         self.proc = subprocess.Popen([sys.executable, "-m", "somwidget.cli", "serve", "--port", str(self.port),
-                                      "--preset", preset, "--device", device, "--fresh"], cwd=ROOT, env=env,
+                                      *start, "--device", device, "--fresh"], cwd=ROOT, env=env,
                                      stdout=self.log, stderr=subprocess.STDOUT)
         deadline = time.monotonic() + 120
         while True:
@@ -131,8 +148,8 @@ def set_iterations(page, value: int) -> None:
     field.press("Enter")
 
 
-def measure_training(page, server: Server, seconds: float) -> dict:
-    set_iterations(page, 1_000_000)
+def measure_training(page, server: Server, seconds: float, iterations: int) -> dict:
+    set_iterations(page, iterations)
     time.sleep(1.0)
     v0, t0, s0 = view(page), time.monotonic(), server.state()["session"]["frame"]
     time.sleep(seconds)
@@ -193,6 +210,7 @@ def measure_drag(page, server: Server, seconds: float) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--presets", default="car,space-grid")
+    ap.add_argument("--waves", default="", help="sides of wave sheets to upload, e.g. 256 (65,536 vertices)")
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--viewport", default="1200x800")
@@ -203,19 +221,23 @@ def main() -> int:
     w, h = (int(v) for v in args.viewport.split("x"))
     results = {"machine": f"{platform.node()} ({os.cpu_count()} cores)", "date": time.strftime("%Y-%m-%d"),
                "viewport": args.viewport, "device": args.device, "presets": {}}
+    meshes = tempfile.TemporaryDirectory(prefix="bench-app-meshes-")
+    runs = [p for p in args.presets.split(",") if p] + [wave(int(n), meshes.name) for n in args.waves.split(",") if n]
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         try:
-            for preset in args.presets.split(","):
+            for preset in runs:
                 server = Server(preset, args.device)
                 try:
                     page = open_page(browser, server.url, {"width": w, "height": h})
                     server.idle()
-                    r = {"training": measure_training(page, server, args.seconds),
+                    long_run = 1_000_000 if preset in args.presets.split(",") else 50_000  # a wave's table:
+                    r = {"training": measure_training(page, server, args.seconds, long_run),  # 511 rates a cycle
                          "drag": measure_drag(page, server, args.seconds)}
                     page.close()
                 finally:
                     server.stop()
+                preset = Path(preset).stem
                 results["presets"][preset] = r
                 t, d = r["training"], r["drag"]
                 print(f"{preset}: training {t['frames_per_s']:.1f} frames/s in the page (session "
@@ -227,6 +249,7 @@ def main() -> int:
                       flush=True)
         finally:
             browser.close()
+            meshes.cleanup()
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
     return 0

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import resource
 import sys
 import threading
 import time
@@ -44,20 +45,21 @@ def grid(side: int) -> Preset:
 
 
 class Watch:
-    """Frames the session publishes, with their arrival times."""
+    """Frames the session publishes: when each arrived and its controls (not the frame: a million nodes' weights a
+    frame would fill the memory the benchmark measures)."""
 
     def __init__(self, session: Session):
-        self.frames: list[tuple[float, object]] = []
+        self.frames: list[tuple[float, np.ndarray]] = []
         self.lock = threading.Lock()
         session.add_listener(self.on_frame, replay=False)
 
     def on_frame(self, frame) -> None:
         with self.lock:
-            self.frames.append((time.perf_counter(), frame))
+            self.frames.append((time.perf_counter(), np.array(frame.controls)))
 
     def since(self, t0: float) -> list:
         with self.lock:
-            return [(t, f) for t, f in self.frames if t >= t0]
+            return [(t, c) for t, c in self.frames if t >= t0]
 
 
 class View(threading.Thread):
@@ -132,7 +134,7 @@ def measure(side: int, device: str, train_seconds: float) -> dict:
         view_frames = [t for t in view.sent if t0 <= t <= moves[-1][0] + 0.05]
         for sent, p in moves:
             for tf, f in watch.since(sent):
-                if np.allclose(np.asarray(f.controls)[i, :3], p, atol=1e-6):
+                if np.allclose(f[i, :3], p, atol=1e-6):
                     latencies.append(tf - sent)
                     break
         span = (drag_frames[-1][0] - drag_frames[0][0]) if len(drag_frames) > 1 else float("nan")
@@ -150,6 +152,7 @@ def measure(side: int, device: str, train_seconds: float) -> dict:
             "move_to_frame_median_ms": float(np.median(lat)) if len(lat) else None,
             "move_to_frame_p90_ms": float(np.percentile(lat, 90)) if len(lat) else None,
             "answered_moves": len(lat),
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,  # this process so far
         }
     finally:
         if view is not None:
@@ -174,7 +177,8 @@ def main() -> int:
               f"{r['training_frames_per_s'] or 0:.1f} frames/s ({r['training_cycles']} cycles); drag "
               f"{r['drag_frames_per_s'] or 0:.1f} frames/s (view {r['view_frames_per_s'] or 0:.1f}), "
               f"move -> frame {r['move_to_frame_median_ms'] or 0:.1f} / {r['move_to_frame_p90_ms'] or 0:.1f} ms "
-              f"(median / p90, {r['answered_moves']} moves); session made in {r['session_seconds']:.1f} s",
+              f"(median / p90, {r['answered_moves']} moves); session made in {r['session_seconds']:.1f} s; peak RSS "
+              f"{r['peak_rss_mb']:.0f} MB",
               flush=True)
     if args.json:
         with open(args.json, "w") as f:

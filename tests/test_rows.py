@@ -316,3 +316,14 @@ def test_grid_past_dense_cap_matches_reference(device):
             ref += table[s, np.abs(ii - ii[u]) + np.abs(jj - jj[u])][:, None] * (c - ref)
     np.testing.assert_allclose(som.weights, ref, rtol=0, atol=1e-4)
     assert som._cache.computed >= 2
+
+
+def test_cpu_cache_holds_a_quarter_gib_at_262144():
+    """A CPU session's memory stays bounded at its largest mesh (issue 28: 1 GB for 262,144 vertices): the distance
+    rows of a 262,144-neuron mesh take at most 256 MiB (256 rows), a GPU's its own share."""
+    from somwidget.backend.rows_path import RowCache
+
+    n = 262_144
+    cache = RowCache(_path(n), "cpu", None)
+    assert cache.size == 256 and cache.size * 4 * n <= 256 << 20
+    assert RowCache(_path(4096), "cpu", None).size == 4096  # a small mesh: every row fits

@@ -15,9 +15,11 @@ from .distance_kernels import assign_slots
 from .local_kernels import block_count, search_row
 from .topology import RowSearch, Topology
 
-#: Distance rows mode: the cache's default size in bytes (int32 rows of N), at least 2 x MAX_CONTROLS rows: on the
-#: CPU 512 MiB, on a GPU a sixteenth of its memory up to 8 GiB.
-_CACHE_BYTES = {"cpu": 512 << 20, "cuda": 8 << 30}
+#: Distance rows mode: the cache's default size in bytes (int32 rows of N): on the CPU 256 MiB, on a GPU a sixteenth
+#: of its memory up to 8 GiB; at least _CACHE_LEAST_ROWS rows (a GPU's graphs want every winner's row of a run at
+#: hand; the CPU fetches each cycle's, and its searches cost what they visit) and at most _CACHE_MOST_ROWS.
+_CACHE_BYTES = {"cpu": 256 << 20, "cuda": 8 << 30}
+_CACHE_LEAST_ROWS = {"cpu": 64, "cuda": 2 * MAX_CONTROLS}
 _CACHE_MOST_ROWS = 4096
 #: Distance rows mode on CUDA: rings of neurons around the winners whose rows a search brings along (see _around).
 _PREFETCH_RINGS = 8
@@ -32,7 +34,8 @@ class RowCache:
         if size is None:
             budget = _CACHE_BYTES["cpu"] if device == "cpu" else min(_CACHE_BYTES["cuda"],
                                                                      wp.get_device(device).total_memory // 16)
-            size = max(2 * MAX_CONTROLS, min(_CACHE_MOST_ROWS, budget // (4 * n)))
+            least = _CACHE_LEAST_ROWS["cpu" if device == "cpu" else "cuda"]
+            size = max(least, min(_CACHE_MOST_ROWS, budget // (4 * n)))
         self.size = min(max(size, 2), n)  # two at least: a mirrored pair's winners move in the same part
         self.device = device
         self.rows = wp.empty((self.size, n), dtype=wp.int32, device=device)

@@ -86,8 +86,9 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
 
     distances: "dense" reads D[u, v] from the topology's dense N x N table (N <= 65,536); "rows" computes the
     distance rows of the current winners on demand and keeps the `cache_rows` most recently used on the device
-    (None: as many as fit in 512 MiB on the CPU, on a GPU in a sixteenth of its memory up to 8 GiB; at least 512 and
-    at most 4096; 2 at the least); None picks dense up to 65,536 neurons on a GPU and 16,384 on the CPU, else rows.
+    (None: as many as fit in 256 MiB on the CPU, on a GPU in a sixteenth of its memory up to 8 GiB; at least 64 on
+    the CPU, 512 on a GPU, at most 4096; 2 at the least); None picks dense up to 65,536 neurons on a GPU and 16,384 on
+    the CPU, else rows.
     Past the dense table the neighbourhood is cut where theta < 2^-24 (schedule.NEIGHBOURHOOD_CUT).
     Both give the same weights, but for that cut.
 

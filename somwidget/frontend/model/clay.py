@@ -19,7 +19,7 @@ from ...backend.symmetry import Symmetry, mirror_dims_of, mirror_of_dims
 from .history import Step
 
 #: Largest mesh a session on the CPU accepts by default: past 16,384 neurons the engine reads distance rows searched
-#: as deep as a restart reaches (512 MiB of them at most) and moves only the blocks of neurons within reach of a
+#: as deep as a restart reaches (256 MiB of them at most) and moves only the blocks of neurons within reach of a
 #: winner (backend/local_path.py), so a drag costs what it touches; at 262,144 a drag frame (10 cycles) stays in a
 #: frame's time on two cores.
 DEFAULT_MAX_VERTICES = 262_144
