@@ -53,7 +53,7 @@ def test_version_header_size_flags_and_magic():
     js = read_js("protocol.js")
     consts = js_constants(js)
     problems = []
-    for name in ("PROTOCOL_VERSION", "HEADER_SIZE"):
+    for name in ("PROTOCOL_VERSION", "HEADER_SIZE", "MAX_STROKE_POINTS"):
         if consts.get(name) != getattr(messages, name):
             problems.append(f"protocol.js {name} = {consts.get(name)}, messages.{name} = {getattr(messages, name)}")
     js_flags = {name.removeprefix("FLAG_").lower(): value for name, value in consts.items() if name.startswith("FLAG_")}

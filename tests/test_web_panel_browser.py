@@ -91,8 +91,8 @@ def test_ctrl_z_in_a_field_undoes_the_typing_there_and_elsewhere_a_step(browser,
     page = open_page(browser, server)
     try:
         type_into(page, "smoothing", "0.1")  # a step of the clay to undo
-        st = server.wait(lambda s: s["session"]["parameters"]["smoothing"] == 0.1, what="smoothing 0.1")
-        steps = st["session"]["history"]
+        server.wait(lambda s: s["session"]["parameters"]["smoothing"] == 0.1, what="smoothing 0.1")
+        steps = server.idle()["session"]["history"]  # the step recorded and shown in a frame
         page.locator("#field-smoothing").click()
         page.keyboard.press("Control+a")
         page.keyboard.type("0.4")

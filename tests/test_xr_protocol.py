@@ -180,6 +180,14 @@ BAD_MESSAGES = [
     ('{"type": "train", "pad": "' + "x" * 3000 + '"}', "message too long"),
     (b"\x00\x01binary", "binary messages are not accepted"),
     ("1" * 5000, "message too long"),
+    ('{"type": "add"}', "missing field"),
+    ('{"type": "add", "position": [0, 0]}', "list of 3 numbers"),
+    ('{"type": "add", "position": [0, 0, 0], "radius": -1}', "out of bounds"),
+    ('{"type": "remove"}', "one of the two"),
+    ('{"type": "radius", "id": 0}', "missing field"),
+    ('{"type": "radius", "index": 0, "radius": "big"}', "must be a number"),
+    ('{"type": "stroke", "points": [[0, 0, 0]]}', "2 to 64 points"),
+    ('{"type": "stroke", "points": [[0, 0, 0], [0, 0]]}', "list of 3 numbers"),
 ]
 
 
@@ -255,6 +263,44 @@ def test_fuzz_bad_messages_are_refused_and_harmless(srv, session):
     assert np.isfinite(session.frame.positions).all() and session.frame.seq >= seq
     session.set_controls(controls)  # back as it was for the other tests
     assert session.wait_applied(30)
+
+
+def test_add_radius_stroke_and_remove_intents(srv, session):
+    """The intents a view sends when a person places controls (the protocol; test_view_modelling.py and
+    test_xr_browser.py show the interaction): "add" puts a control at a point and moves nothing, "radius" sets one's
+    radius, "stroke" adds a line as one control, "remove" takes one away; the "controls" message before the next
+    frame carries the radii and strokes."""
+    assert session.wait_applied(30)
+    controls, radii, weights = session.controls, session.radii, session.frame.weights.copy()
+    point = [float(v) for v in session.frame.positions[10]]
+
+    async def main():
+        async with aiohttp.ClientSession() as cs:
+            c = await connect(cs, srv)
+            await c.send({"type": "add", "position": point, "radius": 0.25})
+            msg = await c.until(lambda m: isinstance(m, dict) and m.get("type") == "controls"
+                                and len(m["ids"]) == len(controls) + 1)
+            added = msg["ids"][-1]
+            assert msg["radii"][-1] == 0.25 and msg["strokes"] == [1] * (len(controls) + 1)
+            await c.send({"type": "radius", "id": added, "radius": 0.5})
+            msg = await c.until(lambda m: isinstance(m, dict) and m.get("type") == "controls"
+                                and m["radii"][-1] == 0.5)
+            await c.send({"type": "stroke", "points": [[3.0, 0.0, 0.5], [3.0, 0.0, 1.0]], "radius": 0.1})
+            msg = await c.until(lambda m: isinstance(m, dict) and m.get("type") == "controls"
+                                and len(m["strokes"]) == len(controls) + 2)
+            run = msg["strokes"][-1]
+            assert run >= 2 and msg["radii"][-run:] == [0.1] * run
+            await c.send({"type": "remove", "id": msg["ids"][-1]})  # a sample of the stroke: the stroke goes whole
+            await c.send({"type": "remove", "id": added})
+            await c.until(lambda m: isinstance(m, dict) and m.get("type") == "controls"
+                          and len(m["ids"]) == len(controls))
+            await c.ws.close()
+
+    run(main())
+    assert session.wait_applied(30)
+    np.testing.assert_array_equal(session.controls, controls)
+    np.testing.assert_array_equal(session.radii, radii)
+    np.testing.assert_array_equal(session.frame.weights, weights)  # paused: nothing trained, nothing moved
 
 
 def test_flood_of_bad_messages_closes_only_that_socket(srv, session, monkeypatch):

@@ -59,12 +59,12 @@ class ControlEdits:
         self.trainer = trainer
         self.frames = frames
 
-    def _queue(self, controls: np.ndarray) -> None:
+    def _queue(self, controls: np.ndarray, keep: bool = False) -> None:
         """The new controls (and the radii and strokes the clay holds) to the Som (caller holds clay.lock); inside a
-        drag they restart from where it began."""
+        drag they restart from where it began; with `keep` nothing restarts (a control placed)."""
         clay = self.clay
         self.trainer.enqueue(SetControls(controls, clay.radii.copy(), clay.strokes, self.timeline.drag_anchor(),
-                                         clay.control_ids))
+                                         clay.control_ids, keep=keep, group=clay.symmetry))
 
     def index_of(self, control_id) -> int:
         if isinstance(control_id, bool) or not isinstance(control_id, (int, np.integer)):
@@ -84,8 +84,9 @@ class ControlEdits:
             i = (check_index("control", index, clay.controls.shape[0]) if control_id is None
                  else self.index_of(control_id))
             controls = clay.controls.copy()
-            change = edit(i, controls[i].copy()) - controls[i]
-            controls[list(clay.run_of(i))] += change
+            values = edit(i, controls[i].copy())
+            controls[list(clay.run_of(i))] += values - controls[i]
+            controls[i] = values  # exactly as given
             clay.controls = controls
             self._queue(controls.copy())
 
@@ -158,23 +159,33 @@ class ControlEdits:
             self._queue(arr)
 
     def add(self, values=None, radius=None) -> int:
+        """A new control where it is placed, moving nothing until it is dragged (the Som keeps its weights and s):
+        `values` all n features, or a position (x, y, z) whose other features are the nearest node's; None puts it on
+        the node farthest from the other controls. Returns its index."""
         clay = self.clay
+        layout = clay.layout
         r = None if radius is None else check_radius("new control radius", radius)
         with self.timeline.step("add"), clay.lock:
-            if values is None:  # next to the last one
-                v = clay.controls[-1].copy()
-                pos = self.frames.latest.positions
-                span = float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0))) or 1.0
-                v[clay.layout.position[2]] += 0.15 * span
+            weights = self.frames.latest.weights
+            nodes = weights[:, list(layout.position)]
+            if values is None:
+                far = np.full(len(nodes), np.inf, np.float32)
+                for c in clay.controls[:, list(layout.position)]:
+                    far = np.minimum(far, np.linalg.norm(nodes - c, axis=1))
+                v = weights[int(np.argmax(far))].copy()
+            elif np.ndim(values) == 1 and len(values) == 3 and layout.n_dims != 3:
+                position = checks.finite_vector("new control position", values, 3, MAX_ABS_VALUE)
+                v = weights[int(np.argmin(np.linalg.norm(nodes - position, axis=1)))].copy()
+                v[list(layout.position)] = position
             else:
-                v = checks.finite_vector("new control", values, clay.layout.n_dims, MAX_ABS_VALUE)
+                v = checks.finite_vector("new control", values, layout.n_dims, MAX_ABS_VALUE)
             controls = np.concatenate([clay.controls, v[None, :]]).astype(np.float32)
             check_count(controls, clay.symmetry)
             clay.radii = np.append(clay.radii, clay.preset.radius if r is None else r).astype(np.float32)
             clay.strokes = (*clay.strokes, 1)
             clay.controls = controls
             clay.control_ids = (*clay.control_ids, *clay.fresh_ids(1))
-            self._queue(controls.copy())
+            self._queue(controls.copy(), keep=True)
             return controls.shape[0] - 1
 
     def add_stroke(self, points, radius=None) -> int:

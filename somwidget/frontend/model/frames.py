@@ -49,6 +49,7 @@ class Frame:
     history:            (undo steps, redo steps) available
     control_ids:        a stable id for each control (k,): an id stays with its control while others come and go
     radii:              (k,) each control's radius of influence (model units; 0: a point control)
+    strokes:            the lengths of the runs of controls that act as one (a stroke's samples), in index order
     group:              the symmetry group in effect (its spec: "mirror-y", "radial-8-z"), "none" when off
     """
 
@@ -76,6 +77,7 @@ class Frame:
     history: tuple[int, int] = (0, 0)
     control_ids: tuple[int, ...] = ()
     radii: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    strokes: tuple[int, ...] = ()
     group: str = "none"
 
     @functools.cached_property
@@ -183,6 +185,7 @@ class FrameStream:
             effective_positions=_readonly(epos), cycle_time=float(cycle_time), step_cycles=int(cycles),
             preset=preset, applied=st["applied"], held=held, history=st["history"],
             control_ids=tuple(st["control_ids"]), radii=_readonly(np.asarray(som.radii, np.float32)),
+            strokes=tuple(int(n) for n in som.strokes),
             group=st.get("group", "none"))
 
     def again(self, frame: Frame, **changes) -> Frame:

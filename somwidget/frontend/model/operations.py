@@ -9,6 +9,7 @@ operation's `roll_back` puts the session's view back to what the Som holds, unle
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,17 +46,34 @@ def _controls_back(clay, som) -> None:
 @dataclass(frozen=True)
 class SetControls(Operation):
     """New controls and their radii. In a drag, `anchor` is the Som that anchored the shape the drag began with: each
-    frame of the drag restarts from it (Som.set_controls(from_anchor=True)), so a long drag ends as one move would."""
+    frame of the drag restarts from it (Som.set_controls(from_anchor=True)), so a long drag ends as one move would.
+    With `keep` (a control placed: it moves nothing until it is dragged) the weights and s stay and nothing trains;
+    `group` is then the symmetry group the Som keeps."""
 
     controls: np.ndarray
     radii: np.ndarray
     strokes: tuple
     anchor: object
     ids: tuple
+    keep: bool = False
+    group: object = None
     key = "controls"
 
+    @property
+    def acts(self) -> bool:
+        return not self.keep
+
+    def after(self, earlier: SetControls) -> SetControls:
+        """This operation in place of `earlier`, still queued (several within one frame: only the latest counts):
+        a restart the earlier one asked for still happens."""
+        return self if self.keep <= earlier.keep else dataclasses.replace(self, keep=False)
+
     def apply(self, som) -> None:
-        som.set_controls(self.controls, self.radii, strokes=self.strokes, from_anchor=self.anchor is som)
+        if self.keep:
+            som.regroup(self.controls, self.radii, *engine_symmetry(self.group), keep_shape=True,
+                        strokes=self.strokes)
+        else:
+            som.set_controls(self.controls, self.radii, strokes=self.strokes, from_anchor=self.anchor is som)
 
     def applied(self, clay) -> None:
         clay.applied_ids = self.ids  # the ids of the controls the Som now holds

@@ -362,8 +362,10 @@ class Session:
         self.edit_controls.replace(controls, radii)
 
     def add_control(self, values=None, radius: float | None = None) -> int:
-        """Append a control (all n features; default: next to the last one) with a radius of influence (model units;
-        None: the preset's, 0 for the case studies); returns its index."""
+        """Append a control where it is placed: all n features, or a position (x, y, z) whose other features are the
+        nearest node's; None puts it on the clay's node farthest from the other controls. Its radius of influence in
+        model units (None: the preset's, 0 for the case studies). It moves nothing until it is dragged: the clay keeps
+        its weights and s. Returns its index."""
         return self.edit_controls.add(values, radius)
 
     def add_stroke(self, points, radius: float | None = None) -> int:

@@ -9,14 +9,14 @@ def summary(session, positions: bool = False) -> dict:
     frame, clay = session.frame, session.clay
     with clay.lock:
         controls, params, pending = clay.controls.copy(), clay.parameters(), len(session.trainer.ops)
-        radii = clay.radii.tolist()
+        radii, strokes = clay.radii.tolist(), list(clay.strokes)
     layout, preset = clay.layout, clay.preset
     out = {
         "preset": preset.name, "title": preset.title, "display": preset.display, "generation": frame.generation,
         "n_vertices": int(preset.n_vertices), "n_dims": layout.n_dims, "feature_names": list(layout.names),
         "position_dims": list(layout.position), "colour_dims": list(layout.colour),
-        "colour_space": layout.colour_space, "controls": controls.tolist(), "radii": radii, "parameters": params,
-        "paused": clay.paused, "pending_intents": pending,
+        "colour_space": layout.colour_space, "controls": controls.tolist(), "radii": radii, "strokes": strokes,
+        "parameters": params, "paused": clay.paused, "pending_intents": pending,
         "frame": {
             "seq": frame.seq, "iteration": frame.iteration, "iterations": frame.iterations,
             "running": frame.running, "cycle_time": frame.cycle_time,

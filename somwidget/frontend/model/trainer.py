@@ -85,7 +85,7 @@ class Trainer:
         self.enqueued += int(intent)
         entry = (op, self.enqueued)
         if isinstance(op, SetControls) and self.ops and isinstance(self.ops[-1][0], SetControls):
-            self.ops[-1] = entry  # several moves within one frame: only the latest counts
+            self.ops[-1] = (op.after(self.ops[-1][0]), self.enqueued)  # several moves within a frame: the latest
         else:
             self.ops.append(entry)
         self.busy = True

@@ -71,6 +71,14 @@ class Gestures:
                     self.session.end_gesture()
         elif kind == "set":
             self.session.set_parameter(intent.name, intent.value)
+        elif kind == "add":
+            self.session.add_control(list(intent.position), intent.radius)
+        elif kind == "remove":
+            self.session.remove_control(self.session.index_of_control(self._control_of(intent)))
+        elif kind == "radius":
+            self.session.set_control_radius(self.session.index_of_control(self._control_of(intent)), intent.radius)
+        elif kind == "stroke":
+            self.session.add_stroke([list(p) for p in intent.points], intent.radius)
         elif kind in SESSION_ACTIONS:
             getattr(self.session, kind)()
         return None

@@ -26,6 +26,8 @@ Server -> client
     "up_axis": 2,               the model's up axis (z; x forward, y sideways)
     "bounds": {"min": [x, y, z], "max": [x, y, z]}  start mesh and controls, for placing the clay
     "control_radius": r,        the drawn radius of a control (model units)
+    "radii": [r, ...], "strokes": [n, ...]  each control's radius of influence and the runs that act as one (as in
+                                the "controls" message)
     "colour_space": "hs", "feature_names": [...], "max_coordinate": 1e4, "max_message_bytes": 2048,
     "client": id}
 
@@ -53,9 +55,12 @@ Server -> client
 3. Text, JSON, as things happen:
    {"type": "grabs", "grabs": [{"index": i, "id": c, "own": bool}, ...]}   controls held now (own: this client)
    {"type": "controls", "ids": [c, ...], "group": g,               each control's stable id, in index order, and
-    "group_maps": [...]}                                           the group (as in the topology): sent (before the
-                                                                   frame) whenever they change (a control added or
-                                                                   removed, new controls, a group on or off)
+    "group_maps": [...], "radii": [r, ...], "strokes": [n, ...]}   the group (as in the topology), each control's
+                                                                   radius of influence (model units) and the runs of
+                                                                   controls that act as one (a stroke's samples):
+                                                                   sent (before the frame) whenever they change (a
+                                                                   control added or removed, a radius, new controls,
+                                                                   a group on or off)
    {"type": "error", "message": "...", "intent": "move" | null}     a refused message (see below)
    {"type": "pong", "t": t}                                        the answer to a ping
    {"type": "status", "cycle_ms": c, "fps": f}                     the engine's time per cycle and the frames
@@ -80,6 +85,14 @@ Client -> server: JSON text, one intent per message, at most MAX_MESSAGE_BYTES b
    {"type": "ping", "t": number}
    {"type": "hello"}                                     send the topology and the latest frame again (a new view
                                                          on an existing connection: the notebook's outputs)
+   {"type": "add", "position": [x, y, z], "radius": r}   a new control there (its other features the nearest
+                                                         node's; radius optional: the preset's); it moves nothing
+                                                         until it is dragged
+   {"type": "remove", "id": c}                           remove a control (a stroke goes whole)
+   {"type": "radius", "id": c, "radius": r}              a control's radius of influence (model units, >= 0); the
+                                                         same control's radius again within a moment joins its step
+   {"type": "stroke", "points": [[x, y, z], ...],        a polyline of 2 to MAX_STROKE_POINTS points as one control
+    "radius": r}                                         (its samples act as one); radius optional
    {"type": "set", "name": n, "value": v}                set a parameter declared in model/parameters.py (the topology
                                                          message lists them: "parameters"), checked against its
                                                          bounds
@@ -127,7 +140,15 @@ INTENTS = {
     "ping": ({"t"}, set()),
     "hello": (set(), set()),
     "set": ({"name", "value"}, set()),
+    "add": ({"position"}, {"radius"}),
+    "remove": (set(), {"index", "id"}),
+    "radius": ({"radius"}, {"index", "id"}),
+    "stroke": ({"points"}, {"radius"}),
 }
+#: Intents that name one control (by "id", or by "index").
+CONTROL_INTENTS = ("grab", "move", "release", "remove", "radius")
+#: Most points a stroke intent carries (the session samples the line again, MAX_STROKE_SAMPLES at most).
+MAX_STROKE_POINTS = 64
 
 #: Server -> client JSON messages (besides binary frames), by their "type".
 SERVER_MESSAGES = ("topology", "grabs", "controls", "error", "pong", "status", "autosave")
@@ -150,6 +171,8 @@ class Intent:
     name: str | None = None
     value: float | bool | None = None
     control_id: int | None = None
+    radius: float | None = None
+    points: tuple[tuple[float, float, float], ...] | None = None
 
 
 # -- intents ---------------------------------------------------------------------------------------------------
@@ -199,7 +222,7 @@ def parse_intent(message, n_controls: int) -> Intent:
     if missing:
         raise IntentError(f"{kind}: missing field(s) {', '.join(missing)}", kind)
     index = position = t = control_id = None
-    if kind in ("grab", "move", "release") and ("index" in data) == ("id" in data):
+    if kind in CONTROL_INTENTS and ("index" in data) == ("id" in data):
         raise IntentError(f"{kind}: give the control's \"id\" (or its \"index\"), one of the two", kind)
     if "id" in data:
         control_id = data["id"]
@@ -214,16 +237,20 @@ def parse_intent(message, n_controls: int) -> Intent:
             raise IntentError(f"{kind}: control index {index} is out of range (there are {n_controls} controls: "
                               f"0..{n_controls - 1})", kind)
     if "position" in data:
-        p = data["position"]
-        if not isinstance(p, list) or len(p) != 3:
-            raise IntentError(f"{kind}: position must be a list of 3 numbers, got {json.dumps(p)[:60]}", kind)
-        xyz = tuple(_number(v, "position", kind) for v in p)
-        if max(abs(v) for v in xyz) > MAX_COORDINATE:
-            raise IntentError(f"{kind}: position {list(xyz)} is out of bounds (|coordinate| <= {MAX_COORDINATE:g})",
-                              kind)
-        position = xyz
+        position = _point(data["position"], "position", kind)
     if "t" in data:
         t = _number(data["t"], "t", kind)
+    radius = points = None
+    if "radius" in data:
+        radius = _number(data["radius"], "radius", kind)
+        if not 0.0 <= radius <= MAX_COORDINATE:
+            raise IntentError(f"{kind}: radius {radius:g} is out of bounds (0 <= radius <= {MAX_COORDINATE:g})", kind)
+    if "points" in data:
+        pts = data["points"]
+        if not isinstance(pts, list) or not 2 <= len(pts) <= MAX_STROKE_POINTS:
+            raise IntentError(f"{kind}: points must be a list of 2 to {MAX_STROKE_POINTS} points [x, y, z], got "
+                              f"{json.dumps(pts)[:60]}", kind)
+        points = tuple(_point(p, "points", kind) for p in pts)
     name = value = None
     if kind == "set":
         name, value = data["name"], data["value"]
@@ -237,7 +264,17 @@ def parse_intent(message, n_controls: int) -> Intent:
             value = declared.check(value)
         except ValueError as exc:
             raise IntentError(f"set: {exc}", kind) from None
-    return Intent(kind, index, position, t, name, value, control_id)
+    return Intent(kind, index, position, t, name, value, control_id, radius, points)
+
+
+def _point(p, what: str, kind: str) -> tuple[float, float, float]:
+    """Three finite numbers within +-MAX_COORDINATE (a position, a stroke's point)."""
+    if not isinstance(p, list) or len(p) != 3:
+        raise IntentError(f"{kind}: {what} must be a list of 3 numbers, got {json.dumps(p)[:60]}", kind)
+    xyz = tuple(_number(v, what, kind) for v in p)
+    if max(abs(v) for v in xyz) > MAX_COORDINATE:
+        raise IntentError(f"{kind}: {what} {list(xyz)} is out of bounds (|coordinate| <= {MAX_COORDINATE:g})", kind)
+    return xyz
 
 
 def error_message(message: str, intent: str | None = None) -> dict:
@@ -253,11 +290,12 @@ def autosave_message(error: str | None) -> dict:
     return {"type": "autosave", "ok": error is None, "message": error or "autosave works again: all is on disk"}
 
 
-def controls_message(control_ids, group: str = "none", maps: list | None = None) -> dict:
-    """The ids of the controls, in index order, and their symmetry group: sent before the first frame whose
-    controls they name."""
+def controls_message(control_ids, group: str = "none", maps: list | None = None, radii=(), strokes=()) -> dict:
+    """The ids of the controls, in index order, their symmetry group, radii and strokes: sent before the first frame
+    whose controls they name."""
     return {"type": "controls", "ids": [int(i) for i in control_ids], "group": group,
-            "group_maps": maps if maps is not None else [[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]]}
+            "group_maps": maps if maps is not None else [[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]],
+            "radii": [round(float(r), 6) for r in radii], "strokes": [int(n) for n in strokes]}
 
 
 def grabs_message(grabs: list[dict]) -> dict:

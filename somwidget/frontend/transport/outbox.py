@@ -30,7 +30,7 @@ class Peer:
 
     id: int | None = None  # the client id its topology message carries (None: the notebook widget)
     generation: int = -1
-    control_ids: tuple = ()  # with the group: the controls it knows
+    control_ids: tuple = ()  # with the group, radii and strokes: the controls it knows
     last_status: float = 0.0
     seq: int = -1  # the latest frame handed to it
     save_error: str | None = None  # the autosave's failure it was told of (None: saves work)
@@ -100,14 +100,17 @@ class Outbox:
                 self._encoded = (frame.seq, encode_frame(frame, session))
             data = self._encoded[1]
         out: list = []
-        controls = (frame.control_ids, frame.group)
+        radii = tuple(round(float(r), 6) for r in frame.radii)
+        controls = (frame.control_ids, frame.group, radii, frame.strokes)
         if peer.generation != frame.generation:
             out.append({**topology, "client": peer.id, "control_ids": list(frame.control_ids), "group": frame.group,
                         "group_maps": group_maps(frame.group), "mirror_axes": mirror_axes(frame.group),
-                        "n_controls": frame.n_controls, "n_effective": len(frame.effective_controls)})
+                        "n_controls": frame.n_controls, "n_effective": len(frame.effective_controls),
+                        "radii": list(radii), "strokes": list(frame.strokes)})
             peer.generation, peer.control_ids = frame.generation, controls
-        elif peer.control_ids != controls:  # a control added or removed, a group on or off: before the frame
-            out.append(controls_message(frame.control_ids, frame.group, group_maps(frame.group)))
+        elif peer.control_ids != controls:  # a control added or removed, a radius, a group: before the frame
+            out.append(controls_message(frame.control_ids, frame.group, group_maps(frame.group), radii,
+                                        frame.strokes))
             peer.control_ids = controls
         out.append(data)
         peer.seq = frame.seq

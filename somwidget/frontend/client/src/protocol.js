@@ -69,4 +69,12 @@ export const intents = {
   ping: (t) => ({ type: 'ping', t }),
   hello: () => ({ type: 'hello' }),
   set: (name, value) => ({ type: 'set', name, value }),
+  // a control placed at a point of the clay (radius: model units; left out, the preset's)
+  add: (position, radius) => (radius === undefined ? { type: 'add', position } : { type: 'add', position, radius }),
+  remove: (id) => ({ type: 'remove', id }),
+  radius: (id, radius) => ({ type: 'radius', id, radius }),
+  // a polyline of 2 to MAX_STROKE_POINTS points [x, y, z] as one control
+  stroke: (points, radius) => (radius === undefined ? { type: 'stroke', points } : { type: 'stroke', points, radius }),
 };
+
+export const MAX_STROKE_POINTS = 64;
