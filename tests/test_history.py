@@ -76,12 +76,14 @@ def test_undo_and_redo_put_every_step_back_exactly(car):
     assert car.redo() is True
     assert_same(still(car), c)
     assert car.redo() is False and car.history == (2, 0)
-    # a new step after an undo drops the redo steps; the next intent trains again
+    # a new step after an undo drops the redo steps; a control placed trains nothing, the next move trains again
     car.undo()
     car.add_control()
     assert car.history == (2, 0)
-    assert car.wait_idle(60) and not car.frame.held
+    assert car.wait_idle(60) and car.frame.held
     assert car.frame.n_controls == 10
+    car.move_control(9, car.controls[9, :3] + np.float32([0.0, 0.0, 0.1]))
+    assert car.wait_idle(60) and not car.frame.held and car.history == (3, 0)
 
 
 def test_undo_across_a_preset_and_a_reset(car):
