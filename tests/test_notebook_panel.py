@@ -182,7 +182,7 @@ def test_session_intents_update_the_widgets(panel, session):
     wait_for(lambda: "iteration 500 / 500 (paused)" in panel.status.value, what="the paused, converged panel")
     gap_before = _gap_of(panel, 2)
     session.move_control(2, [3.6, 0.25, -0.2])  # the nose control, 1 unit forward: the schedule restarts
-    wait_for(lambda: "3.60, 0.25, -0.20" in panel.controls_html.value, what="the control's new position")
+    wait_for(lambda: "3.6, 0.25, -0.2" in panel.controls_html.value, what="the control's new position")
     # a local restart: s0 = floor((1 - reach) S) = 460
     wait_for(lambda: panel.progress.value == 460 and "iteration 460 / 500 (paused)" in panel.status.value,
              what="the restarted iteration")

@@ -500,3 +500,81 @@ def test_desktop_drag_of_a_radial_copy_moves_its_control_by_the_inverse_rotation
                 page.close()
     finally:
         session.close()
+
+
+def test_strokes_and_radii_in_the_headset(ar_page, server, session):
+    """Point at the menu's "Stroke" and pull the trigger: the tool is on (the button now says "Grab"). The thumbstick
+    pushed up makes the stroke's radius ball larger; the trigger held while the controller moves draws a line, and
+    letting go adds it as one control of that radius. With hands: a pinch draws, a pinch with the other hand turns
+    it into a spread that sets the radius. With the tool off, the thumbstick while a control is held sets its
+    radius."""
+    assert session.wait_idle(60)
+    steps, k0 = session.history[0], len(session.controls)
+    dev = device_input(ar_page, "controller")
+    set_position(ar_page, dev, [0.25, 1.5, -0.4])
+    point_and_pull(ar_page, dev, "stroke")
+    ar_page.wait_for_function("somxr.state().tools.on && somxr.button('stroke').label === 'Grab'", timeout=5000)
+    r0 = ar_page.evaluate("somxr.state().tools.radius")
+    ar_page.evaluate(f"{dev}.updateAxes('thumbstick', 0, -1)")  # pushed up: larger
+    wait_frames(ar_page, 12)
+    ar_page.evaluate(f"{dev}.updateAxes('thumbstick', 0, 0)")
+    wait_frames(ar_page, 2)
+    r1 = ar_page.evaluate("somxr.state().tools.radius")
+    assert r1 > 1.05 * r0, (r0, r1)
+    start = np.array(ar_page.evaluate("somxr.controlWorld(2)")) + np.array([0.0, 0.03, 0.0])
+    bring_to(ar_page, dev, False, start)
+    ar_page.evaluate(f"{dev}.updateButtonValue('trigger', 1)")
+    wait_frames(ar_page, 2)
+    glide(ar_page, dev, [-0.12, 0.02, 0.0], steps=10)
+    ar_page.evaluate(f"{dev}.updateButtonValue('trigger', 0)")
+    wait_for(lambda: len(session.strokes) and session.strokes[-1] >= 2 and len(session.controls) > k0,
+             what="the stroke added")
+    run = session.strokes[-1]
+    np.testing.assert_allclose(session.radii[-run:], r1, rtol=1e-3)  # the ball's radius
+    first = np.array(ar_page.evaluate("(p) => somxr.worldToModel(p)", [float(v) for v in start]))
+    assert np.linalg.norm(session.controls[-run, :3] - first) < 0.05 * 2 * ar_page.evaluate("somxr.worldRadius()") \
+        / ar_page.evaluate("somxr.state().scale")  # it begins where the trigger was pulled
+    assert session.wait_idle(120) and session.history[0] == steps + 1  # one step
+
+    # hands: the right hand pinches (draws), the left pinches too: a spread of 16 cm is a ball 8 cm in radius
+    ar_page.evaluate("iwerDevice.primaryInputMode = 'hand'")
+    ar_page.wait_for_function("somxr.inputs().filter((i) => i.hand && i.point).length === 2", timeout=10000)
+    right, left = device_input(ar_page, "hand"), "iwerDevice.hands.left"
+    for h in (right, left):
+        ar_page.evaluate(f"{h}.poseId = 'pinch'")
+    wait_frames(ar_page, 2)
+    centre = np.array(ar_page.evaluate("somxr.state().stage"))
+    bring_to(ar_page, right, True, centre + [0.05, 0.35, 0.0])
+    ar_page.evaluate(f"{right}.updatePinchValue(1)")
+    wait_frames(ar_page, 3)
+    assert ar_page.evaluate("somxr.state().tools.drawing")
+    pts = {i["handedness"]: np.array(i["point"]) for i in ar_page.evaluate("somxr.inputs()") if i["hand"]}
+    set_position(ar_page, left, get_position(ar_page, left) + (pts["right"] + [-0.16, 0, 0]) - pts["left"])
+    wait_frames(ar_page, 2)
+    ar_page.evaluate(f"{left}.updatePinchValue(1)")
+    wait_frames(ar_page, 3)
+    tools = ar_page.evaluate("somxr.state().tools")
+    scale = ar_page.evaluate("somxr.state().scale")
+    assert tools["spreading"] and not tools["drawing"]
+    assert tools["radius"] * scale == pytest.approx(0.08, rel=0.05)
+    for h in (right, left):
+        ar_page.evaluate(f"{h}.updatePinchValue(0)")
+    wait_frames(ar_page, 3)
+    assert len(session.controls) == k0 + run, "a spread adds nothing"
+
+    # the tool off; a controller holds control 3 and the thumbstick makes its radius larger
+    ar_page.evaluate("iwerDevice.primaryInputMode = 'controller'")
+    ar_page.wait_for_function("somxr.inputs().some((i) => !i.hand && i.handedness === 'right')", timeout=10000)
+    set_position(ar_page, dev, [0.25, 1.5, -0.4])
+    point_and_pull(ar_page, dev, "stroke")
+    ar_page.wait_for_function("!somxr.state().tools.on && somxr.button('stroke').label === 'Stroke'", timeout=5000)
+    bring_to(ar_page, dev, False, np.array(ar_page.evaluate("somxr.controlWorld(3)")))
+    ar_page.evaluate(f"{dev}.updateButtonValue('trigger', 1)")
+    wait_for(lambda: server.hub.grabs.get(3) is not None, what="control 3 held")
+    ar_page.evaluate(f"{dev}.updateAxes('thumbstick', 0, -1)")
+    wait_frames(ar_page, 12)
+    ar_page.evaluate(f"{dev}.updateAxes('thumbstick', 0, 0); {dev}.updateButtonValue('trigger', 0)")
+    wait_for(lambda: session.radii[3] > 0, what="control 3's radius from the thumbstick")
+    assert session.wait_idle(120)
+    while session.history[0] > steps:  # the module's other tests start from the converged car
+        session.undo()

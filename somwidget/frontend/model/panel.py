@@ -16,10 +16,13 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
 from ...backend import metrics
 from ...backend import presets as _presets
 from ...backend.presets import hex_colour
 from ...backend.symmetry import Symmetry
+from .controls import check_index
 from .frames import Frame
 from .parameters import BY_NAME, METRIC_WEIGHT, PARAMETERS
 from .session import Session
@@ -70,6 +73,23 @@ def field_text(name: str, value) -> str | float | bool:
     if name == "symmetry":
         return bool(value)
     return fmt(value, 6)
+
+
+def other_dims(layout) -> tuple[int, ...]:
+    """A layout's feature dims that are neither position nor colour (a direction, a length, any other feature)."""
+    return tuple(d for d in range(layout.n_dims) if d not in layout.position and d not in layout.colour)
+
+
+def numbers(text, count: int, what: str) -> list[float]:
+    """`count` numbers typed in a field, between commas or spaces; ValueError naming `what` otherwise."""
+    parts = [t for t in str(text).replace(",", " ").split() if t]
+    try:
+        values = [float(t) for t in parts]
+    except ValueError:
+        values = []
+    if len(values) != count:
+        raise ValueError(f"{what}: expected {count} numbers (as in \"0.5, -1, 2\"), got {str(text)[:40]!r}")
+    return values
 
 
 class PanelModel:
@@ -166,9 +186,12 @@ class PanelModel:
 
     @staticmethod
     def control_rows(frame: Frame) -> list[dict]:
-        """One row per control: its index, colour ('#rrggbb'), position and gap text (original / mirror)."""
+        """One row per control: its index, colour ('#rrggbb'), position ("x, y, z"), its other features' values
+        (the dims that are neither position nor colour, `other_dims`; "" when there are none), gap text (original /
+        mirror) and radius. Position and features are written as a panel's field takes them back."""
         k, gaps = frame.n_controls, frame.gaps
         colours = frame.control_display_colours[:k]
+        others = other_dims(frame.preset.layout) if frame.preset is not None else ()
         rows = []
         for i in range(k):
             g = [float(gaps[i])] if i < len(gaps) else []
@@ -176,9 +199,43 @@ class PanelModel:
                 g.append(float(gaps[k + i]))
             radius = float(frame.radii[i]) if i < len(frame.radii) else 0.0
             rows.append({"i": i, "colour": hex_colour(colours[i]),
-                         "position": ", ".join(f"{x:.2f}" for x in frame.control_positions[i]),
+                         "position": ", ".join(f"{x:.3g}" for x in frame.control_positions[i]),
+                         "features": ", ".join(f"{float(frame.controls[i, d]):.3g}" for d in others),
                          "gap": " / ".join(f"{x:.3f}" for x in g), "radius": round(radius, 4)})
         return rows
+
+    def set_position(self, index, text) -> str | None:
+        """Control `index` moved to a typed position: "x, y, z" (commas or spaces between the numbers); where it is
+        already (Enter, then the field's change event), nothing happens."""
+        def edit():
+            controls = self.session.controls
+            i = check_index("control", index, len(controls))
+            position = numbers(text, 3, f"control {index} position")
+            if not np.allclose(controls[i, list(self.session.layout.position)], position, rtol=1e-6, atol=1e-7):
+                self.session.move_control(i, position)
+
+        return self.attempt(edit)
+
+    def set_features(self, index, text) -> str | None:
+        """Control `index`'s other features (`other_dims`, in order) set from typed values, as one step."""
+        def edit():
+            controls = self.session.controls
+            i = check_index("control", index, len(controls))
+            layout = self.session.layout
+            dims = other_dims(layout)
+            values = controls[i].copy()
+            typed = values.copy()
+            typed[list(dims)] = numbers(text, len(dims), f"control {index} " + ", ".join(layout.names[d]
+                                                                                         for d in dims))
+            if not np.allclose(typed, values, rtol=1e-6, atol=1e-7):
+                self.session.move_control(i, typed)
+
+        return self.attempt(edit)
+
+    def feature_names(self) -> str:
+        """The names of the other features a control row lists ("" when there are none)."""
+        layout = self.session.layout
+        return ", ".join(layout.names[d] for d in other_dims(layout))
 
     @property
     def size(self) -> float:

@@ -109,7 +109,13 @@ class Panel(widgets.VBox):
         self.group = widgets.Dropdown(options=self.model.group_choices(), description="group", style=style,
                                       layout=widgets.Layout(width="290px"),
                                       tooltip="The symmetry group: every copy of a control acts together with it")
-        self.radius_of = widgets.Dropdown(description="radius of", style=style, layout=widgets.Layout(width="170px"))
+        self.radius_of = widgets.Dropdown(description="control", style=style, layout=widgets.Layout(width="170px"),
+                                          tooltip="The control whose position, features and radius the fields show")
+        self.position = widgets.Text(placeholder="x, y, z", continuous_update=False,
+                                     layout=widgets.Layout(width="150px"),
+                                     tooltip="x, y, z: type a position and press Enter to move the control there")
+        self.features = widgets.Text(description="features", style=style, continuous_update=False,
+                                     layout=widgets.Layout(width="330px"))
         self.radius = widgets.BoundedFloatText(min=0.0, max=1e6, step=0.05, description="", tooltip=RADIUS_HELP,
                                                layout=widgets.Layout(width="110px"))
         self.controls_html = widgets.HTML()
@@ -133,7 +139,8 @@ class Panel(widgets.VBox):
             self.features_box,
             widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(GAP_HELP)}">Controls</b> <small>(gap: distance to '
                                        'the nearest node, original / mirror)</small>')),
-            self.controls_html, widgets.HBox([self.radius_of, self.radius]), self.variants,
+            self.controls_html, widgets.HBox([self.radius_of, self.position, self.radius]), self.features,
+            self.variants,
         ], layout=widgets.Layout(width="360px", min_width="360px", padding="4px"))
 
         for w, setter in ((self.S, session.set_iterations), (self.l_start, session.set_l_start),
@@ -142,6 +149,10 @@ class Panel(widgets.VBox):
             w.observe(lambda change, setter=setter: self._intent(setter, change["new"]), names="value")
         self.group.observe(lambda change: self._intent(session.set_symmetry, change["new"]), names="value")
         self.radius_of.observe(lambda _change: self.refresh(), names="value")
+        self.position.observe(lambda change: self._intent(self._typed, self.model.set_position, change["new"]),
+                              names="value")
+        self.features.observe(lambda change: self._intent(self._typed, self.model.set_features, change["new"]),
+                              names="value")
         self.radius.observe(lambda change: self._intent(session.set_control_radius, self.radius_of.value,
                                                         change["new"]), names="value")
         self.preset.observe(self._preset_chosen, names="value")
@@ -183,6 +194,12 @@ class Panel(widgets.VBox):
             self.error.value = ""
         self._wake.set()
         return True
+
+    def _typed(self, setter, text) -> None:
+        """A position or feature values typed for the chosen control (PanelModel.set_position / set_features)."""
+        error = setter(self.radius_of.value, text)
+        if error is not None:
+            raise ValueError(error)
 
     def _preset_chosen(self, change) -> None:
         name = change["new"]
@@ -252,6 +269,13 @@ class Panel(widgets.VBox):
             self.radius.max = max(2.0 * self.model.size, float(frame.radii.max(initial=0.0)))  # a few sizes at most
             if i < len(frame.radii):
                 _set(self.radius, round(float(frame.radii[i]), 4))
+            rows = self.model.control_rows(frame)
+            if i < len(rows):
+                _set(self.position, rows[i]["position"])
+                _set(self.features, rows[i]["features"])
+            names = self.model.feature_names()
+            self.features.layout.display = "" if names else "none"
+            self.features.placeholder = names
             for w, m in zip(self.metric, p["metric_weights"]):
                 _set(w, float(m))
             self.progress.max = max(1, frame.iterations)
@@ -267,7 +291,7 @@ class Panel(widgets.VBox):
             self.train_button.icon = "pause" if frame.running else "play"
             self.undo_button.disabled = not st["can_undo"]
             self.redo_button.disabled = not st["can_redo"]
-            self.controls_html.value = _controls_table(self.model.control_rows(frame))
+            self.controls_html.value = _controls_table(rows)
             if session.error and not self.error.value:
                 self.error.value = f'<span style="color:#b00020">{_html.escape(session.error)}</span>'
             failed = session.save_error
@@ -315,7 +339,7 @@ class Panel(widgets.VBox):
             self._thread.join(2.0)
         self.variants.close()
         for w in [*self.children, *self.metric, *self.features_box.children, self.group, self.radius_of, self.radius,
-                  *self.recovered.children]:
+                  self.position, *self.recovered.children]:
             w.close()
         super().close()
 

@@ -45,9 +45,9 @@ from .state_guard import guard_state_updates
 log = logging.getLogger(__name__)
 
 #: The page's triggers: each calls the method of the same name of the panel's state (panel_state.py) or the app.
-TRIGGERS = ("set_param", "set_metric", "set_colour", "set_radius", "add_control", "remove_control", "toggle_training",
-            "reset", "undo", "redo", "start_fresh", "reload_preset", "refine", "decimate_upload", "export_mesh",
-            "save_session", "sweep_variants", "pick_variant")
+TRIGGERS = ("set_param", "set_metric", "set_colour", "set_radius", "set_position", "set_features", "add_control",
+            "remove_control", "toggle_training", "reset", "undo", "redo", "start_fresh", "reload_preset", "refine",
+            "decimate_upload", "export_mesh", "save_session", "sweep_variants", "pick_variant")
 
 
 class _ClientWatch(LinkProtocol):

@@ -122,6 +122,10 @@ def _revision_key(name: str, row: str = "''") -> str:
     return f"{row} + ':' + (field_revs['{name}'] || 0)"
 
 
+#: The controls table's cells: little padding, so that position, gap and radius fit the drawer's width.
+_TIGHT = "padding: 0 3px"
+
+
 def _on_enter_or_change(handler: str) -> list[str]:
     return [f'@change="{handler}"', f'@keydown.enter="{handler}"']
 
@@ -221,29 +225,41 @@ def _panel(panel: PanelModel) -> None:
 
         # controls
         with html.Div(classes="d-flex align-center mt-2"):
-            html.Div("Controls (gap to the nearest node: original / copy; radius)", classes="text-subtitle-2",
-                     title=GAP_HELP)
+            html.Div("Controls (position; gap to the nearest node: original / copy; radius)",
+                     classes="text-subtitle-2", title=GAP_HELP)
             v3.VSpacer()
             v3.VBtn(icon="mdi-plus", size="small", variant="text", click="trigger('add_control')",
-                    id="add-control", title="Add a control")
+                    id="add-control", title="Add a control on the clay, where it is farthest from the others (it "
+                                            "moves nothing until dragged); or double-click the clay in the view")
         with v3.VTable(density="compact", id="controls-table"):
             with html.Tbody():
                 with html.Tr(v_for="c in controls_ui", key=_revision_key("radius", "c.i")):
-                    html.Td("{{ c.i }}")
-                    with html.Td():
+                    html.Td("{{ c.i }}", style=_TIGHT)
+                    with html.Td(style=_TIGHT):
                         html.Input(type="color", value=("c.colour",), disabled=("!has_colour",),
                                    style="width: 32px; height: 22px; border: none; padding: 0",
                                    change="trigger('set_colour', [c.i, $event.target.value])",
                                    title="control colour")
-                    html.Td("{{ c.position }}", classes="text-caption")
-                    html.Td("{{ c.gap }}", classes="text-caption gap-cell")
-                    with html.Td(style="width: 72px"):
+                    with html.Td(style=f"{_TIGHT}; min-width: 160px"):  # typed: the control moves there (Enter)
+                        v3.VTextField(model_value=("c.position",), density="compact", variant="plain",
+                                      hide_details=True, classes="position-cell text-caption",
+                                      title="x, y, z: type a position and press Enter to move the control there",
+                                      raw_attrs=_on_enter_or_change(
+                                          "trigger('set_position', [c.i, $event.target.value])"))
+                        v3.VTextField(v_if="feature_names", model_value=("c.features",), density="compact",
+                                      variant="plain", hide_details=True, classes="features-cell text-caption",
+                                      title=("'the other features (' + feature_names + '): type values and press "
+                                             "Enter'",),
+                                      raw_attrs=_on_enter_or_change(
+                                          "trigger('set_features', [c.i, $event.target.value])"))
+                    html.Td("{{ c.gap }}", classes="text-caption gap-cell", style=_TIGHT)
+                    with html.Td(style=f"{_TIGHT}; width: 60px"):
                         v3.VTextField(model_value=("c.radius",), density="compact", type="number", variant="plain",
                                       hide_details=True, classes="radius-cell", min=0, step=0.05,
                                       title=RADIUS_HELP,
                                       raw_attrs=_on_enter_or_change(
                                           "trigger('set_radius', [c.i, $event.target.value])"))
-                    with html.Td():
+                    with html.Td(style=_TIGHT):
                         v3.VBtn(icon="mdi-close", size="x-small", variant="text",
                                 click="trigger('remove_control', [c.i])", title="Remove")
 

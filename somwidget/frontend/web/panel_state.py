@@ -99,6 +99,7 @@ class PanelState:
         s.paused = sess.paused
         s.features_ui = [dict(row, weight=fmt(row["weight"], 6)) for row in self.panel.feature_rows()]
         s.has_colour = sess.layout.colour_space != "none"
+        s.feature_names = self.panel.feature_names()
         s.param_errors = {}
 
     def show_frame(self, frame: Frame) -> None:
@@ -108,8 +109,8 @@ class PanelState:
             s.paused = frame.paused
             if self.session.error and not s.error_message:
                 s.error_message = self.session.error
-
             s.save_error = self.session.save_error or ""  # shown until a save is on disk again
+
     def error(self, message: str) -> None:
         log.info("refused: %s", message)
         self.state.error_message = message
@@ -165,6 +166,19 @@ class PanelState:
             self.state.error_message = ""
         else:
             self._refused("radius", "radius", error)
+
+    def set_position(self, index, text) -> None:
+        """A position typed in the controls table; refused, the row shows the position in effect again."""
+        self._control_typed(self.panel.set_position(index, text), "position")
+
+    def set_features(self, index, text) -> None:
+        self._control_typed(self.panel.set_features(index, text), "features")
+
+    def _control_typed(self, error: str | None, key: str) -> None:
+        if error is None:
+            self.state.error_message = ""
+        else:
+            self._refused("radius", key, error)  # "radius" draws the whole control row anew (layout.py)
 
     def set_group(self, spec) -> None:
         """A symmetry group chosen in the panel; refused, the field goes back to the group in effect."""

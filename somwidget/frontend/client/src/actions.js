@@ -14,6 +14,7 @@ export const ACTIONS = [
   { name: 'reset', label: 'Reset', where: 'both' },
   { name: 'smaller', label: '\u2212', where: 'menu' }, // the clay 1.25 times smaller
   { name: 'bigger', label: '+', where: 'menu' },
+  { name: 'stroke', label: 'Stroke', where: 'menu' }, // draw strokes with the trigger or a pinch (xrtools.js)
   { name: 'here', label: 'Bring here', where: 'menu' }, // place the clay in front of the person again
   { name: 'exit', label: 'Exit', where: 'menu' }, // leave the immersive session
 ];

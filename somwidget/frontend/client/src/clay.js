@@ -7,7 +7,8 @@
 import * as THREE from 'three';
 
 const HELD = new THREE.Color(0xff2020);
-const WIREFRAME_LIMIT = 16384; // display vertices above which a surface is drawn without its edges
+const WIREFRAME_LIMIT = 16384; // display vertices above which a surface has no wireframe to show (display.js)
+const THROUGH_OPACITY = 0.3; // a control hidden behind the clay is drawn this faintly through it
 const LIGHT_SEGMENTS = 4096; // synapses above which moving clay on a software rasteriser shows the points alone
 const WHITE = new THREE.Color(0xffffff);
 const HOVER_LIGHTEN = 0.35; // a hovered control's colour moves this far towards white
@@ -69,7 +70,11 @@ export class Clay {
     this.software = software;
     this.onChange = null; // called whenever something drawn changed
     this.segments = null;
+    this.showSegments = true; // the mesh's edges drawn (display.js: the wireframe of a surface, a point display's lines)
+    this.moving = false;
     this.controlIds = []; // each control's stable id, in index order (what intents name)
+    this.radii = []; // each control's radius of influence (model units), from the topology and "controls" messages
+    this.strokes = []; // the runs of controls that act as one (a stroke's samples)
   }
 
   get ready() {
@@ -91,6 +96,7 @@ export class Clay {
     this.pendingGroup = null;
     this.setGroup(groupOf(t));
     this.controlIds = t.control_ids || [];
+    this.setRuns(t);
     const n = t.n_vertices;
     const pos = new THREE.BufferAttribute(new Float32Array(3 * n), 3);
     pos.setUsage(THREE.DynamicDrawUsage);
@@ -150,6 +156,22 @@ export class Clay {
     this.content.position.copy(this.centre).multiplyScalar(-1);
   }
 
+  // Each control's radius and the strokes, from a topology or "controls" message (an older server sends none).
+  setRuns(msg) {
+    if (Array.isArray(msg.radii)) this.radii = msg.radii.map(Number);
+    if (Array.isArray(msg.strokes)) this.strokes = msg.strokes.map(Number);
+  }
+
+  // The indices of the controls that act as one with control i (a stroke's samples; i alone otherwise).
+  runOf(i) {
+    let first = 0;
+    for (const n of this.strokes) {
+      if (i < first + n) return Array.from({ length: n }, (_, m) => first + m);
+      first += n;
+    }
+    return [i];
+  }
+
   setGroup(g) {
     if (!g) return;
     this.group = g.name;
@@ -167,10 +189,11 @@ export class Clay {
   // its points only: thousands of lines are what such a rasteriser draws slowest, on the cores that also train, and
   // they would halve the frames drawn. The lines come back when the clay is still.
   setMoving(moving) {
+    this.moving = moving;
     const many = this.topology?.points && this.topology.segments.length / 2 > LIGHT_SEGMENTS;
-    const drop = Boolean(moving && this.software && many);
-    if (this.segments && this.segments.visible === drop) {
-      this.segments.visible = !drop;
+    const visible = this.showSegments && !(moving && this.software && many);
+    if (this.segments && this.segments.visible !== visible) {
+      this.segments.visible = visible;
       this.onChange?.();
     }
   }
@@ -204,6 +227,7 @@ export class Clay {
     this.colourAttr.array.set(f.colours);
     this.colourAttr.needsUpdate = true;
     if (this.surface) this.surface.geometry.computeVertexNormals();
+    for (const o of this.objects) o.geometry.boundingSphere = null; // raycasts take the clay as it is now
     if (this.pendingGroup) {
       this.setGroup(this.pendingGroup);
       this.pendingGroup = null;
@@ -232,7 +256,9 @@ export class Clay {
   rebuildControls(kEff) {
     for (const m of this.controlAnchors) this.content.remove(m);
     for (const d of this.controlDraws) {
-      this.content.remove(d);
+      const through = d.userData.through;
+      this.content.remove(d, through);
+      through.material.dispose();
       d.material.dispose();
       d.dispose();
     }
@@ -252,7 +278,17 @@ export class Clay {
       d.name = ghost ? 'control-mirrors' : 'control-spheres';
       d.frustumCulled = false;
       d.setColorAt(0, HELD);
-      this.content.add(d);
+      // the same spheres once more, drawn only where the clay hides them: faintly, through it
+      const through = new THREE.InstancedMesh(this.sphere, new THREE.MeshBasicMaterial({
+        transparent: true, opacity: THROUGH_OPACITY, depthWrite: false, depthFunc: THREE.GreaterDepth }), 1);
+      through.instanceMatrix = d.instanceMatrix;
+      through.instanceColor = d.instanceColor;
+      through.count = count;
+      through.name = `${d.name}-through`;
+      through.frustumCulled = false;
+      through.renderOrder = 3; // after the clay and the spheres
+      d.userData.through = through;
+      this.content.add(d, through);
       return d;
     };
     this.controlDraws = [draw(this.k, false), draw(kEff - this.k, true)];
@@ -357,6 +393,23 @@ export class Clay {
       if (d <= maxDistance && (!best || d < best.distance)) best = { index: j, distance: d };
     }
     return best;
+  }
+
+  // Where a ray first meets the clay (its surface; a point display's nearest node within `pointPad` x the control
+  // radius of the ray): {point (world), distance, normal (world, towards the ray; null for a point)} or null.
+  surfaceHit(raycaster, pointPad = 0.5) {
+    const target = this.surface || this.objects.find((o) => o.isPoints);
+    if (!target || !this.lastFrame) return null;
+    raycaster.params.Points.threshold = this.worldControlRadius * pointPad;
+    const hits = raycaster.intersectObject(target, false);
+    if (!hits.length) return null;
+    const h = hits[0];
+    let normal = null;
+    if (h.face) {
+      normal = h.face.normal.clone().transformDirection(target.matrixWorld);
+      if (normal.dot(raycaster.ray.direction) > 0) normal.negate();
+    }
+    return { point: h.point.clone(), distance: h.distance, normal };
   }
 
   // The effective control a ray hits first (spheres padded by `pad` x their radius): {index, point} or null.

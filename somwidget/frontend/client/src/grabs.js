@@ -42,7 +42,7 @@ export class Grabs {
     const m = this.clay.controlAnchors[i];
     const p = m ? [m.position.x, m.position.y, m.position.z] : [0, 0, 0];
     const id = this.clay.controlIds[i] ?? i;
-    this.active.set(i, { id, began: i, pos: p, lastSent: 0, pending: null, sentPos: p.map(round6) });
+    this.active.set(i, { id, began: i, pos: p, lastSent: 0, pending: null, sentPos: p.map(round6), moved: false });
     this.settling.delete(i);
     this.clay.setLocal(i, p);
     this.link.send(intents.grab(id));
@@ -60,6 +60,7 @@ export class Grabs {
     const eps = 1e-5 * this.clay.radius;
     const same = (a) => a && Math.max(...a.map((v, a2) => Math.abs(v - p[a2]))) <= eps;
     g.pending = same(g.sentPos) ? null : p;
+    g.moved ||= g.pending !== null;
     this.flushOne(i, g, performance.now());
   }
 
@@ -96,6 +97,11 @@ export class Grabs {
     this.active.delete(i);
     const p = g.pos.map(round6);
     const now = performance.now();
+    if (!g.moved) { // a click (a selection): let go where it was, nothing restarts
+      this.link.send(intents.release(g.id));
+      this.clay.clearLocal(i);
+      return;
+    }
     if (this.link.send(intents.release(g.id, p))) {
       this.pendingMoves.push({ t: now, index: i, pos: p.map(Math.fround), digest: this.lastDigest });
     }

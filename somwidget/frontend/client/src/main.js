@@ -8,6 +8,7 @@ import { Menu } from './menu.js';
 import { intents } from './protocol.js';
 import { ClayView } from './view.js';
 import { XRApp } from './xr.js';
+import { HandTools } from './xrtools.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -36,7 +37,7 @@ const ui = {
 
 let link = null;
 const view = new ClayView($('view'), { send: (obj) => (link ? link.send(obj) : false), xr: true });
-const { renderer, scene, camera, clay, grabs, desktop } = view;
+const { renderer, scene, clay, grabs, desktop } = view;
 const state = view.state;
 state.mode = null;
 state.xrFrames = 0;
@@ -74,7 +75,7 @@ view.transport = link;
 view.onTopology = (t) => { ui.title.textContent = `somwidget XR: ${t.title}`; };
 view.onFirstFrame = () => {
   if (xr.session) xr.wantPlace = true;
-  else desktop.frame();
+  else view.frame();
 };
 view.onFrame = (f) => {
   state.paused = f.paused;
@@ -99,19 +100,24 @@ const perform = {
   reset: () => link.send(intents.reset()),
   smaller: () => xr.rescale(1 / 1.25),
   bigger: () => xr.rescale(1.25),
+  stroke: () => {
+    tools.setOn(!tools.on);
+    menu.setLabel('stroke', tools.on ? 'Grab' : 'Stroke'); // what a press does next
+  },
   here: () => { xr.wantPlace = true; },
   exit: () => xr.exit(),
 };
 
 const menu = new Menu(perform);
+const tools = new HandTools({ clay, stroke: view.stroke, radius: view.radius });
 
 const xr = new XRApp({
-  renderer, scene, clay, grabs, menu,
+  renderer, scene, clay, grabs, menu, tools, radius: view.radius,
   onMode: (mode) => {
     state.mode = mode;
     if (!mode) {
       scene.background = view.background;
-      if (state.frame) desktop.frame();
+      if (state.frame) view.frame();
     }
     document.body.classList.toggle('immersive', !!mode);
     showStatus();
@@ -183,13 +189,14 @@ window.somxr = {
     autosave: state.autosave || null, hudError: ui.error.hidden ? null : ui.error.textContent,
     menuStatus: menu.statusText, link: { ...link.stats }, moves: grabs.moves, latencies: [...grabs.latencies],
     controlLatencies: [...grabs.controlLatencies], xr: { ...xr.stats }, pressed: [...menu.pressed], desktop: { ...desktop.stats },
-    scale: clay.scale, stage: clay.stage.position.toArray(), inputs: xr.describeInputs(),
+    scale: clay.scale, stage: clay.stage.position.toArray(), inputs: xr.describeInputs(), tools: tools.describe(),
+    radii: [...clay.radii], strokes: [...clay.strokes],
   }),
   controlWorld: (j) => clay.controlWorld(j)?.toArray() ?? null,
   controlScreen: (j) => {
     const w = clay.controlWorld(j);
     if (!w) return null;
-    const p = w.project(camera);
+    const p = w.project(view.camera);
     const r = renderer.domElement.getBoundingClientRect();
     return [r.left + ((p.x + 1) / 2) * r.width, r.top + ((1 - p.y) / 2) * r.height];
   },

@@ -1,5 +1,6 @@
 // The in-headset menu: a row of buttons (the menu's actions in actions.js: Train / Pause, Undo, Redo, Reset, smaller,
-// bigger, bring here, exit) and a status line, drawn on canvases, floating below the clay and facing the person.
+// bigger, Stroke / Grab, bring here, exit) and a status line, drawn on canvases, floating below the clay and facing
+// the person.
 // Pressed by pointing a ray and pulling the trigger (or pinching), or by touching a button with an index finger tip.
 
 import * as THREE from 'three';

@@ -2,15 +2,24 @@
 // (protocol.js) from any transport (the websocket in the web app and the XR page, the kernel's comm in a notebook)
 // and sending intents back through `send`. The browser draws; every view keeps its own camera.
 //
-// On the canvas: the controls as spheres labelled with their index (a copy with primes: ′ ″ ‴, then ·g), hover
-// highlight, the held one red and enlarged; orbit, pan, zoom; a fit-to-view button; a status line (iteration,
-// frames/s drawn here, the server's cycle time). The view refits when a control leaves it.
+// On the canvas: the controls as spheres labelled with their index (a copy with primes: ′ ″ ‴, then ·g; a control
+// hidden by the clay drawn faintly through it), hover highlight, the held one red and enlarged, a marker at the
+// view's edge for each control out of sight; the camera (camera.js), the mouse and keys (desktop.js), the selected
+// control's handle (handle.js), radii (radius.js), strokes (stroke.js), the display settings (display.js) and the
+// view's bar (toolbar.js); a status line (iteration, frames/s drawn here, the server's cycle time).
 
 import './colour.js';
 import * as THREE from 'three';
+import { CameraRig } from './camera.js';
 import { Clay } from './clay.js';
 import { Desktop } from './desktop.js';
+import { Display } from './display.js';
 import { Grabs } from './grabs.js';
+import { Handle } from './handle.js';
+import { MARKER_CSS, Markers } from './markers.js';
+import { RadiusBall } from './radius.js';
+import { StrokeDraw } from './stroke.js';
+import { TOOLBAR_CSS, Toolbar } from './toolbar.js';
 
 const CSS = `
 .somview { position: relative; overflow: hidden; background: #eef0f4; font-family: system-ui, sans-serif; }
@@ -20,16 +29,15 @@ const CSS = `
   padding: 1px 3px; border-radius: 3px; background: rgba(255,255,255,0.8); color: #222; white-space: nowrap; }
 .somview-label.mirror { opacity: 0.6; }
 .somview-label.held { background: #d32f2f; color: white; }
+.somview-label.behind { opacity: 0.4; }
 .somview-status { position: absolute; left: 6px; bottom: 4px; font-size: 11px; color: #445;
   background: rgba(255,255,255,0.7); padding: 1px 5px; border-radius: 3px; pointer-events: none; }
 .somview-status.offline { background: #fde2e2; color: #8a1010; font-weight: 600; }
-.somview-fit { position: absolute; right: 6px; top: 6px; font-size: 12px; padding: 2px 8px; cursor: pointer;
-  border: 1px solid #99a; border-radius: 4px; background: rgba(255,255,255,0.85); }
 .somview-picture { position: absolute; inset: 0; width: 100%; height: 100%; object-fit: contain;
   background: #eef0f4; pointer-events: none; }
-.somview-error { position: absolute; left: 6px; top: 6px; right: 60px; font-size: 12px; padding: 3px 6px;
+.somview-error { position: absolute; left: 6px; top: 36px; right: 6px; font-size: 12px; padding: 3px 6px;
   background: #fde2e2; color: #8a1010; border-radius: 4px; pointer-events: none; }
-`;
+${MARKER_CSS}${TOOLBAR_CSS}`;
 
 // The view's stylesheet, inside its own element (anywidget's way): it applies wherever the element lives, in a page
 // or in a shadow root (marimo renders widgets in one), and goes with it.
@@ -48,7 +56,8 @@ export function digestOf(positions) {
   return s;
 }
 
-const FIT_CHECK_MS = 250;
+const OCCLUSION_MS = 300; // labels of controls hidden by the clay are dimmed, checked this often at most
+const OCCLUSION_BUDGET = 400000; // ... while controls x triangles stays under this (one ray per control)
 const STATUS_MS = 250;
 const DRAG_REDRAW_MS = 50;
 const PRIMES = ['', '\u2032', '\u2033', '\u2034']; // ′ ″ ‴
@@ -98,17 +107,32 @@ export class ClayView {
     const sun = new THREE.DirectionalLight(0xffffff, 1.6);
     sun.position.set(1.5, 3, 2);
     this.scene.add(sun);
-    this.camera = new THREE.PerspectiveCamera(45, 1, 0.01, 100);
+    this.rig = new CameraRig(this.renderer.domElement);
+    this.rig.onChange = () => { this.dirty = true; };
     this.clay = new Clay({ software });
     this.scene.add(this.clay.stage);
     this.grabs = new Grabs(this.link, this.clay);
     this.software = software;
-    this.desktop = new Desktop({ renderer: this.renderer, camera: this.camera, clay: this.clay, grabs: this.grabs,
+    const redraw = () => { this.dirty = true; };
+    this.display = new Display(this.clay, redraw);
+    this.radius = new RadiusBall(this.clay, this.link);
+    this.stroke = new StrokeDraw(this.clay, this.link, this.scene);
+    this.stroke.onChange = redraw;
+    this.handle = new Handle({ rig: this.rig, clay: this.clay, grabs: this.grabs, scene: this.scene,
+      domElement: this.renderer.domElement, onChange: redraw });
+    const act = { // what the view's bar and keys do
+      fit: () => this.rig.fit(this.clay.worldBounds()),
+      look: (name) => this.rig.look(name),
+      orthographic: (on) => this.rig.setOrthographic(on),
+      stroke: (on) => { this.desktop.strokeTool = on; this.desktop.hover(null); },
+      display: (name, value) => this.display.set(name, value),
+    };
+    const refreshBar = (f) => (...args) => { f(...args); this.toolbar.refresh(); };
+    for (const name of Object.keys(act)) act[name] = refreshBar(act[name]);
+    this.desktop = new Desktop({ renderer: this.renderer, rig: this.rig, clay: this.clay, grabs: this.grabs,
+      link: this.link, handle: this.handle, radius: this.radius, stroke: this.stroke, act,
       onDragStart: () => this.clay.setMoving(true),
-      onDragEnd: () => {
-        this.clay.setMoving(!!this.state.frame?.running);
-        this.desktop.keepControlsInView();
-      } });
+      onDragEnd: () => this.clay.setMoving(!!this.state.frame?.running) });
 
     this.grabs.onMoved = (i, j, k) => { // a control this view drags changed place: the copy dragged follows it
       const drag = this.desktop.drag;
@@ -119,28 +143,26 @@ export class ClayView {
     this.statusLine = document.createElement('div');
     this.statusLine.className = 'somview-status';
     this.statusLine.textContent = 'connecting';
-    this.fitButton = document.createElement('button');
-    this.fitButton.className = 'somview-fit';
-    this.fitButton.textContent = 'Fit';
-    this.fitButton.title = 'Fit the clay and every control into the view';
-    this.fitButton.addEventListener('click', () => this.desktop.fit());
     this.errorBox = document.createElement('div');
     this.errorBox.className = 'somview-error';
     this.errorBox.hidden = true;
-    container.append(this.labels, this.statusLine, this.fitButton, this.errorBox);
+    container.append(this.labels, this.statusLine, this.errorBox);
+    this.toolbar = new Toolbar(container, act, () => ({ orthographic: this.rig.orthographicOn,
+      stroke: this.desktop.strokeTool, display: this.display.describe() }));
     this.labelDivs = [];
+    this.markers = new Markers(this.labels, (j) => this.rig.centreOn(this.clay.controlWorld(j)));
+    this.occluded = new Set(); // effective controls the clay hides from the camera
+    this.lastOcclusion = 0;
 
     this.state = { connected: false, topology: null, frame: null, frames: 0, fps: 0, fpsCount: 0,
       fpsStart: performance.now(), digest: 0, errors: [], lastError: null, cycleMs: null, serverFps: null,
       painted: 0, paintedDigest: 0, rendered: 0, renderedAt: 0 };
     this.paints = []; // {digest, t}: when a changed mesh was first drawn (page clock, ms)
     this.hooks = []; // (time, xrFrame) => void, run before each render
-    this.lastFitCheck = 0;
     this.lastStatus = 0;
     this.lastRender = 0;
     this.dirty = true; // draw on the next animation frame (only then: a software rasteriser shares the CPU)
     this.clay.onChange = () => { this.dirty = true; };
-    this.desktop.orbit.addEventListener('change', () => { this.dirty = true; });
     this.resize();
     this.resizer = new ResizeObserver(() => this.resize());
     this.resizer.observe(container);
@@ -159,16 +181,34 @@ export class ClayView {
       onServerStatus: (s) => { this.state.cycleMs = s.cycle_ms; this.state.serverFps = s.fps; },
       onControls: (ids, msg) => {
         if (msg) this.clay.announceGroup(msg); // the group (a server that sends it), from the next frame on
+        if (msg) this.clay.setRuns(msg); // the radii and strokes
         this.grabs.onControls(ids);
+        this.radius.update();
       },
     };
   }
 
   setTopology(t) {
     this.state.topology = t;
+    this.handle.select(null);
     this.clay.setTopology(t);
+    this.display.apply();
     this.state.needsFrame = true;
     this.onTopology?.(t);
+  }
+
+  // A new model: unit scale at the origin, the camera framed on it.
+  frame() {
+    this.clay.stage.position.set(0, 0, 0);
+    this.clay.stage.rotation.set(0, 0, 0);
+    this.clay.fit(1.0);
+    this.rig.frame(this.clay.worldBounds());
+    this.display.placeHelpers();
+  }
+
+  // The camera the view draws with: the rig's (perspective or orthographic), the perspective one in a headset.
+  get camera() {
+    return this.renderer.xr.isPresenting ? this.rig.perspective : this.rig.camera;
   }
 
   applyFrame(f) {
@@ -181,9 +221,11 @@ export class ClayView {
     s.digest = digestOf(f.positions);
     this.grabs.onFrame(f, s.digest);
     this.clay.setMoving(f.running || !!this.desktop.drag);
+    this.handle.follow();
+    this.radius.update();
     if (s.needsFrame) { // the first frame of a model: frame the camera on it
       s.needsFrame = false;
-      this.onFirstFrame ? this.onFirstFrame() : this.desktop.frame();
+      this.onFirstFrame ? this.onFirstFrame() : this.frame();
     }
     this.onFrame?.(f);
     return true;
@@ -207,14 +249,14 @@ export class ClayView {
     const h = Math.max(this.container.clientHeight, 1);
     this.renderer.setSize(w, h);
     this.size = [w, h];
-    this.camera.aspect = w / h;
-    this.camera.updateProjectionMatrix();
+    this.rig.resize(w, h);
     this.dirty = true;
   }
 
   tick(time, xrFrame) {
     for (const hook of this.hooks) hook(time, xrFrame);
     this.grabs.flush();
+    this.radius.flush();
     const now = performance.now();
     const s = this.state;
     if (now - s.fpsStart >= 1000) {
@@ -224,14 +266,11 @@ export class ClayView {
     }
     const presenting = this.renderer.xr.isPresenting;
     if (!presenting) {
-      if (now - this.lastFitCheck > FIT_CHECK_MS && s.frame) {
-        this.lastFitCheck = now;
-        this.desktop.keepControlsInView();
-      }
       if (now - this.lastStatus >= STATUS_MS) { // a few times a second: it is read, not watched
         this.lastStatus = now;
         this.updateStatus();
       }
+      if (this.dirtyOcclusion && now - this.lastOcclusion >= OCCLUSION_MS) this.dirty = true;
       if (!this.dirty) return;
       // a software rasteriser dragging: draw each answer to a move at once, the frames between at most every
       // DRAG_REDRAW_MS (each drawing holds the page's thread while the CPU draws; the next answer waits behind it)
@@ -263,9 +302,11 @@ export class ClayView {
     const [w, h] = this.size; // kept by resize(): reading the layout here would force one every frame
     const p = new THREE.Vector3();
     this.camera.updateMatrixWorld();
+    this.updateOcclusion();
+    const shown = this.display.settings.labels;
     for (let j = 0; j < this.labelDivs.length; j++) {
       const d = this.labelDivs[j];
-      if (j >= clay.kEff) {
+      if (j >= clay.kEff || !shown) {
         d.hidden = true;
         continue;
       }
@@ -275,7 +316,7 @@ export class ClayView {
       if (d.textContent !== text) d.textContent = text;
       clay.controlWorld(j, p);
       p.project(this.camera);
-      const out = p.z > 1 || Math.abs(p.x) > 1.05 || Math.abs(p.y) > 1.05;
+      const out = p.z > 1 || Math.abs(p.x) > 1 || Math.abs(p.y) > 1; // out of sight: a marker instead
       if (d.hidden !== out) d.hidden = out;
       // a transform moves the label without a new layout of the page; only what changed is written
       const place = `translate(${(((p.x + 1) / 2) * w).toFixed(1)}px, ${(((1 - p.y) / 2) * h).toFixed(1)}px) `
@@ -287,6 +328,41 @@ export class ClayView {
       const held = clay.held.has(i) || clay.local.has(i);
       if (d.classList.contains('mirror') !== mirror) d.classList.toggle('mirror', mirror);
       if (d.classList.contains('held') !== held) d.classList.toggle('held', held);
+      const behind = this.occluded.has(j);
+      if (d.classList.contains('behind') !== behind) d.classList.toggle('behind', behind);
+    }
+    this.markers.update(clay, this.camera, this.size, (j) => labelOf(clay.originalOf(j), clay.copyOf(j)));
+  }
+
+  // Which controls the clay hides from the camera (their labels dimmed): one ray each, a few times a second, on a
+  // clay small enough for it.
+  updateOcclusion() {
+    const now = performance.now();
+    if (now - this.lastOcclusion < OCCLUSION_MS) {
+      this.dirtyOcclusion = true; // look again soon: what is drawn may have changed since
+      return;
+    }
+    this.lastOcclusion = now;
+    this.dirtyOcclusion = false;
+    const clay = this.clay;
+    const triangles = (clay.topology?.triangles.length ?? 0) / 3;
+    this.occluded = new Set();
+    if (!clay.surface || triangles * clay.kEff > OCCLUSION_BUDGET) return;
+    const rc = new THREE.Raycaster();
+    const eye = new THREE.Vector3();
+    const c = new THREE.Vector3();
+    for (let j = 0; j < clay.kEff; j++) {
+      clay.controlWorld(j, c);
+      if (this.camera.isOrthographicCamera) {
+        const back = this.camera.getWorldDirection(new THREE.Vector3()).negate();
+        eye.copy(c).addScaledVector(back, 10 * this.rig.fitDistance);
+      } else {
+        eye.copy(this.camera.position);
+      }
+      const far = eye.distanceTo(c);
+      rc.set(eye, c.clone().sub(eye).normalize());
+      const hit = clay.surfaceHit(rc);
+      if (hit && hit.distance < far - clay.worldControlRadius) this.occluded.add(j);
     }
   }
 
@@ -318,10 +394,15 @@ export class ClayView {
       held: [...clay.held], local: [...clay.local.keys()], hover: [...clay.hover],
       errors: s.errors.map((e) => e.message), lastError: s.lastError, moves: this.grabs.moves,
       latencies: [...this.grabs.latencies], controlLatencies: [...this.grabs.controlLatencies],
-      desktop: { ...this.desktop.stats }, status: this.statusLine.textContent, software: this.software,
+      desktop: { ...this.desktop.stats, ...this.rig.stats, handleMoves: this.handle.stats.moves,
+        radiusTurns: this.radius.turns }, status: this.statusLine.textContent, software: this.software,
       synapsesShown: this.clay.segments ? this.clay.segments.visible : null,
       labels: this.labelDivs.filter((d) => !d.hidden).map((d) => d.textContent),
-      camera: this.camera.position.toArray(), target: this.desktop.orbit.target.toArray(),
+      behind: [...this.occluded], markers: this.markers.shown.map((j) => labelOf(clay.originalOf(j), clay.copyOf(j))),
+      ...this.rig.describe(), // camera, target, distance (to the target), fitDistance, projection, zoom
+      display: this.display.describe(), selected: this.handle.selected, tool: this.desktop.strokeTool ? 'stroke' : null,
+      radii: [...clay.radii], strokes: [...clay.strokes], controlIds: [...clay.controlIds],
+      radiusBall: { of: this.radius.shownFor, shown: this.radius.ball.visible, radius: this.radius.ball.scale.x },
       size: [this.renderer.domElement.clientWidth, this.renderer.domElement.clientHeight],
     };
   }
@@ -333,6 +414,24 @@ export class ClayView {
     const p = w.project(this.camera);
     const r = this.renderer.domElement.getBoundingClientRect();
     return [r.left + ((p.x + 1) / 2) * r.width, r.top + ((1 - p.y) / 2) * r.height];
+  }
+
+  // Where a model point [x, y, z] is drawn, in page pixels.
+  modelScreen(point) {
+    const p = this.clay.modelToWorld(point).project(this.camera);
+    const r = this.renderer.domElement.getBoundingClientRect();
+    return [r.left + ((p.x + 1) / 2) * r.width, r.top + ((1 - p.y) / 2) * r.height];
+  }
+
+  // The model point of the clay under page pixel (x, y), or null where there is no clay.
+  surfaceAt(x, y) {
+    const hit = this.clay.surfaceHit(this.desktop.ray({ clientX: x, clientY: y }));
+    return hit ? this.clay.worldToModel(hit.point) : null;
+  }
+
+  // A point on the selected control's handle arrow along model axis 'X', 'Y' or 'Z', in page pixels (or null).
+  handlePoint(axis) {
+    return this.handle.axisPoint(axis, this.camera, this.renderer.domElement.getBoundingClientRect());
   }
 
   controlModel(j) {

@@ -1,6 +1,7 @@
 // The immersive session: entering AR (or VR where AR is missing), placing the clay in front of the person, and the
 // hands and controllers: grab the nearest control with the trigger or a pinch, move it, let go; squeeze (or
 // trigger / pinch on empty space) moves the whole clay, two of them scale it; the menu below the clay does the rest.
+// With Stroke chosen in the menu the trigger or a pinch draws instead, and thumbsticks set radii (xrtools.js).
 //
 // Inputs are read from the XRFrame every animation frame (grip pose for controllers, the midpoint of thumb and index
 // tips for hands); session events only mark what started or ended, the next frame acts on it with fresh poses.
@@ -22,12 +23,14 @@ const GRAB_RADIUS = 0.07; // m: a control within this distance of the hand (or 2
 const RAY_LENGTH = 2.0;
 
 export class XRApp {
-  constructor({ renderer, scene, clay, grabs, menu, onMode }) {
+  constructor({ renderer, scene, clay, grabs, menu, tools, radius, onMode }) {
     this.renderer = renderer;
     this.scene = scene;
     this.clay = clay;
     this.grabs = grabs;
     this.menu = menu;
+    this.tools = tools; // HandTools: the Stroke tool, radii by thumbstick or spread
+    this.radius = radius; // RadiusBall: the held control's radius shown
     this.onMode = onMode;
     this.session = null;
     this.mode = null;
@@ -169,6 +172,8 @@ export class XRApp {
     g.userData.point = new THREE.Mesh(new THREE.SphereGeometry(0.006, 10, 8),
       new THREE.MeshBasicMaterial({ color: 0xffee55 }));
     g.add(g.userData.point);
+    g.userData.radiusBall = this.tools.ball();
+    g.add(g.userData.radiusBall);
     return g;
   }
 
@@ -216,6 +221,7 @@ export class XRApp {
     }
     for (const st of this.inputs.values()) this.dragControl(st);
     this.dragStage();
+    this.tools.update([...this.inputs.values()]);
     for (const e of this.ends.splice(0)) {
       const st = this.inputs.get(e.source);
       if (st) this.endGrab(st, e.kind);
@@ -300,6 +306,15 @@ export class XRApp {
         this.menu.press(touched);
         return;
       }
+      if (this.tools.on) { // the Stroke tool draws, except on the menu
+        if (st.rayOrigin) this.raycaster.set(st.rayOrigin, st.rayDir);
+        const button = st.rayOrigin ? this.menu.hit(this.raycaster) : null;
+        if (button) {
+          this.menu.press(button);
+          return;
+        }
+        if (this.tools.start(st)) return;
+      }
       const near = this.clay.nearest(st.point, Math.max(GRAB_RADIUS, 2 * this.clay.worldControlRadius));
       if (near) return this.grabControl(st, near.index, st.point);
       if (st.rayOrigin) {
@@ -323,6 +338,7 @@ export class XRApp {
     if (this.grabs.holds(i)) return;
     const world = this.clay.controlWorld(j);
     this.grabs.begin(i);
+    this.radius.show(j);
     this.stats.grabs += 1;
     st.grabs.select = { type: 'control', j, i, copy: this.clay.copyOf(j), offset: world.sub(point) };
   }
@@ -375,7 +391,10 @@ export class XRApp {
     delete st.grabs[kind];
     if (g.type === 'control') {
       this.grabs.end(g.i);
+      this.radius.show(null);
       this.stats.releases += 1;
+    } else if (g.type === 'stroke' || g.type === 'spread') {
+      this.tools.end(st, g);
     } else {
       this.beginStage();
     }
