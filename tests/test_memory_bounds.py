@@ -116,7 +116,7 @@ def test_pending_bytes_are_bounded_across_clients_and_a_refused_client_logs_one_
         peak = helpers.proc_status_mb(srv.proc.pid, "VmHWM") - base_hwm
         held = sorted(v for v in out.values())
         assert held.count("held") == limits.MAX_TOTAL_PENDING_BYTES // per_client, out  # 3 fit in the budget
-        assert all(v in ("held", "closed", "closed 1009") for v in out.values()), out
+        assert all(v == "held" or v.startswith("closed") for v in out.values()), out  # 1009, or cut while sending
         budget_mb = limits.MAX_TOTAL_PENDING_BYTES / 1e6
         assert peak < budget_mb + 100, f"six clients took the server's peak memory up by {peak:.0f} MB"
         log = srv.output()

@@ -59,6 +59,10 @@ class PanelState:
             await asyncio.sleep(1.0 / (2 * PANEL_HZ))
 
     def _pump_once(self) -> None:
+        failed = self.session.save_error or ""
+        if failed != self.state.save_error:  # a save failed or works again: at once, not with the next numbers
+            with self.state:
+                self.state.save_error = failed
         with self._latest_lock:
             frame = self._latest
         if frame is None:
