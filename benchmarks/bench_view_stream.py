@@ -1,7 +1,7 @@
 """The clay view in a browser, fed a big clay's frame stream: what the page does with it (no engine involved).
 
-A GPU machine trains a 1,000,000-vertex grid and streams it decimated (wire_display.STREAM_LIMIT display vertices,
-0.49 MB a frame; bench_big_view.py measures that side). This script replays such a stream on this machine: the
+A GPU machine trains a 1,000,000-vertex grid and streams it decimated (wire_display.DECIMATED_NODES display
+vertices, 0.12 MB a frame; bench_big_view.py measures that side). This script replays such a stream on this machine: the
 same grid's display mesh, its nodes moving as a wave, sent by a small aiohttp server at a chosen rate to the page's
 clay view (dist/somview.js, mounted as the web app mounts it) in headless Chromium. It reports the frames the page
 applied and painted per second, and the time from a frame's arrival to its paint.

@@ -467,9 +467,9 @@ def test_new_preset_sends_a_new_topology():
 
 
 def test_a_clay_past_the_streaming_limit_streams_a_decimated_mesh_on_its_trained_nodes():
-    """62,500 nodes (a 250 x 250 grid) are more than a frame streams: the display mesh keeps at most STREAM_LIMIT
-    nodes, every triangle and segment joins kept nodes, it still covers the grid, and a frame carries exactly the
-    trained positions of those nodes."""
+    """62,500 nodes (a 250 x 250 grid) are more than a frame streams whole: the display mesh keeps at most
+    DECIMATED_NODES nodes, every triangle and segment joins kept nodes, it still covers the grid, and a frame carries
+    exactly the trained positions of those nodes."""
     from types import SimpleNamespace
 
     n = 250
@@ -480,12 +480,12 @@ def test_a_clay_past_the_streaming_limit_streams_a_decimated_mesh_on_its_trained
     tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
     edges = np.unique(np.sort(np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]]]), axis=1), axis=0)
     nodes, t, e = wire_display.decimate_display(pts, tris, edges)
-    assert 0.25 * wire_display.STREAM_LIMIT < len(nodes) <= wire_display.STREAM_LIMIT
+    assert 0.25 * wire_display.DECIMATED_NODES < len(nodes) <= wire_display.DECIMATED_NODES < len(pts)
     assert len(np.unique(nodes)) == len(nodes) and nodes.max() < len(pts)
     assert t.max() < len(nodes) and e.max() < len(nodes) and len(t) > len(nodes)  # a surface, not a cloud
     assert (t[:, 0] != t[:, 1]).all() and (t[:, 1] != t[:, 2]).all() and (t[:, 0] != t[:, 2]).all()
     kept = pts[nodes]
-    assert np.allclose(kept.min(axis=0)[:2], 0, atol=0.02) and np.allclose(kept.max(axis=0)[:2], 1, atol=0.02)
+    assert np.allclose(kept.min(axis=0)[:2], 0, atol=0.03) and np.allclose(kept.max(axis=0)[:2], 1, atol=0.03)
     # the display mesh's triangles are small: no face spans more than a few grid cells of the decimated grid
     side = np.linalg.norm(kept[t[:, 0]] - kept[t[:, 1]], axis=1)
     assert side.max() < 0.05
@@ -495,7 +495,7 @@ def test_a_clay_past_the_streaming_limit_streams_a_decimated_mesh_on_its_trained
                                                      topology=SimpleNamespace(n_vertices=len(pts),
                                                                               edges=edges, faces=quads.tolist())))
     geo = wire_display.display_of(session)
-    assert geo["n_vertices"] == len(geo["nodes"]) <= wire_display.STREAM_LIMIT
+    assert geo["n_vertices"] == len(geo["nodes"]) <= wire_display.DECIMATED_NODES
     trained = pts + 0.01
     frame = SimpleNamespace(positions=trained.astype(np.float32), colours=np.zeros_like(trained, np.float32))
     pos, col = wire_display.display_arrays(frame, session)

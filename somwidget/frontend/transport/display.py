@@ -15,12 +15,15 @@ from ...backend.refine import cluster_on_grid
 from ...backend.symmetry import Symmetry
 from .messages import MAX_COORDINATE, MAX_MESSAGE_BYTES, PROTOCOL_VERSION
 
-#: Most display vertices a frame streams: 32,768 x 15 bytes = 0.5 MB a frame, 15 MB/s at 30 frames/s, which a
+#: Most display vertices a frame streams whole: 32,768 x 15 bytes = 0.5 MB a frame, 15 MB/s at 30 frames/s, which a
 #: headset's Wi-Fi and a laptop's browser both take. A bigger clay is shown decimated (`decimate_display`).
 STREAM_LIMIT = 32768
+#: The display vertices of a clay shown decimated: 0.12 MB a frame, what a page drawing in software (no GPU, two
+#: cores) keeps at 30 frames/s while dragging (BENCHMARKS.md, Big clay: 32,768 kept it under 10).
+DECIMATED_NODES = 8192
 
 
-def decimate_display(points: np.ndarray, triangles: np.ndarray, segments: np.ndarray, limit: int = STREAM_LIMIT):
+def decimate_display(points: np.ndarray, triangles: np.ndarray, segments: np.ndarray, limit: int = DECIMATED_NODES):
     """A display mesh of at most `limit` of the nodes, for a clay too big to stream whole: the nodes are clustered on
     a uniform grid over their start positions (one node stands for each occupied cell), and the triangles and
     segments are mapped onto those nodes (the degenerate ones dropped). Every frame then sends the trained
@@ -44,7 +47,8 @@ _DISPLAYS: dict[int, tuple] = {}  # id(preset) -> (preset, display): the latest 
 
 def display_of(session) -> dict:
     """The display geometry of the session's current preset: triangles, segments, points flag, n_vertices, and
-    `nodes` (the nodes a frame streams, in order) when the clay is past STREAM_LIMIT and shown decimated. Made once
+    `nodes` (the nodes a frame streams, in order) when the clay is past STREAM_LIMIT and shown decimated (to
+    DECIMATED_NODES). Made once
     per preset (a million-vertex mesh takes seconds to triangulate and decimate), then kept."""
     preset = session.preset
     cached = _DISPLAYS.get(id(preset))
