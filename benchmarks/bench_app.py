@@ -127,12 +127,17 @@ def open_page(browser, url: str, viewport):
 
 
 def pick_control(page, margin: float = 110.0) -> int:
-    """An original control well inside the view and clear of the others."""
+    """An original control well inside the view, clear of the others and not hidden by the clay (a press there
+    would not grab it)."""
     box = page.locator("#clay-view").bounding_box()
-    k = view(page)["k"]
-    spots = [page.evaluate(f"{VIEW}.controlScreen({j})") for j in range(view(page)["kEff"])]
+    time.sleep(0.35)  # the view has looked again which controls the clay hides
+    state = view(page)
+    behind = set(state.get("behind", []))
+    spots = [page.evaluate(f"{VIEW}.controlScreen({j})") for j in range(state["kEff"])]
     best, best_score = 0, -1.0
-    for i in range(k):
+    for i in range(state["k"]):
+        if i in behind:
+            continue
         x, y = spots[i]
         inside = box["x"] + margin < x < box["x"] + box["width"] - margin and \
             box["y"] + margin < y < box["y"] + box["height"] - margin
