@@ -60,8 +60,8 @@ def test_paper_rule_local_equals_full_computation(mirror, cores):
     """Rows mode on the CPU, a drag restarted from its anchor each frame: the local cycle (on one core, or the blocks
     and controls split between two) gives the full computation's weights and winners bit for bit, and leaves the
     blocks out of reach exactly as they were."""
-    topo, _, pts = _strip()
-    controls = pts[[291, 328, 348]] + np.float32([0.004, 0.003, 0.02])  # mid-sheet: the mirrored copies too
+    topo, _, pts = _strip(16, 520)  # 8,320 neurons: three superblocks of 4,096
+    controls = pts[[4147, 4168, 4188]] + np.float32([0.004, 0.003, 0.02])  # mid-sheet: the mirrored copies too
     local = Som(topo, pts, controls, iterations=S, reach=0.04, mirror=mirror, distances="rows", device="cpu",
                 cpu_cores=cores)
     full = Som(topo, pts, controls, iterations=S, reach=0.04, mirror=mirror, distances="rows", device="cpu")
@@ -141,7 +141,7 @@ def _shaping_full_cycle(som: Som) -> None:
 def test_shaping_local_equals_full_computation(distances, cores):
     """Controls with a radius (a kept shape) and a point control: the CPU's move of the blocks a group can reach gives
     the thread-per-neuron kernel's weights bit for bit; the far end of the strip stays as it was."""
-    topo, _, pts = _strip()
+    topo, _, pts = _strip(16, 520)
     controls = pts[[19, 136, 204, 250]].copy()
     radii = [0.25, 0.25, 0.0, 0.25]
     local, full = (Som(topo, pts, controls, iterations=S, reach=0.04, radii=radii, distances=distances,
@@ -187,9 +187,10 @@ def test_block_search_equals_full_scan():
     """The search that skips blocks whose box cannot hold a nearer neuron finds the full scan's winners, with metric
     weights, blocks in no spatial order, and exact ties (the lowest index wins)."""
     rng = np.random.default_rng(4)
-    n = 40 * int(BLOCK) + 17
+    n = 150 * int(BLOCK) + 17  # three superblocks
     pts = rng.normal(size=(n, 4)).astype(np.float32)
     pts[: n // 2] = np.sort(pts[: n // 2], axis=0)  # half the blocks tight, half spread
+    pts[n // 2: n // 2 + 3000] *= 30.0  # a superblock far away
     pts[n - 5] = pts[7]  # a tie: 7 wins
     pts[n - 9] = pts[n // 3]
     controls = np.concatenate([pts[[7, n // 3, 100, n - 1]], rng.normal(size=(12, 4)).astype(np.float32)])

@@ -1,7 +1,7 @@
 """The CPU's local cycle (a path of `Som`, som.py): a drag costs what it touches. The neurons are kept in blocks of
-local_kernels.BLOCK, each with the bounding box of its weights; a cycle moves only the blocks within reach of a
-winner and searches only the blocks that may hold one (local_kernels.py), and gives the full computation's weights
-bit for bit.
+local_kernels.BLOCK and the blocks in superblocks of local_kernels.SUPER, each with the bounding box of its weights;
+a cycle moves only the blocks within reach of a winner and searches only the blocks that may hold one
+(local_kernels.py), and gives the full computation's weights bit for bit.
 
 It runs the paper's rule past the dense table (distance rows, rows_path.RowCache, searched only as deep as the cut
 table's reach, schedule.NEIGHBOURHOOD_CUT) and, on the CPU, the shaping path's search and move (shaping_path.py).
@@ -16,7 +16,7 @@ import warp as wp
 
 from .cpu_path import PAIRS_PER_EXTRA_CORE
 from .cycle_kernels import MAX_CONTROLS
-from .local_kernels import BLOCK, block_count, local_kernels
+from .local_kernels import BLOCK, block_count, local_kernels, super_count
 from .schedule import reach_hops
 
 
@@ -27,11 +27,14 @@ class LocalPath:
     def _local_setup(self) -> None:
         """The boxes of the weights' blocks and the flat view of the winner keys (once, on the CPU)."""
         vec = self._kernels.vec
-        n_blocks = block_count(self.n_neurons)
+        n_blocks, n_super = block_count(self.n_neurons), super_count(self.n_neurons)
         self._box_lo = wp.empty(n_blocks, dtype=vec, device="cpu")
         self._box_hi = wp.empty(n_blocks, dtype=vec, device="cpu")
+        self._super_lo = wp.empty(n_super, dtype=vec, device="cpu")
+        self._super_hi = wp.empty(n_super, dtype=vec, device="cpu")
         self._boxes_valid = False
         self._moved = wp.zeros(n_blocks, dtype=wp.int32, device="cpu")  # blocks moved since the anchor was kept
+        self._super_moved = wp.zeros(n_super, dtype=wp.int32, device="cpu")
         self._all_moved = True  # or any neuron since (the weights replaced, smoothed)
         self._region = n_blocks  # blocks the last run moved: the next one's work, which sets how many cores share it
         self._busy_cores = 1
@@ -44,23 +47,31 @@ class LocalPath:
         self._boxes_valid = False
         self._all_moved = True
 
+    @property
+    def _boxes(self) -> list[wp.array]:
+        """The blocks' and superblocks' boxes: lo, hi, super lo, super hi."""
+        return [self._box_lo, self._box_hi, self._super_lo, self._super_hi]
+
     def _anchor_boxes(self) -> None:
         """`anchor()` on the CPU: the boxes kept with the weights; nothing moved since."""
         self._ensure_boxes()
-        self._box_anchor = (wp.clone(self._box_lo), wp.clone(self._box_hi))
+        self._box_anchor = [wp.clone(a) for a in self._boxes]
         self._moved.zero_()
+        self._super_moved.zero_()
         self._all_moved = False
 
     def _back_to_anchor(self) -> None:
         """The anchored weights and boxes back: the blocks moved since (all, after anything else changed them)."""
         if self._all_moved:
             wp.copy(self._w, self._w_anchor)
-            wp.copy(self._box_lo, self._box_anchor[0])
-            wp.copy(self._box_hi, self._box_anchor[1])
+            for box, kept in zip(self._boxes, self._box_anchor):
+                wp.copy(box, kept)
             self._moved.zero_()
+            self._super_moved.zero_()
         else:
             wp.launch(local_kernels(self.n_dims).back_to_anchor, dim=1, device="cpu",
-                      inputs=[self._w, self._w_anchor, self._box_lo, self._box_hi, *self._box_anchor, self._moved])
+                      inputs=[self._w, self._w_anchor, *self._boxes, *self._box_anchor, self._moved,
+                              self._super_moved])
         self._boxes_valid = True
         self._all_moved = False
 
@@ -76,20 +87,26 @@ class LocalPath:
         """After a run: the blocks it moved (since the anchor), for the next run's `_share_cores`."""
         self._region = len(self._box_lo) if self._all_moved else int(np.count_nonzero(self._moved.numpy()))
 
-    def _block_ranges(self) -> list[tuple[int, int]]:
-        """Each busy core's range of blocks."""
-        bounds = np.linspace(0, len(self._box_lo), self._busy_cores + 1).astype(int)
+    def _super_ranges(self) -> list[tuple[int, int]]:
+        """Each busy core's range of superblocks."""
+        bounds = np.linspace(0, len(self._super_lo), self._busy_cores + 1).astype(int)
         return list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
 
     def _ensure_boxes(self) -> None:
+        """The boxes of the current weights, made again if they were replaced."""
         if not self._boxes_valid:
             kern = local_kernels(self.n_dims)
-            self._on_cores(kern.boxes, lambda lo, hi: [self._w, self._box_lo, self._box_hi, lo, hi])
+            self._on_cores(kern.boxes, lambda lo, hi: [self._w, *self._boxes, lo, hi])
             self._boxes_valid = True
 
+    def _tighten(self) -> None:
+        """Before a run: the superblocks' boxes as tight as their blocks' (they only grew while blocks moved)."""
+        if self._boxes_valid:
+            wp.launch(local_kernels(self.n_dims).tighten, dim=1, device="cpu", inputs=self._boxes)
+
     def _on_cores(self, kernel, inputs, split=None) -> None:
-        """`kernel` on every core at once, core i given inputs(*split[i]) (default: its range of blocks)."""
-        parts = split if split is not None else self._block_ranges()
+        """`kernel` on every core at once, core i given inputs(*split[i]) (default: its range of superblocks)."""
+        parts = split if split is not None else self._super_ranges()
         others = [self._pool.submit(wp.launch, kernel, dim=1, device="cpu", inputs=inputs(*part))
                   for part in parts[1:]] if len(parts) > 1 else []
         wp.launch(kernel, dim=1, device="cpu", inputs=inputs(*parts[0]))
@@ -102,7 +119,7 @@ class LocalPath:
         kern = local_kernels(self.n_dims)
         cores = min(self._busy_cores, count)
         self._on_cores(kern.find, lambda first: [self._w, controls, first, cores, count, self._m, keys, hint_at,
-                                                 out_at, self._box_lo, self._box_hi],
+                                                 out_at, *self._boxes],
                        split=[(core,) for core in range(cores)])
 
     # -- the paper's rule past the dense table -------------------------------------------------------------------
@@ -112,6 +129,7 @@ class LocalPath:
         neuron), smoothing, and the next winners. Controls whose winners outnumber the cache move in parts."""
         self._settle_anchor()
         self._share_cores()
+        self._tighten()
         kern = local_kernels(self.n_dims, self._pairs)
         smoothing = self._smoothing > 0.0
         keys = self._flat_keys
@@ -124,10 +142,10 @@ class LocalPath:
             winners = (self._keys_host[s % 3, : self._k_eff] & np.uint64(0xFFFFFFFF)).astype(np.int64)
             for lo, hi in self._parts(winners):
                 self._cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), int(self._reach_hops[s]))
-                self._on_cores(kern.move, lambda b_lo, b_hi, lo=lo, hi=hi: [
+                self._on_cores(kern.move, lambda sb_lo, sb_hi, lo=lo, hi=hi: [
                     self._w, self._c, lo, hi, self._table, s, self._reach_dev, self._distances, self._slot_of,
-                    self._cache.near, keys, at, self._box_lo, self._box_hi, self._moved, b_lo, b_hi,
-                    int(smoothing)])
+                    self._cache.near, self._cache.super_near, keys, at, *self._boxes, self._moved,
+                    self._super_moved, sb_lo, sb_hi, int(smoothing)])
             if smoothing:
                 wp.copy(self._w_moved, self._w)
                 self._on_cores(self._kernels.smooth_part, lambda lo, hi: [

@@ -12,7 +12,7 @@ import warp as wp
 
 from .cycle_kernels import CUDA_BLOCK, LONGEST_GRAPH, MAX_CONTROLS
 from .distance_kernels import assign_slots
-from .local_kernels import block_count, search_row
+from .local_kernels import block_count, search_row, super_count
 from .topology import RowSearch, Topology
 
 #: Distance rows mode: the cache's default size in bytes (int32 rows of N): on the CPU 256 MiB, on a GPU a sixteenth
@@ -47,8 +47,10 @@ class RowCache:
         # on the CPU rows are searched only as deep as a cycle reads them (local_path.py): each one's depth, and the
         # least hop count of each block of neurons, which tells the local cycle where a winner's rates are non-zero
         self._depth: dict[int, int] = {}
-        self.near = wp.empty((self.size, block_count(n)), dtype=wp.int32, device=device) if device == "cpu" else None
-        if self.near is not None:
+        self.near = self.super_near = None
+        if device == "cpu":
+            self.near = wp.empty((self.size, block_count(n)), dtype=wp.int32, device=device)
+            self.super_near = wp.empty((self.size, super_count(n)), dtype=wp.int32, device=device)
             self._used = np.zeros(self.size, bool)  # slots searched into before (their `near` tells what to clear)
             self._queue = wp.empty(n, dtype=wp.int32, device=device)
             self._topology_arrays = (wp.array(topology.offsets, dtype=wp.int32, device=device),
@@ -89,7 +91,7 @@ class RowCache:
         else:  # the CPU: searches that cost what they visit (local_kernels.search_row)
             for u, slot in zip(searched, at):
                 wp.launch(search_row, dim=1, device="cpu", inputs=[*self._topology_arrays, u, slot, self.rows,
-                                                                    self.near, self._queue, levels,
+                                                                    self.near, self.super_near, self._queue, levels,
                                                                     int(not self._used[slot])])
                 self._used[slot] = True
             self._depth.update(dict.fromkeys(searched, levels))

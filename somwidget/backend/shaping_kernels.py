@@ -32,7 +32,7 @@ from typing import Any
 
 import warp as wp
 
-from .local_kernels import BLOCK, local_kernels
+from .local_kernels import BLOCK, SUPER, local_kernels
 from .primitives import FLOAT_MAX, INDEX_MASK, UNREACHABLE, winner_key
 
 #: Neurons one thread of `find` scans for one control.
@@ -79,7 +79,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     """The shaping cycle's kernels for weights of n_dims features (compiled once per device on first use)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     options = {"max_unroll": 32}
-    update_box = local_kernels(n_dims).update_box
+    moved_block = local_kernels(n_dims).moved_block
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def find(weights: wp.array(dtype=vec), controls: wp.array(dtype=vec), metric: wp.array(dtype=vec),
@@ -219,9 +219,9 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 rest_hi: wp.array(dtype=vec), keys: wp.array(dtype=wp.uint64), radius2: wp.array(dtype=wp.float32),
                 near: wp.array2d(dtype=wp.int32), slot_of: wp.array(dtype=wp.int32), reach: int, rows: int,
                 position: vec) -> int:
-        """1 when the group lo .. hi - 1 may move a neuron of block b: a carrying member's ball meets the block's
-        box of rest positions, or a point member's winner lies within reach of the block (always, for the dense
-        table)."""
+        """1 when the group lo .. hi - 1 may move a neuron of block b (or superblock b, given the superblocks' boxes
+        and least hop counts): a carrying member's ball meets the block's box of rest positions, or a point member's
+        winner lies within reach of the block (always, for the dense table)."""
         for j in range(lo, hi):
             u = wp.int32(keys[j] & INDEX_MASK)
             r2 = radius2[j]
@@ -257,47 +257,63 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         radius2: wp.array(dtype=wp.float32),
         rest_lo: wp.array(dtype=vec),
         rest_hi: wp.array(dtype=vec),
+        rest_super_lo: wp.array(dtype=vec),
+        rest_super_hi: wp.array(dtype=vec),
         near: wp.array2d(dtype=wp.int32),
+        super_near: wp.array2d(dtype=wp.int32),
         reach: int,
         rows: int,
         lo_box: wp.array(dtype=vec),
         hi_box: wp.array(dtype=vec),
+        super_lo: wp.array(dtype=vec),
+        super_hi: wp.array(dtype=vec),
         moved_blocks: wp.array(dtype=wp.int32),
-        b_lo: int,
-        b_hi: int,
+        moved_supers: wp.array(dtype=wp.int32),
+        sb_lo: int,
+        sb_hi: int,
     ):
-        """`move` on the CPU for blocks b_lo .. b_hi - 1, a group at a time over each block's neurons, skipping the
-        groups that cannot move them (`touches`); then the moved blocks' boxes, each marked in `moved_blocks`."""
+        """`move` on the CPU for the blocks of superblocks sb_lo .. sb_hi - 1, a group at a time over each block's
+        neurons, skipping the superblocks and blocks a group cannot move (`touches`, with the boxes of their rest
+        positions); then the moved blocks' boxes (local_kernels' moved_block)."""
         n = weights.shape[0]
-        for b in range(b_lo, b_hi):
-            moved = int(0)
+        n_blocks = lo_box.shape[0]
+        for sb in range(sb_lo, sb_hi):
+            reached = int(0)
             for g in range(n_groups):
-                lo = group_start[g]
-                hi = group_start[g + 1]
-                if touches(b, lo, hi, rest, rest_lo, rest_hi, keys, radius2, near, slot_of, reach, rows, position):
-                    moved = 1
-                    k = inv_two_sigma2[lo]
-                    if hi - lo == 1 and k > wp.float32(0.0):  # one carrying control: moved_by_group, its terms kept
-                        u = wp.int32(keys[lo] & INDEX_MASK)
-                        alpha = table[s, 0]
-                        centre = rest[u]
-                        part = component[u]
-                        offset = controls[lo] - winners[lo]
-                        largest = offsets[lo]
-                        for v in range(b * BLOCK, wp.min(b * BLOCK + BLOCK, n)):
-                            if component[v] == part:
-                                apart = wp.cw_mul(rest[v] - centre, position)
-                                falloff = wp.exp(-k * wp.dot(apart, apart))
-                                if alpha * (falloff * largest) >= floor:
-                                    weights[v] = weights[v] + (alpha * falloff) * offset
-                    else:
-                        for v in range(b * BLOCK, wp.min(b * BLOCK + BLOCK, n)):
-                            weights[v] = moved_by_group(weights[v], v, lo, hi, stroke[g], rest, controls, winners,
-                                                        keys, inv_two_sigma2, offsets, component, table, s,
-                                                        distances, slot_of, position, floor)
-            if moved != 0:
-                update_box(weights, lo_box, hi_box, b)
-                moved_blocks[b] = 1
+                if reached == 0:
+                    reached = touches(sb, group_start[g], group_start[g + 1], rest, rest_super_lo, rest_super_hi, keys,
+                                      radius2, super_near, slot_of, reach, rows, position)
+            if reached == 0:
+                continue
+            for b in range(sb * SUPER, wp.min(sb * SUPER + SUPER, n_blocks)):
+                moved = int(0)
+                for g in range(n_groups):
+                    lo = group_start[g]
+                    hi = group_start[g + 1]
+                    if touches(b, lo, hi, rest, rest_lo, rest_hi, keys, radius2, near, slot_of, reach, rows,
+                               position):
+                        moved = 1
+                        k = inv_two_sigma2[lo]
+                        if hi - lo == 1 and k > wp.float32(0.0):  # one carrying control: moved_by_group's terms
+                            u = wp.int32(keys[lo] & INDEX_MASK)
+                            alpha = table[s, 0]
+                            centre = rest[u]
+                            part = component[u]
+                            offset = controls[lo] - winners[lo]
+                            largest = offsets[lo]
+                            for v in range(b * BLOCK, wp.min(b * BLOCK + BLOCK, n)):
+                                if component[v] == part:
+                                    apart = wp.cw_mul(rest[v] - centre, position)
+                                    falloff = wp.exp(-k * wp.dot(apart, apart))
+                                    if alpha * (falloff * largest) >= floor:
+                                        weights[v] = weights[v] + (alpha * falloff) * offset
+                        else:
+                            for v in range(b * BLOCK, wp.min(b * BLOCK + BLOCK, n)):
+                                weights[v] = moved_by_group(weights[v], v, lo, hi, stroke[g], rest, controls, winners,
+                                                            keys, inv_two_sigma2, offsets, component, table, s,
+                                                            distances, slot_of, position, floor)
+                if moved != 0:
+                    moved_block(weights, lo_box, hi_box, super_lo, super_hi, moved_blocks, moved_supers, b)
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def smooth(weights_in: wp.array(dtype=vec), weights_out: wp.array(dtype=vec), offsets: wp.array(dtype=wp.int32),

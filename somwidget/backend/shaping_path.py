@@ -92,8 +92,8 @@ class ShapingPath:
         self._sh_order = order
         if getattr(self, "_sh_rest", None) is None:
             self._sh_rest = wp.empty_like(self._w)
-            if dev == "cpu":  # the boxes of the rest positions' blocks
-                self._rest_lo, self._rest_hi = wp.empty_like(self._box_lo), wp.empty_like(self._box_hi)
+            if dev == "cpu":  # the boxes of the rest positions' blocks and superblocks
+                self._rest_boxes = [wp.empty_like(a) for a in self._boxes]
 
     def _shaping_find(self) -> None:
         if self._sh_controls is None:
@@ -117,8 +117,8 @@ class ShapingPath:
                 wp.copy(self._sh_rest, self._w)
                 if self.device == "cpu":
                     self._ensure_boxes()
-                    wp.copy(self._rest_lo, self._box_lo)
-                    wp.copy(self._rest_hi, self._box_hi)
+                    for kept, box in zip(self._rest_boxes, self._boxes):
+                        wp.copy(kept, box)
             self._rest_taken = self._rest_source
             self._sh_rest_pending = False
             self._sh_fit_pending = True
@@ -130,9 +130,10 @@ class ShapingPath:
         position = self._kernels.vec(*position.tolist())
         masks = [self._kernels.vec(*(strength * self._mask_of(self._smooth_dims)).tolist()) for strength in steps]
         rows = int(self._rows_mode)
-        near = self._cache.near if rows and dev == "cpu" else self._no_near
+        near = [self._cache.near, self._cache.super_near] if rows and dev == "cpu" else [self._no_near] * 2
         if dev == "cpu":
             self._share_cores()
+            self._tighten()
         for _ in range(cycles):
             self._shaping_find()
             wp.launch(kern.gather, dim=len(self._sh_keys), device=dev,
@@ -153,9 +154,9 @@ class ShapingPath:
                 wp.launch(kern.balls, dim=len(self._sh_keys), device=dev,
                           inputs=[self._sh_inv, self._sh_offsets, self._sh_group_of, self._sh_groups, self._table,
                                   self._s, self._floor, self._sh_radius2])
-                self._on_cores(kern.move_blocks, lambda b_lo, b_hi: [
-                    *moving, self._sh_radius2, self._rest_lo, self._rest_hi, near, reach, rows, self._box_lo,
-                    self._box_hi, self._moved, b_lo, b_hi])
+                self._on_cores(kern.move_blocks, lambda sb_lo, sb_hi: [
+                    *moving, self._sh_radius2, *self._rest_boxes, *near, reach, rows, *self._boxes, self._moved,
+                    self._super_moved, sb_lo, sb_hi])
             else:
                 wp.launch(kern.move, dim=n, device=dev, inputs=moving)
             for pull in masks:  # into the spare buffer and back (the other paths' graphs hold both buffers' places)
