@@ -114,12 +114,12 @@ class Outbox:
             peer.control_ids = controls
         out.append(data)
         peer.seq = frame.seq
-        now = time.monotonic()
-        if now - peer.last_status >= STATUS_PERIOD:
-            peer.last_status = now
         if session.save_error != peer.save_error:  # a save failed, or works again: every view says so
             peer.save_error = session.save_error
             out.append(autosave_message(peer.save_error))
+        now = time.monotonic()
+        if now - peer.last_status >= STATUS_PERIOD:
+            peer.last_status = now
             out.append(status_message(frame.cycle_time, session.frames_per_second))
         return out
 
