@@ -103,6 +103,38 @@ def inside(inner, outer, slack: float = 1.0) -> bool:
             and inner[3] <= outer[3] + slack)
 
 
+def zoom_and_place(page) -> None:
+    """Ten wheel ticks over the clay bring the first view's camera closer each time, and the page does not scroll;
+    then (after Fit) a double click on the clay adds a control there: both outputs show one control more, and no node
+    moved (the meshes they draw are the same as before)."""
+    box = page.evaluate(f"() => {{ const b = {VIEWS}[0].container.querySelector('canvas').getBoundingClientRect(); "
+                        "return [b.left, b.top, b.width, b.height]; }")
+    at = (box[0] + box[2] / 2, box[1] + box[3] / 2)
+    assert page.evaluate(f"() => {VIEWS}[0].surfaceAt({at[0]}, {at[1]})") is not None, "not over the clay"
+    d0 = page.evaluate(f"() => {VIEWS}[0].describe()")
+    page.mouse.move(*at)
+    distances = []
+    for _ in range(10):
+        page.mouse.wheel(0, -100)
+        page.wait_for_timeout(60)
+        distances.append(page.evaluate(f"() => {VIEWS}[0].describe().distance"))
+    assert all(b < a for a, b in zip([d0["distance"], *distances], distances)), distances
+    assert distances[-1] < 0.45 * d0["fitDistance"]
+    top = page.evaluate(f"() => {VIEWS}[0].container.querySelector('canvas').getBoundingClientRect().top")
+    assert abs(top - box[1]) <= 1, "the wheel scrolled the page"
+    page.evaluate(f"() => {VIEWS}[0].container.querySelector('.somview-fit').click()")
+    page.wait_for_timeout(300)
+    k0, digests = d0["k"], page.evaluate(f"() => {VIEWS}.map((v) => v.describe().digest)")
+    at = (round(at[0] - 20), round(at[1] + 15))  # whole pixels, as events' are
+    aimed = page.evaluate(f"() => {VIEWS}[0].surfaceAt({at[0]}, {at[1]})")
+    assert aimed is not None
+    page.mouse.dblclick(*at)
+    page.wait_for_function(f"() => {VIEWS}.every((v) => v.describe().k === {k0 + 1})", timeout=15000)
+    page.wait_for_timeout(500)
+    assert page.evaluate(f"() => {VIEWS}.map((v) => v.describe().digest)") == digests  # nothing moved
+    np.testing.assert_allclose(page.evaluate(f"() => {VIEWS}[1].controlModel({k0})"), aimed, atol=1e-4)
+
+
 def test_the_view_renders_whole_in_marimo_and_a_drag_moves_the_session(marimo_app):
     with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
@@ -123,7 +155,10 @@ def test_the_view_renders_whole_in_marimo_and_a_drag_moves_the_session(marimo_ap
             assert after["y"] >= second["view"][3] - 1  # below the views, not under their labels
 
             page.evaluate(f"() => {VIEWS}[0].container.scrollIntoView()")
+            page.wait_for_function(f"() => {VIEWS}.every((v) => v.describe().running === false)", timeout=120000)
             page.wait_for_timeout(300)
+            zoom_and_place(page)
+
             before = page.evaluate(f"() => {VIEWS}[0].controlModel(2)")
             x, y = page.evaluate(f"() => {VIEWS}[0].controlScreen(2)")
             page.mouse.move(x, y)

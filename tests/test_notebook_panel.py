@@ -355,7 +355,9 @@ def lab(request, tmp_path_factory):
         "view  # a second output of the same widget",
         "import hashlib\npng = view.view.picture_png() or b''\n"
         "print('picture', png[:8] == b'\\x89PNG\\r\\n\\x1a\\n', len(png), hashlib.md5(png).hexdigest())",
-        "print('session', view.session.history[0], *view.session.parameters['metric_weights'])"])
+        "print('session', view.session.history[0], *view.session.parameters['metric_weights'])",
+        "import hashlib\nprint('clay', len(view.session.controls), view.session.history[0],\n"
+        "      hashlib.md5(view.session.frame.positions.tobytes()).hexdigest())"])
     with jupyter_server(request.param, root) as port:
         page = "lab/tree" if request.param == "jupyterlab" else "notebooks"
         yield f"http://127.0.0.1:{port}/{page}/clay.ipynb?token=t0k"
@@ -480,6 +482,71 @@ def test_a_refused_value_snaps_back_and_ctrl_z_in_a_field_edits_only_the_field(l
             for name in names[:-1]:  # the car's weights again
                 type_in(page, metric_field(page, name), "1")
             assert kernel_session(page)[1:] == [1.0] * 5
+        finally:
+            browser.close()
+
+
+def clay_in_kernel(page) -> tuple[int, int, str]:
+    """Run the notebook's fifth cell: (controls, undo steps, md5 of the positions) of the kernel's session."""
+    cell = page.locator(".jp-Notebook .jp-Cell").nth(4)
+    run_cell(page, 4)
+    page.wait_for_function("(el) => !el.innerText.includes('[*]')",
+                           arg=cell.locator(".jp-InputPrompt").element_handle(), timeout=30000)
+    page.wait_for_timeout(200)
+    words = cell.locator(".jp-OutputArea-output").last.inner_text().split()
+    assert words[0] == "clay", words
+    return int(words[1]), int(words[2]), words[3]
+
+
+def test_the_wheel_zooms_in_and_a_double_click_adds_a_control_in_the_notebook_widget(lab):
+    """The view as a modelling tool inside JupyterLab 4 and Notebook 7 (the same client as the web app): ten wheel
+    ticks over the clay bring the camera closer each time (and do not scroll the notebook away); a double click on
+    the clay adds a control at that point of the surface in the kernel's session, one undo step, and no node moves."""
+    views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
+    with helpers.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            page = open_notebook(browser, lab)
+            run_cell(page, 0)
+            page.wait_for_function(f"() => {{ const v = {views}; return v.length >= 1 && "
+                                   "v[0].describe().painted > 0 && v[0].describe().running === false; }",
+                                   timeout=120000)  # the car trained to its end: nothing moves by itself
+            page.locator(".somview").first.scroll_into_view_if_needed()
+            page.wait_for_timeout(500)
+            box = page.locator(".somview canvas").first.bounding_box()
+            at = (box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+            assert page.evaluate(f"() => {views}[0].surfaceAt({at[0]}, {at[1]})") is not None, "not over the clay"
+            d0 = page.evaluate(f"() => {views}[0].describe()")
+            page.mouse.move(*at)
+            distances = []
+            for _ in range(10):
+                page.mouse.wheel(0, -100)
+                page.wait_for_timeout(60)
+                distances.append(page.evaluate(f"() => {views}[0].describe().distance"))
+            assert all(b < a for a, b in zip([d0["distance"], *distances], distances)), distances
+            assert distances[-1] < 0.45 * d0["fitDistance"]
+            assert page.locator(".somview canvas").first.bounding_box()["y"] == pytest.approx(box["y"], abs=1), \
+                "the wheel scrolled the notebook"
+            n0, steps0, positions0 = clay_in_kernel(page)  # the notebook scrolls to that cell: back to the view
+            page.locator(".somview").first.scroll_into_view_if_needed()
+            page.locator(".somview-fit").first.click()
+            page.wait_for_function(f"() => {{ const d = {views}[0].describe(); "
+                                   "return Math.abs(d.distance - d.fitDistance) < 1e-6 * d.fitDistance; }",
+                                   timeout=5000)
+            page.wait_for_timeout(300)
+            box = page.locator(".somview canvas").first.bounding_box()
+            at = (round(box["x"] + box["width"] / 2 - 20), round(box["y"] + box["height"] / 2 + 15))
+            # (whole pixels, as a mouse event's clientX / clientY are: half a pixel is 0.006 of the car here)
+            aimed = page.evaluate(f"() => {views}[0].surfaceAt({at[0]}, {at[1]})")
+            assert aimed is not None
+            page.mouse.dblclick(*at)
+            page.wait_for_function(f"() => {views}[0].describe().k === {n0 + 1}", timeout=15000)
+            placed = page.evaluate(f"() => {views}[0].controlModel({n0})")
+            np.testing.assert_allclose(placed, aimed, atol=1e-4)  # where the double click was, on the surface
+            n1, steps1, positions1 = clay_in_kernel(page)
+            assert (n1, steps1) == (n0 + 1, steps0 + 1)  # one control more, one undo step
+            assert positions1 == positions0  # nothing moved
+            assert view_errors(page, views) == []
         finally:
             browser.close()
 
