@@ -240,6 +240,7 @@ class ReferenceSom:
         self.strokes = [1] * len(self.controls) if strokes is None else list(strokes)
         self.rest = self.W.copy()
         self.sigmas = None  # the carrying controls' widths, fitted at a restart's first cycle
+        self.grabbed = None  # the winners found at a restart's first cycle (a carrying control keeps its own)
         p = self.start_weights[:, :min(3, self.n_dims)]
         lengths = np.linalg.norm(p[self.edges[:, 0]] - p[self.edges[:, 1]], axis=1) if len(self.edges) else [1.0]
         self.edge = float(np.median(lengths)) or 1.0
@@ -251,6 +252,7 @@ class ReferenceSom:
         self.iteration = restart_iteration(self.reach, self._iterations)
         self.rest = self.W.copy()
         self.sigmas = None
+        self.grabbed = None
 
     def restart(self):
         """A local restart from the latest weights (what a change of smoothing or metric weights does)."""
@@ -324,12 +326,14 @@ class ReferenceSom:
         self.iteration = int(iteration)
         self.rest = self.W.copy()
         self.sigmas = None
+        self.grabbed = None
 
     def reset(self):
         self.W = self.start_weights.copy()
         self.iteration = 0
         self.rest = self.W.copy()
         self.sigmas = None
+        self.grabbed = None
 
     @property
     def shaping(self) -> bool:
@@ -342,12 +346,13 @@ class ReferenceSom:
         return tuple(int(d) for d in self.smooth_dims)
 
     def _one_shaping_iteration(self):
-        """The shaping rules: a control of radius r > 0 carries its winner's region, W_v += alpha(s) g (C - W_u),
-        g = exp(-|x_v - x_u|^2 / (2 sigma^2)) of the rest positions (where the restart began), 0 in another connected
-        part; sigma = max(r / 2, sqrt(h e / 18 degrees)) with h the control's distance from its winner at the
-        restart's first cycle and e the start mesh's median edge; radius 0 is the paper's rule; a control and its
-        copies act together, scaled when there are copies by 1 / max(1, sum of their rates), a carrying group by
-        its falloffs' sum; smoothing is lambda, then Taubin's mu."""
+        """The shaping rules: a control of radius r > 0 carries its winner's region, W_v += alpha(s) g (C - W_u), g =
+        exp(-|x_v - x_u|^2 / (2 sigma^2)) of the rest positions (where the restart began), 0 in another connected part;
+        sigma = max(r / 2, sqrt(h e / 18 degrees)) with h the control's distance from its winner at the restart's first
+        cycle and e the start mesh's median edge, u the winner the control grabbed at that first cycle (kept for the
+        rest of the run; a point control's winner is found every cycle); radius 0 is the paper's rule; a control and its
+        copies act together, scaled when there are copies by 1 / max(1, sum of their rates), a carrying group by its
+        falloffs' sum; smoothing is lambda, then Taubin's mu."""
         s = self.iteration
         W = self.W
         maps = self.group_maps if self.group_maps is not None else np.eye(self.n_dims)[None]
@@ -363,8 +368,15 @@ class ReferenceSom:
             first += length
         slots = [slot for group in groups for slot in group]
         members = np.array([maps[g] @ self.controls[c] for c, g in slots])
-        self.margins.append(winner_margins(W, members, self.metric_weights))
+        margins = winner_margins(W, members, self.metric_weights)
         win = winners(W, members, self.metric_weights)
+        carrying = np.array([self.radii[c] > 0 for c, _ in slots])
+        if self.grabbed is None:  # the restart's first cycle: each control grabs its winner
+            self.grabbed = win.copy()
+        else:  # a carrying control keeps the node it grabbed (its search no longer matters)
+            win = np.where(carrying, self.grabbed, win)
+            margins = np.where(carrying, np.inf, margins)
+        self.margins.append(margins)
         wu = W[win].copy()
         alpha = self.L[s, 0]
         pos = list(range(min(3, self.n_dims)))

@@ -160,6 +160,28 @@ def test_sphere_variants_with_radii_equal_their_single_runs(device):
         assert moved[single.winners()[b + 1]] > 0.1 * size  # the pulled control's region went with it
 
 
+def test_grabbed_winners_carry_over_launches(device):
+    """The sphere preset, variants pulling control 4 or 5 out (the clay slides under controls 0 and 1, which keep the
+    nodes they grabbed at the restart), run in two launches: each equal to its single Som."""
+    p = presets.get_preset("sphere")
+    radii = p.control_radii()
+    size = metrics.bounding_diagonal(p.weights)
+    kw = {"iterations": 1000, "reach": p.reach, "smoothing_rule": p.smoothing_rule}
+    controls = np.stack([p.controls] * 2)
+    for b, c in enumerate((4, 5)):
+        controls[b, c, :3] += 0.3 * size * p.controls[c, :3] / np.linalg.norm(p.controls[c, :3])
+    som = BatchSom(p.topology, p.weights, controls, radii=radii, device=device, **kw)
+    som.restart()
+    assert som.step(37) == 37
+    som.train()
+    for b in range(2):
+        single = Som(p.topology, p.weights, p.controls, radii=radii, device=device, **kw)
+        single.restore(p.weights, 1000)
+        single.set_controls(controls[b])
+        single.train()
+        _match(device, som.weights[b], single.weights)
+
+
 def test_car_variants_with_a_radius_equal_their_single_runs(device):
     """The car's mirrored pairs with the nose's pair given a radius (a carrying pair among point pairs), colour dims
     weighed apart, each variant its own schedule: whole runs, then a local restart with other controls."""

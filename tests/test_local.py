@@ -107,8 +107,8 @@ def test_paper_rule_local_matches_reference_with_the_cut():
 
 
 def _shaping_full_cycle(som: Som) -> None:
-    """One cycle of the shaping rules with the full kernels: the winners by the full scan, every neuron moved by the
-    thread-per-neuron `move`."""
+    """One cycle of the shaping rules with the full kernels: the winners by the full scan (a carrying control keeping
+    the one it grabbed at the restart), every neuron moved by the thread-per-neuron `move`."""
     kern = shaping_kernels(som.n_dims)
     if som._sh_controls is None:
         som._upload_shaping()
@@ -119,6 +119,11 @@ def _shaping_full_cycle(som: Som) -> None:
     stretches = -(-som.n_neurons // 256)
     wp.launch(kern.find, dim=len(som._sh_keys) * stretches, device="cpu",
               inputs=[som._w, som._sh_controls, som._m, som._sh_keys, stretches])
+    if som._sh_fit_pending:  # a restart's first cycle: each control grabs its winner
+        wp.copy(som._sh_grabbed, som._sh_keys)
+    else:  # a carrying control keeps it
+        wp.launch(kern.hold, dim=len(som._sh_keys), device="cpu",
+                  inputs=[som._sh_keys, som._sh_grabbed, som._sh_sigma])
     wp.launch(kern.gather, dim=len(som._sh_keys), device="cpu",
               inputs=[som._w, som._sh_keys, som._sh_controls, som._sh_winners, som._sh_offsets])
     if som._rows_mode:  # the point controls' rows, whole

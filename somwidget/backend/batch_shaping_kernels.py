@@ -2,20 +2,22 @@
 threads per variant, a whole run in one launch, by the shaping rules of shaping_kernels.py (BENCHMARKS.md, "Shaping
 rules", Choice).
 
-A control of radius r > 0 carries the clay around its winner u: W_v += alpha(s) g(v) (C - W_u), g = exp(-|x_v -
-x_u|^2 / (2 sigma^2)) of the rest positions (the variant's weights where its run restarted), 0 in another connected
-part; sigma = max(r / 2, sqrt(h e / FIT_TURN)), fitted at the restart's first cycle from the control's distance h
-from its winner and the start mesh's median edge e. A control of radius 0 keeps the paper's rule, W_v += L[s, D[u,
-v]] (C - W_v). A control and its mirrored copy act as one group, scaled by 1 / max(1, sum of their rates and
-falloffs); a group of carrying controls leaves v as it is where alpha sum_j g_j |C_j - W_uj| (largest dim) is below
-the variant's floor (shaping_kernels.CARRY_CUT of the start shape's size). Radial groups and strokes are not here:
-variants with them run as single Soms (variants.run_plan).
+A control of radius r > 0 carries the clay around its winner u (the node it grabbed at the restart): W_v += alpha(s)
+g(v) (C - W_u), g = exp(-|x_v - x_u|^2 / (2 sigma^2)) of the rest positions (the variant's weights where its run
+restarted), 0 in another connected part; sigma = max(r / 2, sqrt(h e / FIT_TURN)), fitted at the restart's first cycle
+from the control's distance h from its winner and the start mesh's median edge e. A control of radius 0 keeps the
+paper's rule, W_v += L[s, D[u, v]] (C - W_v). A control and its mirrored copy act as one group, scaled by 1 / max(1, sum
+of their rates and falloffs); a group of carrying controls leaves v as it is where alpha sum_j g_j |C_j - W_uj| (largest
+dim) is below the variant's floor (shaping_kernels.CARRY_CUT of the start shape's size). Radial groups and strokes are
+not here: variants with them run as single Soms (variants.run_plan).
 
 A cycle, as shaping_path.py runs it for one Som, in one block:
 1. winners from the weights before the cycle (each thread its neurons, the block's least winner key: batch_kernels'
    keys, shared memory on CUDA); a barrier;
 2. gather: each control's winner index and weights W_u, its largest offset |C - W_u|, and at the restart's first
-   cycle its fitted 1 / (2 sigma^2); a barrier (the move must not read a winner another thread already moved);
+   cycle its fitted 1 / (2 sigma^2); a carrying control keeps the winner it grabbed at the restart's first cycle
+   (shaping_kernels.hold), a point control takes the one just found; a barrier (the move must not read a winner
+   another thread already moved);
 3. move: each thread moves its neurons group by group (the arithmetic of shaping_kernels.moved_by_group);
 4. smoothing: one Jacobi step of lambda, and with `taubin` Taubin's mu after it (batch_kernels' steps).
 At the first cycle of a restarted variant (`fresh`) its weights are first copied to its rest positions.
@@ -185,6 +187,8 @@ def shaping_variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int =
             # 2. each control's winner, its weights and offset before any move; at a restart its falloff's width
             for c in range(t, k, threads):
                 u = int(read_key(keys, base, buf + c) & INDEX_MASK)
+                if fit == 0 and inv_two_sigma2[b, c] > wp.float32(0.0):  # a carrying control keeps its grabbed node
+                    u = winner[b, c]
                 w_u = weights[b, u]
                 winner[b, c] = u
                 winners[b, c] = w_u

@@ -3,8 +3,12 @@ step that keeps the volume (shaping_path.py runs them; som.py's docstring states
 
 One cycle, as the algorithm's three steps, generic on the CPU and on CUDA (a thread per neuron or per control):
   1. `find`: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2 for every effective control, from the weights before the
-     cycle (a thread per control and stretch of neurons, an atomic min of winner keys); `gather` keeps each
-     winner's weights W_u (the move below must not read a winner that another thread already moved);
+     cycle (a thread per control and stretch of neurons, an atomic min of winner keys); a control with a radius
+     searches only at a restart's first cycle and then keeps the node it grabbed there (`hold`): it carries that
+     node's region to the control, and a control that holds the clay still pulls back clay that slides under it
+     (were it to take whichever node is nearest, clay sliding along the surface would bring it a new winner at no
+     distance, and the clay it held would go unheld: BENCHMARKS.md, "The engine's shaping path"); `gather` keeps
+     each winner's weights W_u (the move below must not read a winner that another thread already moved);
   2. `move`: each neuron applies the control groups in order (a group: a control and its symmetric copies, their
      rates from the same W_v, scaled by 1 / max(1, sum of rates) when the group has copies). A control of radius 0
      is the paper's: W_v += L[s, D[u, v]] (C - W_v). A control of radius r carries the clay around its winner:
@@ -101,6 +105,14 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
             best = wp.where(nearer, dist, best)
             best_v = wp.where(nearer, v, best_v)
         wp.atomic_min(keys, c, winner_key(best, best_v))
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def hold(keys: wp.array(dtype=wp.uint64), grabbed: wp.array(dtype=wp.uint64), sigma: wp.array(dtype=wp.float32)):
+        """After step 1 past a restart's first cycle: each carrying control (sigma > 0) keeps the winner it grabbed
+        there; a point control keeps the winner just found."""
+        j = wp.tid()
+        if sigma[j] > wp.float32(0.0):
+            keys[j] = grabbed[j]
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def gather(weights: wp.array(dtype=vec), keys: wp.array(dtype=wp.uint64), controls: wp.array(dtype=vec),
@@ -334,5 +346,5 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     for source in (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32)):
         wp.overload(move, {"distances": source})
         wp.overload(move_blocks, {"distances": source})
-    return SimpleNamespace(vec=vec, find=find, gather=gather, fit=fit, move=move, balls=balls,
+    return SimpleNamespace(vec=vec, find=find, hold=hold, gather=gather, fit=fit, move=move, balls=balls,
                            move_blocks=move_blocks, smooth=smooth)

@@ -4,11 +4,13 @@ shaping_kernels.py. A Som takes this path whenever
 one of them is in use; with point controls, no symmetry or a mirror, and the paper's Laplacian step, it takes the
 case studies' paths (cpu_path.py, cuda_path.py, rows_path.py) and gives their results bit for bit.
 
-Each cycle launches its kernels from here (no captured graphs): find, gather (and, at a restart, fit), move, then one
-or two smoothing steps. In distance rows mode the point controls' winners come back to the host each cycle and their
-rows are fetched before the move; controls with a radius read only which part of the mesh a node is in. On the CPU
-the search and the move are local_path.py's: only the blocks of neurons a group can move are moved (each carrying
-control's reach from `balls`, the blocks' boxes of rest positions), and only those that may hold a winner searched.
+Each cycle launches its kernels from here (no captured graphs): find, gather (and, at a restart, fit), move, then one or
+two smoothing steps. A carrying control's winner is searched only at a restart's first cycle (it keeps the node it
+grabbed: shaping_kernels.hold), so with no point control the later cycles search nothing. In distance rows mode the
+point controls' winners come back to the host each cycle and their rows are fetched before the move; controls with a
+radius read only which part of the mesh a node is in. On the CPU the search and the move are local_path.py's: only the
+blocks of neurons a group can move are moved (each carrying control's reach from `balls`, the blocks' boxes of rest
+positions), and only those that may hold a winner searched.
 """
 
 from __future__ import annotations
@@ -85,6 +87,7 @@ class ShapingPath:
         self._sh_stroke = wp.array(stroke, dtype=wp.int32, device=dev)
         if getattr(self, "_sh_keys", None) is None or len(self._sh_keys) != k * order:  # else: the last winners,
             self._sh_keys = wp.full(k * order, np.uint64(0xFFFFFFFFFFFFFFFF), dtype=wp.uint64, device=dev)  # hints
+            self._sh_grabbed = wp.empty_like(self._sh_keys)  # the carrying controls' winners since the restart
         self._sh_winners = wp.empty(k * order, dtype=self._kernels.vec, device=dev)
         self._sh_offsets = wp.zeros(k * order, dtype=wp.float32, device=dev)
         self._sh_radius2 = wp.zeros(k * order, dtype=wp.float32, device=dev)
@@ -96,16 +99,26 @@ class ShapingPath:
                 self._rest_boxes = [wp.empty_like(a) for a in self._boxes]
 
     def _shaping_find(self) -> None:
+        """Step 1: the winners. A carrying control grabs its winner at a restart's first cycle and carries that
+        node for the rest of the run (shaping_kernels.hold); only point controls search again every cycle."""
         if self._sh_controls is None:
             self._upload_shaping()
-        if self.device == "cpu":  # from each control's last winner, in the blocks that may hold a nearer one
-            self._local_find(self._sh_controls, len(self._sh_keys), self._sh_keys, 0, 0)
+        fresh = self._sh_fit_pending or self._sh_rest_pending
+        if not fresh and not self._sh_point.any():  # every control carries the node it grabbed
             return
         kern = shaping_kernels(self.n_dims)
-        stretches = max(1, math.ceil(self.n_neurons / FIND_STRETCH))
-        self._sh_keys.fill_(np.uint64(0xFFFFFFFFFFFFFFFF))
-        wp.launch(kern.find, dim=len(self._sh_keys) * stretches, device=self.device,
-                  inputs=[self._w, self._sh_controls, self._m, self._sh_keys, stretches])
+        if self.device == "cpu":  # from each control's last winner, in the blocks that may hold a nearer one
+            self._local_find(self._sh_controls, len(self._sh_keys), self._sh_keys, 0, 0)
+        else:
+            stretches = max(1, math.ceil(self.n_neurons / FIND_STRETCH))
+            self._sh_keys.fill_(np.uint64(0xFFFFFFFFFFFFFFFF))
+            wp.launch(kern.find, dim=len(self._sh_keys) * stretches, device=self.device,
+                      inputs=[self._w, self._sh_controls, self._m, self._sh_keys, stretches])
+        if fresh:
+            wp.copy(self._sh_grabbed, self._sh_keys)
+        else:
+            wp.launch(kern.hold, dim=len(self._sh_keys), device=self.device,
+                      inputs=[self._sh_keys, self._sh_grabbed, self._sh_sigma])
 
     def _run_shaping(self, cycles: int) -> None:
         """`cycles` cycles from s of the shaping rules."""
