@@ -8,6 +8,7 @@ intent or sets state itself.
 from __future__ import annotations
 
 import os
+import re
 
 import numpy as np
 import pytest
@@ -215,6 +216,35 @@ def test_a_control_hidden_behind_the_clay_is_not_grabbed_through_it(page, server
     v = view(page)
     assert v["desktop"]["hiddenPresses"] >= 1 and v["desktop"]["drags"] == 0
     assert np.linalg.norm(np.subtract(v["camera"], camera)) > 0.05, "the press went to the orbit"
+
+
+def test_a_hidden_control_is_taken_by_its_dimmed_label_and_moved_by_its_handle(page, server):
+    """A control behind the clay is not grabbed through it, but a click on its dimmed label selects it: its handle is
+    drawn over the clay and moves it along one axis, without turning the view."""
+    st0 = server.idle()
+    page.wait_for_timeout(350)
+    v = view(page)
+    box = canvas(page)
+    hidden = [j for j in v["behind"] if j < v["k"] and box["x"] + 80 < screen(page, j)[0] < box["x"] + box["width"] - 80
+              and box["y"] + 80 < screen(page, j)[1] < box["y"] + box["height"] - 80]
+    assert hidden, f"no control behind the clay on screen: {v['behind']}"
+    j = hidden[0]
+    label = page.locator(".somview-label.behind").filter(has_text=re.compile(f"^{j}$")).first
+    label.click()
+    page.wait_for_function(f"() => {VIEW}.describe().selected === {j}", timeout=5000)
+    camera = view(page)["camera"]
+    c = np.array(screen(page, j))
+    tips = {a: np.array(page.evaluate(f"() => {VIEW}.handlePoint('{a}')")) for a in "XYZ"}
+    axis = max(tips, key=lambda a: np.linalg.norm(tips[a] - c))
+    page.mouse.move(*tips[axis])
+    page.wait_for_timeout(50)
+    drag(page, tuple(tips[axis]), tuple(0.8 * (tips[axis] - c)))
+    st = server.idle()
+    moved = np.abs(np.array(st["session"]["controls"][j][:3]) - np.array(st0["session"]["controls"][j][:3]))
+    a = "XYZ".index(axis)
+    assert moved[a] > 0.05 and np.delete(moved, a).max() < 1e-4, f"not moved along {axis}: {moved}"
+    np.testing.assert_allclose(view(page)["camera"], camera, atol=1e-9)  # the view did not turn
+    page.keyboard.press("Escape")
 
 
 def test_delete_removes_the_hovered_control_and_the_wheel_over_one_sets_its_radius(page, server):

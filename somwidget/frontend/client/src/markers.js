@@ -1,5 +1,5 @@
 // Controls out of sight: a marker at the view's edge for each, pointing the way to it, with its label; a click on
-// the marker centres the view on that control (the camera keeps its direction and distance).
+// the marker centres the view on that control (the camera keeps its direction and distance) and selects it.
 
 import * as THREE from 'three';
 

@@ -29,7 +29,7 @@ const CSS = `
   padding: 1px 3px; border-radius: 3px; background: rgba(255,255,255,0.8); color: #222; white-space: nowrap; }
 .somview-label.mirror { opacity: 0.6; }
 .somview-label.held { background: #d32f2f; color: white; }
-.somview-label.behind { opacity: 0.4; }
+.somview-label.behind { opacity: 0.4; pointer-events: auto; cursor: pointer; }
 .somview-status { position: absolute; left: 6px; bottom: 4px; font-size: 11px; color: #445;
   background: rgba(255,255,255,0.7); padding: 1px 5px; border-radius: 3px; pointer-events: none; }
 .somview-status.offline { background: #fde2e2; color: #8a1010; font-weight: 600; }
@@ -150,7 +150,10 @@ export class ClayView {
     this.toolbar = new Toolbar(container, act, () => ({ orthographic: this.rig.orthographicOn,
       stroke: this.desktop.strokeTool, display: this.display.describe() }));
     this.labelDivs = [];
-    this.markers = new Markers(this.labels, (j) => this.rig.centreOn(this.clay.controlWorld(j)));
+    this.markers = new Markers(this.labels, (j) => { // centred and selected: its handle moves it
+      this.rig.centreOn(this.clay.controlWorld(j));
+      this.handle.select(j);
+    });
     this.occluded = new Set(); // effective controls the clay hides from the camera
     this.lastOcclusion = 0;
 
@@ -295,7 +298,15 @@ export class ClayView {
     const clay = this.clay;
     while (this.labelDivs.length < clay.kEff) {
       const d = document.createElement('div');
+      const j = this.labelDivs.length;
       d.className = 'somview-label';
+      // the dimmed label of a control behind the clay takes a click: it selects the control, whose handle is drawn
+      // over the clay, so it can be moved without turning the view
+      d.addEventListener('pointerdown', (ev) => ev.stopPropagation());
+      d.addEventListener('click', (ev) => {
+        ev.stopPropagation();
+        this.handle.select(j);
+      });
       this.labels.appendChild(d);
       this.labelDivs.push(d);
     }
