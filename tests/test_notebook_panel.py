@@ -509,8 +509,13 @@ def test_the_wheel_zooms_in_and_a_double_click_adds_a_control_in_the_notebook_wi
             page = open_notebook(browser, lab)
             run_cell(page, 0)
             page.wait_for_function(f"() => {{ const v = {views}; return v.length >= 1 && "
-                                   "v[0].describe().painted > 0 && v[0].describe().running === false; }",
-                                   timeout=120000)  # the car trained to its end: nothing moves by itself
+                                   "v[0].describe().painted > 0; }", timeout=120000)
+            try:  # the car trained to its end: nothing moves by itself
+                page.wait_for_function(f"() => {views}[0].describe().running === false", timeout=180000)
+            except Exception:
+                d = page.evaluate(f"() => {views}[0].describe()")
+                seen = {k: d.get(k) for k in ("running", "status", "painted", "errors")}
+                raise AssertionError(f"the car did not settle in the view: {seen}") from None
             page.locator(".somview").first.scroll_into_view_if_needed()
             page.wait_for_timeout(500)
             box = page.locator(".somview canvas").first.bounding_box()

@@ -35,6 +35,14 @@ def test_the_web_panel_sets_a_radius_and_a_symmetry_group():
             radius.press("Enter")
             page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('radius')")
             assert abs(srv.state()["session"]["radii"][2] - 0.55) < 1e-6
+            steps = srv.idle()["session"]["history"][0]
+            every = page.locator("#all-radii")  # every control's radius at once: one step
+            every.fill("0.7")
+            every.press("Enter")
+            st = srv.wait(lambda s: np.allclose(s["session"]["radii"], 0.7, atol=1e-6), what="every radius 0.7")
+            assert srv.idle()["session"]["history"][0] == steps + 1
+            page.wait_for_function("() => [...document.querySelectorAll('#controls-table .radius-cell input')]"
+                                   ".every((e) => Math.abs(Number(e.value) - 0.7) < 1e-6)", timeout=10000)
             page.locator(".v-select:has(#symmetry-group) .v-field").click()
             page.locator(".v-list-item", has_text="4-fold about z").first.click()
             st = srv.wait(lambda s: s["session"]["parameters"]["group"] == "radial-4-z", what="the radial group")
@@ -70,6 +78,13 @@ def test_the_notebook_panel_sets_a_radius_and_a_symmetry_group():
         assert "radius" in panel.controls_html.value
         shown = [float(x) for x in re.findall(r'somwidget-radius">([0-9.e+-]+)<', panel.controls_html.value)]
         np.testing.assert_allclose(shown, session.radii, rtol=1e-2)
+        steps = session.history[0]
+        panel.all_radii.value = "0.3"  # every control's radius at once: one step
+        np.testing.assert_allclose(session.radii, 0.3)
+        assert session.history[0] == steps + 1
+        panel.all_radii.value = "-1"  # refused: the message, the radii as they were
+        assert "radius" in panel.error.value
+        np.testing.assert_allclose(session.radii, 0.3)
         panel.radius.value = 2e6  # past the widget's bound (a few sizes): it holds the radius there
         assert session.radii.max() <= 2.0 * panel.model.size + 1e-4
         panel.symmetry.value = False

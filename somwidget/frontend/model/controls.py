@@ -124,11 +124,13 @@ class ControlEdits:
 
     def set_radius(self, index, radius) -> None:
         clay = self.clay
-        r = check_radius(f"control {index} radius", radius)
-        with self.timeline.step(f"parameter:radius:{index}"), clay.lock:
-            i = check_index("control", index, clay.controls.shape[0])
+        r = check_radius("every control's radius" if index is None else f"control {index} radius", radius)
+        with self.timeline.step(f"parameter:radius:{'all' if index is None else index}"), clay.lock:
             radii = clay.radii.copy()
-            radii[list(clay.run_of(i))] = r
+            if index is None:
+                radii[:] = r
+            else:
+                radii[list(clay.run_of(check_index("control", index, clay.controls.shape[0])))] = r
             clay.radii = radii
             self._queue(clay.controls.copy())
 

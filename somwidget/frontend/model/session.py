@@ -380,10 +380,10 @@ class Session:
         with self.clay.lock:
             return tuple(self.clay.strokes)
 
-    def set_control_radius(self, index: int, radius: float) -> None:
-        """Control `index`'s radius of influence (model units; 0: the paper's point control): moving it then carries
-        the clay around its winner with a smooth falloff of about that radius. Set again within a moment (a slider's
-        drag), it joins the same undo step."""
+    def set_control_radius(self, index: int | None, radius: float) -> None:
+        """Control `index`'s radius of influence (model units; 0: the paper's point control), or every control's
+        with `index` None: moving it then carries the clay around its winner with a smooth falloff of about that
+        radius. Set again within a moment (a slider's drag), it joins the same undo step."""
         self.edit_controls.set_radius(index, radius)
 
     @property

@@ -118,6 +118,9 @@ class Panel(widgets.VBox):
                                      layout=widgets.Layout(width="330px"))
         self.radius = widgets.BoundedFloatText(min=0.0, max=1e6, step=0.05, description="", tooltip=RADIUS_HELP,
                                                layout=widgets.Layout(width="110px"))
+        self.all_radii = widgets.Text(placeholder="all radii", continuous_update=False,
+                                      layout=widgets.Layout(width="80px"),
+                                      tooltip="Every control's radius of influence at once: type it and press Enter")
         self.controls_html = widgets.HTML()
         self.error = widgets.HTML()
         self.recovered = _banner(self.model.recovered_message())
@@ -139,7 +142,8 @@ class Panel(widgets.VBox):
             self.features_box,
             widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(GAP_HELP)}">Controls</b> <small>(gap: distance to '
                                        'the nearest node, original / mirror)</small>')),
-            self.controls_html, widgets.HBox([self.radius_of, self.position, self.radius]), self.features,
+            self.controls_html, widgets.HBox([self.radius_of, self.position, self.radius]),
+            widgets.HBox([self.features, self.all_radii]),
             self.variants,
         ], layout=widgets.Layout(width="360px", min_width="360px", padding="4px"))
 
@@ -155,6 +159,8 @@ class Panel(widgets.VBox):
                               names="value")
         self.radius.observe(lambda change: self._intent(session.set_control_radius, self.radius_of.value,
                                                         change["new"]), names="value")
+        self.all_radii.observe(lambda change: change["new"] and self._intent(session.set_control_radius, None,
+                                                                             change["new"]), names="value")
         self.preset.observe(self._preset_chosen, names="value")
         self.train_button.on_click(lambda _b: self._intent(self.model.toggle_training))
         self.reset_button.on_click(lambda _b: self._intent(session.reset))
@@ -339,7 +345,7 @@ class Panel(widgets.VBox):
             self._thread.join(2.0)
         self.variants.close()
         for w in [*self.children, *self.metric, *self.features_box.children, self.group, self.radius_of, self.radius,
-                  self.position, *self.recovered.children]:
+                  self.position, self.features, self.all_radii, *self.recovered.children]:
             w.close()
         super().close()
 

@@ -228,6 +228,11 @@ def _panel(panel: PanelModel) -> None:
             html.Div("Controls (position; gap to the nearest node: original / copy; radius)",
                      classes="text-subtitle-2", title=GAP_HELP)
             v3.VSpacer()
+            v3.VTextField(key=_revision_key("radius", "'all'"), placeholder="all radii", density="compact",
+                          type="number", variant="underlined", hide_details=True, min=0, step=0.05, id="all-radii",
+                          style="max-width: 80px", title="Every control's radius of influence at once: type it and "
+                                                         "press Enter (model units; 0: the paper's point controls)",
+                          raw_attrs=_on_enter_or_change("trigger('set_radius', [null, $event.target.value])"))
             v3.VBtn(icon="mdi-plus", size="small", variant="text", click="trigger('add_control')",
                     id="add-control", title="Add a control on the clay, where it is farthest from the others (it "
                                             "moves nothing until dragged); or double-click the clay in the view")
