@@ -261,7 +261,7 @@ def saddle() -> Target:
 
 # -- actions ----------------------------------------------------------------------------------------------------------
 def _fmt(value) -> str:
-    if isinstance(value, str):
+    if value is None or isinstance(value, str):
         return repr(value)
     a = np.asarray(value, np.float64)
     if a.ndim == 0:
@@ -299,6 +299,10 @@ def symmetry(spec: str, text: str) -> Action:
 
 def radius(index: int, r: float, text: str) -> Action:
     return Action(text, "set_control_radius", (index, r))
+
+
+def every_radius(r: float, text: str) -> Action:
+    return Action(text, "set_control_radius", (None, r))
 
 
 def drag(index: int, point, text: str) -> Action:
@@ -380,14 +384,15 @@ BRIEFS = [
           ]),
     Brief("car", "The car with a longer nose and a lower roof", "car", car_target, closed=True, of_start=True,
           camera=view((0.6, 0.0, -0.05), 6.4, (0.3, -1.0, 0.35)), actions=[
-              radius(2, 1.0, "set the nose pair's radius (control 2) to 1"),
-              drag(2, (3.4, 0.25, -0.2), "drag the nose 0.8 forward"),
-              radius(5, 1.0, "set the bonnet pair's radius (control 5) to 1"),
-              drag(5, (1.95, 0.5, 0.3), "drag the bonnet 0.4 forward"),
-              radius(4, 1.0, "set the roof pair's radius (control 4) to 1"),
-              drag(4, (-0.3, 0.45, 0.65), "drag the roof 0.3 down"),
-              radius(6, 1.0, "set the windscreen pair's radius (control 6) to 1"),
-              drag(6, (0.65, 0.45, 0.5), "drag the windscreen 0.2 down"),
+              every_radius(1.0, "set every control's radius to 1 (the panel's 'all radii')"),
+              parameter("smoothing", 0.8, "set smoothing to 0.8"),
+              Action("press Reset: the body grows again from the ellipsoid, carried by the controls' regions",
+                     "reset"),
+              refine("refine (602 -> 2,402 nodes)"),
+              drag(2, (3.4, 0.25, -0.2), "drag the nose pair (control 2) 0.8 forward"),
+              drag(5, (1.95, 0.5, 0.3), "drag the bonnet pair (control 5) 0.4 forward"),
+              drag(4, (-0.3, 0.45, 0.65), "drag the roof pair (control 4) 0.3 down"),
+              drag(6, (0.65, 0.45, 0.5), "drag the windscreen pair (control 6) 0.2 down"),
           ]),
     Brief("canopy", "A saddle canopy (hyperbolic paraboloid) from the open grid", "grid", saddle,
           camera=view((0.0, 0.0, -0.2), 4.0), actions=[
