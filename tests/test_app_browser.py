@@ -165,6 +165,8 @@ def test_page_loads_on_the_car_and_renders(browser, server):
         assert v["k"] == 9 and v["kEff"] == 18
         assert sorted(v["labels"]) == sorted([str(i) for i in range(9)] + [f"{i}\u2032" for i in range(9)])
         assert v["status"].startswith("iteration 1000 / 1000")
+        # and the server's own figures, sent four times a second to every view: the cycle's time in ms
+        page.wait_for_function(f"() => / cycle \\d+\\.\\d{{3}} ms/.test({VIEW}.describe().status)", timeout=10000)
         np.testing.assert_allclose(np.array([page.evaluate(f"() => {VIEW}.controlModel({j})") for j in range(9)]),
                                    np.array(st["session"]["controls"])[:, :3], atol=1e-5)
     finally:
