@@ -372,3 +372,43 @@ def test_serve_starts_when_a_file_is_where_the_autosave_folder_should_be(tmp_pat
         settled(srv)
     finally:
         srv.stop()
+
+
+def test_an_earlier_versions_autosave_is_brought_back_once(tmp_path, monkeypatch):
+    """An autosave left by somwidget before the session folders (`autosave/<id>.npz`, a session file, beside its free
+    `<id>.lock`, as a killed process left it) is brought back by the next `somwidget serve` exactly as saved, with a
+    message that says so; the file is renamed, kept, and not taken again. One whose lock is held (a live process of
+    that version) is left alone."""
+    from somwidget.frontend.model.store import lock
+
+    data = tmp_path / "data"
+    monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(data))
+    folder = data / "autosave"
+    folder.mkdir(parents=True)
+    s = Session("sphere", device="cpu", autosave=False)
+    s.move_control(2, [0.2, -1.3, 0.4])
+    assert s.wait_idle(60)
+    s.save(folder / "20261120-101500-4242-0abc1234.npz")
+    (folder / "20261120-101500-4242-0abc1234.lock").touch()
+    saved_controls, saved_weights, saved_s = s.controls, s.frame.weights.copy(), s.frame.iteration
+    s.close()
+    live = folder / "20261120-090000-4141-0def5678.npz"  # older, and its process still holds its lock
+    shutil.copy(folder / "20261120-101500-4242-0abc1234.npz", live)
+    held = lock(live.with_suffix(".lock"))
+    os.utime(live, (time.time() - 3600, time.time() - 3600))
+    srv = Serve(env={"SOMWIDGET_DATA_DIR": str(data)})
+    try:
+        st = srv.state(positions=True)
+        session = st["session"]
+        assert session["preset"] == "sphere" and "earlier version" in session["recovered_message"], session
+        np.testing.assert_array_equal(session["controls"], saved_controls)
+        np.testing.assert_array_equal(session["frame"]["positions"], saved_weights[:, :3])
+        assert session["frame"]["iteration"] == saved_s
+        kept = [p.name for p in folder.iterdir() if ".brought-back-" in p.name]
+        assert len(kept) == 1 and kept[0].startswith("20261120-101500-4242-0abc1234.npz"), kept
+        assert live.exists()  # a live session's file is not taken
+    finally:
+        srv.stop()
+    assert autosave.legacy_stopped() == []  # the live one's lock is still held; the other was renamed
+    held.close()
+    assert autosave.legacy_stopped() == [live]  # its process gone, it would be next

@@ -9,14 +9,19 @@ is a step of its own that Undo removes, and the message says so.
 A save that fails (a full disk, a folder that cannot be written) is kept and tried again every RETRY_SECONDS, a newer
 state taking its place, until one is on disk; meanwhile `Autosave.error` says what is wrong and where, and the
 session's views show it. Nothing is called saved before its manifest is on disk.
+
+An autosave of an earlier version (one session file per session, `<id>.npz` beside `<id>.lock`) is brought back by
+`recover` when no saved session of this version is waiting, then renamed so that it is taken once.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 from . import store as _store
 from .store import SessionStore, Saving, Unreadable
@@ -259,4 +264,74 @@ def recover(session_class, origin: str | None = None, **options):
         if start:
             session.start()
         return session, notices
-    return None, notices
+    session = _recover_legacy(session_class, origin, notices, max_vertices, options)
+    if session is not None and start:
+        session.start()
+    return session, notices
+
+
+#: An earlier version's autosave: `<id>.npz` (a session file) beside `<id>.lock` in the autosave folder.
+LEGACY_SUFFIX = ".npz"
+
+
+def legacy_stopped() -> list[Path]:
+    """Autosaves written by somwidget before 2026-11-25 (one session file each, no undo history) of sessions that
+    stopped (their lock free or gone), newest first."""
+    folder = _store.autosave_dir()
+    if not folder.is_dir():
+        return []
+    found = []
+    for path in folder.glob(f"*{LEGACY_SUFFIX}"):
+        if not path.is_file():
+            continue
+        lock_path = path.with_suffix(".lock")
+        if lock_path.exists():
+            try:
+                handle = _store.lock(lock_path)
+            except OSError:
+                continue
+            if handle is None:
+                continue  # its process is alive
+            handle.close()
+        found.append((path.stat().st_mtime, path))
+    return [p for _, p in sorted(found, reverse=True)]
+
+
+def _recover_legacy(session_class, origin, notices: list[str], max_vertices: int, options: dict):
+    """The newest earlier-version autosave brought back (as a loaded session file: its step, no undo history), the
+    file then renamed `<id>.npz.brought-back-<time>` so it is taken once and never deleted; or None."""
+    from .files import preset_of, read
+
+    for path in legacy_stopped():
+        try:
+            state = read(path, max_vertices)
+            preset = preset_of(state)[0]
+        except ValueError as exc:
+            try:
+                notices.append(f"the earlier version's autosave {path} cannot be read ({exc}); it is kept at "
+                               f"{_store.set_aside(path)}")
+            except OSError as err:
+                notices.append(f"the earlier version's autosave {path} cannot be read ({exc}) nor set aside ({err})")
+            continue
+        try:
+            session = session_class(preset, start=False, origin=origin or "python", **options)
+        except ValueError as exc:  # it does not fit this device
+            notices.append(f"the earlier version's autosave {path} cannot be brought back here: {exc}")
+            continue
+        session.restore(state)
+        kept = path.with_name(f"{path.name}.brought-back-{time.strftime('%Y%m%d-%H%M%S')}")
+        try:
+            os.replace(path, kept)
+            path.with_suffix(".lock").unlink(missing_ok=True)
+        except OSError as exc:
+            notices.append(f"the earlier version's autosave {path} was brought back but cannot be renamed: {exc}")
+            kept = path
+        saved = kept.stat().st_mtime if kept.exists() else time.time()
+        when = time.strftime("%Y-%m-%d %H:%M", time.localtime(saved))
+        message = (f"Brought back your session of {when} ({preset.title or preset.name}) from an earlier version's "
+                   f"autosave, as it was saved; the file is kept at {kept}.")
+        session.recovered = {"path": str(kept), "saved": saved, "preset": preset.name, "gesture": False, "undo": 0,
+                             "redo": 0, "message": message}
+        session.notices.extend(notices)
+        return session
+    return None
