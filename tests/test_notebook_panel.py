@@ -355,7 +355,9 @@ def lab(request, tmp_path_factory):
         "view  # a second output of the same widget",
         "import hashlib\npng = view.view.picture_png() or b''\n"
         "print('picture', png[:8] == b'\\x89PNG\\r\\n\\x1a\\n', len(png), hashlib.md5(png).hexdigest())",
-        "print('session', view.session.history[0], *view.session.parameters['metric_weights'])",
+        "print('session', view.session.history[0], *view.session.parameters['metric_weights'])"])
+    notebook_file(root / "modelling.ipynb", [  # a kernel of its own: no earlier test's sessions or saved outputs
+        "import somwidget\nview = somwidget.show('car', device='cpu')\nview",
         "import hashlib\nprint('clay', len(view.session.controls), view.session.history[0],\n"
         "      hashlib.md5(view.session.frame.positions.tobytes()).hexdigest())"])
     with jupyter_server(request.param, root) as port:
@@ -372,9 +374,10 @@ def _answers(url: str) -> bool:
 
 
 def open_notebook(browser, url: str):
-    """A new page on the notebook at `url`, its cells on screen."""
+    """A new page on the notebook at `url`, its cells on screen (JupyterLab's workspace reset: it would bring back
+    the tabs an earlier test opened beside it)."""
     page = browser.new_page(viewport={"width": 1400, "height": 1000})
-    page.goto(url)
+    page.goto(url.replace("?", "?reset&", 1))
     page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=90000)
     return page
 
@@ -487,9 +490,9 @@ def test_a_refused_value_snaps_back_and_ctrl_z_in_a_field_edits_only_the_field(l
 
 
 def clay_in_kernel(page) -> tuple[int, int, str]:
-    """Run the notebook's fifth cell: (controls, undo steps, md5 of the positions) of the kernel's session."""
-    cell = page.locator(".jp-Notebook .jp-Cell").nth(4)
-    run_cell(page, 4)
+    """Run modelling.ipynb's second cell: (controls, undo steps, md5 of the positions) of the kernel's session."""
+    cell = page.locator(".jp-Notebook .jp-Cell").nth(1)
+    run_cell(page, 1)
     page.wait_for_function("(el) => !el.innerText.includes('[*]')",
                            arg=cell.locator(".jp-InputPrompt").element_handle(), timeout=30000)
     page.wait_for_timeout(200)
@@ -506,7 +509,7 @@ def test_the_wheel_zooms_in_and_a_double_click_adds_a_control_in_the_notebook_wi
     with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         try:
-            page = open_notebook(browser, lab)
+            page = open_notebook(browser, lab.replace("clay.ipynb", "modelling.ipynb"))
             run_cell(page, 0)
             page.wait_for_function(f"() => {{ const v = {views}; return v.length >= 1 && "
                                    "v[0].describe().painted > 0; }", timeout=120000)
