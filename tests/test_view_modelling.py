@@ -245,6 +245,11 @@ def test_a_hidden_control_is_taken_by_its_dimmed_label_and_moved_by_its_handle(p
     assert moved[a] > 0.05 and np.delete(moved, a).max() < 1e-4, f"not moved along {axis}: {moved}"
     np.testing.assert_allclose(view(page)["camera"], camera, atol=1e-9)  # the view did not turn
     page.keyboard.press("Escape")
+    page.wait_for_function(f"() => {VIEW}.describe().selected === null", timeout=5000)
+    page.locator(f"#controls-table td.control-index[data-control='{j}']").click()  # its number in the panel
+    page.wait_for_function(f"() => {VIEW}.describe().selected === {j}", timeout=5000)
+    page.mouse.move(*centre(page, 0, 250))
+    page.keyboard.press("Escape")
 
 
 def test_delete_removes_the_hovered_control_and_the_wheel_over_one_sets_its_radius(page, server):

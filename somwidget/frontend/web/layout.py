@@ -80,6 +80,12 @@ if (!window.somwidgetMount) {
   };
   setInterval(window.somwidgetMount, 300);
   window.somwidgetMount();
+  // a click on a control's number in the panel's table selects it in the view: its handle moves it
+  document.addEventListener('click', (ev) => {
+    const cell = ev.target.closest?.('[data-control]');
+    const view = document.getElementById('clay-view')?.somview;
+    if (cell && view) view.selectControl(Number(cell.dataset.control));
+  });
 }
 """
 
@@ -239,7 +245,9 @@ def _panel(panel: PanelModel) -> None:
         with v3.VTable(density="compact", id="controls-table"):
             with html.Tbody():
                 with html.Tr(v_for="c in controls_ui", key=_revision_key("radius", "c.i")):
-                    html.Td("{{ c.i }}", style=_TIGHT)
+                    html.Td("{{ c.i }}", style=f"{_TIGHT}; cursor: pointer", classes="control-index",
+                            raw_attrs=[':data-control="c.i"'],
+                            title="Select this control in the view: its handle moves it, also from behind the clay")
                     with html.Td(style=_TIGHT):
                         html.Input(type="color", value=("c.colour",), disabled=("!has_colour",),
                                    style="width: 32px; height: 22px; border: none; padding: 0",

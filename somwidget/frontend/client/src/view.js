@@ -445,6 +445,11 @@ export class ClayView {
     return this.handle.axisPoint(axis, this.camera, this.renderer.domElement.getBoundingClientRect());
   }
 
+  // Select control j (its handle shows and moves it), as a click on it does; the web panel's table calls this.
+  selectControl(j) {
+    this.handle.select(Number.isInteger(j) && j >= 0 && j < this.clay.kEff ? j : null);
+  }
+
   controlModel(j) {
     const m = this.clay.controlAnchors[j];
     return m ? [m.position.x, m.position.y, m.position.z] : null;
