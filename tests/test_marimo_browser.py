@@ -110,21 +110,13 @@ def zoom_and_place(page) -> None:
     box = page.evaluate(f"() => {{ const b = {VIEWS}[0].container.querySelector('canvas').getBoundingClientRect(); "
                         "return [b.left, b.top, b.width, b.height]; }")
     at = (box[0] + box[2] / 2, box[1] + box[3] / 2)
-    assert page.evaluate(f"() => {VIEWS}[0].surfaceAt({at[0]}, {at[1]})") is not None, "not over the clay"
-    d0 = page.evaluate(f"() => {VIEWS}[0].describe()")
-    page.mouse.move(*at)
-    distances = []
-    for _ in range(10):
-        page.mouse.wheel(0, -100)
-        page.wait_for_timeout(60)
-        distances.append(page.evaluate(f"() => {VIEWS}[0].describe().distance"))
-    assert all(b < a for a, b in zip([d0["distance"], *distances], distances)), distances
-    assert distances[-1] < 0.45 * d0["fitDistance"]
+    k0 = page.evaluate(f"() => {VIEWS}[0].describe().k")
+    helpers.wheel_ten_ticks_closer(page, f"{VIEWS}[0]", at)
     top = page.evaluate(f"() => {VIEWS}[0].container.querySelector('canvas').getBoundingClientRect().top")
     assert abs(top - box[1]) <= 1, "the wheel scrolled the page"
     page.evaluate(f"() => {VIEWS}[0].container.querySelector('.somview-fit').click()")
     page.wait_for_timeout(300)
-    k0, digests = d0["k"], page.evaluate(f"() => {VIEWS}.map((v) => v.describe().digest)")
+    digests = page.evaluate(f"() => {VIEWS}.map((v) => v.describe().digest)")
     at = (round(at[0] - 20), round(at[1] + 15))  # whole pixels, as events' are
     aimed = page.evaluate(f"() => {VIEWS}[0].surfaceAt({at[0]}, {at[1]})")
     assert aimed is not None

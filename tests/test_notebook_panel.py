@@ -522,17 +522,8 @@ def test_the_wheel_zooms_in_and_a_double_click_adds_a_control_in_the_notebook_wi
             page.locator(".somview").first.scroll_into_view_if_needed()
             page.wait_for_timeout(500)
             box = page.locator(".somview canvas").first.bounding_box()
-            at = (box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
-            assert page.evaluate(f"() => {views}[0].surfaceAt({at[0]}, {at[1]})") is not None, "not over the clay"
-            d0 = page.evaluate(f"() => {views}[0].describe()")
-            page.mouse.move(*at)
-            distances = []
-            for _ in range(10):
-                page.mouse.wheel(0, -100)
-                page.wait_for_timeout(60)
-                distances.append(page.evaluate(f"() => {views}[0].describe().distance"))
-            assert all(b < a for a, b in zip([d0["distance"], *distances], distances)), distances
-            assert distances[-1] < 0.45 * d0["fitDistance"]
+            helpers.wheel_ten_ticks_closer(page, f"{views}[0]", (box["x"] + box["width"] / 2,
+                                                                 box["y"] + box["height"] / 2))
             assert page.locator(".somview canvas").first.bounding_box()["y"] == pytest.approx(box["y"], abs=1), \
                 "the wheel scrolled the notebook"
             n0, steps0, positions0 = clay_in_kernel(page)  # the notebook scrolls to that cell: back to the view
