@@ -55,6 +55,24 @@ def _drag(pts: np.ndarray, controls: np.ndarray, frames: int = 4):
         yield moved.copy()
 
 
+def _drag_matches_reference(som: Som, ref, pts: np.ndarray, controls: np.ndarray, frames: int = 4) -> None:
+    """A drag restarted from its anchor each frame (6 cycles a frame) in the Som and in the float64 reference with
+    its cuts: the weights match, and the nodes the reference leaves exactly in place (some, not all) are exactly in
+    place in the Som too."""
+    som.restore(pts, S)
+    som.anchor()
+    for moved in _drag(pts, controls, frames):
+        som.set_controls(moved, from_anchor=True)
+        som.step(6)
+        ref.restore(pts.astype(np.float64), S)
+        ref.set_controls(moved.astype(np.float64))
+        ref.step(6)
+        _assert_matches(som, ref, _scale(pts, moved))
+        still = (ref.W == pts).all(axis=1)
+        assert 0 < still.sum() < len(pts)
+        np.testing.assert_array_equal(som.weights[still], pts[still])
+
+
 @pytest.mark.parametrize(("mirror", "cores"), [((), 1), ((1,), 1), ((1,), 2)])
 def test_paper_rule_local_equals_full_computation(mirror, cores):
     """Rows mode on the CPU, a drag restarted from its anchor each frame: the local cycle (on one core, or the blocks
@@ -92,18 +110,7 @@ def test_paper_rule_local_matches_reference_with_the_cut():
     som = Som(topo, pts, controls, iterations=S, reach=0.04, distances="rows", device="cpu")
     ref = ReferenceSom(len(pts), edges, pts.astype(np.float64), controls.astype(np.float64), iterations=S,
                        reach=0.04, cut=ROWS_CUT)
-    som.restore(pts, S)
-    som.anchor()
-    for moved in _drag(pts, controls):
-        som.set_controls(moved, from_anchor=True)
-        som.step(6)
-        ref.restore(pts.astype(np.float64), S)
-        ref.set_controls(moved.astype(np.float64))
-        ref.step(6)
-        _assert_matches(som, ref, _scale(pts, moved))
-        still = (ref.W == pts).all(axis=1)
-        assert 0 < still.sum() < len(pts)
-        np.testing.assert_array_equal(som.weights[still], pts[still])
+    _drag_matches_reference(som, ref, pts, controls)
 
 
 def _shaping_full_cycle(som: Som) -> None:
@@ -174,18 +181,7 @@ def test_shaping_local_matches_reference_with_the_floor():
     som = Som(topo, pts, controls, iterations=S, reach=0.3, radii=radii, distances="rows", device="cpu")
     ref = ReferenceSom(len(pts), edges, pts.astype(np.float64), controls.astype(np.float64), iterations=S,
                        reach=0.3, radii=radii, cut=ROWS_CUT)
-    som.restore(pts, S)
-    som.anchor()
-    for moved in _drag(pts, controls, 3):
-        som.set_controls(moved, from_anchor=True)
-        som.step(6)
-        ref.restore(pts.astype(np.float64), S)
-        ref.set_controls(moved.astype(np.float64))
-        ref.step(6)
-        _assert_matches(som, ref, _scale(pts, moved))
-        still = (ref.W == pts).all(axis=1)
-        assert 0 < still.sum() < len(pts)
-        np.testing.assert_array_equal(som.weights[still], pts[still])
+    _drag_matches_reference(som, ref, pts, controls, 3)
 
 
 def test_block_search_equals_full_scan():
