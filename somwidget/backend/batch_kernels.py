@@ -21,6 +21,7 @@ array instead of shared memory and the warp reduction is the thread's own minimu
 
 
 import functools
+from types import SimpleNamespace
 
 import warp as wp
 
@@ -74,21 +75,13 @@ SEARCH = 4
 
 
 @functools.cache
-def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, min_blocks: int = 1,
-                    gather: int = GATHER, searched: int = SEARCH, unit_metric: bool = False, taubin: bool = False):
-    """The kernel for weights of n_dims features; with `pairs` the effective controls come as mirrored pairs, each
-    original next to its copy. `cuda`: the keys in shared memory (on the CPU Warp's shared tiles are one static
-    buffer, which concurrent launches on several cores would share), blocks of at most `threads` threads of which
-    `min_blocks` fit an SM at once (the compiler's register budget); `gather`, `searched`: GATHER, SEARCH.
-    `unit_metric`: every metric weight is 1, so the winner search skips multiplying by them (the same bits).
-    `taubin`: each smoothing step is followed by the second step of Taubin's pair (its strength in `second`)."""
+def variant_funcs(n_dims: int, searched: int, unit_metric: bool) -> SimpleNamespace:
+    """The device functions both batched kernels use (this module's and batch_shaping_kernels'): `distance` (the
+    metric's squared distance; `unit_metric` skips the weights), `smoothed` (one Jacobi step of a variant's neuron)
+    and `search` (step 1: `searched` controls at a time over a thread's neurons, offered to the block's keys)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
-    rates = wp.types.vector(length=gather, dtype=wp.float32)
-    keys4 = wp.types.vector(length=searched, dtype=wp.uint64)
+    keys_of = wp.types.vector(length=searched, dtype=wp.uint64)
     targets_of = wp.types.matrix(shape=(searched, n_dims), dtype=wp.float32)
-    group_of = wp.types.matrix(shape=(gather, n_dims), dtype=wp.float32)
-    group_ints = wp.types.vector(length=gather, dtype=wp.int32)
-    options = {"max_unroll": 32}
 
     @wp.func
     def distance(target: vec, w: vec, metric: vec) -> wp.float32:
@@ -113,20 +106,10 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
         return w
 
     @wp.func
-    def move_pair(w: vec, l1: wp.float32, l2: wp.float32, a: vec, b: vec) -> vec:
-        """W + (l1 (A - W) + l2 (B - W)) / max(1, l1 + l2), in the mirror-exact form of cycle_kernels.py."""
-        m = wp.float32(0.5) * (l1 + l2)
-        h = wp.float32(0.5) * (l1 - l2)
-        step = m * ((a + b) - wp.float32(2.0) * w) + h * (a - b)
-        if l1 + l2 > wp.float32(1.0):  # else a division by 1, which changes no bit
-            step = step / (l1 + l2)
-        return w + step
-
-    @wp.func
     def search(weights: wp.array2d(dtype=vec), controls: wp.array2d(dtype=vec), b: int, c0: int, k: int, m: vec,
                t: int, threads: int, keys: wp.array(dtype=wp.uint64), base: int, buf: int):
         """Step 1 for controls c0 .. c0 + searched - 1 (past k: the last one again) over this thread's neurons."""
-        best = keys4()
+        best = keys_of()
         targets = targets_of()
         for g in range(searched):
             best[g] = KEY_NONE
@@ -138,6 +121,36 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
         for g in range(searched):
             if c0 + g < k:
                 offer_key(keys, base, buf + c0 + g, best[g])
+
+    return SimpleNamespace(distance=distance, smoothed=smoothed, search=search)
+
+
+@functools.cache
+def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, min_blocks: int = 1,
+                    gather: int = GATHER, searched: int = SEARCH, unit_metric: bool = False, taubin: bool = False):
+    """The kernel for weights of n_dims features; with `pairs` the effective controls come as mirrored pairs, each
+    original next to its copy. `cuda`: the keys in shared memory (on the CPU Warp's shared tiles are one static
+    buffer, which concurrent launches on several cores would share), blocks of at most `threads` threads of which
+    `min_blocks` fit an SM at once (the compiler's register budget); `gather`, `searched`: GATHER, SEARCH.
+    `unit_metric`: every metric weight is 1, so the winner search skips multiplying by them (the same bits).
+    `taubin`: each smoothing step is followed by the second step of Taubin's pair (its strength in `second`)."""
+    vec = wp.types.vector(length=n_dims, dtype=wp.float32)
+    rates = wp.types.vector(length=gather, dtype=wp.float32)
+    group_of = wp.types.matrix(shape=(gather, n_dims), dtype=wp.float32)
+    group_ints = wp.types.vector(length=gather, dtype=wp.int32)
+    options = {"max_unroll": 32}
+    shared = variant_funcs(n_dims, searched, unit_metric)
+    search, smoothed = shared.search, shared.smoothed
+
+    @wp.func
+    def move_pair(w: vec, l1: wp.float32, l2: wp.float32, a: vec, b: vec) -> vec:
+        """W + (l1 (A - W) + l2 (B - W)) / max(1, l1 + l2), in the mirror-exact form of cycle_kernels.py."""
+        m = wp.float32(0.5) * (l1 + l2)
+        h = wp.float32(0.5) * (l1 - l2)
+        step = m * ((a + b) - wp.float32(2.0) * w) + h * (a - b)
+        if l1 + l2 > wp.float32(1.0):  # else a division by 1, which changes no bit
+            step = step / (l1 + l2)
+        return w + step
 
     @wp.func
     def move_group(weights: wp.array2d(dtype=vec), moved: wp.array2d(dtype=vec), into_moved: int, c0: int, b: int,

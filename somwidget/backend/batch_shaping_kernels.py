@@ -27,8 +27,8 @@ import functools
 
 import warp as wp
 
-from .batch_kernels import _SHARED_WORDS, clear_key, offer_key, rate, read_key
-from .primitives import INDEX_MASK, KEY_NONE, sync_block, winner_key
+from .batch_kernels import _SHARED_WORDS, clear_key, rate, read_key, variant_funcs
+from .primitives import INDEX_MASK, sync_block
 from .shaping_kernels import FIT_TURN
 
 
@@ -39,49 +39,10 @@ def shaping_variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int =
     original next to its copy: a group of two), else each control is a group of one. `cuda`, `threads`,
     `min_blocks`, `searched`, `unit_metric`, `taubin`: as batch_kernels.variants_kernel's."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
-    keys_of = wp.types.vector(length=searched, dtype=wp.uint64)
-    targets_of = wp.types.matrix(shape=(searched, n_dims), dtype=wp.float32)
     order = 2 if pairs else 1
     options = {"max_unroll": 32}
-
-    @wp.func
-    def distance(target: vec, w: vec, metric: vec) -> wp.float32:
-        diff = target - w
-        if wp.static(unit_metric):
-            return wp.dot(diff, diff)
-        return wp.dot(wp.cw_mul(diff, metric), diff)
-
-    @wp.func
-    def smoothed(weights: wp.array2d(dtype=vec), b: int, v: int, offsets: wp.array(dtype=wp.int32),
-                 neighbors: wp.array(dtype=wp.int32), pull: vec) -> vec:
-        """Variant b's neuron v after one Jacobi step, W_v + pull (mean of W over v's neighbours - W_v); a neuron
-        without neighbours stays."""
-        w = weights[b, v]
-        lo = offsets[v]
-        hi = offsets[v + 1]
-        if hi > lo:
-            total = vec()
-            for e in range(lo, hi):
-                total += weights[b, neighbors[e]]
-            w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
-        return w
-
-    @wp.func
-    def search(weights: wp.array2d(dtype=vec), controls: wp.array2d(dtype=vec), b: int, c0: int, k: int, m: vec,
-               t: int, threads: int, keys: wp.array(dtype=wp.uint64), base: int, buf: int):
-        """Step 1 for controls c0 .. c0 + searched - 1 (past k: the last one again) over this thread's neurons."""
-        best = keys_of()
-        targets = targets_of()
-        for g in range(searched):
-            best[g] = KEY_NONE
-            targets[g] = controls[b, wp.min(c0 + g, k - 1)]
-        for v in range(t, weights.shape[1], threads):
-            w = weights[b, v]
-            for g in range(searched):
-                best[g] = wp.min(best[g], winner_key(distance(targets[g], w, m), v))
-        for g in range(searched):
-            if c0 + g < k:
-                offer_key(keys, base, buf + c0 + g, best[g])
+    shared = variant_funcs(n_dims, searched, unit_metric)
+    search, smoothed = shared.search, shared.smoothed
 
     @wp.func
     def moved_by_group(w: vec, b: int, v: int, lo: int, rest: wp.array2d(dtype=vec),
