@@ -113,7 +113,6 @@ class PanelState:
             s.paused = frame.paused
             if self.session.error and not s.error_message:
                 s.error_message = self.session.error
-            s.save_error = self.session.save_error or ""  # shown until a save is on disk again
 
     def error(self, message: str) -> None:
         log.info("refused: %s", message)

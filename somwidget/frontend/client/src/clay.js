@@ -452,8 +452,4 @@ export class Clay {
   unmap(g, modelPos) {
     return g > 0 ? applyInverse(this.mapOf(g), modelPos) : modelPos;
   }
-
-  toOriginal(j, modelPos) {
-    return this.unmap(this.copyOf(j), modelPos);
-  }
 }

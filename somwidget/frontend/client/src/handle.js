@@ -59,7 +59,6 @@ export class Handle {
       this.select(null);
       return;
     }
-    this.controls.camera = this.rig.camera;
     if (this.held) return;
     const m = this.clay.controlAnchors[this.selected];
     if (m && !this.proxy.position.equals(m.position)) this.proxy.position.copy(m.position);

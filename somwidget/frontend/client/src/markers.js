@@ -22,17 +22,20 @@ export class Markers {
     this.onPick = onPick;
     this.divs = [];
     this.shown = []; // the effective indices with a marker now
+    this.p = new THREE.Vector3(); // scratch, for update()
+    this.to = new THREE.Vector3();
+    this.forward = new THREE.Vector3();
   }
 
   // Place a marker for each control out of sight (`camera` the view's, `size` [w, h] px); returns their indices.
   update(clay, camera, size, labelOf) {
     const [w, h] = size;
-    const p = new THREE.Vector3();
-    const forward = camera.getWorldDirection(new THREE.Vector3());
+    const p = this.p;
+    const forward = camera.getWorldDirection(this.forward);
     const shown = [];
     for (let j = 0; j < clay.kEff; j++) {
       clay.controlWorld(j, p);
-      const behind = camera.isPerspectiveCamera && p.clone().sub(camera.position).dot(forward) <= 0;
+      const behind = camera.isPerspectiveCamera && this.to.subVectors(p, camera.position).dot(forward) <= 0;
       p.project(camera);
       if (!behind && Math.abs(p.x) <= INSIDE && Math.abs(p.y) <= INSIDE) continue;
       let x = behind ? -p.x : p.x; // behind the camera the projection is mirrored
@@ -45,17 +48,26 @@ export class Markers {
       x *= t;
       y *= t;
       const d = this.div(shown.length);
-      d.dataset.index = String(j);
       const text = labelOf(j);
-      if (d.textContent !== text) d.textContent = text;
-      d.title = `Control ${text} is out of sight: click to bring it into view`;
-      const angle = Math.atan2(x * w, y * h); // 0: up
-      d.style.setProperty('--angle', `${angle.toFixed(3)}rad`);
-      d.style.transform = `translate(${(((x + 1) / 2) * w).toFixed(1)}px, ${(((1 - y) / 2) * h).toFixed(1)}px)`;
-      d.hidden = false;
+      if (d.textContent !== text) { // a marker's control changed: its label, index and title
+        d.textContent = text;
+        d.dataset.index = String(j);
+        d.title = `Control ${text} is out of sight: click to bring it into view`;
+      }
+      const angle = `${Math.atan2(x * w, y * h).toFixed(3)}rad`; // 0: up
+      const place = `translate(${(((x + 1) / 2) * w).toFixed(1)}px, ${(((1 - y) / 2) * h).toFixed(1)}px)`;
+      if (d.somAngle !== angle) {
+        d.somAngle = angle;
+        d.style.setProperty('--angle', angle);
+      }
+      if (d.somPlace !== place) {
+        d.somPlace = place;
+        d.style.transform = place;
+      }
+      if (d.hidden) d.hidden = false;
       shown.push(j);
     }
-    for (let m = shown.length; m < this.divs.length; m++) this.divs[m].hidden = true;
+    for (let m = shown.length; m < this.divs.length; m++) if (!this.divs[m].hidden) this.divs[m].hidden = true;
     this.shown = shown;
     return shown;
   }

@@ -25,12 +25,12 @@ export class RadiusBall {
     this.pending = null; // {id, radius, i} not sent yet
     this.lastSent = 0;
     this.turns = 0;
-    this.local = new Map(); // control index -> {radius, until}: set here, on its way to the server
+    this.local = new Map(); // control id -> {radius, until}: set here, on its way to the server
   }
 
   // The radius of control i now (the one this view set, until the server's messages have caught up).
   radiusOf(i) {
-    const own = this.local.get(i);
+    const own = this.local.get(this.clay.controlIds[i] ?? i);
     if (own && performance.now() < own.until) return own.radius;
     return Number(this.clay.radii[i] ?? 0);
   }
@@ -66,7 +66,7 @@ export class RadiusBall {
   set(i, r) {
     r = Number(r.toPrecision(5));
     const until = performance.now() + SETTLE_MS;
-    for (const m of this.clay.runOf(i)) this.local.set(m, { radius: r, until });
+    for (const m of this.clay.runOf(i)) this.local.set(this.clay.controlIds[m] ?? m, { radius: r, until });
     this.pending = { id: this.clay.controlIds[i] ?? i, radius: r };
     this.turns += 1;
     this.flush();
@@ -77,7 +77,8 @@ export class RadiusBall {
   flush() {
     const now = performance.now();
     if (!this.pending || now - this.lastSent < SEND_MS) return;
-    if (this.link.send(intents.radius(this.pending.id, this.pending.radius))) this.lastSent = now;
+    if (!this.link.send(intents.radius(this.pending.id, this.pending.radius))) return; // tried again next frame
+    this.lastSent = now;
     this.pending = null;
   }
 }

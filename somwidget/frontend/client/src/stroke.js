@@ -6,7 +6,7 @@ import * as THREE from 'three';
 import { MAX_STROKE_POINTS, intents } from './protocol.js';
 
 const MOST_DRAWN = 2048; // points the preview holds
-const SENT_POINTS = 32; // a stroke goes out as at most this many points, evenly spaced along it (the message's limit)
+const SENT_POINTS = Math.min(32, MAX_STROKE_POINTS); // a stroke goes out as at most this many points, evenly spaced
 const SPACING = 0.01; // a new point comes at least this share of the clay's world radius from the last
 
 // `points` (model, [x, y, z] each) evenly resampled to at most `most` along their length, to 5 significant digits.
@@ -75,7 +75,7 @@ export class StrokeDraw {
     this.cancel();
     if (!points || points.length < 2) return false;
     const model = points.map((p) => this.clay.worldToModel(p));
-    const out = resampled(model, Math.min(SENT_POINTS, MAX_STROKE_POINTS));
+    const out = resampled(model);
     const sent = this.link.send(intents.stroke(out, radius === undefined ? undefined : Number(radius.toPrecision(5))));
     if (sent) this.sent += 1;
     return sent;

@@ -123,7 +123,10 @@ export class ClayView {
     const act = { // what the view's bar and keys do
       fit: () => this.rig.fit(this.clay.worldBounds()),
       look: (name) => this.rig.look(name),
-      orthographic: (on) => this.rig.setOrthographic(on),
+      orthographic: (on) => {
+        this.rig.setOrthographic(on);
+        this.handle.controls.camera = this.rig.camera; // aimed and sized for the camera now drawing
+      },
       stroke: (on) => { this.desktop.strokeTool = on; this.desktop.hover(null); },
       display: (name, value) => this.display.set(name, value),
     };
@@ -155,6 +158,9 @@ export class ClayView {
       this.handle.select(j);
     });
     this.occluded = new Set(); // effective controls the clay hides from the camera
+    this.occlusionRay = new THREE.Raycaster();
+    this.occlusionScratch = { eye: new THREE.Vector3(), c: new THREE.Vector3(), dir: new THREE.Vector3(),
+      back: new THREE.Vector3() };
     this.lastOcclusion = 0;
 
     this.state = { connected: false, topology: null, frame: null, frames: 0, fps: 0, fpsCount: 0,
@@ -359,19 +365,16 @@ export class ClayView {
     const triangles = (clay.topology?.triangles.length ?? 0) / 3;
     this.occluded = new Set();
     if (!clay.surface || triangles * clay.kEff > OCCLUSION_BUDGET) return;
-    const rc = new THREE.Raycaster();
-    const eye = new THREE.Vector3();
-    const c = new THREE.Vector3();
+    const rc = this.occlusionRay;
+    const { eye, c, dir, back } = this.occlusionScratch;
+    const ortho = this.camera.isOrthographicCamera;
+    if (ortho) this.camera.getWorldDirection(back).negate();
     for (let j = 0; j < clay.kEff; j++) {
       clay.controlWorld(j, c);
-      if (this.camera.isOrthographicCamera) {
-        const back = this.camera.getWorldDirection(new THREE.Vector3()).negate();
-        eye.copy(c).addScaledVector(back, 10 * this.rig.fitDistance);
-      } else {
-        eye.copy(this.camera.position);
-      }
+      if (ortho) eye.copy(c).addScaledVector(back, 10 * this.rig.fitDistance);
+      else eye.copy(this.camera.position);
       const far = eye.distanceTo(c);
-      rc.set(eye, c.clone().sub(eye).normalize());
+      rc.set(eye, dir.subVectors(c, eye).normalize());
       const hit = clay.surfaceHit(rc);
       if (hit && hit.distance < far - clay.worldControlRadius) this.occluded.add(j);
     }

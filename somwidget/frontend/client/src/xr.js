@@ -221,7 +221,7 @@ export class XRApp {
     }
     for (const st of this.inputs.values()) this.dragControl(st);
     this.dragStage();
-    this.tools.update([...this.inputs.values()]);
+    this.tools.update(this.inputs.values());
     for (const e of this.ends.splice(0)) {
       const st = this.inputs.get(e.source);
       if (st) this.endGrab(st, e.kind);
@@ -298,6 +298,15 @@ export class XRApp {
     if (st.point) v.userData.point.position.copy(st.point);
   }
 
+  // A controller's ray on a menu button presses it (true); the raycaster is left set along the ray.
+  pressMenuByRay(st) {
+    if (!st.rayOrigin) return false;
+    this.raycaster.set(st.rayOrigin, st.rayDir);
+    const button = this.menu.hit(this.raycaster);
+    if (button) this.menu.press(button);
+    return !!button;
+  }
+
   startGrab(st, kind) {
     if (!st.point) return;
     if (kind === 'select') {
@@ -307,23 +316,13 @@ export class XRApp {
         return;
       }
       if (this.tools.on) { // the Stroke tool draws, except on the menu
-        if (st.rayOrigin) this.raycaster.set(st.rayOrigin, st.rayDir);
-        const button = st.rayOrigin ? this.menu.hit(this.raycaster) : null;
-        if (button) {
-          this.menu.press(button);
-          return;
-        }
+        if (this.pressMenuByRay(st)) return;
         if (this.tools.start(st)) return;
       }
       const near = this.clay.nearest(st.point, Math.max(GRAB_RADIUS, 2 * this.clay.worldControlRadius));
       if (near) return this.grabControl(st, near.index, st.point);
       if (st.rayOrigin) {
-        this.raycaster.set(st.rayOrigin, st.rayDir);
-        const button = this.menu.hit(this.raycaster);
-        if (button) {
-            this.menu.press(button);
-          return;
-        }
+        if (this.pressMenuByRay(st)) return;
         const hit = this.clay.hitByRay(this.raycaster);
         if (hit) return this.grabControl(st, hit.index, st.point);
       }
