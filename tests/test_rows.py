@@ -119,7 +119,7 @@ def test_row_search_methods_match_reference(device, name):
         rows = wp.full((len(sources) + 1, n), 7, dtype=wp.int32, device=device)
         search.run(sources, [2, 0, 4, 1], rows, n)  # fills the batch's buffers
         wp.launch(distance_kernels.bfs_row_blocks, dim=len(sources), device="cpu",
-                  inputs=[search._offsets, search._neighbors, b["sources"], b["first"], b["slots"], rows, b["queue"],
+                  inputs=[search.offsets, search.neighbors, b["sources"], b["first"], b["slots"], rows, b["queue"],
                           b["size"], b["far"]])
         np.testing.assert_array_equal(rows.numpy()[[2, 0, 4, 1]], expected)
         np.testing.assert_array_equal(b["far"].numpy()[: len(sources)], expected.max(1))

@@ -27,11 +27,11 @@ from . import checks
 from .batch_kernels import GATHER, SEARCH, variants_kernel
 from .batch_shaping_kernels import shaping_variants_kernel
 from .device import resolve, usable_cores, warp_exclusive, warp_lock
-from .metrics import bounding_diagonal
-from .schedule import BY_NAME, KEYS, learning_table
+from .metrics import bounding_diagonal, median_edge
+from .schedule import BY_NAME, KEYS, SMOOTHING_RULES, learning_table
 from .shaping_kernels import CARRY_CUT
 from .shaping_path import SIGMA_OF_RADIUS, taubin_mu
-from .som import MAX_CONTROLS, MAX_DIMS, MAX_RADIUS, SMOOTHING_RULES, restart_iteration
+from .som import MAX_CONTROLS, MAX_DIMS, check_radii, restart_iteration
 from .topology import Topology, _components
 
 #: Learning-table entries (rows of every distinct schedule x (d_max + 1), float32) a batch may hold: 2 GiB.
@@ -53,26 +53,11 @@ def _per_variant(name: str, value, n: int) -> np.ndarray:
     return values
 
 
-def _radii(radii, k: int) -> np.ndarray:
-    """(k,) float32 radii >= 0, checked as Som checks them."""
-    if radii is None:
-        return np.zeros(k, np.float32)
-    r = checks.finite_array("radii", [radii] if np.isscalar(radii) else radii, 1)
-    if r.shape[0] != k:
-        raise ValueError(f"radii: expected one radius per control ({k}), got {r.shape[0]}")
-    if (r < 0).any() or (r > MAX_RADIUS).any():
-        raise ValueError(f"radii: each radius must lie in [0, {MAX_RADIUS:g}] (model units; 0 = a point control), "
-                         f"got {r.tolist()}")
-    return r
-
-
 def _scale(topology: Topology, start: np.ndarray, dims: list[int]) -> tuple[float, float]:
     """(the median edge length, the carrying floor) of a start mesh, as a Som measures them on its start weights
     (shaping_path.ShapingPath._median_edge; CARRY_CUT of the size)."""
-    p = start[:, dims].astype(np.float64)
-    e = np.asarray(topology.edges, np.int64).reshape(-1, 2)
-    edge = (float(np.median(np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1))) or 1.0) if len(e) else 1.0
-    return edge, CARRY_CUT * (bounding_diagonal(p) or 1.0)
+    p = start[:, dims]
+    return median_edge(p, topology.edges) or 1.0, CARRY_CUT * (bounding_diagonal(p) or 1.0)
 
 
 class BatchSom:
@@ -146,7 +131,7 @@ class BatchSom:
             raise ValueError(f"controls: expected 1 to {MAX_CONTROLS} controls counting mirrored copies, got {k} "
                              f"({k_eff} with mirroring)")
         self._controls = c.astype(np.float32)
-        self._radii = _radii(radii, k)
+        self._radii = check_radii(radii, k)
         if origin is not None:
             origin = checks.finite_array("origin", origin, 2)
             if origin.shape != (self.n_neurons, n):
@@ -158,8 +143,7 @@ class BatchSom:
         self._l_end = _per_variant("l_end", l_end, B)
         self._smoothing = _per_variant("smoothing", smoothing, B)
         self._reach = _per_variant("reach", reach, B)
-        if smoothing_rule not in SMOOTHING_RULES:
-            raise ValueError(f"smoothing_rule: expected one of {', '.join(SMOOTHING_RULES)}, got {smoothing_rule!r}")
+        checks.choice("smoothing_rule", smoothing_rule, SMOOTHING_RULES)
         self.smoothing_rule = smoothing_rule
         self._taubin = smoothing_rule == "taubin" and bool((self._smoothing > 0).any())
         second = [taubin_mu(x) if x > 0 else 0.0 for x in self._smoothing.tolist()]

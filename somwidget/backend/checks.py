@@ -66,6 +66,21 @@ def integer(name: str, value, minimum: int, maximum: int | None = None) -> int:
     return value
 
 
+def runs(name: str, lengths, total: int) -> tuple[int, ...]:
+    """Run lengths, each an integer >= 1, that add up to `total` (the strokes of a list of controls)."""
+    out = tuple(integer(f"{name}[{i}]", n, 1) for i, n in enumerate(lengths))
+    if sum(out) != total:
+        raise ValueError(f"{name}: the runs' lengths {list(out)} sum to {sum(out)}, not to the {total} controls")
+    return out
+
+
+def choice(name: str, value, options: tuple[str, ...]) -> str:
+    """One of `options`."""
+    if value not in options:
+        raise ValueError(f"{name}: expected one of {', '.join(map(repr, options))}, got {value!r}")
+    return value
+
+
 def real(name: str, value, low: float, high: float, low_open: bool = False) -> float:
     """A finite float in [low, high] (or (low, high] when low_open)."""
     try:

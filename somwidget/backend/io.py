@@ -7,7 +7,7 @@ whose message starts with the file's path and says what is wrong.
 from __future__ import annotations
 
 import os
-import tempfile
+import uuid
 from pathlib import Path
 from struct import error as struct_error
 
@@ -17,7 +17,7 @@ from . import checks
 from .refine import coarsen
 from .presets import (DISPLAYS, XYZ, FeatureLayout, Preset, colours_of, controls_on, kept_shape,
                       line_display_mesh, positions_of)
-from .schedule import BY_NAME, KEYS
+from .schedule import BY_NAME, KEYS, SMOOTHING_RULES
 from .symmetry import Symmetry
 from .topology import Topology
 
@@ -270,8 +270,8 @@ def weld(points: np.ndarray, triangles: np.ndarray, colours: np.ndarray | None =
         while target[rb] != rb:
             rb = target[rb]
         target[max(ra, rb)] = min(ra, rb)
-    for v in range(len(target)):
-        target[v] = target[target[v]]
+    while not np.array_equal(root := target[target], target):  # each vertex to its group's lowest one
+        target = root
     tris = target[tris]
     distinct = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
     area2 = np.linalg.norm(np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]), axis=1)
@@ -290,9 +290,25 @@ def _apart(p: np.ndarray, tris: np.ndarray, tol: float) -> tuple[np.ndarray, np.
     gap = 10.0 * tol
     keys = np.floor(p / gap).astype(np.int64)
     _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    crowded = counts[inverse.ravel()] > 1
-    if not crowded.any():
+    cell = inverse.ravel()
+    crowded = np.flatnonzero(counts[cell] > 1)
+    if not len(crowded):
         return p, tris
+    # of the vertices sharing a cell, those with one there that no edge joins to it (a short edge is not a touch)
+    edges = {(min(a, b), max(a, b)) for t in tris[np.isin(tris, crowded).any(axis=1)].tolist()
+             for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    groups: dict[int, list[int]] = {}
+    for v in crowded.tolist():
+        groups.setdefault(int(cell[v]), []).append(v)
+    touching = np.zeros(len(p), bool)
+    for members in groups.values():
+        for i, a in enumerate(members):
+            for b in members[i + 1:]:
+                if (a, b) not in edges:
+                    touching[a] = touching[b] = True
+    if not touching.any():
+        return p, tris
+    crowded = touching
     normals = np.zeros_like(p)
     face_n = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
     for corner in range(3):
@@ -403,17 +419,24 @@ def save_session(path, state: dict) -> None:
         arrays["face_sizes"] = np.asarray([len(f) for f in face_list], np.int64)
     else:
         arrays["topology_kind"] = np.str_("edges")
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".session-", suffix=".tmp", dir=folder)
+    write_atomic(Path(path), lambda f: np.savez_compressed(f, **arrays))
+
+
+def write_atomic(path: Path, write) -> None:
+    """`write(f)` into a temporary file beside `path` (".tmp-<name>-<random>"), flushed to the disk, then renamed
+    over `path`: `path` is either its old content or the whole new one, whatever happens meanwhile."""
+    tmp = path.with_name(f".tmp-{path.name}-{uuid.uuid4().hex[:8]}")
     try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **arrays)
+        with open(tmp, "wb") as f:
+            write(f)
             f.flush()
-            os.fsync(f.fileno())  # on the disk before it takes the name: a crash leaves the old file or the new
+            os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
         raise
 
 
@@ -609,12 +632,8 @@ def _check_state(state: dict, label: str) -> dict:
     if radii.shape != (k,) or (radii < 0).any():
         raise ValueError(f"{label}: key 'radii': expected {k} values >= 0 (one per control), got {radii.tolist()}")
     out["radii"] = radii
-    strokes = (1,) * k if state.get("strokes") is None else tuple(state["strokes"])
-    if any(isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1 for n in strokes) or \
-            sum(strokes) != k:
-        raise ValueError(f"{label}: key 'strokes': expected run lengths >= 1 that sum to the {k} controls, got "
-                         f"{list(strokes)}")
-    out["strokes"] = tuple(int(n) for n in strokes)
+    out["strokes"] = (1,) * k if state.get("strokes") is None else \
+        checks.runs(f"{label}: key 'strokes'", tuple(state["strokes"]), k)
     try:
         group = Symmetry.parse(state.get("symmetry", "none"))
     except ValueError as exc:
@@ -623,10 +642,8 @@ def _check_state(state: dict, label: str) -> dict:
         raise ValueError(f"{label}: key 'symmetry': a file keeps a mirror in 'mirror' and a radial group here, got "
                          f"{state['symmetry']!r} with mirror {out['mirror']}")
     out["symmetry"] = "none" if group is None else group.spec
-    if state.get("smoothing_rule", "laplacian") not in ("laplacian", "taubin"):
-        raise ValueError(f"{label}: key 'smoothing_rule': expected 'laplacian' or 'taubin', got "
-                         f"{state['smoothing_rule']!r}")
-    out["smoothing_rule"] = state.get("smoothing_rule", "laplacian")
+    out["smoothing_rule"] = checks.choice(f"{label}: key 'smoothing_rule'", state.get("smoothing_rule", "laplacian"),
+                                          SMOOTHING_RULES)
     return out
 
 

@@ -170,6 +170,7 @@ class LocalPath:
         return parts
 
     def _local_table(self) -> None:
-        """The cut table's reach per cycle, on the host and the device (after the table is built)."""
+        """The cut table's reach per cycle, as a list and as an array for the kernels (on the CPU, after the table is
+        built)."""
         self._reach_hops = reach_hops(self._table_host)
-        self._reach_dev = wp.array(self._reach_hops, dtype=wp.int32, device=self.device)
+        self._reach_dev = wp.array(self._reach_hops, dtype=wp.int32, device="cpu")

@@ -16,6 +16,13 @@ def bounding_diagonal(positions) -> float:
     return float(np.linalg.norm(p.max(axis=0) - p.min(axis=0))) if len(p) else 0.0
 
 
+def median_edge(positions, edges) -> float:
+    """The median length of a mesh's edges ((E, 2) vertex indices) at `positions`; 0 for a mesh without edges."""
+    p = np.asarray(positions, np.float64)
+    e = np.asarray(edges, np.int64).reshape(-1, 2)
+    return float(np.median(np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1))) if len(e) else 0.0
+
+
 def nearest_distances(points, nodes) -> np.ndarray:
     """(len(points),) the distance from each point to its nearest node (in blocks: memory stays bounded)."""
     pts = np.asarray(points, np.float64)

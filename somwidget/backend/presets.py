@@ -17,7 +17,7 @@ import numpy as np
 
 from . import checks
 from .metrics import bounding_diagonal
-from .schedule import BY_NAME, KEYS
+from .schedule import BY_NAME, KEYS, SMOOTHING_RULES
 from .symmetry import Symmetry
 from .topology import Topology
 
@@ -145,7 +145,7 @@ class Preset:
     radii: np.ndarray | None = None  # each control's own radius, where they differ (a saved session); else `radius`
     symmetry: Symmetry | None = None  # a radial group of its controls (a mirror is `mirror`'s dims)
     strokes: tuple[int, ...] | None = None  # the lengths of the runs of controls that act as one (None: each alone)
-    smoothing_rule: str = "laplacian"  # or "taubin" (keeps the volume): som.SMOOTHING_RULES
+    smoothing_rule: str = "laplacian"  # or "taubin" (keeps the volume): schedule.SMOOTHING_RULES
 
     def __post_init__(self):
         if not isinstance(self.topology, Topology):
@@ -174,19 +174,14 @@ class Preset:
                 raise ValueError(f"preset {self.name!r}: radii must be {len(self.controls)} values >= 0, got {radii}")
             self.radii = radii
         if self.strokes is not None:
-            self.strokes = tuple(checks.integer(f"preset {self.name!r}: strokes", n, 1) for n in self.strokes)
-            if sum(self.strokes) != len(self.controls):
-                raise ValueError(f"preset {self.name!r}: strokes {list(self.strokes)} do not sum to the "
-                                 f"{len(self.controls)} controls")
+            self.strokes = checks.runs(f"preset {self.name!r}: strokes", self.strokes, len(self.controls))
         if self.symmetry is not None:
             if not isinstance(self.symmetry, Symmetry):
                 raise ValueError(f"preset {self.name!r}: symmetry must be a Symmetry, got {self.symmetry!r}")
             if self.mirror:
                 raise ValueError(f"preset {self.name!r}: give either a symmetry or mirror dims, not both")
             self.symmetry = self.symmetry.on(self.layout.position, self.layout.direction)
-        if self.smoothing_rule not in ("laplacian", "taubin"):
-            raise ValueError(f"preset {self.name!r}: smoothing_rule must be 'laplacian' or 'taubin', got "
-                             f"{self.smoothing_rule!r}")
+        checks.choice(f"preset {self.name!r}: smoothing_rule", self.smoothing_rule, SMOOTHING_RULES)
         self.mirror = checks.dims(f"preset {self.name!r}: mirror", self.mirror, n)
         if self.smooth_dims is not None:
             self.smooth_dims = checks.dims(f"preset {self.name!r}: smooth_dims", self.smooth_dims, n)
@@ -212,8 +207,7 @@ class Preset:
     def effective_controls(self) -> np.ndarray:
         """The controls the engine trains on: originals, then their symmetric copies (by the group's elements)."""
         if self.symmetry is not None:
-            maps = self.symmetry.maps(self.layout.n_dims)
-            return np.concatenate([(self.controls.astype(np.float64) @ m.T).astype(np.float32) for m in maps])
+            return self.symmetry.images(self.controls).astype(np.float32)
         return effective_controls(self.controls, self.mirror)
 
     def control_radii(self) -> np.ndarray:

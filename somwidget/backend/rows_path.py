@@ -53,9 +53,6 @@ class RowCache:
             self.super_near = wp.empty((self.size, super_count(n)), dtype=wp.int32, device=device)
             self._used = np.zeros(self.size, bool)  # slots searched into before (their `near` tells what to clear)
             self._queue = wp.empty(n, dtype=wp.int32, device=device)
-            self._topology_arrays = (wp.array(topology.offsets, dtype=wp.int32, device=device),
-                                     wp.array(topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32),
-                                              dtype=wp.int32, device=device))
         self.computed = 0  # rows searched so far for winners
         self.prefetched = 0  # rows searched ahead for their neighbours
         self.stalls = 0  # graphs that stopped on a missing row
@@ -90,9 +87,9 @@ class RowCache:
             self._search.run([[u] for u in searched], at, self.rows, levels)
         else:  # the CPU: searches that cost what they visit (local_kernels.search_row)
             for u, slot in zip(searched, at):
-                wp.launch(search_row, dim=1, device="cpu", inputs=[*self._topology_arrays, u, slot, self.rows,
-                                                                    self.near, self.super_near, self._queue, levels,
-                                                                    int(not self._used[slot])])
+                wp.launch(search_row, dim=1, device="cpu",
+                          inputs=[self._search.offsets, self._search.neighbors, u, slot, self.rows, self.near,
+                                  self.super_near, self._queue, levels, int(not self._used[slot])])
                 self._used[slot] = True
             self._depth.update(dict.fromkeys(searched, levels))
         if fresh:

@@ -16,6 +16,9 @@ import numpy as np
 
 from . import checks
 
+#: How a smoothing step is taken: the paper's Laplacian step, or Taubin's pair (lambda, then mu: keeps the volume).
+SMOOTHING_RULES = ("laplacian", "taubin")
+
 #: The largest S (iterations) anything accepts: a view, a session file, a sweep or the engine.
 MAX_ITERATIONS = 1_000_000
 #: The neighbourhood radius a restart begins with, as a share of the full radius sigma (som.py, Restarts). Chosen

@@ -20,7 +20,7 @@ import math
 import numpy as np
 import warp as wp
 
-from .metrics import bounding_diagonal
+from .metrics import bounding_diagonal, median_edge
 from .shaping_kernels import CARRY_CUT, FIND_STRETCH, shaping_kernels
 from .topology import _components
 
@@ -44,11 +44,7 @@ class ShapingPath:
 
     def _median_edge(self) -> float:
         """The median length of the start mesh's edges in the position dims (the hop cutoff's unit)."""
-        e = np.asarray(self.topology.edges, np.int64).reshape(-1, 2)
-        if not len(e):
-            return 1.0
-        p = self._start[:, self._position_dims].astype(np.float64)
-        return float(np.median(np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1))) or 1.0
+        return median_edge(self._start[:, self._position_dims], self.topology.edges) or 1.0
 
     def _upload_shaping(self) -> None:
         """The effective controls grouped on the device (each stroke's samples, or a single control, followed by
@@ -92,7 +88,6 @@ class ShapingPath:
         self._sh_offsets = wp.zeros(k * order, dtype=wp.float32, device=dev)
         self._sh_radius2 = wp.zeros(k * order, dtype=wp.float32, device=dev)
         self._sh_group_of = wp.array(group_of, dtype=wp.int32, device=dev)
-        self._sh_order = order
         if getattr(self, "_sh_rest", None) is None:
             self._sh_rest = wp.empty_like(self._w)
             if dev == "cpu":  # the boxes of the rest positions' blocks and superblocks

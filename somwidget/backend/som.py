@@ -51,9 +51,9 @@ from .cuda_path import CudaPath
 from .cycle_kernels import CUDA_BLOCK, LONGEST_GRAPH, MAX_CONTROLS, PAIRS, SCALED_PAIRS, SINGLES, cycle_kernels
 from .local_path import LocalPath
 from .rows_path import RowCache, RowsPath
-from .schedule import BY_NAME, DEFAULT_REACH, NEIGHBOURHOOD_CUT, learning_table
+from .schedule import BY_NAME, DEFAULT_REACH, NEIGHBOURHOOD_CUT, SMOOTHING_RULES, learning_table
 from .shaping_path import ShapingPath, taubin_mu
-from .symmetry import Symmetry, mirror_dims_of, mirror_of_dims
+from .symmetry import Symmetry, images, mirror_dims_of, mirror_of_dims
 from .topology import MAX_DENSE_NEURONS, Topology
 
 MAX_DIMS = 32
@@ -72,9 +72,21 @@ def restart_iteration(reach: float, iterations: int) -> int:
 
 #: How a Som smooths: "laplacian" (the paper's uniform step, the case studies) or "taubin" (the same step, then a
 #: negative one that undoes its shrinking: the volume stays).
-SMOOTHING_RULES = ("laplacian", "taubin")
 #: Largest radius of influence a control may have (model units).
 MAX_RADIUS = 1e6
+
+
+def check_radii(radii, k: int) -> np.ndarray:
+    """(k,) float32 radii of influence, each in [0, MAX_RADIUS] model units (None: k point controls, 0)."""
+    if radii is None:
+        return np.zeros(k, np.float32)
+    r = checks.finite_array("radii", [radii] if np.isscalar(radii) else radii, 1)
+    if r.shape[0] != k:
+        raise ValueError(f"radii: expected one radius per control ({k}), got {r.shape[0]}")
+    if (r < 0).any() or (r > MAX_RADIUS).any():
+        raise ValueError(f"radii: each radius must lie in [0, {MAX_RADIUS:g}] (model units; 0 = a point "
+                         f"control), got {r.tolist()}")
+    return r
 
 
 class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
@@ -150,7 +162,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         self._smooth_dims = self._check_smooth_dims(smooth_dims)
         self._metric = self._check_metric(metric_weights)
         self._controls = self._check_controls(controls, self._mirror)
-        self._radii = self._check_radii(radii, len(self._controls))
+        self._radii = check_radii(radii, len(self._controls))
         self._strokes = self._check_strokes(strokes, len(self._controls))
         self._edge: float | None = None  # the start mesh's median edge length, once the shaping path needs it
         self._sh_rest = None  # the shaping path's weights where the latest restart began
@@ -247,28 +259,10 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         return symmetry, ()
 
     def _check_strokes(self, strokes, k: int) -> tuple[int, ...]:
-        if strokes is None:
-            return (1,) * k
-        runs = tuple(checks.integer(f"strokes[{i}]", n, 1) for i, n in enumerate(strokes))
-        if sum(runs) != k:
-            raise ValueError(f"strokes: the runs' lengths {list(runs)} sum to {sum(runs)}, not to the {k} controls")
-        return runs
+        return (1,) * k if strokes is None else checks.runs("strokes", strokes, k)
 
     def _check_smoothing_rule(self, rule) -> str:
-        if rule not in SMOOTHING_RULES:
-            raise ValueError(f"smoothing_rule: expected one of {', '.join(SMOOTHING_RULES)}, got {rule!r}")
-        return rule
-
-    def _check_radii(self, radii, k: int) -> np.ndarray:
-        if radii is None:
-            return np.zeros(k, np.float32)
-        r = checks.finite_array("radii", [radii] if np.isscalar(radii) else radii, 1)
-        if r.shape[0] != k:
-            raise ValueError(f"radii: expected one radius per control ({k}), got {r.shape[0]}")
-        if (r < 0).any() or (r > MAX_RADIUS).any():
-            raise ValueError(f"radii: each radius must lie in [0, {MAX_RADIUS:g}] (model units; 0 = a point "
-                             f"control), got {r.tolist()}")
-        return r
+        return checks.choice("smoothing_rule", rule, SMOOTHING_RULES)
 
     @property
     def _order(self) -> int:
@@ -478,7 +472,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
     @radii.setter
     @warp_exclusive
     def radii(self, value: ArrayLike) -> None:
-        self._radii = self._check_radii(value, len(self._controls))
+        self._radii = check_radii(value, len(self._controls))
         self._upload_controls()
         self._restart()
 
@@ -510,8 +504,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         (with a mirror: [originals..., mirrored copies...]); copy j is of control j mod k."""
         if self._order == 1:
             return self._controls.copy()
-        maps = self._group_maps()
-        return np.concatenate([(self._controls.astype(np.float64) @ m.T).astype(np.float32) for m in maps])
+        return images(self._controls, self._group_maps()).astype(np.float32)
 
     @property
     @warp_exclusive
@@ -547,7 +540,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
             raise ValueError("set_controls: from_anchor needs anchor() first (no weights are kept)")
         controls = self._check_controls(controls, self._mirror)
         if radii is not None or len(controls) != len(self._controls):
-            self._radii = self._check_radii(radii, len(controls))
+            self._radii = check_radii(radii, len(controls))
         if strokes is not None or len(controls) != len(self._controls):
             self._strokes = self._check_strokes(strokes, len(controls))
         self._controls = controls
@@ -569,7 +562,7 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
             self._symmetry, self._mirror = None, ()
             self._symmetry, self._mirror = self._check_symmetry(symmetry, mirror)
             self._controls = self._check_controls(controls, self._mirror)
-            self._radii = self._check_radii(radii, len(self._controls))
+            self._radii = check_radii(radii, len(self._controls))
             self._strokes = self._check_strokes(strokes, len(self._controls))
         except ValueError:
             self._symmetry, self._mirror, self._controls, self._radii, self._strokes = old
@@ -688,8 +681,9 @@ class Som(CpuPath, CudaPath, RowsPath, ShapingPath, LocalPath):
         self._d_max = d_max
         self._table_host = host
         self._table = wp.array(host, dtype=wp.float32, device=self.device, copy=self.device != "cpu")
-        self._local_table()
-        if self.device != "cpu":  # the device holds it; `learning_table()` reads it back
+        if self.device == "cpu":  # the local cycle's reach per cycle (the CPU's only)
+            self._local_table()
+        else:  # the device holds it; `learning_table()` reads it back
             self._table_host = None
 
     def _upload_controls(self) -> None:

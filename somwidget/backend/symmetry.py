@@ -31,6 +31,13 @@ def _axis(value) -> int:
     return checks.integer("axis", value, 0, 2)
 
 
+def images(controls: np.ndarray, maps: np.ndarray) -> np.ndarray:
+    """Controls (..., k, n) under each of a group's maps (order, n, n), stacked along the controls' axis:
+    [originals (the identity first)..., first copies..., ...], in float64."""
+    c = np.asarray(controls, np.float64)
+    return np.concatenate([c @ m.T for m in maps], axis=-2)
+
+
 @dataclass(frozen=True)
 class Symmetry:
     """A symmetry group (see the module's docstring). kind "mirror": across the plane normal to `axis`; "radial": `n`
@@ -133,6 +140,11 @@ class Symmetry:
                 if len(dims) == 3:
                     out[g][np.ix_(dims, dims)] = r
         return out
+
+    def images(self, controls: np.ndarray) -> np.ndarray:
+        """The effective controls, as the engine orders them: [originals..., first copies..., ...] (float64)."""
+        c = np.asarray(controls, np.float64)
+        return images(c, self.maps(c.shape[-1]))
 
     def copies(self, controls: np.ndarray) -> np.ndarray:
         """(k * order, n) the effective controls, grouped: each control followed by its copies."""

@@ -212,9 +212,10 @@ class RowSearch:
         self.device = device
         self.n = n = topology.n_vertices
         self._cost = len(topology.neighbors) + n
-        self._offsets = wp.array(topology.offsets, dtype=wp.int32, device=device)
+        #: the adjacency on the device (CSR: offsets, neighbours), which the CPU's row searches read too
+        self.offsets = wp.array(topology.offsets, dtype=wp.int32, device=device)
         neighbors = topology.neighbors if len(topology.neighbors) else np.zeros(1, np.int32)
-        self._neighbors = wp.array(neighbors, dtype=wp.int32, device=device)
+        self.neighbors = wp.array(neighbors, dtype=wp.int32, device=device)
         budget = _QUEUE_BYTES["cpu" if device == "cpu" else "cuda"]
         #: rows per launch (the queue holds a row of N int32 per search)
         self.batch = int(max(1, min(256, budget // (4 * n))))
@@ -264,11 +265,11 @@ class RowSearch:
             words, cap = self._shared
             kernel = distance_kernels.shared_row_search(words, cap, _SHARED_THREADS)
             wp.launch_tiled(kernel, dim=[count], block_dim=_SHARED_THREADS, device=self.device,
-                            inputs=[self._ell, self._offsets, self._neighbors, b["sources"], b["first"], b["slots"],
+                            inputs=[self._ell, self.offsets, self.neighbors, b["sources"], b["first"], b["slots"],
                                     rows, b["queue"], b["far"]])
         elif method == "block":
             wp.launch(distance_kernels.bfs_row_blocks, dim=count * _ROW_BLOCK_THREADS, block_dim=_ROW_BLOCK_THREADS,
-                      device=self.device, inputs=[self._offsets, self._neighbors, b["sources"], b["first"], b["slots"],
+                      device=self.device, inputs=[self.offsets, self.neighbors, b["sources"], b["first"], b["slots"],
                                                   rows, b["queue"], b["size"], b["far"]])
         elif method == "levels":
             b["count"].fill_(count)
@@ -281,7 +282,7 @@ class RowSearch:
             wp.capture_launch(graph)
         else:
             wp.launch(distance_kernels.bfs_wide, dim=count, device=self.device,
-                      inputs=[self._offsets, self._neighbors, b["sources"], b["first"], b["slots"], rows, b["queue"],
+                      inputs=[self.offsets, self.neighbors, b["sources"], b["first"], b["slots"], rows, b["queue"],
                               b["far"], levels])
         return b["far"].numpy()[:count] if far else None
 
@@ -293,7 +294,7 @@ class RowSearch:
                           b["far"]])
         for level in range(levels):
             wp.launch(distance_kernels.bfs_level, dim=(self.batch, _LEVEL_THREADS), device=dev,
-                      inputs=[self._offsets, self._neighbors, b["slots"], b["count"], rows, b["queue"], b["base"],
+                      inputs=[self.offsets, self.neighbors, b["slots"], b["count"], rows, b["queue"], b["base"],
                               b["size"], b["far"], level, _LEVEL_THREADS])
 
     def _buffer(self) -> dict[str, wp.array]:

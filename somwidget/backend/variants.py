@@ -199,8 +199,7 @@ def figures(plan: VariantPlan, weights: np.ndarray) -> dict:
     size = np.where(size > 0, size, 1.0)
     controls = plan.controls.astype(np.float64)
     if plan.symmetry is not None:
-        maps = plan.symmetry.maps(controls.shape[2])
-        controls = np.concatenate([controls @ m.T for m in maps], axis=1)
+        controls = plan.symmetry.images(controls)
     elif plan.mirror:
         image = controls.copy()
         image[:, :, list(plan.mirror)] *= -1.0

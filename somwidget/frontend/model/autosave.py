@@ -45,7 +45,6 @@ class Autosave:
         self.on_status = on_status
         self.error: str | None = None  # why the latest save failed; None once one is on disk
         self.saves = 0  # saves on disk
-        self.saved_at: float | None = None  # time.time() of the latest save on disk
         self._pending: Saving | None = None
         self._writing = False
         self._cond = threading.Condition()
@@ -92,7 +91,6 @@ class Autosave:
                 self._writing = False
                 if error is None:
                     self.saves += 1
-                    self.saved_at = time.time()
                 elif self._pending is None:
                     self._pending = saving  # tried again, unless a newer state comes first
                 changed, self.error = error != self.error, error

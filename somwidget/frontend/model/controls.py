@@ -9,7 +9,9 @@ import numpy as np
 
 from ...backend import checks
 from ...backend import presets as _presets
+from ...backend.metrics import median_edge
 from ...backend.presets import parse_hex_colour, rgb_to_colour_dims
+from ...backend.som import MAX_RADIUS, check_radii
 from .clay import Clay
 from .frames import FrameStream
 from .operations import SetControls
@@ -20,8 +22,6 @@ from .trainer import Trainer
 MAX_CONTROLS = _presets.MAX_CONTROLS
 #: Largest |value| accepted for a control coordinate or feature.
 MAX_ABS_VALUE = 1e6
-#: Largest radius of influence (model units).
-MAX_RADIUS = 1e6
 
 
 def check_index(name: str, value, count: int) -> int:
@@ -146,11 +146,7 @@ class ControlEdits:
                 raise ValueError(f"controls: expected shape (k, {n}), got {arr.shape}")
             check_count(arr, clay.symmetry)
             if radii is not None:
-                r = checks.finite_array("radii", radii, 1)
-                if r.shape != (len(arr),) or (r < 0).any() or (r > MAX_RADIUS).any():
-                    raise ValueError(f"radii: expected {len(arr)} values in [0, {MAX_RADIUS:g}] (one per control), "
-                                     f"got {r.tolist()}")
-                clay.radii = r
+                clay.radii = check_radii(radii, len(arr))
             elif len(arr) != len(clay.radii):
                 clay.radii = np.full(len(arr), clay.preset.radius, np.float32)
             if len(arr) != len(clay.controls):
@@ -222,9 +218,7 @@ class ControlEdits:
 
     def _spacing(self, radius: float) -> float:
         """How far apart a stroke's samples are: SPACING_SHARE of its radius, at least the clay's median edge."""
-        pos = self.frames.latest.positions
-        e = np.asarray(self.clay.preset.topology.edges, np.int64).reshape(-1, 2)
-        edge = float(np.median(np.linalg.norm(pos[e[:, 0]] - pos[e[:, 1]], axis=1))) if len(e) else 0.0
+        edge = median_edge(self.frames.latest.positions, self.clay.preset.topology.edges)
         return max(edge, SPACING_SHARE * radius, 1e-6)
 
     def remove(self, index) -> None:

@@ -116,9 +116,8 @@ def expand(controls: np.ndarray, radii: np.ndarray, strokes: tuple, group) -> tu
     copies...], with their radii and strokes."""
     if group is None:
         return controls, radii, strokes
-    maps = group.maps(controls.shape[1])
-    return (np.concatenate([(controls.astype(np.float64) @ m.T).astype(np.float32) for m in maps]),
-            np.tile(radii, len(maps)), strokes * len(maps))
+    order = group.order
+    return group.images(controls).astype(np.float32), np.tile(radii, order), strokes * order
 
 
 def regroup(clay, group) -> tuple[np.ndarray, np.ndarray, tuple, tuple, bool]:

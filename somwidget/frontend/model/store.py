@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ...backend import io as sw_io
+from ...backend.io import write_atomic
 from ...backend.presets import MAX_CONTROLS, Preset
 from ...backend.schedule import KEYS as SCHEDULE_KEYS
 from ...backend.schedule import MAX_ITERATIONS, Schedule
@@ -96,24 +97,6 @@ class Saved:
 
 
 # -- files --------------------------------------------------------------------------------------------------------
-def write_atomic(path: Path, write) -> None:
-    """`write(f)` into a temporary file beside `path`, flushed to the disk, then renamed over `path`: `path` is
-    either its old content or the whole new one, whatever happens meanwhile."""
-    tmp = path.with_name(f".tmp-{path.name}-{uuid.uuid4().hex[:8]}")
-    try:
-        with open(tmp, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
-        raise
-
-
 def sync_folder(folder: Path) -> None:
     """Flush a folder's entries (the names just renamed into it) to the disk."""
     if os.name != "posix":  # pragma: no cover - Windows has no directory handles to flush
@@ -304,10 +287,6 @@ class SessionStore:
         store = cls(folder, str(manifest.get("origin", "python")), handle)
         store._count_files()
         return store
-
-    @property
-    def locked(self) -> bool:
-        return self._handle is not None
 
     def open(self, notices: list[str] | None = None) -> None:
         """Make the folder and take its lock (once); OSError when the disk refuses."""

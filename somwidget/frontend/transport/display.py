@@ -109,8 +109,9 @@ def mirror_axes(group: str) -> list[bool]:
     return [symmetry is not None and symmetry.kind == "mirror" and symmetry.axis == a for a in range(3)]
 
 
-def topology_message(session, frame, client_id: int | None = None) -> dict:
-    """The JSON topology message for `frame` (whose generation must be the session's current one)."""
+def topology_message(session, frame) -> dict:
+    """The JSON topology message for `frame` (whose generation must be the session's current one), but for what each
+    view's copy adds (Outbox: its client id, the controls' ids, group, radii and strokes as they are now)."""
     geo = display_of(session)
     pos, _ = display_arrays(frame, session)
     start = _presets.positions_of(session.preset.weights, session.layout)
@@ -124,13 +125,10 @@ def topology_message(session, frame, client_id: int | None = None) -> dict:
         "preset": session.preset.name, "title": session.preset.title, "display": geo["display"],
         "n_vertices": int(geo["n_vertices"]), "n_nodes": int(session.topology.n_vertices),
         "triangles": geo["triangles"].ravel().tolist(), "segments": geo["segments"].ravel().tolist(),
-        "points": bool(geo["points"]), "n_controls": int(frame.n_controls),
-        "n_effective": int(len(frame.effective_controls)), "mirror_axes": mirror_axes(frame.group),
-        "group": frame.group, "group_maps": group_maps(frame.group), "up_axis": 2,
+        "points": bool(geo["points"]), "up_axis": 2,
         "bounds": {"min": [float(x) for x in lo], "max": [float(x) for x in hi]},
         "control_radius": 0.035 * span, "colour_space": session.layout.colour_space,
         "feature_names": list(session.layout.names), "max_coordinate": MAX_COORDINATE,
-        "max_message_bytes": MAX_MESSAGE_BYTES, "client": client_id,
+        "max_message_bytes": MAX_MESSAGE_BYTES,
         "parameters": [p.describe() for p in _parameters.PARAMETERS],
-        "control_ids": [int(i) for i in frame.control_ids],
     }
