@@ -32,6 +32,7 @@ def test_the_web_panel_sets_a_radius_and_a_symmetry_group():
             srv.wait(lambda s: abs(s["session"]["radii"][2] - 0.55) < 1e-6, what="control 2's radius")
             srv.idle()
             radius.fill("-1")  # refused: the message in the panel, the radius as it was
+            assert radius.input_value() == "-1", "the field lost what was typed before Enter"
             radius.press("Enter")
             page.wait_for_function("() => document.querySelector('#error-alert')?.innerText.includes('radius')")
             assert abs(srv.state()["session"]["radii"][2] - 0.55) < 1e-6
