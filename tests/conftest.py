@@ -1,4 +1,8 @@
-"""Shared fixtures for the engine tests.
+"""Shared fixtures for every test.
+
+Tests live in folders by room (engine, model, transport, web, notebook, xr, package) and carry markers: `browser`
+(drives a real Chromium), `gpu` (runs on a CUDA device, skipped without one), `slow` (a minute or more). The fast
+loop is `pytest -m "not browser and not slow"`.
 
 `device` is parametrised over DEVICES: "cpu" always, "cuda:0" only when Warp reports a CUDA device
 (otherwise that case is skipped with a reason). Every engine test runs the real Warp kernels.
@@ -40,7 +44,7 @@ DEVICES = [
     "cpu",
     pytest.param(
         "cuda:0",
-        marks=pytest.mark.skipif(not HAS_CUDA, reason="warp reports no CUDA device on this machine"),
+        marks=[pytest.mark.gpu, pytest.mark.skipif(not HAS_CUDA, reason="warp reports no CUDA device on this machine")],
     ),
 ]
 

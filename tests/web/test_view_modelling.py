@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve
 
+pytestmark = pytest.mark.browser
+
 playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
 if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
     pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from somwidget.frontend.transport import messages
 
-CLIENT_SRC = Path(__file__).resolve().parent.parent / "somwidget" / "frontend" / "client" / "src"
+CLIENT_SRC = Path(__file__).resolve().parents[2] / "somwidget" / "frontend" / "client" / "src"
 #: The frame header's fields, in HEADER_FORMAT's order (messages.py documents them).
 HEADER_FIELDS = ("magic", "version", "flags", "seq", "generation", "iteration", "iterations", "n", "k", "k_eff")
 

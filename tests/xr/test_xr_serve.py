@@ -22,6 +22,8 @@ from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, insecure_context
 from somwidget.frontend.transport import frames as wire_frames
 from somwidget.frontend.client import DIST
 
+pytestmark = pytest.mark.browser
+
 NOT_WIRED = ("`somwidget serve` does not serve /xr/: app.py must call somwidget.frontend.web.hub.attach(wslink_server, "
              "session, token=...) from ctrl.on_server_bind (see the XR helper's report)")
 

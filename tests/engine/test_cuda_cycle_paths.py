@@ -19,7 +19,7 @@ from somwidget.backend import dependent_launch
 from somwidget.backend import cuda_path
 from somwidget.backend.spread_kernels import SHARED_TABLE_WORDS
 
-pytestmark = pytest.mark.skipif(not HAS_CUDA, reason="warp reports no CUDA device on this machine")
+pytestmark = [pytest.mark.gpu, pytest.mark.skipif(not HAS_CUDA, reason="warp reports no CUDA device on this machine")]
 
 DEVICE = "cuda:0"
 

@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, wave_mesh
 
+pytestmark = pytest.mark.browser
+
 VIEWPORT = {"width": 1200, "height": 800}
 
 playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")

@@ -20,6 +20,8 @@ import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, free_port, sync_playwright, wait_for
 from test_app_browser import VIEW, VIEWPORT, open_page
 
+pytestmark = pytest.mark.browser
+
 
 @pytest.fixture(scope="module")
 def server():

@@ -23,6 +23,8 @@ from helpers import CHROMIUM, CHROMIUM_ARGS, wait_for
 
 from somwidget.frontend.client import DIST
 
+pytestmark = pytest.mark.browser
+
 VIEWPORT = {"width": 480, "height": 360}  # small: SwiftShader renders on the CPU
 
 playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")

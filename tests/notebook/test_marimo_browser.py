@@ -24,6 +24,8 @@ if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
 NOTEBOOK = '''
 import marimo
 
+pytestmark = pytest.mark.browser
+
 app = marimo.App(width="medium")
 
 

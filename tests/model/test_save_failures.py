@@ -22,6 +22,8 @@ from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, wait_for
 
 from somwidget.frontend.model import store as _store
 
+pytestmark = pytest.mark.browser
+
 playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
 
 

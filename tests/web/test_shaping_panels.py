@@ -14,6 +14,8 @@ from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, wait_for, wave_mesh
 from somwidget.frontend.model import Session
 from somwidget.frontend.notebook import Panel
 
+pytestmark = pytest.mark.browser
+
 playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from somwidget.cli import _build_parser, main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SERVE_OPTIONS = ("--preset", "--mesh", "--host", "--port", "--device", "--open")
 BENCH_OPTIONS = ("--device", "--cases", "--cycles", "--repeats", "--json", "--no-baseline")
 

@@ -33,6 +33,8 @@ pytest.importorskip("ipywidgets")
 from somwidget.frontend.notebook import Panel, SomWidget, show  # noqa: E402
 from somwidget.frontend.model import Session  # noqa: E402
 
+pytestmark = pytest.mark.browser
+
 wait_for = functools.partial(helpers.wait_for, timeout=15.0, interval=0.02)
 
 
