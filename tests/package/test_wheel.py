@@ -16,6 +16,8 @@ import zipfile
 import helpers
 import pytest
 
+pytestmark = pytest.mark.slow
+
 pytest.importorskip("build", reason="the build package is not installed")
 DIST = helpers.ROOT / "somwidget" / "frontend" / "client" / "dist"
 ANNOUNCED = re.compile(r"somwidget serving .* at (http://127\.0\.0\.1:\d+)/")
