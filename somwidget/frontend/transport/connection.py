@@ -195,4 +195,5 @@ HANDLERS: dict[type[Intent], Callable[[ViewConnection, Intent], ServerMessage | 
     TrainIntent: lambda c, _: c.session.train(),
     PauseIntent: lambda c, _: c.session.pause(),
 }
-assert set(HANDLERS) == set(INTENTS.values()), "every intent needs its handler in HANDLERS"
+if set(HANDLERS) != set(INTENTS.values()):
+    raise TypeError(f"intents without a handler in HANDLERS: {set(INTENTS.values()) - set(HANDLERS)}")

@@ -498,8 +498,8 @@ def _wire_type(hint) -> WireType | None:
 
 _DECLARED = {kind: declared_fields(cls) for kind, cls in INTENTS.items()}
 for _kind, _fields in _DECLARED.items():
-    _missing = [f.name for f in _fields if f.wire is None]
-    assert not _missing, f"intent {_kind!r}: fields without a wire type: {_missing}"
+    if any(f.wire is None for f in _fields):
+        raise TypeError(f"intent {_kind!r}: every field needs a wire type (fields.py), as Annotated[type, WireType]")
 
 
 def _no_constants(name: str):
