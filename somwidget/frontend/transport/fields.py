@@ -31,6 +31,19 @@ def _shown(value, limit: int = 40) -> str:
     return json.dumps(value)[:limit]
 
 
+def finite(value, name: str, kind: str) -> float:
+    """A finite JSON number (not true / false) as a float; IntentError naming the intent and the field."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise IntentError(f"{kind}: {name} must be a number, got {_shown(value)}", kind)
+    try:
+        x = float(value)
+    except OverflowError:
+        raise IntentError(f"{kind}: {name} is too large", kind) from None
+    if not math.isfinite(x):
+        raise IntentError(f"{kind}: {name} must be finite", kind)
+    return x
+
+
 class WireType:
     """A field's type on the wire: `check(value, name, kind, n_controls)` returns the value as Python uses it or
     raises IntentError naming the intent, the field and what was expected."""
@@ -50,14 +63,7 @@ class Number(WireType):
     js = "number"
 
     def check(self, value, name: str, kind: str, n_controls: int = 0) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise IntentError(f"{kind}: {name} must be a number, got {_shown(value)}", kind)
-        try:
-            x = float(value)
-        except OverflowError:
-            raise IntentError(f"{kind}: {name} is too large", kind) from None
-        if not math.isfinite(x):
-            raise IntentError(f"{kind}: {name} must be finite", kind)
+        x = finite(value, name, kind)
         if (self.low is not None and x < self.low) or (self.high is not None and x > self.high):
             raise IntentError(f"{kind}: {name} {x:g} is out of bounds ({self.low:g} <= {name} <= {self.high:g})",
                               kind)
@@ -100,7 +106,7 @@ class Coordinates(WireType):
     def check(self, value, name: str, kind: str, n_controls: int = 0) -> tuple[float, float, float]:
         if not isinstance(value, list) or len(value) != 3:
             raise IntentError(f"{kind}: {name} must be a list of 3 numbers, got {_shown(value, 60)}", kind)
-        xyz = tuple(Number().check(v, name, kind) for v in value)
+        xyz = (finite(value[0], name, kind), finite(value[1], name, kind), finite(value[2], name, kind))
         if max(abs(v) for v in xyz) > MAX_COORDINATE:
             raise IntentError(f"{kind}: {name} {list(xyz)} is out of bounds (|coordinate| <= {MAX_COORDINATE:g})",
                               kind)
@@ -119,7 +125,8 @@ class Points(WireType):
         if not isinstance(value, list) or not self.least <= len(value) <= self.most:
             raise IntentError(f"{kind}: {name} must be a list of {self.least} to {self.most} points [x, y, z], got "
                               f"{_shown(value, 60)}", kind)
-        return tuple(Coordinates().check(p, name, kind) for p in value)
+        point = Coordinates()
+        return tuple(point.check(p, name, kind) for p in value)
 
 
 @dataclass(frozen=True)

@@ -41,6 +41,7 @@ from .fields import (
     Radius,
     Value,
     WireType,
+    finite,
 )
 
 PROTOCOL_VERSION = 1
@@ -73,7 +74,7 @@ def check_setting(name: str, value):
     """`value` checked against the setting `name`'s declaration (type, bounds); ValueError naming the problem."""
     declared = _parameters.BY_NAME[name]
     if declared.kind != "bool":
-        value = Number().check(value, name, "set")
+        value = finite(value, name, "set")
     return declared.check(value)
 
 
