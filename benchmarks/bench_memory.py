@@ -89,7 +89,7 @@ def s_change(root: Path, folder: Path) -> None:
             async def send():
                 import aiohttp
 
-                url = srv.base.replace("http", "ws") + "/xr/ws"
+                url = srv.base.replace("http", "ws") + "/view/ws"
                 async with aiohttp.ClientSession() as cs, cs.ws_connect(url) as ws:
                     await ws.send_json({"type": "set", "name": "iterations", "value": S})
 

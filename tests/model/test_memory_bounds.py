@@ -38,7 +38,7 @@ def strip_obj(path, n: int = 4096) -> None:
 async def _set(base: str, name: str, value) -> None:
     import aiohttp
 
-    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/xr/ws") as ws:
+    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/view/ws") as ws:
         await ws.send_json({"type": "set", "name": name, "value": value})  # 54 bytes
         await ws.send_json({"type": "ping", "t": 1})
         while True:

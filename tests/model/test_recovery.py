@@ -1,7 +1,7 @@
 """Work is never lost (issue 27), each test written as the fault: a real `somwidget serve` stopped by SIGTERM, SIGINT
 and SIGKILL (mid-drag too), then started again; two servers and a Python session at once; many stopped sessions;
 a directory and a corrupt file where a saved session should be. The servers are driven through the views' websocket
-(/xr/ws) and read through GET /api/state (positions are the weights' position dims, exactly)."""
+(/view/ws) and read through GET /api/state (positions are the weights' position dims, exactly)."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ async def _send(base: str, messages: list, pause: float = 0.05, hold=None) -> No
     client that goes away mid-drag ends the drag: a test that kills the server mid-drag keeps it open)."""
     import aiohttp
 
-    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/xr/ws") as ws:
+    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/view/ws") as ws:
         for m in messages:
             await ws.send_json(m)
             await asyncio.sleep(pause)

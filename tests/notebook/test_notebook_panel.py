@@ -617,7 +617,10 @@ def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened
                 def saved_picture():
                     page.keyboard.press("Control+s")
                     page.wait_for_timeout(1000)
-                    state = json.loads(path.read_text()).get("metadata", {}).get("widgets", {})
+                    try:
+                        state = json.loads(path.read_text()).get("metadata", {}).get("widgets", {})
+                    except ValueError:  # read while Jupyter was writing it: look again
+                        return None
                     models = state.get("application/vnd.jupyter.widget-state+json", {}).get("state", {})
                     pictures = [m["state"].get("picture", "") for m in models.values()]
                     return next((x for x in pictures if x.startswith("data:image/png;base64,")), None)
