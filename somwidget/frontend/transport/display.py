@@ -10,7 +10,7 @@ import numpy as np
 
 from ...backend import io as _io
 from ...backend import presets as _presets
-from ..model import parameters as _parameters
+from ..model import settings as _parameters
 from ...backend.refine import cluster_on_grid
 from ...backend.symmetry import Symmetry
 from .messages import MAX_COORDINATE, MAX_MESSAGE_BYTES, PROTOCOL_VERSION

@@ -109,7 +109,7 @@ import json
 import math
 from dataclasses import dataclass
 
-from ..model import parameters as _parameters
+from ..model import settings as _parameters
 
 PROTOCOL_VERSION = 1
 MAGIC = b"SOMF"
