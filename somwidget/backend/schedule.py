@@ -112,11 +112,11 @@ class Setting:
         return d
 
 
-#: The panel sections settings show in: (title, what it is about).
+#: The panel sections settings show in: (title, what it is about: a note under or beside the title).
 SECTIONS: dict[str, tuple[str, str]] = {
     "schedule": ("Schedule", "alpha(s) from l_start to l_end over S cycles"),
     "symmetry": ("Symmetry", "every copy of a control acts together with it"),
-    "features": ("Feature dimensions", "metric weights m_j of the winner search"),
+    "features": ("Feature dimensions (metric weights)", "the m_j of the winner search"),
     "controls": ("Controls", "each control's radius of influence"),
 }
 

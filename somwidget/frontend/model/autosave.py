@@ -23,11 +23,10 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from . import store as _store
 from .files import preset_of, read
 from .operations import Publish
 from .state import ModellingState, max_vertices_for
-from .store import Saving, SessionStore, Unreadable
+from .store import Saving, SessionStore, Unreadable, autosave_dir, lock, peek, set_aside, stopped
 from .timeline import Timeline
 from .trainer import Trainer
 
@@ -245,8 +244,8 @@ def recover(session_class, origin: str | None = None, **options):
     notices: list[str] = []
     start = options.pop("start", True)
     max_vertices = options.get("max_vertices") or max_vertices_for(options.get("device"))
-    for folder in _store.stopped(notices):
-        manifest = _store.peek(folder)
+    for folder in stopped(notices):
+        manifest = peek(folder)
         if manifest is not None and origin is not None and manifest.get("origin") != origin:
             continue
         try:
@@ -297,7 +296,7 @@ LEGACY_SUFFIX = ".npz"
 def legacy_stopped() -> list[Path]:
     """Autosaves written by somwidget before 2026-11-25 (one session file each, no undo history) of sessions that
     stopped (their lock free or gone), newest first."""
-    folder = _store.autosave_dir()
+    folder = autosave_dir()
     if not folder.is_dir():
         return []
     found = []
@@ -307,7 +306,7 @@ def legacy_stopped() -> list[Path]:
         lock_path = path.with_suffix(".lock")
         if lock_path.exists():
             try:
-                handle = _store.lock(lock_path)
+                handle = lock(lock_path)
             except OSError:
                 continue
             if handle is None:
@@ -327,7 +326,7 @@ def _recover_legacy(session_class, origin, notices: list[str], max_vertices: int
         except ValueError as exc:
             try:
                 notices.append(f"the earlier version's autosave {path} cannot be read ({exc}); it is kept at "
-                               f"{_store.set_aside(path)}")
+                               f"{set_aside(path)}")
             except OSError as err:
                 notices.append(f"the earlier version's autosave {path} cannot be read ({exc}) nor set aside ({err})")
             continue

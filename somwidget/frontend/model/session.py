@@ -43,8 +43,8 @@ from ...backend import checks
 from ...backend import io as mesh_io
 from ...backend import presets as _presets
 from ...backend.presets import FeatureLayout, Preset
-from . import autosave as _autosave
-from . import store as _store
+from .autosave import SessionAutosave
+from .autosave import recover as recover_session
 from .controls import ControlEdits
 from .files import SessionFiles
 from .frames import Frame, FrameListener, FrameStream
@@ -52,6 +52,7 @@ from .operations import Publish, Reset, Restart
 from .refining import refined_preset
 from .settings import SessionSettings
 from .state import GPU_MAX_VERTICES, ModellingState, build, max_vertices_for
+from .store import SessionStore, prune
 from .summary import summary
 from .timeline import SessionHistory, Timeline
 from .trainer import Trainer
@@ -107,7 +108,7 @@ class Session:
         self.settings = SessionSettings(self.modelling, self.timeline, self.trainer)
         self.files = SessionFiles(self.modelling, self.timeline, self._build, self._install, self.max_vertices)
         self.frames.install(self._make_frame(0))
-        self.autosave = None if store is None else _autosave.SessionAutosave(self.modelling, store, self.timeline,
+        self.autosave = None if store is None else SessionAutosave(self.modelling, store, self.timeline,
                                                                               self.trainer)
         _LIVE.add(self)
         if start:
@@ -451,20 +452,20 @@ class Session:
         says which state came back. `options` go to Session (device, start...). It goes on saving in the same
         folder. A saved session that cannot be read is set aside (renamed, never deleted; `session.notices` and the
         log say where) and the next one tried."""
-        session, notices = _autosave.recover(cls, origin, **options)
+        session, notices = recover_session(cls, origin, **options)
         for notice in notices:
             log.warning("%s", notice)
         return session
 
 
-def _store_for(origin: str, notices: list[str]) -> _store.SessionStore:
+def _store_for(origin: str, notices: list[str]) -> SessionStore:
     """A new session's folder (made with its first save), after the stopped sessions past the bounds are pruned."""
-    store = _store.SessionStore.new(origin)
+    store = SessionStore.new(origin)
     try:
         store.open(notices)
     except OSError as exc:  # the autosave says so, and tries again
         log.warning("autosave: cannot make %s (%s); trying again with each save", store.folder, exc.strerror or exc)
-    _store.prune()
+    prune()
     return store
 
 

@@ -54,7 +54,7 @@ def check_set(name, value):
 
 class SessionSettings:
     """The settings of one session (see the module's docstring): `session.settings["reach"]`,
-    `session.settings.set("reach", 0.2)`, `session.settings.update(l_start=0.3, l_end=0.05)`."""
+    `session.settings.set("reach", 0.2)`, `session.settings.update(smoothing=0.1, reach=0.2)`."""
 
     def __init__(self, state: ModellingState, timeline: Timeline, trainer: Trainer):
         self.state = state
@@ -93,7 +93,7 @@ class SessionSettings:
         self.update({name: value})
 
     def update(self, values: Mapping | None = None, **more) -> None:
-        """Several settings of one value each as one step (`update(l_start=0.3, l_end=0.05)`): every value is
+        """Several settings of one value each as one step (`update(smoothing=0.1, reach=0.2)`): every value is
         checked first, so a refused one changes nothing."""
         values = {ALIASES.get(k, k): v for k, v in {**(values or {}), **more}.items()}
         declared = {s.name: s for s in settable() if s.section != "symmetry"}
