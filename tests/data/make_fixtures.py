@@ -1,6 +1,8 @@
-"""Writes the files tests/model/test_old_files.py reads: a session file and an autosave folder, made by somwidget as
-it was before the settings were declared once (commit 7a5338a, 2026-11-27). Kept to show how they were made; run
-again only to make files of the format of the day (never over these: they stand for the files people already have).
+"""Writes the files tests/model/test_old_files.py reads: a session file and an autosave folder. Those in tests/data
+were made by this script at commit 7a5338a (2026-11-27), before the settings were declared once (with the Session
+calls of then: set_reach, set_symmetry, set_metric_weights, snapshot, flush_autosave, autosave_path, which are the
+calls of session.settings, session.files and session.autosave below). Run it again only to make files of the format
+of the day, never over these: they stand for the files people already have.
 
     SOMWIDGET_DATA_DIR=$(mktemp -d) PYTHONPATH=. python tests/data/make_fixtures.py tests/data
 
@@ -32,7 +34,7 @@ def digest(weights) -> str:
 
 
 def described(session: Session) -> dict:
-    snap = session.snapshot()
+    snap = session.files.snapshot()
     return {"controls": snap["controls"].tolist(), "radii": snap["radii"].tolist(),
             "parameters": snap["parameters"], "iteration": snap["iteration"], "history": list(session.history),
             "weights_sha256": digest(snap["weights"]), "preset": snap["preset"].name}
@@ -45,9 +47,9 @@ def main(out: Path) -> None:
     s = Session("sphere", device="cpu", autosave=False)
     s.set_parameter("iterations", 300)
     s.set_smoothing(0.05)
-    s.set_reach(0.2)
-    s.set_symmetry(True)
-    s.set_metric_weights([1.0, 1.0, 0.5])
+    s.settings.set("reach", 0.2)
+    s.settings.set_symmetry(True)
+    s.settings.set_metric_weights([1.0, 1.0, 0.5])
     s.set_control_radius(1, 0.15)
     s.move_control(0, s.controls[0, :3] + np.float32([0.0, 0.0, 0.2]))
     assert s.wait_idle(120), s.error
@@ -65,9 +67,9 @@ def main(out: Path) -> None:
     assert s.wait_idle(120), s.error
     s.set_parameter("iterations", 400)
     assert s.wait_idle(120), s.error
-    assert s.flush_autosave(30)
+    assert s.autosave.flush(30)
     expected["autosave-v1-sphere"] = described(s)
-    folder = s.autosave_path
+    folder = s.autosave.path
     s.close()
     target = out / "autosave-v1-sphere"
     shutil.rmtree(target, ignore_errors=True)
