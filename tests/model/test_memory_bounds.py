@@ -150,7 +150,7 @@ print(json.dumps({"message": message, "seconds": time.perf_counter() - t, "extra
 def test_a_gpu_sized_import_is_counted_before_it_is_expanded(tmp_path):
     import trimesh
 
-    from somwidget.frontend.model.clay import GPU_MAX_VERTICES
+    from somwidget.frontend.model.state import GPU_MAX_VERTICES
 
     ball = trimesh.creation.icosphere(subdivisions=4)  # 2,562 vertices
     scene = trimesh.Scene()

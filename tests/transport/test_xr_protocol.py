@@ -261,7 +261,7 @@ def test_fuzz_bad_messages_are_refused_and_harmless(srv, session):
     np.testing.assert_array_equal(session.controls[others], controls[others])
     assert session.parameters == params and session.paused and session.error is None
     assert np.isfinite(session.frame.positions).all() and session.frame.seq >= seq
-    session.set_controls(controls)  # back as it was for the other tests
+    session.control_edits.replace(controls)  # back as it was for the other tests
     assert session.wait_applied(30)
 
 
@@ -271,7 +271,7 @@ def test_add_radius_stroke_and_remove_intents(srv, session):
     radius, "stroke" adds a line as one control, "remove" takes one away; the "controls" message before the next
     frame carries the radii and strokes."""
     assert session.wait_applied(30)
-    controls, radii, weights = session.controls, session.radii, session.frame.weights.copy()
+    controls, radii, weights = session.controls, session.control_edits.radii, session.frame.weights.copy()
     point = [float(v) for v in session.frame.positions[10]]
 
     async def main():
@@ -299,7 +299,7 @@ def test_add_radius_stroke_and_remove_intents(srv, session):
     run(main())
     assert session.wait_applied(30)
     np.testing.assert_array_equal(session.controls, controls)
-    np.testing.assert_array_equal(session.radii, radii)
+    np.testing.assert_array_equal(session.control_edits.radii, radii)
     np.testing.assert_array_equal(session.frame.weights, weights)  # paused: nothing trained, nothing moved
 
 
@@ -358,7 +358,7 @@ def test_two_clients_share_the_session_and_grabs(srv, session):
 
     run(main())
     assert not srv.hub.grabs
-    session.set_controls(start)
+    session.control_edits.replace(start)
     assert session.wait_applied(30)
 
 

@@ -410,7 +410,7 @@ def test_the_panel_comes_from_the_parameters_declaration_and_follows_a_change_ma
     comes back to that client as an error and changes nothing."""
     import aiohttp
 
-    from somwidget.frontend.model.parameters import PARAMETERS
+    from somwidget.frontend.model.settings import PARAMETERS
 
     page = open_page(browser, server)
     try:

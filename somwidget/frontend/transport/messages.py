@@ -27,7 +27,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Annotated, ClassVar, Literal
 
-from ..model import parameters as _parameters
+from ..model import settings as _settings
 from .fields import (
     MAX_COORDINATE,
     MAX_STROKE_POINTS,
@@ -59,11 +59,11 @@ IDENTITY_MAP = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 # -- the settings' part of the schema ------------------------------------------------------------------------------
 def settings_schema() -> list[dict]:
     """The settings a view may set by name ("set"), as the topology message lists them ("parameters")."""
-    return [p.describe() for p in _parameters.PARAMETERS]
+    return _settings.wire_schema()
 
 
 def setting_names() -> tuple[str, ...]:
-    return tuple(_parameters.BY_NAME)
+    return tuple(s.name for s in _settings.settable())
 
 
 #: A "set" intent's name: a declared setting.
@@ -72,10 +72,10 @@ SettingName = Annotated[str, OneOf(setting_names, "parameter")]
 
 def check_setting(name: str, value):
     """`value` checked against the setting `name`'s declaration (type, bounds); ValueError naming the problem."""
-    declared = _parameters.BY_NAME[name]
+    declared = {s.name: s for s in _settings.settable()}[name]
     if declared.kind != "bool":
         value = finite(value, name, "set")
-    return declared.check(value)
+    return _settings.check_set(name, value)
 
 
 # -- the binary frame ---------------------------------------------------------------------------------------------

@@ -33,7 +33,7 @@ from wslink.websocket import LinkProtocol
 from ...backend import presets as _presets
 from ..model import Session
 from ...backend.io import TooManyVertices
-from ..model.parameters import REACH_HELP
+from ..model.panel import REACH_HELP
 from ..transport.limits import bound_messages
 from . import lan as _lan
 from . import uploads
