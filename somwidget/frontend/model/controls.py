@@ -11,7 +11,7 @@ from ...backend import checks
 from ...backend import presets as _presets
 from ...backend.metrics import median_edge
 from ...backend.presets import parse_hex_colour, rgb_to_colour_dims
-from ...backend.som import MAX_RADIUS, check_radii
+from ...backend.som_controls import MAX_RADIUS, check_radii
 from .clay import Clay
 from .frames import FrameStream
 from .operations import SetControls

@@ -10,7 +10,7 @@ import numpy as np
 
 from ...backend import checks
 from ...backend.schedule import MAX_ITERATIONS
-from ...backend.som import _MAX_TABLE_ENTRIES
+from ...backend.som_schedule import MAX_TABLE_ENTRIES as _MAX_TABLE_ENTRIES
 from ...backend.symmetry import Symmetry
 from .clay import Clay
 from .controls import MAX_ABS_VALUE, check_count
