@@ -10,9 +10,9 @@ algorithm's three steps (som.py, The cycle; the same arithmetic as cycle_kernels
    shared memory; a barrier;
 2. move: each thread moves its neurons by the controls in list order, W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v), or
    a mirrored pair at once (`move_pair`, scaled by 1 / max(1, l1 + l2));
-3. smoothing (a variant with lambda > 0): the moved weights go to a scratch array, a barrier, then one Jacobi step;
-   with Taubin's rule (`taubin`) a barrier and a second step of strength mu < 0 into the scratch array, a barrier and
-   a copy back: the volume-keeping pair of shaping_path.py.
+3. smoothing (a variant with lambda > 0): the moved weights go to a scratch array, a barrier, then one Jacobi step
+   (smoothing_kernels.smoothed on the variant's row); with Taubin's rule (`taubin`) a barrier and a second step of
+   strength mu < 0 into the scratch array, a barrier and a copy back: the volume-keeping pair.
 
 Winner keys rotate through three buffers (cycle s fills buffer s % 3 and clears buffer s + 1), so one barrier a
 cycle is enough without smoothing. On the CPU, where Warp runs a block as one thread, the keys live in a global

@@ -47,8 +47,7 @@ class CpuPath:
     def prepare(self, model: SomModel, controls: Controls, schedule: SomSchedule) -> None:
         """Before a run: the cores' plan and the graphs for these controls and this schedule."""
         self.cores.plan(model.n_neurons, controls.n_slots)
-        self.graphs.valid_for((schedule.version, schedule.values.smoothing, controls.n_slots,
-                               controls.pairs(schedule.table_max)))
+        self.graphs.valid_for(controls, schedule)
 
     def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
         """`cycles` cycles from s (at most cycle_kernels.LONGEST_GRAPH)."""

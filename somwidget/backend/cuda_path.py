@@ -92,10 +92,8 @@ class CudaPath:
         self.graphs.clear()
 
     def prepare(self, model: SomModel, controls: Controls, schedule: SomSchedule) -> None:
-        """Before a run: the graphs for these controls and this schedule (they hold lambda, the table, the count of
-        controls and their pairing)."""
-        self.graphs.valid_for((schedule.version, schedule.values.smoothing, controls.n_slots,
-                               controls.pairs(schedule.table_max)))
+        """Before a run: the graphs for these controls and this schedule."""
+        self.graphs.valid_for(controls, schedule)
 
     def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
         """`cycles` cycles from s (at most cycle_kernels.LONGEST_GRAPH), replayed from a captured graph."""

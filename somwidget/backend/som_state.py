@@ -21,6 +21,7 @@ from .cycle_kernels import MAX_CONTROLS
 from .block_boxes import BlockBoxes
 from .som_controls import Controls
 from .som_model import SomModel
+from .som_schedule import SomSchedule
 
 KEY_NONE = np.uint64(0xFFFFFFFFFFFFFFFF)
 
@@ -176,15 +177,17 @@ class SomState:
 
 class Graphs:
     """Captured graphs of runs of cycles by key (with the packed arguments of their dependent launches, which must
-    live as long as they do), all dropped when what they hold changes: `valid_for(setup)` with a different setup
-    (the learning table, lambda, the control slots and how step 2 pairs them), or `clear()`."""
+    live as long as they do), all dropped when what they hold changes (`valid_for`), or by `clear()`."""
 
     def __init__(self, device: str):
         self.device = device
         self._held: dict[tuple, tuple] = {}
         self._setup: tuple | None = None
 
-    def valid_for(self, setup: tuple) -> None:
+    def valid_for(self, controls: Controls, schedule: SomSchedule) -> None:
+        """Keep the graphs only if they were captured for this learning table, lambda, count of control slots and
+        pairing of step 2 (what a graph holds)."""
+        setup = (schedule.version, schedule.values.smoothing, controls.n_slots, controls.pairs(schedule.table_max))
         if setup != self._setup:
             self._held.clear()
             self._setup = setup

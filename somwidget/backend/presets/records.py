@@ -214,7 +214,7 @@ class Preset:
 
 
 def effective_controls(controls, mirror=()) -> np.ndarray:
-    """[originals..., mirrored copies...]: each copy has the `mirror` dims negated (som.py, Mirrored pairs)."""
+    """[originals..., mirrored copies...]: each copy has the `mirror` dims negated (som.py, step 2)."""
     c = np.asarray(controls, dtype=np.float32)
     if not mirror:
         return c.copy()
