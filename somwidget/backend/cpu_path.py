@@ -15,11 +15,6 @@ from .som_schedule import SomSchedule
 from .som_state import Graphs, SomState
 
 
-def in_effective_order(found: np.ndarray, controls: Controls) -> np.ndarray:
-    """Winners in slot order (a mirrored pair side by side) in the order of `Controls.effective`."""
-    return np.concatenate([found[0::2], found[1::2]]) if controls.mirror else found
-
-
 class CpuPath:
     """The CPU's dense cycle: `run` replays each core's graph (`record` captures it), `winners` finds the winners of
     the current weights. It also runs distance rows on the CPU when rows_path.RowsPath drives it (the full
@@ -31,7 +26,7 @@ class CpuPath:
 
     def winners(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule) -> np.ndarray:
         state.fresh_winners(lambda: self.find_winners(model, state))
-        return in_effective_order(state.winners(state.n_slots), controls)
+        return controls.from_slots(state.winners(state.n_slots))
 
     @staticmethod
     def find_winners(model: SomModel, state: SomState) -> None:

@@ -10,7 +10,6 @@ import numpy as np
 import warp as wp
 
 from . import dependent_launch
-from .cpu_path import in_effective_order
 from .cycle_kernels import CUDA_BLOCK, SINGLES, cycle_kernels
 from .halos import block_halos
 from .som_controls import Controls
@@ -77,7 +76,7 @@ class CudaPath:
 
     def winners(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule) -> np.ndarray:
         state.fresh_winners(lambda: self.find_winners(model, state))
-        return in_effective_order(state.winners(state.n_slots), controls)
+        return controls.from_slots(state.winners(state.n_slots))
 
     @staticmethod
     def find_winners(model: SomModel, state: SomState) -> None:

@@ -14,7 +14,7 @@ import numpy as np
 import warp as wp
 
 from .cpu_cores import CpuCores
-from .cpu_path import CpuPath, in_effective_order
+from .cpu_path import CpuPath
 from .cycle_kernels import MAX_CONTROLS
 from .local_kernels import local_kernels
 from .row_cache import control_parts
@@ -51,7 +51,7 @@ class LocalPath:
 
     def winners(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule) -> np.ndarray:
         state.fresh_winners(lambda: CpuPath.find_winners(model, state))
-        return in_effective_order(state.winners(state.n_slots), controls)
+        return controls.from_slots(state.winners(state.n_slots))
 
     def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
         state.settle_anchor()

@@ -1,5 +1,5 @@
-"""The shaping cycle's kernels: controls with a radius of influence, symmetry groups of any size, and a smoothing
-step that keeps the volume (shaping_path.py runs them; som.py's docstring states the rules).
+"""The shaping cycle's kernels: controls with a radius of influence, symmetry groups of any size and strokes
+(shaping_path.py runs them; its smoothing steps, Taubin's pair among them, are smoothing_kernels.py's).
 
 One cycle, as the algorithm's three steps, generic on the CPU and on CUDA (a thread per neuron or per control):
   1. `find`: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2 for every effective control, from the weights before the

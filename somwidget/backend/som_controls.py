@@ -130,6 +130,10 @@ class Controls:
             return self.values.copy()
         return images(self.values, self.group_maps()).astype(np.float32)
 
+    def from_slots(self, found: np.ndarray) -> np.ndarray:
+        """Per-slot values (a mirrored pair side by side, `n_slots`) in the order of `effective`."""
+        return np.concatenate([found[0::2], found[1::2]]) if self.mirror else found
+
     def shaping(self, smoothing_steps: int) -> bool:
         """Whether the shaping path runs the cycles: radii, a radial group, strokes, or a second smoothing step
         (Taubin's); else the paper's rule (cpu_path.py, cuda_path.py, rows_path.py, local_path.py)."""
