@@ -46,9 +46,7 @@ class CpuPath:
 
     def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
         """`cycles` cycles from s (at most cycle_kernels.LONGEST_GRAPH)."""
-        fresh = not state.winners_valid
-        if fresh:
-            state.set_cycle()
+        fresh = state.start_run()
         smoothing = schedule.values.smoothing > 0.0
         self.prepare(model, controls, schedule)
         self.replay(model, state, controls, schedule, (cycles, fresh, smoothing), cycles, fresh, smoothing)

@@ -96,9 +96,7 @@ class CudaPath:
 
     def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
         """`cycles` cycles from s (at most cycle_kernels.LONGEST_GRAPH), replayed from a captured graph."""
-        fresh = not state.winners_valid
-        if fresh:
-            state.set_cycle()
+        fresh = state.start_run()
         smoothing = schedule.values.smoothing > 0.0
         parity = 0 if fresh else state.parity
         two_kernels = smoothing and self.smoothing_in_one_kernel(state.n_slots) is None

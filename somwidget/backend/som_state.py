@@ -121,6 +121,14 @@ class SomState:
         self.rest_pending = True
         self.rest_source = None
 
+    def start_run(self) -> bool:
+        """Whether a run of the paper's captured cycles starts afresh (the winners of cycle s unknown: it finds them
+        first), the counters then set to s."""
+        fresh = not self.winners_valid
+        if fresh:
+            self.set_cycle()
+        return fresh
+
     def fresh_winners(self, find: Callable[[], None]) -> None:
         """keys[s % 3]: the winners of the current weights, found by `find` unless they are known."""
         if self.winners_valid:
