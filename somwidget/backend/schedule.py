@@ -30,7 +30,7 @@ MAX_ITERATIONS = 1_000_000
 #: control among the values that do (a smaller reach pulls a narrower, pointier bump; a larger one wears down the
 #: neighbourhoods of the other controls).
 DEFAULT_REACH = 0.08
-#: The largest radius of influence of a control, in model units (som.py's MAX_RADIUS).
+#: The largest radius of influence of a control, in model units.
 MAX_RADIUS = 1e6
 
 _TRUE, _FALSE = ("true", "on", "1"), ("false", "off", "0")

@@ -12,7 +12,7 @@ from ...backend import checks, schedule
 from ...backend import presets as _presets
 from ...backend.metrics import median_edge
 from ...backend.presets import parse_hex_colour, rgb_to_colour_dims
-from ...backend.som import check_radii
+from ...backend.som_controls import check_radii
 from .state import ModellingState
 from .frames import FrameStream
 from .operations import SetControls

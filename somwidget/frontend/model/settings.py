@@ -16,7 +16,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ...backend import checks, schedule
-from ...backend.som import _MAX_TABLE_ENTRIES
+from ...backend.som_schedule import MAX_TABLE_ENTRIES as _MAX_TABLE_ENTRIES
 from ...backend.symmetry import Symmetry
 from .controls import MAX_ABS_VALUE, check_count
 from .operations import Publish, SetMetricWeights, SetParameter, SetSymmetry
