@@ -111,10 +111,15 @@ class Clay:
         """A new preset and its Som (caller holds both locks, or nothing runs yet): new ids, parameters from the Som,
         the next generation."""
         self.preset, self.som, self.layout = preset, som, preset.layout
-        self.controls = np.array(som.controls, dtype=np.float32)
+        controls = np.array(som.controls, dtype=np.float32)
+        same = getattr(self, "controls", None) is not None and np.array_equal(controls, self.controls)
+        self.controls = controls
         self.radii = np.array(som.radii, dtype=np.float32)
         self.strokes = tuple(som.strokes)
-        self.control_ids = self.applied_ids = self.fresh_ids(len(self.controls))
+        if not same:  # another clay's controls: numbered from 0 again (the same controls, Refine: their ids stay)
+            self._next_id = 0
+            self.control_ids = self.fresh_ids(len(self.controls))
+        self.applied_ids = self.control_ids
         self.symmetry = som_group(som, preset.layout)
         self.default_group = self.symmetry or default_group(preset)  # what "symmetry on" brings
         self.params = {name: type(getattr(som, name))(getattr(som, name)) for name in SCHEDULE_KEYS}
@@ -158,7 +163,7 @@ class Clay:
         params = dict(self.params, metric_weights=list(self.params["metric_weights"]))
         return Step(preset=self.preset, controls=self.controls.copy(), parameters=params, weights=self.som.weights,
                     iteration=int(self.som.iteration), radii=self.radii.copy(), symmetry=self.symmetry,
-                    strokes=self.strokes)
+                    strokes=self.strokes, control_ids=tuple(self.control_ids))
 
     def put_back(self, step: Step) -> None:
         """Put a recorded state into the Som exactly, and the session's view with it; nothing trains until the next
@@ -177,7 +182,10 @@ class Clay:
         self.radii = np.array(radii, np.float32)
         self.strokes = tuple(som.strokes)
         self.set_symmetry(step.symmetry)
-        if len(self.controls) != len(self.control_ids):  # a control added or removed: new ids (a grab on an id
+        if step.control_ids is not None and len(step.control_ids) == len(self.controls):  # the ids it had: each
+            self.control_ids = tuple(step.control_ids)  # control's number and colour come back with it
+            self._next_id = max(self._next_id, max(self.control_ids, default=-1) + 1)
+        elif len(self.controls) != len(self.control_ids):  # a control added or removed: new ids (a grab on an id
             self.control_ids = self.fresh_ids(len(self.controls))  # that is gone ends)
         self.applied_ids = self.control_ids
         self.params = dict(p, metric_weights=list(p["metric_weights"]))

@@ -13,6 +13,10 @@ const LIGHT_SEGMENTS = 4096; // synapses above which moving clay on a software r
 const WHITE = new THREE.Color(0xffffff);
 const HOVER_LIGHTEN = 0.35; // a hovered control's colour moves this far towards white
 const IDENTITY = [1, 0, 0, 0, 1, 0, 0, 0, 1];
+const GHOST_SIZE = 0.6; // a symmetric copy (a ghost) is drawn this many times a control's size ...
+const GHOST_OPACITY = 0.3; // ... and this faint
+export const DRAWN_PX = { control: 6, ghost: 4 }; // the smallest radius a control (a ghost) is drawn at, in pixels
+export const PICKED_PX = { control: 14, ghost: 9 }; // ... and the smallest radius a press or hover takes it within
 
 // A 3 x 3 map (row-major, 9 numbers) of a position p: M p, and its inverse (the transpose: the maps are orthogonal).
 export const applyMap = (M, p) => [M[0] * p[0] + M[1] * p[1] + M[2] * p[2], M[3] * p[0] + M[4] * p[1] + M[5] * p[2],
@@ -75,6 +79,7 @@ export class Clay {
     this.controlIds = []; // each control's stable id, in index order (what intents name)
     this.radii = []; // each control's radius of influence (model units), from the topology and "controls" messages
     this.strokes = []; // the runs of controls that act as one (a stroke's samples)
+    this.pixelSize = null; // (world point) => world units a screen pixel spans there (null: no floor, a headset)
   }
 
   get ready() {
@@ -160,6 +165,18 @@ export class Clay {
   setRuns(msg) {
     if (Array.isArray(msg.radii)) this.radii = msg.radii.map(Number);
     if (Array.isArray(msg.strokes)) this.strokes = msg.strokes.map(Number);
+  }
+
+  // Whether effective control j carries a number: a control a person placed (not a symmetric copy, a ghost; of a
+  // stroke, its first sample).
+  numbered(j) {
+    if (j >= this.k) return false;
+    let first = 0;
+    for (const n of this.strokes) {
+      if (j < first + n) return j === first;
+      first += n;
+    }
+    return true;
   }
 
   // The indices of the controls that act as one with control i (a stroke's samples; i alone otherwise).
@@ -252,7 +269,8 @@ export class Clay {
   }
 
   // The control spheres: an anchor (Object3D) per effective control carries its place and size, and two instanced
-  // meshes draw them, the originals solid and the copies translucent (two draw calls whatever the count).
+  // meshes draw them, the originals solid and the copies (ghosts) smaller and faint (two draw calls whatever the
+  // count). A control is never drawn smaller than DRAWN_PX on screen (`pixelSize`).
   rebuildControls(kEff) {
     for (const m of this.controlAnchors) this.content.remove(m);
     for (const d of this.controlDraws) {
@@ -273,7 +291,7 @@ export class Clay {
     }
     const draw = (count, ghost) => {
       const d = new THREE.InstancedMesh(this.sphere, new THREE.MeshLambertMaterial({
-        transparent: ghost, opacity: ghost ? 0.55 : 1.0 }), Math.max(count, 1));
+        transparent: ghost, opacity: ghost ? GHOST_OPACITY : 1.0, depthWrite: !ghost }), Math.max(count, 1));
       d.count = count;
       d.name = ghost ? 'control-mirrors' : 'control-spheres';
       d.frustumCulled = false;
@@ -295,7 +313,8 @@ export class Clay {
     this.kEff = kEff;
   }
 
-  // What control j looks like as drawn: its colour and its radius over the control radius.
+  // What control j looks like as drawn: its colour, its radius over the control radius, whether it is a ghost (a
+  // symmetric copy) and how opaque.
   controlLook(j) {
     if (j < 0 || j >= this.kEff) return null;
     const [d, i] = j < this.k ? [this.controlDraws[0], j] : [this.controlDraws[1], j - this.k];
@@ -303,7 +322,8 @@ export class Clay {
     d.getColorAt(i, c);
     const m = new THREE.Matrix4();
     d.getMatrixAt(i, m);
-    return { colour: `#${c.getHexString()}`, scale: m.getMaxScaleOnAxis() / this.controlRadius };
+    return { colour: `#${c.getHexString()}`, scale: m.getMaxScaleOnAxis() / this.controlRadius, ghost: j >= this.k,
+      opacity: d.material.opacity };
   }
 
   // Positions, colours and highlights of the control spheres (local drags win over the server's positions).
@@ -319,8 +339,9 @@ export class Clay {
       const hovered = this.hover.has(j);
       const c = m.userData.colour.copy(held ? HELD : (m.userData.base || HELD));
       if (hovered && !held) c.lerp(WHITE, HOVER_LIGHTEN);
-      const grow = held ? (m.userData.mirror ? 1.35 : 1.6) : hovered ? 1.3 : 1.0;
-      m.scale.setScalar(this.controlRadius * grow);
+      const ghost = m.userData.mirror;
+      const grow = (held ? (ghost ? 1.35 : 1.6) : hovered ? 1.3 : 1.0) * (ghost ? GHOST_SIZE : 1.0);
+      m.scale.setScalar(Math.max(this.controlRadius * grow, this.floorAt(m, ghost ? DRAWN_PX.ghost : DRAWN_PX.control)));
       m.updateMatrix();
       const [d, at] = j < this.k ? [this.controlDraws[0], j] : [this.controlDraws[1], j - this.k];
       if (!d || at >= d.count) continue;
@@ -331,6 +352,13 @@ export class Clay {
       d.instanceMatrix.needsUpdate = true;
       if (d.instanceColor) d.instanceColor.needsUpdate = true;
     }
+  }
+
+  // The model radius that `px` screen pixels make at anchor m (0 without a camera to measure: a headset).
+  floorAt(m, px) {
+    if (!this.pixelSize) return 0;
+    const w = m.getWorldPosition(this.scratchWorld || (this.scratchWorld = new THREE.Vector3()));
+    return (px * this.pixelSize(w)) / this.scale;
   }
 
   setLocal(i, modelPos) {
@@ -364,16 +392,22 @@ export class Clay {
   // The world-space sphere around the drawn clay and every control (null before the first frame).
   worldBounds() {
     if (!this.lastFrame) return null;
-    const box = new THREE.Box3();
-    const a = this.positionAttr.array;
-    const v = new THREE.Vector3();
-    for (let o = 0; o < a.length; o += 3) box.expandByPoint(v.set(a[o], a[o + 1], a[o + 2]));
+    const box = this.drawnBox();
     for (const m of this.controlAnchors) box.expandByPoint(m.position);
     if (box.isEmpty()) return null;
     const centre = box.getCenter(new THREE.Vector3());
     const radius = Math.max(box.getSize(new THREE.Vector3()).length() / 2 + this.controlRadius * 1.6, 1e-6);
     const c = centre.toArray();
     return { center: this.modelToWorld(c), radius: radius * this.scale };
+  }
+
+  // The box of the clay as drawn now (model units; empty before a frame).
+  drawnBox() {
+    const box = new THREE.Box3();
+    const a = this.positionAttr?.array ?? [];
+    const v = new THREE.Vector3();
+    for (let o = 0; o < a.length; o += 3) box.expandByPoint(v.set(a[o], a[o + 1], a[o + 2]));
+    return box;
   }
 
   controlWorld(j, target = new THREE.Vector3()) {
@@ -412,19 +446,47 @@ export class Clay {
     return { point: h.point.clone(), distance: h.distance, normal };
   }
 
-  // The effective control a ray hits first (spheres padded by `pad` x their radius): {index, point} or null.
+  // The effective controls a ray passes by: each within its pick radius (its drawn sphere padded by `pad`, at least
+  // PICKED_PX on screen where the view measures pixels), as {index, along (the ray's length to the point nearest the
+  // centre), off (the ray's distance from the centre), drawn (world radius), reach (pick radius), point}.
+  rayCandidates(raycaster, pad = 1.5) {
+    const out = [];
+    const ray = raycaster.ray;
+    const w = new THREE.Vector3();
+    for (let j = 0; j < this.kEff; j++) {
+      const m = this.controlAnchors[j];
+      this.controlWorld(j, w);
+      const along = w.clone().sub(ray.origin).dot(ray.direction);
+      if (along < 0) continue;
+      const off = ray.at(along, new THREE.Vector3()).distanceTo(w);
+      const drawn = m.scale.x * this.scale;
+      const px = this.pixelSize ? this.pixelSize(w) : 0;
+      const reach = Math.max(drawn * pad, px * (m.userData.mirror ? PICKED_PX.ghost : PICKED_PX.control));
+      if (off <= reach) out.push({ index: j, along, off, drawn, reach, ghost: !!m.userData.mirror, point: w.clone() });
+    }
+    return out;
+  }
+
+  // Whether the clay hides effective control j from `camera`: the line of sight to its centre meets the clay more
+  // than `slack` x its drawn radius before it (a control lying on the surface shows, one behind the clay does not).
+  hides(j, camera, slack = 1.0, raycaster = new THREE.Raycaster()) {
+    const c = this.controlWorld(j);
+    if (!c || !this.surface) return false;
+    const eye = camera.isOrthographicCamera
+      ? c.clone().addScaledVector(camera.getWorldDirection(new THREE.Vector3()), -20 * this.worldRadius)
+      : camera.getWorldPosition(new THREE.Vector3());
+    const far = eye.distanceTo(c);
+    raycaster.set(eye, c.clone().sub(eye).normalize());
+    const hit = this.surfaceHit(raycaster);
+    return !!hit && hit.distance < far - slack * this.controlAnchors[j].scale.x * this.scale;
+  }
+
+  // The effective control a ray hits first (spheres padded by `pad` x their radius): {index, distance, point} or null.
   hitByRay(raycaster, pad = 1.5) {
     let best = null;
-    const w = new THREE.Vector3();
-    const sphere = new THREE.Sphere();
-    const hit = new THREE.Vector3();
-    for (let j = 0; j < this.kEff; j++) {
-      this.controlWorld(j, w);
-      sphere.set(w, this.worldControlRadius * pad);
-      if (raycaster.ray.intersectSphere(sphere, hit)) {
-        const d = hit.distanceTo(raycaster.ray.origin);
-        if (!best || d < best.distance) best = { index: j, distance: d, point: hit.clone() };
-      }
+    for (const c of this.rayCandidates(raycaster, pad)) {
+      const distance = c.along - Math.sqrt(Math.max(c.reach * c.reach - c.off * c.off, 0));
+      if (!best || distance < best.distance) best = { index: c.index, distance, point: c.point };
     }
     return best;
   }
