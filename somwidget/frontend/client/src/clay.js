@@ -16,7 +16,6 @@ const IDENTITY = [1, 0, 0, 0, 1, 0, 0, 0, 1];
 const GHOST_SIZE = 0.6; // a symmetric copy (a ghost) is drawn this many times a control's size ...
 const GHOST_OPACITY = 0.3; // ... and this faint
 export const DRAWN_PX = { control: 6, ghost: 4 }; // the smallest radius a control (a ghost) is drawn at, in pixels
-export const PICKED_PX = { control: 14, ghost: 9 }; // ... and the smallest radius a press or hover takes it within
 
 // A 3 x 3 map (row-major, 9 numbers) of a position p: M p, and its inverse (the transpose: the maps are orthogonal).
 export const applyMap = (M, p) => [M[0] * p[0] + M[1] * p[1] + M[2] * p[2], M[3] * p[0] + M[4] * p[1] + M[5] * p[2],
@@ -41,6 +40,14 @@ export function groupOf(msg) {
   if (axis < 0) return { name: typeof msg.group === 'string' ? msg.group : 'none', maps: [IDENTITY] };
   const mirror = [0, 1, 2].flatMap((r) => [0, 1, 2].map((c) => (r === c ? (axes[r] ? -1 : 1) : 0)));
   return { name: typeof msg.group === 'string' ? msg.group : `mirror-${'xyz'[axis]}`, maps: [IDENTITY, mirror] };
+}
+
+// The box of the positions in `array` (x, y, z, x, ...; empty for none).
+export function boxOf(array) {
+  const box = new THREE.Box3();
+  const v = new THREE.Vector3();
+  for (let o = 0; o < array.length; o += 3) box.expandByPoint(v.set(array[o], array[o + 1], array[o + 2]));
+  return box;
 }
 
 export class Clay {
@@ -167,16 +174,10 @@ export class Clay {
     if (Array.isArray(msg.strokes)) this.strokes = msg.strokes.map(Number);
   }
 
-  // Whether effective control j carries a number: a control a person placed (not a symmetric copy, a ghost; of a
+  // Whether effective control j carries a number: a control a person placed (not a ghost, a symmetric copy; of a
   // stroke, its first sample).
   numbered(j) {
-    if (j >= this.k) return false;
-    let first = 0;
-    for (const n of this.strokes) {
-      if (j < first + n) return j === first;
-      first += n;
-    }
-    return true;
+    return j < this.k && this.runOf(j)[0] === j;
   }
 
   // The indices of the controls that act as one with control i (a stroke's samples; i alone otherwise).
@@ -313,19 +314,6 @@ export class Clay {
     this.kEff = kEff;
   }
 
-  // What control j looks like as drawn: its colour, its radius over the control radius, whether it is a ghost (a
-  // symmetric copy) and how opaque.
-  controlLook(j) {
-    if (j < 0 || j >= this.kEff) return null;
-    const [d, i] = j < this.k ? [this.controlDraws[0], j] : [this.controlDraws[1], j - this.k];
-    const c = new THREE.Color();
-    d.getColorAt(i, c);
-    const m = new THREE.Matrix4();
-    d.getMatrixAt(i, m);
-    return { colour: `#${c.getHexString()}`, scale: m.getMaxScaleOnAxis() / this.controlRadius, ghost: j >= this.k,
-      opacity: d.material.opacity };
-  }
-
   // Positions, colours and highlights of the control spheres (local drags win over the server's positions).
   refreshControls() {
     this.onChange?.();
@@ -392,7 +380,7 @@ export class Clay {
   // The world-space sphere around the drawn clay and every control (null before the first frame).
   worldBounds() {
     if (!this.lastFrame) return null;
-    const box = this.drawnBox();
+    const box = boxOf(this.positionAttr.array);
     for (const m of this.controlAnchors) box.expandByPoint(m.position);
     if (box.isEmpty()) return null;
     const centre = box.getCenter(new THREE.Vector3());
@@ -401,32 +389,11 @@ export class Clay {
     return { center: this.modelToWorld(c), radius: radius * this.scale };
   }
 
-  // The box of the clay as drawn now (model units; empty before a frame).
-  drawnBox() {
-    const box = new THREE.Box3();
-    const a = this.positionAttr?.array ?? [];
-    const v = new THREE.Vector3();
-    for (let o = 0; o < a.length; o += 3) box.expandByPoint(v.set(a[o], a[o + 1], a[o + 2]));
-    return box;
-  }
-
   controlWorld(j, target = new THREE.Vector3()) {
     const m = this.controlAnchors[j];
     if (!m) return null;
     this.stage.updateWorldMatrix(true, true);
     return m.getWorldPosition(target);
-  }
-
-  // The effective control nearest to a world point, within maxDistance (world units): {index, distance} or null.
-  nearest(worldPoint, maxDistance) {
-    let best = null;
-    const w = new THREE.Vector3();
-    for (let j = 0; j < this.kEff; j++) {
-      this.controlWorld(j, w);
-      const d = w.distanceTo(worldPoint);
-      if (d <= maxDistance && (!best || d < best.distance)) best = { index: j, distance: d };
-    }
-    return best;
   }
 
   // Where a ray first meets the clay (its surface; a point display's nearest node within `pointPad` x the control
@@ -444,51 +411,6 @@ export class Clay {
       if (normal.dot(raycaster.ray.direction) > 0) normal.negate();
     }
     return { point: h.point.clone(), distance: h.distance, normal };
-  }
-
-  // The effective controls a ray passes by: each within its pick radius (its drawn sphere padded by `pad`, at least
-  // PICKED_PX on screen where the view measures pixels), as {index, along (the ray's length to the point nearest the
-  // centre), off (the ray's distance from the centre), drawn (world radius), reach (pick radius), point}.
-  rayCandidates(raycaster, pad = 1.5) {
-    const out = [];
-    const ray = raycaster.ray;
-    const w = new THREE.Vector3();
-    for (let j = 0; j < this.kEff; j++) {
-      const m = this.controlAnchors[j];
-      this.controlWorld(j, w);
-      const along = w.clone().sub(ray.origin).dot(ray.direction);
-      if (along < 0) continue;
-      const off = ray.at(along, new THREE.Vector3()).distanceTo(w);
-      const drawn = m.scale.x * this.scale;
-      const px = this.pixelSize ? this.pixelSize(w) : 0;
-      const reach = Math.max(drawn * pad, px * (m.userData.mirror ? PICKED_PX.ghost : PICKED_PX.control));
-      if (off <= reach) out.push({ index: j, along, off, drawn, reach, ghost: !!m.userData.mirror, point: w.clone() });
-    }
-    return out;
-  }
-
-  // Whether the clay hides effective control j from `camera`: the line of sight to its centre meets the clay more
-  // than `slack` x its drawn radius before it (a control lying on the surface shows, one behind the clay does not).
-  hides(j, camera, slack = 1.0, raycaster = new THREE.Raycaster()) {
-    const c = this.controlWorld(j);
-    if (!c || !this.surface) return false;
-    const eye = camera.isOrthographicCamera
-      ? c.clone().addScaledVector(camera.getWorldDirection(new THREE.Vector3()), -20 * this.worldRadius)
-      : camera.getWorldPosition(new THREE.Vector3());
-    const far = eye.distanceTo(c);
-    raycaster.set(eye, c.clone().sub(eye).normalize());
-    const hit = this.surfaceHit(raycaster);
-    return !!hit && hit.distance < far - slack * this.controlAnchors[j].scale.x * this.scale;
-  }
-
-  // The effective control a ray hits first (spheres padded by `pad` x their radius): {index, distance, point} or null.
-  hitByRay(raycaster, pad = 1.5) {
-    let best = null;
-    for (const c of this.rayCandidates(raycaster, pad)) {
-      const distance = c.along - Math.sqrt(Math.max(c.reach * c.reach - c.off * c.off, 0));
-      if (!best || distance < best.distance) best = { index: c.index, distance, point: c.point };
-    }
-    return best;
   }
 
   // Effective control j is control j mod k under the group's map floor(j / k): which control an effective index

@@ -10,6 +10,7 @@
 import * as THREE from 'three';
 import { VIEWS } from './camera.js';
 import { isTyping, viewAction } from './keys.js';
+import { controlsAlong, hidesControl } from './picking.js';
 import { intents } from './protocol.js';
 
 const PAD = 1.2; // a control is hit within this many times its drawn radius
@@ -75,13 +76,13 @@ export class Desktop {
   }
 
   // The control under the pointer that the person can see, picked before the clay: of the controls the ray passes
-  // within their pick radius and the clay does not hide (clay.hides: one lying on the surface shows, also where the
+  // within their pick radius and the clay does not hide (picking.js: one lying on the surface shows, also where the
   // clay covers part of its sphere), one whose drawn sphere the ray meets wins (the nearest), else the one it passes
   // closest (for its size). {index, distance} or null; `hidden` counts a press that met only hidden controls.
   visibleControl(raycaster, hidden = null) {
-    const candidates = this.clay.rayCandidates(raycaster, PAD);
+    const candidates = controlsAlong(this.clay, raycaster, PAD);
     if (!candidates.length) return null;
-    const seen = candidates.filter((c) => !this.clay.hides(c.index, this.rig.camera, PAD, this.sightRay));
+    const seen = candidates.filter((c) => !hidesControl(this.clay, c.index, this.rig.camera, PAD, this.sightRay));
     if (!seen.length) {
       if (hidden) hidden.count += 1;
       return null;

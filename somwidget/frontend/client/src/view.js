@@ -11,12 +11,12 @@
 import './colour.js';
 import * as THREE from 'three';
 import { CameraRig } from './camera.js';
-import { Clay } from './clay.js';
+import { Clay, boxOf } from './clay.js';
 import { Desktop } from './desktop.js';
 import { Display } from './display.js';
 import { Grabs } from './grabs.js';
 import { Handle } from './handle.js';
-import { MARKER_CSS, Markers } from './markers.js';
+import { ControlLabels, LABEL_CSS } from './labels.js';
 import { RadiusBall, RadiusDisc } from './radius.js';
 import { StrokeDraw } from './stroke.js';
 import { TOOLBAR_CSS, Toolbar } from './toolbar.js';
@@ -24,11 +24,6 @@ import { TOOLBAR_CSS, Toolbar } from './toolbar.js';
 const CSS = `
 .somview { position: relative; overflow: hidden; background: #eef0f4; font-family: system-ui, sans-serif; }
 .somview canvas { display: block; touch-action: none; outline: none; }
-.somview-labels { position: absolute; inset: 0; pointer-events: none; overflow: hidden; }
-.somview-label { position: absolute; left: 0; top: 0; font-size: 11px; line-height: 1;
-  padding: 1px 3px; border-radius: 3px; background: rgba(255,255,255,0.8); color: #222; white-space: nowrap; }
-.somview-label.held { background: #d32f2f; color: white; }
-.somview-label.behind { opacity: 0.4; pointer-events: auto; cursor: pointer; }
 .somview-radius { position: absolute; left: 0; top: 0; font-size: 11px; line-height: 1.2; padding: 1px 4px;
   border-radius: 3px; background: rgba(29, 66, 138, 0.85); color: white; white-space: nowrap; pointer-events: none; }
 .somview-status { position: absolute; left: 6px; bottom: 4px; font-size: 11px; color: #445;
@@ -38,7 +33,7 @@ const CSS = `
   background: #eef0f4; pointer-events: none; }
 .somview-error { position: absolute; left: 6px; top: 36px; right: 6px; font-size: 12px; padding: 3px 6px;
   background: #fde2e2; color: #8a1010; border-radius: 4px; pointer-events: none; }
-${MARKER_CSS}${TOOLBAR_CSS}`;
+${LABEL_CSS}${TOOLBAR_CSS}`;
 
 // The view's stylesheet, inside its own element (anywidget's way): it applies wherever the element lives, in a page
 // or in a shadow root (marimo renders widgets in one), and goes with it.
@@ -57,16 +52,9 @@ export function digestOf(positions) {
   return s;
 }
 
-const OCCLUSION_MS = 300; // labels of controls hidden by the clay are dimmed, checked this often at most
-const OCCLUSION_BUDGET = 400000; // ... while controls x triangles stays under this (one ray per control)
 const STATUS_MS = 250;
 const SAME_CLAY = 0.02; // a new topology whose clay's bounds moved less than this share of its size is the same clay
 const DRAG_REDRAW_MS = 50;
-
-// A control's label: its number, which stays with it while others come and go (its stable id).
-export function labelOf(clay, i) {
-  return String(clay.controlIds[i] ?? i);
-}
 
 // A software rasteriser (SwiftShader, llvmpipe: a browser without a GPU) draws every pixel on the CPU that also
 // trains the clay: there the view skips multisampling and draws at one pixel per CSS pixel.
@@ -151,25 +139,20 @@ export class ClayView {
       const drag = this.desktop.drag;
       if (drag && this.grabs.current(drag.i) === i && j >= 0) drag.j = j + drag.copy * k;
     };
-    this.labels = document.createElement('div');
-    this.labels.className = 'somview-labels';
+    this.labels = new ControlLabels({ clay: this.clay, display: this.display, onPick: (j) => this.handle.select(j),
+      onMarker: (j) => { // centred and selected: its handle moves it
+        this.rig.centreOn(this.clay.controlWorld(j));
+        this.handle.select(j);
+      } });
     this.statusLine = document.createElement('div');
     this.statusLine.className = 'somview-status';
     this.statusLine.textContent = 'connecting';
     this.errorBox = document.createElement('div');
     this.errorBox.className = 'somview-error';
     this.errorBox.hidden = true;
-    container.append(this.labels, this.radiusLabel, this.statusLine, this.errorBox);
+    container.append(this.labels.layer, this.radiusLabel, this.statusLine, this.errorBox);
     this.toolbar = new Toolbar(container, act, () => ({ orthographic: this.rig.orthographicOn,
       stroke: this.desktop.strokeTool, display: this.display.describe() }));
-    this.labelDivs = [];
-    this.markers = new Markers(this.labels, (j) => { // centred and selected: its handle moves it
-      this.rig.centreOn(this.clay.controlWorld(j));
-      this.handle.select(j);
-    });
-    this.occluded = new Set(); // effective controls the clay hides from the camera
-    this.occlusionRay = new THREE.Raycaster();
-    this.lastOcclusion = 0;
     this.pixelScratch = new THREE.Vector3();
     this.pixelForward = new THREE.Vector3();
 
@@ -210,7 +193,7 @@ export class ClayView {
   setTopology(t) {
     const clay = this.clay;
     // the clay drawn now, and where: a new topology of the same clay (Refine, its Undo) stays where it is
-    this.state.before = clay.lastFrame && clay.positionAttr ? { box: clay.drawnBox(),
+    this.state.before = clay.lastFrame && clay.positionAttr ? { box: boxOf(clay.positionAttr.array),
       offset: clay.content.position.clone(), centre: clay.centre.clone() } : null;
     this.state.topology = t;
     this.handle.select(null);
@@ -235,7 +218,7 @@ export class ClayView {
   // (its bounds within SAME_CLAY of its size: Refine, the Undo of a Refine); returns whether it was.
   keepPlace(before) {
     if (!before) return false;
-    const box = this.clay.drawnBox();
+    const box = boxOf(this.clay.positionAttr.array);
     const size = before.box.getSize(new THREE.Vector3()).length();
     const moved = Math.max(box.min.distanceTo(before.box.min), box.max.distanceTo(before.box.max));
     if (!(moved <= SAME_CLAY * size)) return false;
@@ -330,12 +313,12 @@ export class ClayView {
         this.lastStatus = now;
         this.updateStatus();
       }
-      if (this.dirtyOcclusion && now - this.lastOcclusion >= OCCLUSION_MS) this.dirty = true;
+      if (this.labels.due(now)) this.dirty = true;
       if (!this.dirty) return;
       // a software rasteriser dragging: draw each answer to a move at once, the frames between at most every
       // DRAG_REDRAW_MS (each drawing holds the page's thread while the CPU draws; the next answer waits behind it)
       if (this.software && this.desktop.drag && !this.grabs.answered && now - this.lastRender < DRAG_REDRAW_MS) return;
-      this.updateLabels();
+      this.labels.update(this.camera, this.size);
     }
     this.dirty = false;
     this.renderer.render(this.scene, this.camera);
@@ -349,76 +332,6 @@ export class ClayView {
       this.paints.push({ digest: s.digest, t: now });
       if (this.paints.length > 400) this.paints.splice(0, 200);
     }
-  }
-
-  updateLabels() {
-    const clay = this.clay;
-    while (this.labelDivs.length < clay.kEff) {
-      const d = document.createElement('div');
-      const j = this.labelDivs.length;
-      d.className = 'somview-label';
-      // the dimmed label of a control behind the clay takes a click: it selects the control, whose handle is drawn
-      // over the clay, so it can be moved without turning the view
-      d.addEventListener('pointerdown', (ev) => ev.stopPropagation());
-      d.addEventListener('click', (ev) => {
-        ev.stopPropagation();
-        this.handle.select(j);
-      });
-      this.labels.appendChild(d);
-      this.labelDivs.push(d);
-    }
-    const [w, h] = this.size; // kept by resize(): reading the layout here would force one every frame
-    const p = new THREE.Vector3();
-    this.camera.updateMatrixWorld();
-    this.updateOcclusion();
-    const shown = this.display.settings.labels;
-    for (let j = 0; j < this.labelDivs.length; j++) {
-      const d = this.labelDivs[j];
-      if (j >= clay.kEff || !shown) {
-        d.hidden = true;
-        continue;
-      }
-      if (!clay.numbered(j)) { // a ghost (a symmetric copy), a stroke's later sample: not numbered
-        if (!d.hidden) d.hidden = true;
-        continue;
-      }
-      const i = clay.originalOf(j);
-      const text = labelOf(clay, i);
-      if (d.textContent !== text) d.textContent = text;
-      clay.controlWorld(j, p);
-      p.project(this.camera);
-      const out = p.z > 1 || Math.abs(p.x) > 1 || Math.abs(p.y) > 1; // out of sight: a marker instead
-      if (d.hidden !== out) d.hidden = out;
-      // a transform moves the label without a new layout of the page; only what changed is written
-      const place = `translate(${(((p.x + 1) / 2) * w).toFixed(1)}px, ${(((1 - p.y) / 2) * h).toFixed(1)}px) `
-        + 'translate(-50%, -130%)';
-      if (d.somPlace !== place) {
-        d.somPlace = place;
-        d.style.transform = place;
-      }
-      const held = clay.held.has(i) || clay.local.has(i);
-      if (d.classList.contains('held') !== held) d.classList.toggle('held', held);
-      const behind = this.occluded.has(j);
-      if (d.classList.contains('behind') !== behind) d.classList.toggle('behind', behind);
-    }
-    this.markers.update(clay, this.camera, this.size, (j) => labelOf(clay, clay.originalOf(j)));
-  }
-
-  // Which controls the clay hides from the camera (their labels dimmed): one ray each, a few times a second, on a
-  // clay small enough for it.
-  updateOcclusion() {
-    const now = performance.now();
-    if (now - this.lastOcclusion < OCCLUSION_MS) {
-      this.dirtyOcclusion = true; // look again soon: what is drawn may have changed since
-      return;
-    }
-    this.lastOcclusion = now;
-    this.dirtyOcclusion = false;
-    const clay = this.clay;
-    const triangles = (clay.topology?.triangles.length ?? 0) / 3;
-    this.occluded = new Set();
-    if (!clay.surface || triangles * clay.kEff > OCCLUSION_BUDGET) return;
-    for (let j = 0; j < clay.kEff; j++) if (clay.hides(j, this.camera, 1.0, this.occlusionRay)) this.occluded.add(j);
   }
 
   updateStatus() {
@@ -452,8 +365,7 @@ export class ClayView {
       desktop: { ...this.desktop.stats, ...this.rig.stats, handleMoves: this.handle.stats.moves,
         radiusTurns: this.radius.turns }, status: this.statusLine.textContent, software: this.software,
       synapsesShown: this.clay.segments ? this.clay.segments.visible : null,
-      labels: this.labelDivs.filter((d) => !d.hidden).map((d) => d.textContent),
-      behind: [...this.occluded], markers: this.markers.shown.map((j) => labelOf(clay, clay.originalOf(j))),
+      ...this.labels.describe(), // labels, behind, markers
       ...this.rig.describe(), // camera, target, distance (to the target), fitDistance, projection, zoom
       display: this.display.describe(), selected: this.handle.selected, tool: this.desktop.strokeTool ? 'stroke' : null,
       radii: [...clay.radii], strokes: [...clay.strokes], controlIds: [...clay.controlIds],
@@ -502,8 +414,18 @@ export class ClayView {
     return m ? [m.position.x, m.position.y, m.position.z] : null;
   }
 
+  // What control j looks like as drawn: its colour, its radius over the control radius, whether it is a ghost (a
+  // symmetric copy) and how opaque.
   controlLook(j) {
-    return this.clay.controlLook(j);
+    const clay = this.clay;
+    if (j < 0 || j >= clay.kEff) return null;
+    const [d, i] = j < clay.k ? [clay.controlDraws[0], j] : [clay.controlDraws[1], j - clay.k];
+    const c = new THREE.Color();
+    d.getColorAt(i, c);
+    const m = new THREE.Matrix4();
+    d.getMatrixAt(i, m);
+    return { colour: `#${c.getHexString()}`, scale: m.getMaxScaleOnAxis() / clay.controlRadius, ghost: j >= clay.k,
+      opacity: d.material.opacity };
   }
 
   // How big effective control j is drawn on screen: its radius in page pixels (null when there is none).
