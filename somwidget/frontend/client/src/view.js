@@ -2,10 +2,11 @@
 // (protocol.js) from any transport (the websocket in the web app and the XR page, the kernel's comm in a notebook)
 // and sending intents back through `send`. The browser draws; every view keeps its own camera.
 //
-// On the canvas: the controls as spheres labelled with their index (a copy with primes: ′ ″ ‴, then ·g; a control
-// hidden by the clay drawn faintly through it), hover highlight, the held one red and enlarged, a marker at the
-// view's edge for each control out of sight; the camera (camera.js), the mouse and keys (desktop.js), the selected
-// control's handle (handle.js), radii (radius.js), strokes (stroke.js), the display settings (display.js) and the
+// On the canvas: the controls as spheres numbered by their stable ids (labels.js; symmetric copies as ghosts
+// without numbers; a control hidden by the clay drawn faintly through it), hover highlight, the held one red and
+// enlarged, a marker at the view's edge for each control out of sight; the camera (camera.js: nothing refits it, a
+// Refine neither), the mouse (desktop.js) and keys (keys.js), the selected control's handle (handle.js), radii
+// (radius.js: the ball, the disc under the cursor), strokes (stroke.js), the display settings (display.js) and the
 // view's bar (toolbar.js); a status line (iteration, frames/s drawn here, the server's cycle time).
 
 import './colour.js';
