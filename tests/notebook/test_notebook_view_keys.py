@@ -7,6 +7,8 @@ view does is read through its read-only `describe()`, the kernel's session by ru
 
 from __future__ import annotations
 
+import os
+
 import helpers
 import numpy as np
 import pytest
@@ -16,6 +18,7 @@ from test_notebook_panel import jupyter_server, notebook_file, open_notebook, ru
 pytestmark = pytest.mark.browser
 
 VIEWS = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
+SHOTS = os.environ.get("SOMWIDGET_SHOTS")  # a folder: the test leaves its screenshot there
 
 
 def cells(page) -> list[str]:
@@ -96,6 +99,8 @@ def test_view_keys_and_undo_act_on_the_clay_in_jupyterlab_and_escape_gives_the_n
             page.wait_for_function(f"() => {view}.describe().k === {k0 + 1}", timeout=15000)
             d = page.evaluate(f"() => {view}.describe().desktop")
             assert d["undos"] == 1 and d["redos"] == 1
+            if SHOTS:  # the view as the person sees it now: from the front, orthographic, the control added
+                page.screenshot(path=os.path.join(SHOTS, "jupyterlab-keys.png"), clip=box)
             assert cells(page) == ["code", "code"], "Ctrl+Z reached JupyterLab (its deleted cell came back)"
 
             # the focus in the view, the pointer out of it: still its keys

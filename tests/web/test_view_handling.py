@@ -166,6 +166,15 @@ def test_view_keys_never_change_a_panel_field(page, server):
     page.wait_for_timeout(200)
     np.testing.assert_allclose(looking_from(view(page)), [1, 0, 0], atol=1e-3)
     assert server.idle()["session"]["parameters"]["iterations"] == 1000
+    # a value entered (Enter) stays entered when Escape then leaves the field
+    field.click()
+    page.keyboard.press("Control+a")
+    page.keyboard.type("1200")
+    page.keyboard.press("Enter")
+    server.wait(lambda s: s["session"]["parameters"]["iterations"] == 1200, what="the entered S")
+    page.keyboard.press("Escape")
+    page.wait_for_timeout(500)
+    assert field.input_value() == "1200" and server.idle()["session"]["parameters"]["iterations"] == 1200
 
     # Ctrl+Z and Ctrl+Shift+Z from the page (a press on the panel's text: nothing focused) undo and redo the view's
     # step, once each
@@ -212,7 +221,9 @@ def test_a_control_lying_on_the_clay_is_grabbed_anywhere_on_its_sphere(page, ser
     control = page.evaluate(f"() => {VIEW}.controlModel({j})")
     eye = np.array(v["camera"])
     assert eye[0] - on_clay[0] < eye[0] - control[0], (on_clay, control)  # looking along -x: nearer is larger x
-    shot(page, "pick-outline-before")
+    page.mouse.move(*press)
+    page.wait_for_function(f"() => {VIEW}.describe().hover.includes({j})", timeout=3000)  # it is the one taken
+    shot(page, "pick-outline")
     camera = v["camera"]
     drag(page, tuple(press), (0, -60))
     st = server.idle()

@@ -38,15 +38,16 @@ export function viewAction(ev) {
 // menu or page shortcut sees them); Escape in a field leaves it. `view` is the ClayView. Returns a function that
 // stops the routing.
 export function routePageKeys(view, doc = document) {
-  const typedAt = new WeakMap(); // a text field -> its value when it took the focus
-  const onFocus = (ev) => {
-    if (isTyping(ev.target)) typedAt.set(ev.target, ev.target.value);
+  const entered = new WeakMap(); // a text field -> its value when it took the focus, or was last entered
+  const keep = (ev) => {
+    if (isTyping(ev.target)) entered.set(ev.target, ev.target.value);
   };
   const onKey = (ev) => {
     const target = ev.composedPath?.()[0] || ev.target;
     if (view.container.contains(target)) return; // the view's own listener has it
     if (isTyping(target)) {
-      if (ev.key === 'Escape' && !ev.isComposing) leaveField(target, typedAt.get(target), view);
+      if (ev.key === 'Enter') entered.set(target, target.value);
+      else if (ev.key === 'Escape' && !ev.isComposing) leaveField(target, entered.get(target), view);
       return;
     }
     if (ev.key === 'Escape') { // a focused menu, switch or button: Vuetify closes its menu; the view has the keys
@@ -55,16 +56,18 @@ export function routePageKeys(view, doc = document) {
     }
     view.desktop.key(ev);
   };
-  doc.addEventListener('focusin', onFocus, true);
+  doc.addEventListener('focusin', keep, true);
+  doc.addEventListener('change', keep, true);
   doc.addEventListener('keydown', onKey, true);
   return () => {
-    doc.removeEventListener('focusin', onFocus, true);
+    doc.removeEventListener('focusin', keep, true);
+    doc.removeEventListener('change', keep, true);
     doc.removeEventListener('keydown', onKey, true);
   };
 }
 
 // Escape in a text field: what was typed there and not entered is dropped (the field shows what it showed when it
-// took the focus, and no change event sends it), and the focus goes to the view.
+// took the focus or was last entered, and no change event sends it), and the focus goes to the view.
 function leaveField(field, before, view) {
   if (before !== undefined && field.value !== before) {
     field.value = before;
