@@ -82,7 +82,7 @@ export class Desktop {
   visibleControl(raycaster, hidden = null) {
     const candidates = controlsAlong(this.clay, raycaster, PAD);
     if (!candidates.length) return null;
-    const seen = candidates.filter((c) => !hidesControl(this.clay, c.index, this.rig.camera, PAD, this.sightRay));
+    const seen = candidates.filter((c) => !hidesControl(this.clay, c.index, this.rig.camera, this.sightRay));
     if (!seen.length) {
       if (hidden) hidden.count += 1;
       return null;

@@ -8,7 +8,7 @@ import { MARKER_CSS, Markers } from './markers.js';
 import { hidesControl } from './picking.js';
 
 const OCCLUSION_MS = 300; // labels of controls hidden by the clay are dimmed, checked this often at most
-const OCCLUSION_BUDGET = 400000; // ... while controls x triangles stays under this (one ray per control)
+const OCCLUSION_BUDGET = 400000; // ... while controls x triangles stays under this (one to six rays a control)
 
 export const LABEL_CSS = `
 .somview-labels { position: absolute; inset: 0; pointer-events: none; overflow: hidden; }
@@ -111,7 +111,7 @@ export class ControlLabels {
     const triangles = (clay.topology?.triangles.length ?? 0) / 3;
     this.occluded = new Set();
     if (!clay.surface || triangles * clay.kEff > OCCLUSION_BUDGET) return;
-    for (let j = 0; j < clay.kEff; j++) if (hidesControl(clay, j, camera, 1.0, this.ray)) this.occluded.add(j);
+    for (let j = 0; j < clay.kEff; j++) if (hidesControl(clay, j, camera, this.ray)) this.occluded.add(j);
   }
 
   // For describe(): the labels shown (their text), the controls the clay hides, the markers' labels.

@@ -28,18 +28,34 @@ export function controlsAlong(clay, raycaster, pad = 1.5) {
   return out;
 }
 
-// Whether the clay hides effective control j from `camera`: the line of sight to its centre meets the clay more than
-// `slack` x its drawn radius before it (a control lying on the surface shows, one behind the clay does not).
-export function hidesControl(clay, j, camera, slack = 1.0, raycaster = new THREE.Raycaster()) {
+// Whether the clay hides effective control j from `camera`: no part of its sphere as drawn shows, i.e. the line of
+// sight to each of five points of it (its centre, the points `reach` x its radius to the camera's left, right, up
+// and down, and towards the camera) meets the clay before it. A control lying on the clay shows (also on the clay's
+// outline, where the clay covers half its sphere), one behind the clay does not.
+export function hidesControl(clay, j, camera, raycaster = new THREE.Raycaster(), reach = 0.8) {
   const c = clay.controlWorld(j);
   if (!c || !clay.surface) return false;
-  const eye = camera.isOrthographicCamera
-    ? c.clone().addScaledVector(camera.getWorldDirection(new THREE.Vector3()), -20 * clay.worldRadius)
-    : camera.getWorldPosition(new THREE.Vector3());
-  const far = eye.distanceTo(c);
-  raycaster.set(eye, c.clone().sub(eye).normalize());
-  const hit = clay.surfaceHit(raycaster);
-  return !!hit && hit.distance < far - slack * clay.controlAnchors[j].scale.x * clay.scale;
+  const r = reach * clay.controlAnchors[j].scale.x * clay.scale;
+  camera.updateMatrixWorld();
+  const e = camera.matrixWorld.elements; // the camera's right, up and backward axes, in world units
+  const sides = [[0, 0, 0], [e[0], e[1], e[2]], [-e[0], -e[1], -e[2]], [e[4], e[5], e[6]], [-e[4], -e[5], -e[6]],
+    [e[8], e[9], e[10]]];
+  const point = new THREE.Vector3();
+  const eye = new THREE.Vector3();
+  const dir = new THREE.Vector3();
+  for (const [x, y, z] of sides) {
+    point.set(x, y, z).normalize().multiplyScalar(r).add(c);
+    if (camera.isOrthographicCamera) {
+      eye.copy(point).addScaledVector(camera.getWorldDirection(dir), -20 * clay.worldRadius);
+    } else {
+      camera.getWorldPosition(eye);
+    }
+    const far = eye.distanceTo(point);
+    raycaster.set(eye, dir.subVectors(point, eye).normalize());
+    const hit = clay.surfaceHit(raycaster);
+    if (!hit || hit.distance >= far - 0.05 * r) return false; // this part of it shows
+  }
+  return true;
 }
 
 // The effective control a ray meets first (spheres padded by `pad` x their radius): {index, distance, point} or null.
