@@ -108,8 +108,9 @@ class Clay:
         self.install(preset, som)
 
     def install(self, preset: Preset, som) -> None:
-        """A new preset and its Som (caller holds both locks, or nothing runs yet): new ids, parameters from the Som,
-        the next generation."""
+        """A new preset and its Som (caller holds both locks, or nothing runs yet): new ids from 0 (the views number
+        and colour controls by them; the same controls, as after Refine, keep theirs), parameters from the Som, the
+        next generation."""
         self.preset, self.som, self.layout = preset, som, preset.layout
         controls = np.array(som.controls, dtype=np.float32)
         same = getattr(self, "controls", None) is not None and np.array_equal(controls, self.controls)
@@ -128,7 +129,7 @@ class Clay:
         self.generation += 1
 
     def fresh_ids(self, k: int) -> tuple[int, ...]:
-        """k new control ids, never used before in this session."""
+        """k new control ids, never used before on this clay (since its preset was installed)."""
         first = self._next_id
         self._next_id += k
         return tuple(range(first, first + k))
