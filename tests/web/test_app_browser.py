@@ -162,10 +162,11 @@ def test_page_loads_on_the_car_and_renders(browser, server):
         assert not_blank(img) > 0.05, "the 3-D view looks blank"
         assert st["clients"] >= 1 and st["views"]["clients"] >= 1
         v = view_state(page)
-        # drawn by the browser from the streamed frames: the labels match the panel's control table (0..8, and
-        # the mirrored copies primed), the status line shows the iteration
+        # drawn by the browser from the streamed frames: the labels match the panel's control table (0..8; the
+        # mirrored copies are ghosts without numbers), the status line shows the iteration
         assert v["k"] == 9 and v["kEff"] == 18
-        assert sorted(v["labels"]) == sorted([str(i) for i in range(9)] + [f"{i}\u2032" for i in range(9)])
+        assert sorted(v["labels"], key=int) == [str(i) for i in range(9)]
+        assert v["numbered"] == [True] * 9 + [False] * 9
         assert v["status"].startswith("iteration 1000 / 1000")
         # and the server's own figures, sent four times a second to every view: the cycle's time in ms
         page.wait_for_function(f"() => / cycle \\d+\\.\\d{{3}} ms/.test({VIEW}.describe().status)", timeout=10000)

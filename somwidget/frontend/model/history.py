@@ -47,6 +47,7 @@ class Step:
     radii: np.ndarray | None = None  # each control's radius (None: all 0)
     symmetry: object = None  # the Symmetry group in effect, or None
     strokes: tuple | None = None  # the lengths of the runs of controls that act as one (None: each alone)
+    control_ids: tuple | None = None  # the controls' stable ids (None: new ones when put back)
     key: int = field(default_factory=lambda: next(_KEYS), compare=False)
 
     @property

@@ -108,6 +108,15 @@ export class Grabs {
     this.settling.set(i, { pos: p.map(Math.fround), until: now + SETTLE_MS });
   }
 
+  // Let go of control i at once, where the server has it (a new clay came mid-drag: its ids name other controls).
+  drop(i) {
+    i = this.current(i);
+    const g = this.active.get(i);
+    if (!g) return;
+    this.link.send(intents.release(g.id));
+    this.cancel(i);
+  }
+
   cancel(i) {
     this.active.delete(i);
     this.settling.delete(i);

@@ -201,7 +201,7 @@ window.somxr = {
     return [r.left + ((p.x + 1) / 2) * r.width, r.top + ((1 - p.y) / 2) * r.height];
   },
   controlModel: (j) => view.controlModel(j),
-  controlLook: (j) => clay.controlLook(j),
+  controlLook: (j) => view.controlLook(j),
   button: (name) => menu.describe(name),
   serverControl: (j) => clay.controlAnchors[j]?.userData.server ?? null,
   modelToWorld: (p) => clay.modelToWorld(p).toArray(),
