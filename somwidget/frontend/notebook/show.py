@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 from pathlib import Path
 
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")  # the saved notebook's picture
@@ -17,17 +18,21 @@ from ...backend.presets import Preset  # noqa: E402
 from ..client import view_module  # noqa: E402
 from ..model import Session  # noqa: E402
 from .panel import Panel  # noqa: E402
+from .still import LIVE_TEXT, Stills  # noqa: E402
 from .widget import ClayWidget  # noqa: E402
 
 log = logging.getLogger(__name__)
+#: How long a still shown while the map trains waits for it to settle before it is drawn again (seconds).
+STILL_WAIT_S = 300.0
 
 
 class SomWidget(widgets.HBox):
     """The panel and the live view side by side: `session`, `panel`, `view` (a ClayWidget; None without one).
 
-    A saved notebook reads without a kernel: the output keeps a picture of the clay (image/png next to the widget)
-    as the view last showed it, or as it was when shown; the widget state, where the notebook saves it, keeps the
-    view's latest picture (ClayWidget.picture), which the view shows until frames come again."""
+    A saved notebook reads without a kernel: displayed, the widget leaves the live view and, beside it, a still of the
+    clay (still.py) that follows the view's latest picture, so the file shows the clay as last seen wherever it is
+    read; the widget state, where the notebook saves it, keeps that picture too (ClayWidget.picture), which the view
+    shows until frames come again."""
 
     def __init__(self, session: Session, panel: Panel, view: ClayWidget | None = None, owns_session: bool = False):
         self.session = session
@@ -37,17 +42,44 @@ class SomWidget(widgets.HBox):
         children = [panel] if view is None else [panel, view]
         if view is not None:
             view.layout = widgets.Layout(flex="1 1 auto", min_width="360px")
-        super().__init__(children, layout=widgets.Layout(width="100%", align_items="flex-start"))
+        super().__init__(children, layout=widgets.Layout(width="100%", align_items="flex-start",
+                                                         flex_flow="row wrap"))
         self.add_class("somwidget-show")  # the view's module keeps the keys typed in here from Jupyter's shortcuts
+        self.stills = Stills()
+        if view is not None:
+            view.observe(lambda _change: self.stills.update(view.picture_png()), names="picture")
 
     def _repr_mimebundle_(self, **kwargs):
+        """The live view's output: the widget, and a line of text where a host cannot draw it."""
         bundle = super()._repr_mimebundle_(**kwargs)
-        if self.view is not None and isinstance(bundle, dict):
-            try:
-                bundle["image/png"] = self.view.picture_png() or picture_png(self.session)
-            except Exception:  # no off-screen rendering here: the live view is all there is
-                log.debug("no picture for the saved notebook", exc_info=True)
+        if isinstance(bundle, dict):
+            bundle["text/plain"] = LIVE_TEXT
         return bundle
+
+    def _ipython_display_(self) -> None:
+        """In a notebook: the live view's output, then the still of the clay (still.py) beside it."""
+        from IPython.display import display
+
+        display(self._repr_mimebundle_(), raw=True)
+        if self.view is not None:
+            training = self.session.frame.running
+            self.stills.show(self.still_png())
+            if training:  # no browser may draw (a run by nbclient): the settled clay's still
+                threading.Thread(target=self._still_once_settled, name="somwidget-still", daemon=True).start()
+
+    def _still_once_settled(self) -> None:
+        """Replace the stills by the settled clay, rendered off screen, unless a view's picture came first."""
+        seen = self.stills.updates
+        if self.session.wait_idle(STILL_WAIT_S) and self.stills.updates == seen and self.view.comm is not None:
+            self.stills.update(self.still_png())
+
+    def still_png(self) -> bytes | None:
+        """The picture a new still shows: the view's latest, else one rendered off screen (None where neither)."""
+        try:
+            return self.view.picture_png() or picture_png(self.session)
+        except Exception:  # no off-screen rendering here: the view's first picture fills the still in
+            log.debug("no picture for the saved notebook", exc_info=True)
+            return None
 
     def close(self) -> None:
         """Close the widgets, and the session when show() made it."""
