@@ -41,7 +41,7 @@ class SomWidget(widgets.HBox):
         self.owns_session = owns_session
         children = [panel] if view is None else [panel, view]
         if view is not None:
-            view.layout = widgets.Layout(flex="1 1 auto", min_width="360px")
+            view.layout = widgets.Layout(flex="1 1 360px", min_width="280px", max_width="100%")
         super().__init__(children, layout=widgets.Layout(width="100%", align_items="flex-start",
                                                          flex_flow="row wrap"))
         self.add_class("somwidget-show")  # the view's module keeps the keys typed in here from Jupyter's shortcuts
