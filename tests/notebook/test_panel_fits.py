@@ -168,3 +168,68 @@ def test_the_panel_fits_voila_and_the_kernel_goes_with_the_page(tmp_path):
                 proc.wait(20)
             except subprocess.TimeoutExpired:
                 proc.kill()
+
+
+MARIMO_NOTEBOOK = '''
+import marimo
+
+app = marimo.App(width="medium")
+
+
+@app.cell
+def _():
+    import marimo as mo
+    import somwidget
+
+    view = somwidget.show("car", device="cpu")  # in marimo: the anywidget panel beside the view
+    view
+    return
+
+
+if __name__ == "__main__":
+    app.run()
+'''
+
+
+def test_the_anywidget_panel_fits_marimo_and_sets_the_session(tmp_path):
+    """`marimo run` on a notebook whose cell ends with show()'s widget: the anywidget panel (its fields from the
+    declaration) beside the view fits at both widths; a value typed in its S field reaches the kernel's session (the
+    panel's status line shows the session's new S)."""
+    pytest.importorskip("marimo")
+    (tmp_path / "clay.py").write_text(MARIMO_NOTEBOOK)
+    port = helpers.free_port()
+    env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(tmp_path / "data")}
+    with open(tmp_path / "marimo.log", "w") as log:
+        proc = subprocess.Popen([sys.executable, "-m", "marimo", "run", "--headless", "--no-token", "--host",
+                                 "127.0.0.1", "--port", str(port), str(tmp_path / "clay.py")], env=env, stdout=log,
+                                stderr=subprocess.STDOUT)
+        try:
+            helpers.wait_for(lambda: _answers(f"http://127.0.0.1:{port}/"), timeout=90, what="marimo to start")
+            with helpers.sync_playwright() as p:
+                browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+                try:
+                    page = browser.new_page(viewport={"width": 1280, "height": 900})
+                    page.goto(f"http://127.0.0.1:{port}/")
+                    wait_for_view(page)
+                    check_widths(page, "marimo")
+                    page.set_viewport_size({"width": 1280, "height": 900})
+                    fields = page.evaluate(f"() => ({FIND})('.somwidget-panel input[type=number]').length")
+                    assert fields >= 4 + 5  # S, l_start, l_end, smoothing; a metric weight per feature
+                    page.evaluate(f"""() => {{ const f = ({FIND})('.somwidget-panel input[type=number]')[0];
+                        f.scrollIntoView({{block: 'center'}}); }}""")
+                    box = page.evaluate(f"""() => {{ const r = ({FIND})('.somwidget-panel input[type=number]')[0]
+                        .getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; }}""")
+                    page.mouse.click(*box)  # the S field, as a person types in it
+                    page.keyboard.press("Control+a")
+                    page.keyboard.type("400")
+                    page.keyboard.press("Enter")
+                    page.wait_for_function(f"() => ({FIND})('.somwidget-panel .status')[0].textContent"
+                                           ".includes('/ 400')", timeout=30000)  # the session's S, shown back
+                finally:
+                    browser.close()
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(20)
+            except subprocess.TimeoutExpired:
+                proc.kill()

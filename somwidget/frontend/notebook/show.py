@@ -34,7 +34,7 @@ class SomWidget(widgets.HBox):
     read; the widget state, where the notebook saves it, keeps that picture too (ClayWidget.picture), which the view
     shows until frames come again."""
 
-    def __init__(self, session: Session, panel: Panel, view: ClayWidget | None = None, owns_session: bool = False):
+    def __init__(self, session: Session, panel, view: ClayWidget | None = None, owns_session: bool = False):
         self.session = session
         self.panel = panel
         self.view = view
@@ -72,6 +72,13 @@ class SomWidget(widgets.HBox):
         seen = self.stills.updates
         if self.session.wait_idle(STILL_WAIT_S) and self.stills.updates == seen and self.view.comm is not None:
             self.stills.update(self.still_png())
+
+    def _display_(self):
+        """In marimo: the panel and the view side by side (each through mo.ui.anywidget), wrapping when narrow."""
+        import marimo as mo
+
+        items = [mo.ui.anywidget(w) for w in (self.panel, self.view) if w is not None]
+        return mo.hstack(items, wrap=True, align="start", justify="start")
 
     def still_png(self) -> bytes | None:
         """The picture a new still shows: the view's latest, else one rendered off screen (None where neither)."""
@@ -136,8 +143,20 @@ def _say_device(session: Session) -> None:
         print(f"somwidget: training on {_device.describe(where)}")
 
 
+def in_marimo() -> bool:
+    """True inside a marimo notebook (its cells draw anywidgets, not ipywidgets)."""
+    import sys
+
+    if "marimo" not in sys.modules:
+        return False
+    try:
+        return bool(sys.modules["marimo"].running_in_notebook())
+    except Exception:  # an older marimo, or marimo imported outside a notebook
+        return False
+
+
 def show(what="car", *, device: str | None = "auto", paused: bool = False, view: bool = True,
-         height: int = 520) -> SomWidget:
+         height: int = 520, panel: str = "auto") -> SomWidget:
     """An interactive SOM in a notebook cell: the panel beside the live, draggable 3-D view of one Session.
 
     what:     a preset name ("car", "space-grid", "lines", ...), a Preset, a mesh file path (OBJ, PLY, STL, OFF,
@@ -146,17 +165,26 @@ def show(what="car", *, device: str | None = "auto", paused: bool = False, view:
     paused:   a new session starts paused (press Train)
     view:     False: the panel alone
     height:   of the view in pixels
+    panel:    "ipywidgets" (Jupyter, Voila, VS Code, Colab), "anywidget" (anypanel.py: any host that draws
+              anywidgets, marimo among them) or "auto": the anywidget panel inside marimo, else ipywidgets
 
     Returns the widget (an ipywidgets HBox: put it last in the cell, or `display()` it); `.session` is the
     Session to script (`move_control`, `set_iterations`, `wait_idle`, `export_mesh`...), `.close()` closes it.
     The view draws in the browser from frames the kernel sends over the widget's comm: no server, no port.
     """
+    if panel not in ("auto", "ipywidgets", "anywidget"):
+        raise ValueError(f"show: panel must be 'auto', 'ipywidgets' or 'anywidget', got {panel!r}")
     if view:
         view_module()  # ClientNotBuilt (what to run) before a session is made, where the client is not built
     session, owned = _session_of(what, device, paused)
     _say_device(session)
     try:
-        panel = Panel(session)
+        if panel == "anywidget" or (panel == "auto" and in_marimo()):
+            from .anypanel import PanelWidget
+
+            panel = PanelWidget(session)
+        else:
+            panel = Panel(session)
         clay = ClayWidget(session, height=height) if view else None
     except Exception:
         if owned:
