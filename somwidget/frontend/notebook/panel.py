@@ -371,11 +371,16 @@ class Panel(widgets.VBox):
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(2.0)
         self.variants.close()
-        for w in [*self.children, *self.fields.values(), *self.metric, *self.features_box.children, self.group,
-                  self.radius_of, self.radius, self.position, self.features, self.all_radii, *self.recovered.children,
-                  self.export_format, self.export_button, self.export_link]:
-            w.close()
+        for w in self.children:  # every widget of the panel, rows and all: a widget left open stays registered
+            close_tree(w)  # with its comm, and its handlers would keep this panel and its session alive
         super().close()
+
+
+def close_tree(widget) -> None:
+    """Close a widget and every widget inside it."""
+    for child in getattr(widget, "children", ()):
+        close_tree(child)
+    widget.close()
 
 
 def _fluid(flex: str = "1 1 100%") -> widgets.Layout:

@@ -89,13 +89,31 @@ class SomWidget(widgets.HBox):
             return None
 
     def close(self) -> None:
-        """Close the widgets, and the session when show() made it."""
+        """Close the widgets, and the session when show() made it: its memory goes back to the system (a kernel
+        left running after its view has gone keeps none of it)."""
         self.panel.close()
         if self.view is not None:
             self.view.close()
-        if self.owns_session:
-            self.session.close()
         super().close()
+        if self.owns_session and self.session is not None:
+            self.session.close()
+            self.session = None  # the arrays go with the last reference
+            give_back_memory()
+
+
+def give_back_memory() -> None:
+    """Collect what is unreachable and hand the freed heap back to the system (glibc keeps freed memory of a size
+    it has just freed for reuse: a closed session's hundreds of MB would stay counted against the kernel)."""
+    import ctypes
+    import gc
+    import sys
+
+    gc.collect()
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL("libc.so.6").malloc_trim(0)
+        except (OSError, AttributeError):  # another C library: it keeps its own ways
+            pass
 
 
 def picture_png(session: Session, size=(640, 420)) -> bytes:
