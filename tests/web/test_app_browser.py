@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import datetime
 import io
 import itertools
 import os
@@ -17,6 +18,7 @@ import time
 
 import numpy as np
 import pytest
+import helpers
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, wave_mesh
 
 pytestmark = pytest.mark.browser
@@ -642,14 +644,25 @@ def test_preset_chooser_lines_and_export(browser, server, tmp_path):
         shows(page, st)
         assert view_state(page)["kEff"] == 16
         assert not_blank(view_image(page)) > 0.05
-        with page.expect_download(timeout=20000) as dl:
-            page.locator("#export-obj").click()
+        day = datetime.date.today().isoformat()
+        with page.expect_download(timeout=20000) as dl:  # OBJ: the format menu's first choice
+            page.locator("#export-mesh").click()
+        assert dl.value.suggested_filename == f"lines-{day}.obj"  # named after the session
         path = tmp_path / "lines.obj"
         dl.value.save_as(path)
         text = path.read_text()
         assert text.count("\nv ") + text.startswith("v ") == 1204  # roots and tips
+        page.locator(".v-select:has(#export-format) .v-field").click()  # the format menu: Rhino
+        page.get_by_text("Rhino .3dm (mesh, controls)").click()
+        with page.expect_download(timeout=20000) as dl:
+            page.locator("#export-mesh").click()
+        assert dl.value.suggested_filename == f"lines-{day}.3dm"
+        dl.value.save_as(tmp_path / "lines.3dm")
+        rhino = helpers.read_3dm(tmp_path / "lines.3dm")
+        assert len(rhino["clay"].vertices) == 1204 and len(rhino["controls"]) == 8
         with page.expect_download(timeout=20000) as dl:
             page.locator("#save-session").click()
+        assert dl.value.suggested_filename == f"lines-{day}.npz"
         saved = tmp_path / "session.npz"
         dl.value.save_as(saved)
         assert saved.stat().st_size > 1000

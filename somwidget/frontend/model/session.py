@@ -430,9 +430,10 @@ class Session:
         self.load_preset(preset)
         return preset
 
-    def export_mesh(self, path) -> None:
-        """Write the current mesh (OBJ, PLY, GLB by extension) with its vertex colours (`files.export_mesh`)."""
-        self.files.export_mesh(path)
+    def export_mesh(self, path, units: str = "meters") -> None:
+        """Write the current mesh (OBJ, PLY, STL, glTF, GLB, .3dm by extension) with its vertex colours and controls
+        (`files.export_mesh`); `units`: a .3dm's unit system."""
+        self.files.export_mesh(path, units=units)
 
     def save(self, path) -> None:
         """Save the session (`files.save`: a versioned .npz)."""
