@@ -16,7 +16,8 @@ diagonal. The figures (columns):
   push     a control on the sphere's top pole, radius a quarter of the size, typed to z -0.6 (one move) on the
            UV sphere of 64 x 31 (1,986 nodes) and on the sphere preset refined once (1,922): the control's distance
            to the surface (target <= 3% of the size), the largest dihedral angle in degrees (target <= 45), the
-           volume after over before (target >= 0.5); `482` the largest angle on the unrefined preset (no target:
+           volume after over before (target >= 0.5), the far half's move (p90, share of the size: the bottom
+           stays); `482` the largest angle on the unrefined preset (no target:
            four edges per radius cannot turn a 1.6-deep hole's rim under 45 degrees)
   flare    a ring (one control and its 15 copies, radius 0.5) dragged out by 0.4 on a tube of 64 x 25 (edges about
            0.09): in its middle and at its open end (a lip): the largest gap (target: reached, <= 1% of the size),
@@ -205,7 +206,8 @@ def push(rule, mesh: str, smoothing=0.0, shots=None) -> dict:
     if shots is not None:
         shots.append((f"push_{mesh}", som.W, faces, target[None], f"push to z -0.6 ({len(p)} nodes)"))
     return dict(gap=float(gaps(som, faces, target[None])[0]) / size, angle=max_angle(som.W, faces),
-                volume=metrics.mesh_volume(som.W, faces) / metrics.mesh_volume(p, faces))
+                volume=metrics.mesh_volume(som.W, faces) / metrics.mesh_volume(p, faces),
+                far=metrics.far_half_moved(p, som.W, p[0]))
 
 
 def flare(rule, where: str, fine: bool = True, smoothing=0.0, shots=None) -> dict:
@@ -247,10 +249,12 @@ def far(rule, smoothing=0.0, shots=None) -> dict:
 
 ROWS = {
     "carry": ("carry: the engine's rule (2026-11-25)", "carry", 0.0),
-    "literal": ("geodesic, quartic, sum, bound once at the grab", Rule(distance="geodesic", carry="grab"), 0.0),
+    "literal": ("geodesic, quartic, sum, bound once at the grab", Rule(distance="geodesic", blend="sum", carry="grab"),
+                0.0),
+    "or": ("  ... blend or: mean D x (1 - prod(1 - w))", Rule(distance="geodesic", carry="grab"), 0.0),
     "steps": ("  ... bound again every step of r/4", Rule(distance="geodesic"), 0.0),
     "chosen": ("  ... straight distance in the ball: CHOSEN", Rule(), 0.0),
-    "or": ("chosen, blend or: w mean x (1 - prod(1 - w))", Rule(blend="or"), 0.0),
+    "sum": ("chosen, blend sum: sum w D / max(1, sum w)", Rule(blend="sum"), 0.0),
     "cosine": ("chosen, falloff cosine", Rule(falloff="cosine"), 0.0),
     "spline": ("chosen, falloff spline (|f''| 4)", Rule(falloff="spline"), 0.0),
     "smootherstep": ("chosen, falloff smootherstep", Rule(falloff="smootherstep"), 0.0),
@@ -332,7 +336,8 @@ def main() -> None:
     if args.pictures:
         args.pictures.mkdir(parents=True, exist_ok=True)
     head = (f"{'rule':46s} | {'vase tube: z, out, gap':24s} | {'vase sphere: z, out, gap':24s} | "
-            f"{'push: gap, deg, vol / refined / 482':36s} | {'flare mid, lip: gap deg dip / 32':38s} | far, deg    | s")
+            f"{'push: gap, deg, vol, far / refined / 482':42s} | {'flare mid, lip: gap deg dip / 32':38s} | "
+            "far, deg    | s")
     print(head)
     print("-" * len(head))
     for key in args.rows:
@@ -345,7 +350,8 @@ def main() -> None:
         fm, fl = f["flare_mid"], f["flare_lip"]
         print(f"{label:46s} | {vt['zlo']:5.2f}..{vt['zhi']:5.2f} {vt['out']:5.1%} {vt['gap']:4.1%} | "
               f"{vs['zlo']:5.2f}..{vs['zhi']:5.2f} {vs['out']:5.1%} {vs['gap']:4.1%} | "
-              f"{pf['gap']:4.1%} {pf['angle']:4.1f} {pf['volume']:4.2f} / {pr['angle']:4.1f} / {pc['angle']:3.0f} | "
+              f"{pf['gap']:4.1%} {pf['angle']:4.1f} {pf['volume']:4.2f} {pf['far']:5.1%} / {pr['angle']:4.1f} / "
+              f"{pc['angle']:3.0f} | "
               f"{fm['gap']:4.1%} {fm['angle']:4.1f} {fm['dip']:4.1%}, "
               f"{fl['gap']:4.1%} {fl['angle']:4.1f} {fl['dip']:4.1%} / {f['flare_coarse']['angle']:3.0f} | "
               f"{f['far']['far']:5.2%} {f['far']['angle']:3.0f} | {time.time() - t:3.0f}", flush=True)

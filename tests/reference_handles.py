@@ -124,8 +124,8 @@ class Rule:
     distance  "euclid": straight distance over the part of the ball joined to the winner; "geodesic": Dijkstra over
               the edges and the faces' diagonals; "edges": Dijkstra over the edges; "hops": the BFS hop count times
               the mean length of the winner's edges (no bound: a hop can be shorter than the straight distance)
-    blend     "sum": sum w D / max(1, sum w); "or": the weighted mean displacement times 1 - prod (1 - w) (smooth
-              where the sum crosses 1, but a ring of copies dips between them)
+    blend     "or": the weighted mean displacement times 1 - prod (1 - w); "sum": sum w D / max(1, sum w) (DESIGN.md's:
+              a ring of copies moves as one, but the target has a kink where the sum crosses 1: sawtooth creases)
     carry     "steps": bound again at every step of at most STEP r; "grab": bound once, at the grab, the target
               W(grab) + w (C - W_u(grab)) (DESIGN.md's first statement)
     rate      "hard": a bound node goes to its target (kappa 1); "schedule": by alpha(s) of the way
@@ -136,7 +136,7 @@ class Rule:
 
     falloff: str = "quartic"
     distance: str = "euclid"
-    blend: str = "sum"
+    blend: str = "or"
     carry: str = "steps"
     rate: str = "hard"
     others: str = "inert"
