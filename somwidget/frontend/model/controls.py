@@ -14,6 +14,7 @@ from ...backend.presets import parse_hex_colour, rgb_to_colour_dims
 from ...backend.som import MAX_RADIUS, check_radii
 from .clay import Clay
 from .frames import FrameStream
+from .hands import Hands
 from .operations import SetControls
 from .timeline import Timeline
 from .trainer import Trainer
@@ -53,11 +54,12 @@ def check_radius(name: str, value) -> float:
 class ControlEdits:
     """The control intents of one session (see the module's docstring)."""
 
-    def __init__(self, clay: Clay, timeline: Timeline, trainer: Trainer, frames: FrameStream):
+    def __init__(self, clay: Clay, timeline: Timeline, trainer: Trainer, frames: FrameStream, hands: Hands):
         self.clay = clay
         self.timeline = timeline
         self.trainer = trainer
         self.frames = frames
+        self.hands = hands  # a control another hand holds is refused (hands.py)
 
     def _queue(self, controls: np.ndarray, keep: bool = False) -> None:
         """The new controls (and the radii and strokes the clay holds) to the Som (caller holds clay.lock); inside a
@@ -80,6 +82,7 @@ class ControlEdits:
         """One control's values changed by `edit(i, values) -> values` (its checks inside), as one step; the other
         samples of its stroke change by as much."""
         clay = self.clay
+        self.hands.claim(index, control_id)
         with self.timeline.step(step), clay.lock:
             i = (check_index("control", index, clay.controls.shape[0]) if control_id is None
                  else self.index_of(control_id))
@@ -125,6 +128,8 @@ class ControlEdits:
     def set_radius(self, index, radius) -> None:
         clay = self.clay
         r = check_radius("every control's radius" if index is None else f"control {index} radius", radius)
+        if index is not None:
+            self.hands.claim(index)
         with self.timeline.step(f"parameter:radius:{'all' if index is None else index}"), clay.lock:
             radii = clay.radii.copy()
             if index is None:
@@ -223,6 +228,7 @@ class ControlEdits:
 
     def remove(self, index) -> None:
         clay = self.clay
+        self.hands.claim(index)
         with self.timeline.step("remove"), clay.lock:
             i = check_index("control", index, clay.controls.shape[0])
             run = clay.run_of(i)  # a stroke goes whole

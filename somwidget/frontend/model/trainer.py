@@ -6,14 +6,19 @@ Between two steps the thread applies every queued operation to the Som in order 
 within one frame collapse into one `set_controls`), then steps k cycles, k sized so that a step takes about
 `step_fraction / frame_rate` seconds, and publishes a frame. Once s reaches S (or while paused or held) it sleeps
 until the next operation. The caller of an intent never waits for a training step.
+
+A caller that must not wait even for the Som's lock (a server's event loop) posts its intents instead (`post`): the
+thread runs them in order between two turns, where nothing else holds the lock.
 """
 
 from __future__ import annotations
 
+import collections
 import logging
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import Future
 
 from ...backend.schedule import MAX_ITERATIONS
 from .clay import Clay
@@ -45,6 +50,9 @@ class Trainer:
         self.busy = False  # applying operations or stepping
         self.cycle_time = 0.0
         self.cycles_per_step = 1
+        self.calls: collections.deque = collections.deque()  # (call, Future): posted, run between two turns
+        self.posted = 0  # calls posted so far
+        self.ran = 0  # calls run so far
 
     # -- lifetime ----------------------------------------------------------------------------------------------
     def start(self) -> None:
@@ -66,6 +74,42 @@ class Trainer:
         if t is not None and t is not threading.current_thread():
             t.join(timeout)
         return not already
+
+    def post(self, call: Callable[[], object]) -> Future:
+        """Run `call()` on the training thread between two turns, after the calls posted before it; returns its Future
+        (its result, or the exception it raised). Without a running thread (never started) it runs here and now; on a
+        closed session (or a thread stopped on an error) the Future holds a RuntimeError."""
+        future: Future = Future()
+        with self.clay.wake:
+            if self.closed or self.thread_error is not None:
+                future.set_exception(RuntimeError(self.thread_error or "session is closed"))
+                return future
+            if self.thread is not None and self.thread.is_alive():
+                self.calls.append((call, future))
+                self.posted += 1
+                self.clay.wake.notify_all()
+                return future
+        _run(call, future)
+        return future
+
+    def _run_calls(self) -> None:
+        """The posted calls, in order (on the training thread, holding no lock)."""
+        while True:
+            with self.clay.wake:
+                if not self.calls:
+                    return
+                call, future = self.calls.popleft()
+            _run(call, future)
+            with self.clay.wake:
+                self.ran += 1
+                self.clay.wake.notify_all()
+
+    def _fail_calls(self, why: str) -> None:
+        with self.clay.wake:
+            calls, self.calls = list(self.calls), collections.deque()
+            self.ran += len(calls)
+        for _, future in calls:
+            future.set_exception(RuntimeError(why))
 
     def stopped(self) -> bool:
         """No more intents will be handled: closed, never started, or stopped on an error."""
@@ -147,28 +191,34 @@ class Trainer:
                 clay.paused = True
                 self.busy = False
                 clay.wake.notify_all()
+            self._fail_calls(self.thread_error)
 
     def _loop(self) -> None:
         wake = self.clay.wake
         while True:
             with wake:
-                while not self.closed and not self.ops and not self.should_step():
+                while not self.closed and not self.calls and not self.ops and not self.should_step():
                     self.busy = False
                     wake.notify_all()
                     wake.wait()
                 if self.closed:
                     self.busy = False
                     wake.notify_all()
-                    return
+                    break
                 self.busy = True
+            self._run_calls()
+            with wake:
+                if not self.ops and not self.should_step():
+                    continue
             t0 = time.monotonic()
             self._turn()
             self.after_turn()
             with wake:  # pace: a frame every 1 / frame_rate seconds while training; wake early for a new intent
-                if self.should_step() and not self.ops and not self.closed:
+                if self.should_step() and not self.ops and not self.calls and not self.closed:
                     rest = 1.0 / self.frame_rate - (time.monotonic() - t0)
                     if rest > 0:
                         wake.wait(rest)
+        self._fail_calls("session is closed")
 
     def _turn(self) -> None:
         """Apply the queued operations, step, publish a frame. Never raises."""
@@ -242,7 +292,7 @@ class Trainer:
                 t = self.thread
                 if self.thread_error is not None or (t is not None and not self.closed and not t.is_alive()):
                     return False
-                if not (self.ops or self.busy or (t is not None and self.should_step())):
+                if not (self.calls or self.ops or self.busy or (t is not None and self.should_step())):
                     return True
                 if t is None or self.closed:
                     return not self.ops
@@ -257,6 +307,14 @@ class Trainer:
         deadline = time.monotonic() + timeout
         wake = self.clay.wake
         with wake:
+            posted = self.posted  # the calls posted so far first: the intents they queue count too
+            while self.ran < posted:
+                if self.stopped():
+                    return False
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                wake.wait(min(left, 0.05))
             target = self.enqueued
             while self.frames.latest.applied < target:
                 if self.stopped():
@@ -266,3 +324,13 @@ class Trainer:
                     return False
                 wake.wait(min(left, 0.05))
         return True
+
+
+def _run(call: Callable[[], object], future: Future) -> None:
+    """`call()` into `future` (never raises)."""
+    if not future.set_running_or_notify_cancel():
+        return
+    try:
+        future.set_result(call())
+    except BaseException as exc:  # the caller's to see
+        future.set_exception(exc)
