@@ -109,6 +109,10 @@ class Hands:
             self._heard.pop(hand.id, None)
         self._let_go([(cid, hand) for cid, who in self.held().items() if who is hand], [])
 
+    def acting(self, hand: Hand, control_id: int | None = None):
+        """A context in which the intents run are `hand`'s (on `control_id`: a drag's moves join its gesture)."""
+        return acting(hand.id, control_id)
+
     def heard(self, hand: Hand) -> None:
         """`hand` sent something: it is still there."""
         self._heard[hand.id] = time.monotonic()
@@ -148,7 +152,7 @@ class Hands:
         """ValueError unless `hand` holds the control (a view's move or release)."""
         holder = self._held.get(control_id)
         if holder is not hand:
-            index = self._index(control_id)
+            index = self._index(control_id, default=control_id)
             if holder is not None:
                 raise ValueError(refusal(what, index, holder))
             raise ValueError(f"{what}: control {index} is not held by this client; send grab first")
