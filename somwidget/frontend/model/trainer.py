@@ -4,7 +4,9 @@
 
 Between two steps the thread applies every queued operation to the Som in order (several control moves that arrive
 within one frame collapse into one `set_controls`), then steps k cycles, k sized so that a step takes about
-`step_fraction / frame_rate` seconds, and publishes a frame. Once s reaches S (or while paused or held) it sleeps
+`step_fraction / frame_rate` seconds, and publishes a frame. A cycle early in the schedule (after a restart: a drag's
+frames, a setting) costs far more than one late in a long run, so the steps after a restart are sized apart
+(`Pace`): a drag's first frame stays within a frame's time. Once s reaches S (or while paused or held) it sleeps
 until the next operation. The caller of an intent never waits for a training step.
 
 A caller that must not wait even for the Som's lock (a server's event loop) posts its intents instead (`post`): the
@@ -28,6 +30,21 @@ from .operations import Operation, SetControls
 log = logging.getLogger(__name__)
 
 
+class Pace:
+    """Cycles a step, sized to a step's time budget from the time a cycle took (a moving average)."""
+
+    def __init__(self):
+        self.cycle_time = 0.0
+        self.cycles = 1
+
+    def tune(self, per_cycle: float, budget: float) -> None:
+        per_cycle = max(per_cycle, 1e-7)
+        self.cycle_time = per_cycle if self.cycle_time == 0.0 else 0.7 * self.cycle_time + 0.3 * per_cycle
+        target = int(budget / self.cycle_time)
+        # grow at most x2 a frame so one slow first call does not overshoot
+        self.cycles = max(1, min(target, 2 * self.cycles, MAX_ITERATIONS))
+
+
 class Trainer:
     """The thread that trains one session's Som (see the module's docstring).
 
@@ -48,8 +65,9 @@ class Trainer:
         self.thread_error: str | None = None  # why the thread stopped, if it ever did on an error
         self.closed = False
         self.busy = False  # applying operations or stepping
-        self.cycle_time = 0.0
-        self.cycles_per_step = 1
+        self.pace = Pace()  # steps that go on with the schedule
+        self.restart_pace = Pace()  # steps right after a restart took the schedule back
+        self._stepped_to = 0  # the iteration the last step reached
         self.calls: collections.deque = collections.deque()  # (call, Future): posted, run between two turns
         self.posted = 0  # calls posted so far
         self.ran = 0  # calls run so far
@@ -117,8 +135,12 @@ class Trainer:
         return self.closed or t is None or self.thread_error is not None or not t.is_alive()
 
     def reset_pace(self) -> None:
-        self.cycle_time = 0.0
-        self.cycles_per_step = 1
+        self.pace, self.restart_pace = Pace(), Pace()
+
+    @property
+    def cycle_time(self) -> float:
+        """Seconds per cycle as the schedule goes on (moving average; 0 before any step)."""
+        return self.pace.cycle_time
 
     # -- the queue ---------------------------------------------------------------------------------------------
     def enqueue(self, op: Operation, intent: bool = True) -> None:
@@ -240,7 +262,8 @@ class Trainer:
                 stepping = self.should_step()
                 dragging = clay.gesture
             if stepping:
-                k = self.cycles_per_step
+                pace = self.restart_pace if som.iteration < self._stepped_to else self.pace
+                k = pace.cycles
                 if drained and not dragging:  # a fresh intent: a short first step gets the change out sooner
                     k = max(1, k // 4)
                 k = max(1, min(k, som.iterations - som.iteration))
@@ -250,17 +273,10 @@ class Trainer:
                     som.synchronize()
                 dt = time.perf_counter() - t
                 if cycles > 0:
-                    self._tune(dt / cycles)
+                    pace.tune(dt / cycles, self.step_fraction / self.frame_rate)
                     clay.unsaved = True
+            self._stepped_to = som.iteration
             return self.make_frame(cycles)
-
-    def _tune(self, per_cycle: float) -> None:
-        per_cycle = max(per_cycle, 1e-7)
-        self.cycle_time = per_cycle if self.cycle_time == 0.0 else 0.7 * self.cycle_time + 0.3 * per_cycle
-        budget = self.step_fraction / self.frame_rate
-        target = int(budget / self.cycle_time)
-        # grow at most x2 a frame so one slow first call does not overshoot
-        self.cycles_per_step = max(1, min(target, 2 * self.cycles_per_step, MAX_ITERATIONS))
 
     def _error_frame(self, message: str) -> Frame | None:
         """After a failed step: pause, show `message`, and return a frame to publish. Never raises."""

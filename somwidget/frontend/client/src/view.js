@@ -6,7 +6,8 @@
 // hidden by the clay drawn faintly through it), hover highlight, the held one red and enlarged, a marker at the
 // view's edge for each control out of sight; the camera (camera.js), the mouse and keys (desktop.js), the selected
 // control's handle (handle.js), radii (radius.js), strokes (stroke.js), the display settings (display.js) and the
-// view's bar (toolbar.js); a status line (iteration, frames/s drawn here, the server's cycle time).
+// view's bar (toolbar.js); a status line (iteration, frames/s drawn here, the server's cycle time); who else is on
+// the session (presence.js).
 
 import './colour.js';
 import * as THREE from 'three';
@@ -17,6 +18,7 @@ import { Display } from './display.js';
 import { Grabs } from './grabs.js';
 import { Handle } from './handle.js';
 import { MARKER_CSS, Markers } from './markers.js';
+import { PRESENCE_CSS, Presence } from './presence.js';
 import { RadiusBall } from './radius.js';
 import { StrokeDraw } from './stroke.js';
 import { TOOLBAR_CSS, Toolbar } from './toolbar.js';
@@ -37,7 +39,7 @@ const CSS = `
   background: #eef0f4; pointer-events: none; }
 .somview-error { position: absolute; left: 6px; top: 36px; right: 6px; font-size: 12px; padding: 3px 6px;
   background: #fde2e2; color: #8a1010; border-radius: 4px; pointer-events: none; }
-${MARKER_CSS}${TOOLBAR_CSS}`;
+${MARKER_CSS}${TOOLBAR_CSS}${PRESENCE_CSS}`;
 
 // The view's stylesheet, inside its own element (anywidget's way): it applies wherever the element lives, in a page
 // or in a shadow root (marimo renders widgets in one), and goes with it.
@@ -150,6 +152,7 @@ export class ClayView {
     this.errorBox.className = 'somview-error';
     this.errorBox.hidden = true;
     container.append(this.labels, this.statusLine, this.errorBox);
+    this.presence = new Presence(container, this.clay);
     this.toolbar = new Toolbar(container, act, () => ({ orthographic: this.rig.orthographicOn,
       stroke: this.desktop.strokeTool, display: this.display.describe() }));
     this.labelDivs = [];
@@ -186,6 +189,7 @@ export class ClayView {
       onTopology: (t) => this.setTopology(t),
       onFrame: (f) => this.applyFrame(f),
       onGrabs: (list) => this.grabs.onGrabs(list),
+      onPresence: (hands) => this.presence.update(hands),
       onError: (e) => this.showError(e),
       onServerStatus: (s) => { this.state.cycleMs = s.cycle_ms; this.state.serverFps = s.fps; },
       onControls: (ids, msg) => {
@@ -193,6 +197,7 @@ export class ClayView {
         if (msg) this.clay.setRuns(msg); // the radii and strokes
         this.grabs.onControls(ids);
         this.radius.update();
+        this.presence.refresh();
       },
     };
   }
@@ -417,6 +422,7 @@ export class ClayView {
       display: this.display.describe(), selected: this.handle.selected, tool: this.desktop.strokeTool ? 'stroke' : null,
       radii: [...clay.radii], strokes: [...clay.strokes], controlIds: [...clay.controlIds],
       radiusBall: { of: this.radius.shownFor, shown: this.radius.ball.visible, radius: this.radius.ball.scale.x },
+      presence: this.presence.describe(),
       size: [this.renderer.domElement.clientWidth, this.renderer.domElement.clientHeight],
     };
   }
