@@ -111,12 +111,17 @@ class Trainer:
         return future
 
     def _run_calls(self) -> None:
-        """The posted calls, in order (on the training thread, holding no lock)."""
+        """The posted calls, in order (on the training thread, holding no lock); then a moment for the threads that
+        wait on them (their replies go out before the next step)."""
+        ran = False
         while True:
             with self.clay.wake:
                 if not self.calls:
+                    if ran:
+                        time.sleep(0)
                     return
                 call, future = self.calls.popleft()
+            ran = True
             _run(call, future)
             with self.clay.wake:
                 self.ran += 1

@@ -9,8 +9,9 @@ session's one `HolderRegistry` (holders.py): who is there, who holds what.
 
 Intents run on the session's training thread (`Session.submit`), in the order they came, so the thread that
 receives them (a server's event loop) never waits for the Som; a view's moves of one control still waiting there
-collapse into the latest. A ping is answered there too, after the intents before it (a view that has its pong knows
-they were taken); a hello and a hand are answered at once (they touch nothing of the clay).
+collapse into the latest. A ping is answered there too while intents of its view wait there (a view that has its
+pong knows the intents before it were taken), else at once, as are a hello and a hand (they touch nothing of the
+clay): a view that only watches is never held up by another's intents.
 
 The pipe is the host's: `send_json(dict)` for a JSON message and `send_frame(bytes)` for a binary frame, both
 returning at once and callable from any thread (the hub queues on its loop; the widget's comm sends). A lock keeps
@@ -86,6 +87,7 @@ class ViewConnection:
         self._lock = threading.Lock()
         self._moves: dict = {}  # control -> its latest move still waiting for the training thread
         self._moves_lock = threading.Lock()
+        self._waiting = 0  # intents posted to the training thread and not done yet
         self.holders = holders_for(session)
         self.hand = self.holders.join(self, kind)
 
@@ -137,7 +139,7 @@ class ViewConnection:
         except IntentError as exc:
             self._refuse(exc, exc.intent)
             return _done(False)
-        if type(intent) in AT_ONCE:
+        if type(intent) in AT_ONCE or (isinstance(intent, PingIntent) and not self._waiting):
             return _done(self._handle(intent))
         if isinstance(intent, MoveIntent):
             key = (intent.id, intent.index)
@@ -156,8 +158,12 @@ class ViewConnection:
 
     def _submit(self, call: Callable[[], bool]) -> Future:
         done: Future = Future()
+        with self._moves_lock:
+            self._waiting += 1
 
         def finish(future: Future) -> None:
+            with self._moves_lock:
+                self._waiting -= 1
             if future.exception() is None:
                 done.set_result(future.result())
             else:  # a closed session

@@ -98,12 +98,13 @@ class _Client:
         self.wake.set()
 
     def _on_loop(self, call, arg) -> None:
-        """`call(arg)` on the loop's thread: now when this is it, else as soon as the loop can."""
-        if threading.get_ident() == self.thread:
-            call(arg)
-            return
+        """`call(arg)` on the loop's thread, in the order handed, whichever thread hands it (a reply made on the
+        training thread stays before a pong answered later on the loop)."""
         with contextlib.suppress(RuntimeError):  # the loop is closed: the server is going down
-            self.loop.call_soon_threadsafe(call, arg)
+            if threading.get_ident() == self.thread:
+                self.loop.call_soon(call, arg)
+            else:
+                self.loop.call_soon_threadsafe(call, arg)
 
     def drop(self, reason: bytes) -> None:
         self.closed = True

@@ -42,10 +42,14 @@ export class Grabs {
 
   begin(i) {
     if (this.active.has(i)) return false;
+    const id = this.clay.controlIds[i] ?? i;
+    if (this.clay.holders.has(i)) { // another hand holds it: the server says who (an error), nothing moves here
+      this.link.send(intents.grab(id));
+      return false;
+    }
     this.renamed.delete(i);
     const m = this.clay.controlAnchors[i];
     const p = m ? [m.position.x, m.position.y, m.position.z] : [0, 0, 0];
-    const id = this.clay.controlIds[i] ?? i;
     this.active.set(i, { id, began: i, pos: p, lastSent: 0, pending: null, sentPos: p.map(round6), moved: false });
     this.settling.delete(i);
     this.clay.setLocal(i, p);

@@ -4,8 +4,8 @@
 // line a headset's menu shows.
 
 export const PRESENCE_CSS = `
-.somview-presence { position: absolute; right: 6px; bottom: 4px; display: flex; flex-direction: column;
-  align-items: flex-end; gap: 2px; pointer-events: none; font-size: 11px; }
+.somview-presence { position: absolute; left: 6px; bottom: 22px; display: flex; flex-direction: column-reverse;
+  align-items: flex-start; gap: 2px; pointer-events: none; font-size: 11px; }
 .somview-hand { display: flex; align-items: center; gap: 4px; padding: 1px 5px; border-radius: 3px;
   background: rgba(255,255,255,0.75); color: #223; white-space: nowrap; }
 .somview-hand.you { font-weight: 600; }
