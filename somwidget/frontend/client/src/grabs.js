@@ -108,7 +108,6 @@ export class Grabs {
     const g = this.active.get(i);
     if (!g) return;
     this.active.delete(i);
-    const p = g.pos.map(round6);
     const now = performance.now();
     if (g.pending) { // the last move, not sent yet: now, whatever the interval
       g.lastSent = -Infinity;
@@ -119,7 +118,14 @@ export class Grabs {
       this.clay.clearLocal(i);
       return;
     }
-    this.settling.set(i, { pos: p.map(Math.fround), until: now + SETTLE_MS });
+    const pos = g.sentPos.map(Math.fround); // where the server has it (a hand within a hair of it sent nothing more)
+    const shown = this.clay.controlAnchors[i]?.userData.server;
+    if (shown && pos.every((v, a) => v === shown[a])) { // a frame shows it there already: nothing to wait for
+      this.clay.clearLocal(i);
+      return;
+    }
+    this.clay.setLocal(i, g.sentPos);
+    this.settling.set(i, { pos, until: now + SETTLE_MS });
   }
 
   cancel(i) {
