@@ -40,7 +40,10 @@ def cell_output(page, index: int, word: str, timeout: float = 60.0) -> list[str]
 
 
 def press_on(page, view: str, index: int) -> tuple[float, float]:
-    """The mouse over control `index` of a view (or its mirrored copy, where the clay hides it), pressed."""
+    """The mouse over control `index` of a view (or its mirrored copy, where the clay hides it), pressed; the view
+    scrolled into sight first (running a cell scrolls the notebook)."""
+    page.locator(".somview").first.scroll_into_view_if_needed()
+    page.wait_for_timeout(300)
     for j in (index, index + 9):
         x, y = page.evaluate(f"() => {view}.controlScreen({j})")
         page.mouse.move(x, y)
@@ -50,7 +53,9 @@ def press_on(page, view: str, index: int) -> tuple[float, float]:
             continue
         page.mouse.down()
         return x, y
-    raise AssertionError(f"control {index} cannot be taken with the mouse")
+    page.screenshot(path=str(helpers.ROOT / "hands-failure.png"))
+    raise AssertionError(f"control {index} cannot be taken with the mouse (hovering "
+                         f"{page.evaluate(f'() => {view}.describe().hover')} at {x:.0f}, {y:.0f})")
 
 
 def rgb(colour: str) -> np.ndarray:
