@@ -27,9 +27,10 @@ from .gestures import PYTHON, acting, actor
 
 #: What a view is, as the others see it.
 KINDS = ("desktop", "notebook", "headset")
-#: The hands' colours, one each in the order they come (distinct on the clay's light background and in a headset).
-COLOURS = ("#e6194b", "#2e8b3e", "#4363d8", "#f58231", "#911eb4", "#1a9fb3", "#d6329c", "#7f8c1b", "#9a6324",
-           "#000075")
+#: The hands' colours, one each in the order they come: distinct on the clay's light background and in a headset, and
+#: none red (a view draws the control it holds itself red).
+COLOURS = ("#4363d8", "#2e8b3e", "#f58231", "#911eb4", "#1a9fb3", "#d6329c", "#7f8c1b", "#9a6324", "#000075",
+           "#469990")
 PYTHON_COLOUR = "#555555"
 #: A hand that holds a control and sends nothing for this long lets go (a view keeps saying it is there while it
 #: holds: client/src/grabs.js pings every 2 s).
