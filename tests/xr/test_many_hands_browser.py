@@ -5,7 +5,8 @@ session's state in Python.
 
 - a control one person holds is refused to the other, who is told who holds it, and sees it in the holder's colour;
 - every view shows who else is there (desktop, headset: a colour each) and what they hold;
-- two drags at once are two undo steps, and each person's Ctrl+Z takes back their own drag first;
+- two drags at once are two undo steps, and each person's Ctrl+Z takes back their own drag first (three views: two
+  browsers and a headset, two of them dragging);
 - a mouse up (a trigger let go) on a settled clay runs nothing: no cycle, no frame with other positions.
 
 Needs /usr/bin/chromium, Python Playwright and the built client (npm run build).
@@ -238,19 +239,26 @@ def controller_to(page, world) -> None:
         wait_frames(page, 2)
 
 
-def test_a_browser_and_a_headset(browser, server, session):
+def test_two_browsers_and_a_headset(browser, server, session):
+    """Three views: a desktop page, a second one, and a headset. Each lists the three; the headset's grab is refused
+    to the desktop and shown in both; the second desktop drags another control meanwhile (a step of its own); the
+    headset lets go on a settled clay and nothing runs."""
     desk = open_page(browser, server.base + "/xr/")
+    desk2 = open_page(browser, server.base + "/xr/")
     headset = open_page(browser, server.base + "/xr/emulator.html")
     frames = []
     try:
         enter_ar(headset)
-        hh, hd = me(headset), me(desk)
+        hh, hd, hd2 = me(headset), me(desk), me(desk2)
         wait_for(lambda: me(headset)["kind"] == "headset", what="the headset to say it is one")
         hh = me(headset)
-        desk.wait_for_function(f"document.querySelector('.somview-presence').innerText.includes('{hh['name']}')",
-                               timeout=10000)
-        assert hh["name"].startswith("headset ") and hh["colour"] != hd["colour"]
+        for page in (desk, desk2):
+            page.wait_for_function(f"document.querySelector('.somview-presence').innerText.includes('{hh['name']}')",
+                                   timeout=10000)
+            assert len(page.evaluate("somxr.state().presence")) == 3
+        assert hh["name"].startswith("headset ") and len({hh["colour"], hd["colour"], hd2["colour"]}) == 3
         headset.wait_for_function(f"somxr.state().menuStatus.includes('with {hd['name']}')", timeout=10000)
+        assert hd2["name"] in headset.evaluate("somxr.state().menuStatus")
         assert session.wait_idle(60)
         start, steps = session.controls, session.history[0]
 
@@ -268,8 +276,13 @@ def test_a_browser_and_a_headset(browser, server, session):
         desk.mouse.up()
         desk.wait_for_function(f"(somxr.state().lastError || '').includes('control 2 is held by {hh['name']}')",
                                timeout=10000)
-        for s in range(1, 7):  # the headset moves it
+        desk2.wait_for_function(f"document.querySelector('.somview-presence').innerText.includes("
+                                f"'{hh['name']} \u00b7 holds 2')", timeout=10000)
+        x, y = press_on(desk2, 5)  # the second desktop drags control 5 meanwhile
+        for s in range(1, 7):  # the headset moves control 2, the second desktop control 5
             controller_to(headset, target + np.array([0.01, 0.008, 0.0]) * s)
+            desk2.mouse.move(x - 6 * s, y + 4 * s)
+        desk2.mouse.up()
         wait_for(lambda: settled(session), timeout=60, what="the clay settled while the trigger is held")
         before = session.frame
         session.add_listener(frames.append, replay=False)
@@ -280,11 +293,12 @@ def test_a_browser_and_a_headset(browser, server, session):
         assert session.frame.iteration == before.iterations and all(f.step_cycles == 0 for f in frames)
         np.testing.assert_array_equal(session.frame.positions, before.positions)
         assert np.linalg.norm(session.controls[2, :3] - start[2, :3]) > 0.05
-        assert session.history[0] == steps + 1  # the headset's drag: one step
+        assert np.linalg.norm(session.controls[5, :3] - start[5, :3]) > 0.1
+        assert session.history[0] == steps + 2  # the two drags, a step each
         desk.wait_for_function("!document.querySelector('.somview-presence').innerText.includes('holds')",
                                timeout=10000)
-        assert desk.errors == [] and headset.errors == [], desk.errors + headset.errors
+        assert desk.errors == [] and desk2.errors == [] and headset.errors == []
     finally:
         session.remove_listener(frames.append)
-        desk.close()
-        headset.close()
+        for page in (desk, desk2, headset):
+            page.close()
