@@ -6,7 +6,8 @@ limit), so that nothing read can fail later while the session is rebuilt.
 `read_folder` never writes and never raises for what is on the disk: each thing it cannot read is a `Problem` that
 names the file and says what is wrong in plain words (never a library's own), and it brings back the most it can:
 
-- the manifest unreadable (missing, not a manifest, another format, a newer somwidget's settings): nothing;
+- the manifest unreadable (missing, not a manifest, another format), or a current step with settings this somwidget
+  does not know (a newer one wrote it): nothing;
 - an undo or redo step unreadable (its entry in the manifest, its file, or the file of its mesh's start): the
   session without that step and those beyond it;
 - the current step unreadable: the newest readable undo step in its place, with the undo steps before it (the redo
@@ -44,6 +45,7 @@ LAST_TIME = 32_503_680_000.0
 #: Bytes a step file holds beyond its arrays' values (zip entries and .npy headers).
 STEP_FILE_SLACK = 65536
 _STEP_ARRAYS = ("controls.npy", "radii.npy", "weights.npy")
+_CURRENT = "the current step"
 _WHAT = {"weights": "weights (the clay's shape)", "controls": "controls", "radii": "radii (each control's reach)"}
 
 
@@ -205,7 +207,7 @@ class _Reader:
             gesture = False
         undo, redo = self._records(manifest, "undo"), self._records(manifest, "redo")
         try:
-            r.current = self._step(manifest.get("current"), "the current step", load=True)
+            r.current = self._step(manifest.get("current"), _CURRENT, load=True)
             r.gesture = gesture
         except _Damaged as exc:
             self.problem(exc)
@@ -266,8 +268,8 @@ class _Reader:
             raise _Damaged(m, part, f"its settings are missing ({_short(parameters)})")
         try:
             params = read_settings(parameters, n_dims)
-        except NewerSettings as exc:
-            raise _Refused(m, part, str(exc)) from None
+        except NewerSettings as exc:  # the current step's: the session is a newer somwidget's (an older step's: damage)
+            raise (_Refused if part == _CURRENT else _Damaged)(m, part, str(exc)) from None
         except ValueError as exc:
             raise _Damaged(m, part, f"its setting {exc}") from None
         group = self._symmetry(record.get("symmetry"), n_dims, part)
