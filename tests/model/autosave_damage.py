@@ -37,6 +37,8 @@ TEXT = ("cut", "flip", "garbage", "empty", "nested", "list", "string", "utf16", 
 ARRAY = ("scale1e30", "scale1e20", "nan", "inf", "ninf", "float64", "int32", "float16", "object", "transpose",
          "extra_row", "drop_col", "flat", "scalar", "empty", "drop_member", "extra_member", "rename_member",
          "negate", "zero", "fortran")
+#: Those of them that may leave valid values (another state, read as it is).
+VALID = ("negate", "zero", "fortran")
 #: Changes to one file, whatever it holds.
 FILE = ("cut", "random", "flip", "empty", "folder", "link_outside", "link_inside", "link_dangling", "link_loop",
         "fifo", "delete", "sparse_huge", "npy_not_npz", "pickle", "zip_bomb_header")
@@ -459,7 +461,8 @@ def _check_session(session, saved: Saved, damages) -> str:
     weights, controls = snap["weights"], snap["controls"]
     assert np.isfinite(weights).all() and np.isfinite(controls).all()
     assert np.isfinite(session.frame.positions).all()
-    assert digest(weights) in saved.digests, "the session brought back is none of the saved steps"
+    if not any(d.kind == "array" and d.how in VALID for d in damages):
+        assert digest(weights) in saved.digests, "the session brought back is none of the saved steps"
     if not any(d.may_hit_current(saved.manifest) for d in damages):
         assert digest(weights) == saved.current, "the current step could be read but did not come back"
         np.testing.assert_array_equal(controls, saved.controls)

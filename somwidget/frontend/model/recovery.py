@@ -174,7 +174,8 @@ def _kept(reading: Reading) -> str:
 
     stacks = f"{n(len(reading.undo), 'undo')} and {n(len(reading.redo), 'redo')}"
     if reading.back:
-        before = "the step before the last one" if reading.back == 1 else f"the step {reading.back} steps before the last"
+        before = "the step before the last one" if reading.back == 1 else \
+            f"the step {reading.back} steps before the last"
         came = f"Brought back instead: {before} (the newest that could be read), with {n(len(reading.undo), 'undo')}"
     else:
         came = f"Brought back: the last step, with {stacks}"
