@@ -27,7 +27,7 @@ import numpy as np
 
 ORIGIN = "fuzz"
 #: Adversarial JSON values for any field of a manifest.
-VALUES = (None, True, False, 0, -1, 1, 7, 2**31, 10**30, -(10**30), 0.5, -0.5, 1e300, -1e300, float("nan"),
+VALUES = (None, True, False, 0, -1, 1, 7, 2**31, 10**30, -(10**30), 10**400, 0.5, -0.5, 1e300, -1e300, float("nan"),
           float("inf"), float("-inf"), 1e-320, "", "x" * 300, "../../../etc/passwd", "/etc/passwd", "s1.npz", "p1.npz",
           "manifest.json", "lock", "none", "radial-99-z", "mirror-q", [], [0], [1.0, float("inf")], [None] * 3,
           ["a", "b"], {}, {"kind": "radial", "axis": 2, "n": 1000}, {"a": 1}, [[[[]]]])

@@ -88,6 +88,7 @@ class _Damaged(Exception):
     """One part cannot be read (`problem` says which and why)."""
 
     def __init__(self, path: Path, part: str, reason: str):
+        reason = reason if len(reason) <= 240 else reason[:237] + "..."
         super().__init__(reason)
         self.problem = Problem(path, part, reason)
 
@@ -111,15 +112,19 @@ def read_settings(stored: dict, n_dims: int) -> dict:
                             "a newer somwidget wrote it")
     values = {}
     for name, s in declared.items():
-        if name not in stored:
-            values[name] = [s.default] * n_dims if s.per else s.default
-        elif s.per:
-            if not isinstance(stored[name], list) or len(stored[name]) != n_dims:
-                raise ValueError(f"{s.label}: expected a list of {n_dims} values (one per feature dimension), got "
-                                 f"{_short(stored[name])}")
-            values[name] = [float(s.check(x, f"{s.label} {d}")) for d, x in enumerate(stored[name])]
-        else:
-            values[name] = s.check(stored[name], s.label)
+        value = stored.get(name)
+        try:
+            if name not in stored:
+                values[name] = [s.default] * n_dims if s.per else s.default
+            elif s.per:
+                if not isinstance(value, list) or len(value) != n_dims:
+                    raise ValueError(f"{s.label}: expected a list of {n_dims} values (one per feature dimension), "
+                                     f"got {_short(value)}")
+                values[name] = [float(s.check(x, f"{s.label} {d}")) for d, x in enumerate(value)]
+            else:
+                values[name] = s.check(value, s.label)
+        except (OverflowError, TypeError):  # a number past any float's range, a value of no kind a setting has
+            raise ValueError(f"{s.label}: {_short(value)} is not a value it takes") from None
     return values
 
 
@@ -291,6 +296,9 @@ class _Reader:
             clean = session_file.check_state(state, MANIFEST)  # what Session.load checks
         except ValueError as exc:
             raise _Damaged(m, part, _plain_key(str(exc), MANIFEST)) from None
+        except (OverflowError, TypeError):
+            raise _Damaged(m, part, "its values do not fit together (a number too large, or of another kind)") \
+                from None
         step = Step(preset=preset, controls=clean["controls"], parameters=params,
                     weights=clean["weights"] if load else path, iteration=clean["iteration"], radii=clean["radii"],
                     symmetry=group, strokes=None if strokes is None else clean["strokes"])
@@ -396,6 +404,8 @@ class _Reader:
             raise _Damaged(path, part, str(exc)) from None
         except ValueError as exc:
             raise _Damaged(path, part, _plain_key(str(exc), str(path))) from None
+        except (OverflowError, TypeError, IndexError, KeyError):  # values that do not fit together
+            raise _Damaged(path, part, "not a readable somwidget session: its parts do not fit together") from None
         if len(preset.controls) < 1:
             raise _Damaged(path, part, "it holds no controls")
         return preset
