@@ -22,6 +22,7 @@ import shutil
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -399,6 +400,16 @@ class Saved:
         return cls(folder, manifest, frozenset(digests.values()), digests[manifest["current"]["file"]], controls)
 
 
+class Result(NamedTuple):
+    """What a restart did: `outcome` "whole" (read in place), "partial" (set aside, every step back), "back-N" (the
+    step N before the current one back), "nothing" (set aside, a new session) or "untouched" (not read: left as it
+    is); the recovered message and the notices."""
+
+    outcome: str
+    message: str
+    notices: list
+
+
 def digest(weights) -> str:
     return hashlib.sha256(np.ascontiguousarray(weights, np.float32).tobytes()).hexdigest()
 
@@ -408,10 +419,10 @@ def recover_damaged(saved: Saved, damages, work: Path) -> str:
     (Session.recover, in this process) and check what must hold whatever the damage: the start succeeds; a session
     brought back has finite weights and controls and is one of the saved steps (the current one, when no damage could
     touch it); no byte of the saved folder is changed or deleted (it is where it was, or set aside whole), and what
-    came back of a folder set aside is in a new folder that reads back whole. Returns what happened: "whole",
-    "partial", "back-N", "nothing" or "untouched"."""
+    came back of a folder set aside is in a new folder that reads back whole. Returns what happened (`Result`)."""
     from somwidget.frontend.model import Session
     from somwidget.frontend.model.readback import read_folder
+    from somwidget.frontend.model.recovery import recover
 
     folder = work / "autosave" / saved.folder.name
     outside = work / "outside"
@@ -426,10 +437,11 @@ def recover_damaged(saved: Saved, damages, work: Path) -> str:
     old = os.environ.get("SOMWIDGET_DATA_DIR")
     os.environ["SOMWIDGET_DATA_DIR"] = str(work)
     try:
-        session = Session.recover(origin=ORIGIN, device="cpu", start=False)
+        session, notices = recover(Session, ORIGIN, device="cpu", start=False)  # as `somwidget serve` starts
         try:
             outcome = _check_session(session, saved, damages)
             new_folder = session.autosave.path if session is not None else None
+            said = (session.recovered["message"] if session is not None else "", list(notices))
         finally:
             if session is not None:
                 session.close()
@@ -440,17 +452,17 @@ def recover_damaged(saved: Saved, damages, work: Path) -> str:
             os.environ["SOMWIDGET_DATA_DIR"] = old
     aside = [p for p in folder.parent.iterdir() if p.name.startswith(folder.name + ".unreadable")]
     if before is None:
-        return outcome
+        return Result(outcome, *said)
     if folder.exists() or folder.is_symlink():
         assert not aside, aside
         assert same_folder(before, snapshot(folder)), "the saved folder was changed"
-        return outcome if session is not None else "untouched"
+        return Result(outcome if session is not None else "untouched", *said)
     assert len(aside) == 1, sorted(p.name for p in folder.parent.iterdir())
     assert same_folder(before, snapshot(aside[0])), "the folder set aside is not the saved folder, whole"
-    assert session is None or session.notices, "a folder set aside without a notice"
+    assert any(str(aside[0]) in notice for notice in notices), "a folder set aside without a notice saying where"
     if session is not None and new_folder != folder:
         assert read_folder(new_folder, 1 << 20).whole, "what came back is not whole in its new folder"
-    return outcome
+    return Result(outcome, *said)
 
 
 def _check_session(session, saved: Saved, damages) -> str:
@@ -490,3 +502,86 @@ def random_damage(rng: random.Random, manifest: dict) -> Damage:
     if kind == "file":
         return Damage(kind, (rng.choice(roles),), rng.choice(FILE), n=n)
     return Damage(kind, (), rng.choice(FOLDER), n=n)
+
+
+def _set(*where, value) -> Damage:
+    return Damage("set", where, value=value)
+
+
+#: Corruptions by name (benchmarks/fuzz_recovery.py --list prints what each gives): the issue's and their kin.
+NAMED: dict[str, list[Damage]] = {
+    "manifest: removed": [Damage("file", ("manifest",), "delete")],
+    "manifest: a folder": [Damage("file", ("manifest",), "folder")],
+    "manifest: cut short": [Damage("text", ("manifest",), "cut", n=40)],
+    "manifest: empty": [Damage("text", ("manifest",), "empty")],
+    "manifest: random bytes": [Damage("text", ("manifest",), "garbage", n=7)],
+    "manifest: UTF-16": [Damage("text", ("manifest",), "utf16")],
+    "manifest: a JSON list": [Damage("text", ("manifest",), "list")],
+    "manifest: 20,000 nested brackets": [Damage("text", ("manifest",), "nested")],
+    "manifest: a link out of the folder": [Damage("folder", (), "manifest_link")],
+    "manifest: a named pipe": [Damage("folder", (), "manifest_fifo")],
+    "manifest: format 2 (a newer somwidget)": [_set("format", value=2)],
+    "manifest: format \"1\"": [_set("format", value="1")],
+    "manifest: presets missing": [Damage("delete", ("presets",))],
+    "manifest: current step missing": [Damage("delete", ("current",))],
+    "manifest: undo not a list": [_set("undo", value="s3.npz")],
+    "manifest: saved 1e300": [_set("saved", value=1e300)],
+    "manifest: saved NaN": [_set("saved", value=float("nan"))],
+    "manifest: saved \"yesterday\"": [_set("saved", value="yesterday")],
+    "manifest: gesture \"yes\"": [_set("gesture", value="yes")],
+    "current step: file \"../p1.npz\"": [_set("current", "file", value="../p1.npz")],
+    "current step: file names a missing s99.npz": [_set("current", "file", value="s99.npz")],
+    "current step: s past S": [_set("current", "iteration", value=10**6)],
+    "current step: s = -1": [_set("current", "iteration", value=-1)],
+    "current step: s 10**400": [_set("current", "iteration", value=10**400)],
+    "current step: reach 5 (range (0, 1])": [_set("current", "parameters", "reach", value=5)],
+    "current step: Infinity in the metric weights": [_set("current", "parameters", "metric_weights", 0,
+                                                          value=float("inf"))],
+    "every step: Infinity in the metric weights": [_set(k, *(i,) if k != "current" else (), "parameters",
+                                                        "metric_weights", 0, value=float("inf"))
+                                                   for k, n in (("current", 1), ("undo", 7), ("redo", 1))
+                                                   for i in range(n)],
+    "current step: metric weights all 0": [_set("current", "parameters", "metric_weights", value=[0, 0, 0])],
+    "current step: a setting of a newer somwidget": [Damage("add", ("current", "parameters"), value=1.0)],
+    "undo step: a setting of a newer somwidget": [Damage("add", ("undo", 3, "parameters"), value=1.0)],
+    "current step: radial group of 1000": [_set("current", "symmetry", value={"kind": "radial", "axis": 2,
+                                                                               "n": 1000})],
+    "current step: strokes do not cover the controls": [_set("current", "strokes", value=[1, 1])],
+    "current step file: cut short": [Damage("file", ("current",), "cut", n=300)],
+    "current step file: random bytes": [Damage("file", ("current",), "random", n=5000)],
+    "current step file: a pickle": [Damage("file", ("current",), "pickle")],
+    "current step file: one .npy, not an .npz": [Damage("file", ("current",), "npy_not_npz")],
+    "current step file: weights x1e30": [Damage("array", ("current",), "scale1e30", n=2)],
+    "current step file: controls x1e30": [Damage("array", ("current",), "scale1e30", n=0)],
+    "current step file: a NaN in the weights": [Damage("array", ("current",), "nan", n=2)],
+    "current step file: -Infinity in the radii": [Damage("array", ("current",), "ninf", n=1)],
+    "current step file: weights float64": [Damage("array", ("current",), "float64", n=2)],
+    "current step file: weights of Python objects": [Damage("array", ("current",), "object", n=2)],
+    "current step file: weights a row short": [Damage("array", ("current",), "drop_col", n=2)],
+    "current step file: no controls": [Damage("array", ("current",), "empty", n=0)],
+    "current step file: radii negative": [Damage("array", ("current",), "negate", n=1)],
+    "current step file: a member missing": [Damage("array", ("current",), "drop_member", n=1)],
+    "current step file: an extra member": [Damage("array", ("current",), "extra_member")],
+    "current step file: a header declaring 2^28 rows": [Damage("file", ("current",), "zip_bomb_header")],
+    "current step file: a folder": [Damage("file", ("current",), "folder")],
+    "current step file: a link to a good copy outside": [Damage("file", ("current",), "link_outside")],
+    "current step file: a link to another step": [Damage("file", ("current",), "link_inside")],
+    "current step file: a link to itself": [Damage("file", ("current",), "link_loop")],
+    "current step file: a named pipe": [Damage("file", ("current",), "fifo")],
+    "current step file: a sparse 256 MiB file": [Damage("file", ("current",), "sparse_huge")],
+    "current step file: removed": [Damage("file", ("current",), "delete")],
+    "current and newest undo step files: random bytes": [Damage("file", ("current",), "random", n=1),
+                                                          Damage("file", ("undo:6",), "random", n=2)],
+    "undo step file (the 3rd back): random bytes": [Damage("file", ("undo:4",), "random", n=3)],
+    "redo step file: cut short": [Damage("file", ("redo:0",), "cut", n=200)],
+    "preset file of the current step: random bytes": [Damage("file", ("preset:0",), "random", n=9)],
+    "preset file of the older steps: cut short": [Damage("file", ("preset:1",), "cut", n=500)],
+    "preset file of the older steps: n_vertices 1e30": [Damage("array", ("preset:1",), "scale1e30", n=19)],
+    "lock: a folder": [Damage("folder", (), "lock_folder")],
+    "lock: a link out of the folder": [Damage("folder", (), "lock_link")],
+    "lock: a named pipe": [Damage("folder", (), "lock_fifo")],
+    "lock: removed": [Damage("folder", (), "lock_missing")],
+    "stray step files s999999999999.npz and s<200 digits>.npz": [Damage("folder", (), "stray_step"),
+                                                                 Damage("folder", (), "stray_long")],
+    "a temporary file a kill left": [Damage("folder", (), "tmp_file")],
+}

@@ -188,7 +188,7 @@ class _Reader:
         if not isinstance(origin, str) or not origin or len(origin) > 100:
             raise _Refused(path, part, f"the program that made it is not named (origin {_short(origin)})")
         if not isinstance(manifest.get("presets"), dict):
-            raise _Refused(path, part, "it lists no starts of meshes (its 'presets' are missing or not a list)")
+            raise _Refused(path, part, "it lists no starts of meshes (its 'presets' are missing or damaged)")
         return manifest
 
     def _time(self, value) -> float | None:

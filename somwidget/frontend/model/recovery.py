@@ -27,7 +27,7 @@ from pathlib import Path
 from .files import preset_of, read
 from .readback import Reading, read_folder
 from .state import max_vertices_for
-from .store import SessionStore, autosave_dir, lock, peek, set_aside, stopped
+from .store import LOCK, SessionStore, autosave_dir, lock, peek, set_aside, stopped
 
 log = logging.getLogger(__name__)
 
@@ -83,7 +83,10 @@ def _from_folder(session_class, folder: Path, origin: str | None, max_vertices: 
     try:
         store = SessionStore.adopt(folder)
     except OSError as exc:
-        notices.append(f"Your saved session in {folder} cannot be opened ({exc.strerror or exc}); it is left as it is.")
+        lock_path = folder / LOCK
+        why = "its lock is a link" if lock_path.is_symlink() else "its lock is not a file" \
+            if lock_path.exists() and not lock_path.is_file() else exc.strerror or str(exc)
+        notices.append(f"Your saved session in {folder} cannot be opened ({why}); it is left as it is.")
         return None
     if store is None:
         return None  # live: another process has it
