@@ -208,7 +208,7 @@ def _damage_text(path: Path, damage: Damage) -> None:
     how = damage.how
     if how == "cut":
         data = data[: damage.n % max(1, len(data))]
-    elif how == "flip":
+    elif how == "flip" and data:
         i = damage.n % len(data)
         data = data[:i] + bytes([data[i] ^ 0x5A]) + data[i + 1:]
     elif how == "garbage":
@@ -431,7 +431,8 @@ def recover_damaged(saved: Saved, damages, work: Path) -> str:
     for damage in damages:
         try:
             apply(folder, damage, outside, saved.manifest)
-        except (OSError, ValueError, KeyError, IndexError, TypeError, RecursionError, zipfile.BadZipFile):
+        except (OSError, ValueError, KeyError, IndexError, TypeError, ZeroDivisionError, RecursionError,
+                zipfile.BadZipFile):
             pass  # an earlier damage took away what this one changes
     before = snapshot(folder) if folder.is_dir() else None
     old = os.environ.get("SOMWIDGET_DATA_DIR")
