@@ -239,8 +239,9 @@ def _damage_array(path: Path, damage: Damage) -> None:
     how = damage.how
     numeric = a.dtype.kind in "fiub" and a.size
     if how in ("scale1e30", "scale1e20") and numeric:
-        arrays[key] = (a.astype(np.float64) * float(how[5:]) + float(how[5:])).astype(a.dtype if a.dtype.kind == "f"
-                                                                                     else np.float64)
+        with np.errstate(over="ignore", invalid="ignore"):  # float16 overflows to inf: a damage as good as any
+            arrays[key] = (a.astype(np.float64) * float(how[5:]) + float(how[5:])).astype(
+                a.dtype if a.dtype.kind == "f" else np.float64)
     elif how in ("nan", "inf", "ninf") and numeric:
         b = a.astype(np.float32 if a.dtype.kind != "f" else a.dtype).copy()
         b.flat[damage.n % b.size] = {"nan": np.nan, "inf": np.inf, "ninf": -np.inf}[how]
