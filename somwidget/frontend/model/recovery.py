@@ -82,6 +82,8 @@ def _from_folder(session_class, folder: Path, origin: str | None, max_vertices: 
     """The session of one stopped folder brought back (its notice added when it was not read whole), or None."""
     try:
         store = SessionStore.adopt(folder)
+    except FileNotFoundError:
+        return None  # gone meanwhile: another start set it aside
     except OSError as exc:
         lock_path = folder / LOCK
         why = "its lock is a link" if lock_path.is_symlink() else "its lock is not a file" \
