@@ -457,6 +457,8 @@ def recover_damaged(saved: Saved, damages, work: Path) -> str:
     if folder.exists() or folder.is_symlink():
         assert not aside, aside
         assert same_folder(before, snapshot(folder)), "the saved folder was changed"
+        if session is not None:
+            _saves_again(work)
         return Result(outcome if session is not None else "untouched", *said)
     assert len(aside) == 1, sorted(p.name for p in folder.parent.iterdir())
     assert same_folder(before, snapshot(aside[0])), "the folder set aside is not the saved folder, whole"
@@ -464,6 +466,29 @@ def recover_damaged(saved: Saved, damages, work: Path) -> str:
     if session is not None and new_folder != folder:
         assert read_folder(new_folder, 1 << 20).whole, "what came back is not whole in its new folder"
     return Result(outcome, *said)
+
+
+def _saves_again(work: Path) -> None:
+    """A session brought back in place goes on saving there: its next step is on disk, and the folder reads back
+    whole (what was read can be written again)."""
+    from somwidget.frontend.model import Session
+    from somwidget.frontend.model.readback import read_folder
+
+    old = os.environ.get("SOMWIDGET_DATA_DIR")
+    os.environ["SOMWIDGET_DATA_DIR"] = str(work)
+    try:
+        session = Session.recover(origin=ORIGIN, device="cpu", start=False)
+        try:
+            session.settings.set("l_start", 0.2 if session.parameters["l_start"] != 0.2 else 0.3)
+            assert session.autosave.flush(30), session.save_error
+            assert read_folder(session.autosave.path, 1 << 20).whole
+        finally:
+            session.close()
+    finally:
+        if old is None:
+            del os.environ["SOMWIDGET_DATA_DIR"]
+        else:
+            os.environ["SOMWIDGET_DATA_DIR"] = old
 
 
 def _check_session(session, saved: Saved, damages) -> str:
@@ -575,6 +600,8 @@ NAMED: dict[str, list[Damage]] = {
                                                           Damage("file", ("undo:6",), "random", n=2)],
     "undo step file (the 3rd back): random bytes": [Damage("file", ("undo:4",), "random", n=3)],
     "redo step file: cut short": [Damage("file", ("redo:0",), "cut", n=200)],
+    "presets: -Infinity among a mesh's facts (meta)": [Damage("add", ("presets", "p3.npz", "meta"),
+                                                               value=float("-inf"))],
     "preset file of the current step: random bytes": [Damage("file", ("preset:0",), "random", n=9)],
     "preset file of the older steps: cut short": [Damage("file", ("preset:1",), "cut", n=500)],
     "preset file of the older steps: n_vertices 1e30": [Damage("array", ("preset:1",), "scale1e30", n=19)],

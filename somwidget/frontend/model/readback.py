@@ -392,6 +392,11 @@ class _Reader:
         radius = record.get("radius") if isinstance(record, dict) else None
         if not ok or type(radius) not in (int, float) or not 0 <= radius <= schedule.BY_NAME["radius"].high:
             raise _Damaged(m, part, f"its entry for {name} is damaged ({_short(record)})")
+        try:  # what is read is written again with the next save: it must be plain JSON (no NaN, no Infinity)
+            json.dumps(record["meta"], allow_nan=False)
+        except (ValueError, TypeError, RecursionError):
+            raise _Damaged(m, part, f"its entry for {name} holds a value that is not a number ({_short(record)})") \
+                from None
         path = self.folder / name
         try:
             check_plain(path, 1 << 40)  # the session file's own checks bound its size

@@ -67,6 +67,8 @@ UNREADABLE = ".unreadable"
 #: The names of a folder's step and preset files (ASCII digits, as many as this module writes at most).
 STEP_FILE = re.compile(r"s([0-9]{1,12})\.npz")
 PRESET_FILE = re.compile(r"p([0-9]{1,12})\.npz")
+#: File numbers counted when a folder is taken over (far below the 12 digits a name may have).
+COUNTED = 10**9
 #: The largest manifest read (200 undo and 200 redo steps of 32 dims take about 1 MiB).
 MAX_MANIFEST_BYTES = 16 << 20
 
@@ -368,9 +370,11 @@ class SessionStore:
         return aside
 
     def _count_files(self) -> None:
+        """Number the next files past those in the folder (a stray one numbered near the names' limit, which no
+        session reaches, is not counted: the names written stay names the reader takes)."""
         for entry in os.listdir(self.folder):
             m = STEP_FILE.fullmatch(entry) or PRESET_FILE.fullmatch(entry)
-            if m:
+            if m and int(m.group(1)) < COUNTED:
                 self._counter = max(self._counter, int(m.group(1)))
 
     def _next(self) -> int:
