@@ -179,6 +179,11 @@ class PanelModel:
         """What the panel's banner says about a session brought back (which state came back), "" for any other."""
         return (self.session.recovered or {}).get("message", "")
 
+    def notice_message(self) -> str:
+        """What the panel's notice says about the saved sessions that could not be read whole (what was wrong, in
+        which file, what came back and where the folder is kept), "" when there is none."""
+        return " ".join(self.session.notices)
+
     @staticmethod
     def train_label(frame: Frame) -> str:
         """What the run button does now: Pause a running map, Resume one stopped part way through its schedule

@@ -44,12 +44,12 @@ from ...backend import io as mesh_io
 from ...backend import presets as _presets
 from ...backend.presets import FeatureLayout, Preset
 from .autosave import SessionAutosave
-from .autosave import recover as recover_session
 from .controls import ControlEdits
 from .files import SessionFiles
 from .frames import Frame, FrameListener, FrameStream
 from .hands import Hand, Hands, redo_own, undo_own
 from .operations import Publish, Reset, Restart
+from .recovery import recover as recover_session
 from .refining import refined_preset
 from .settings import SessionSettings
 from .state import GPU_MAX_VERTICES, ModellingState, build, max_vertices_for
@@ -462,9 +462,11 @@ class Session:
         ("python": made from Python, a notebook's included; "serve": `somwidget serve`'s; None: any), brought back
         as its autosave left it: its last completed step (or a drag not released, as a step of its own) with its
         undo history; nothing trains until the next intent. None if there is none. `session.recovered["message"]`
-        says which state came back. `options` go to Session (device, start...). It goes on saving in the same
-        folder. A saved session that cannot be read is set aside (renamed, never deleted; `session.notices` and the
-        log say where) and the next one tried."""
+        says which state came back. `options` go to Session (device, start...). Everything it reads is checked
+        before anything is built (readback.py); read whole, it goes on saving in the same folder, which is not
+        written until the next step. A folder not read whole is set aside whole (renamed, never changed) and what
+        could be read comes back in a new folder, or the next one is tried; `session.notices` and the log say what
+        was wrong, in which file, and what was kept where (recovery.py)."""
         session, notices = recover_session(cls, origin, **options)
         for notice in notices:
             log.warning("%s", notice)

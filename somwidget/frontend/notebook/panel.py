@@ -127,11 +127,12 @@ class Panel(widgets.VBox):
                                                     "download")
         self.export_link = widgets.HTML(layout=_fluid())
         self.recovered = _banner(self.model.recovered_message())
+        self.notices = _banner(self.model.notice_message(), "#e0a030")  # saved sessions not read whole
         self.saving = widgets.HTML()  # the autosave's failure, until a save is on disk again
         self.variants = VariantsSection(self.model, self._intent)
 
         super().__init__([
-            self.recovered, self.saving, self.title,
+            self.recovered, self.notices, self.saving, self.title,
             _row([self.preset, self.reload_button, self.refine_button]),
             _row([self.train_button, self.undo_button, self.redo_button, self.reset_button]),
             self.progress, self.status, self.error,
@@ -428,12 +429,13 @@ def _show(widget, p: Setting, value) -> None:
     _set(widget, value)
 
 
-def _banner(message: str) -> widgets.HBox:
-    """The recovered session's banner (hidden when there is none to say) with a button that dismisses it."""
+def _banner(message: str, colour: str = "#9c9") -> widgets.HBox:
+    """A banner (the recovered session's; the notices about saved sessions) hidden when there is nothing to say, with
+    a button that dismisses it."""
     dismiss = widgets.Button(icon="times", tooltip="Dismiss", layout=widgets.Layout(width="32px", min_width="32px"))
     banner = widgets.HBox([widgets.HTML(_BLOCK.format(f"<small>{_html.escape(message)}</small>"),
                                         layout=widgets.Layout(flex="1 1 auto")), dismiss],
-                          layout=widgets.Layout(display="flex" if message else "none", border="1px solid #9c9",
+                          layout=widgets.Layout(display="flex" if message else "none", border=f"1px solid {colour}",
                                                 padding="2px 4px", margin="0 0 4px 0", align_items="center"))
     banner.add_class("somwidget-recovered")
 
