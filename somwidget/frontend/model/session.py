@@ -361,6 +361,13 @@ class Session:
         metric_weights. A schedule setting restarts the schedule locally from the latest weights."""
         self.settings.set(name, value)
 
+    def set_symmetry(self, group) -> str:
+        """The symmetry group: a Symmetry, its spec ("mirror-y", "radial-8-z"), True (the last group, else the
+        preset's), False or None (off). Off, every copy becomes a control of its own and nothing moves; on, no control
+        is merged into another's copy unless all of them pair up (the copies a group left when turned off). One undo
+        step; returns what happened to the controls, in words (`settings.set_symmetry`)."""
+        return self.settings.set_symmetry(group)
+
     def set_iterations(self, value) -> None:
         """S: cycles in a run."""
         self.settings.set("iterations", value)
