@@ -257,12 +257,12 @@ MAX_STROKE_SAMPLES = 24
 SPACING_SHARE = 0.1
 
 
-def resample(points: np.ndarray, position, spacing: float) -> np.ndarray:
+def resample(points: np.ndarray, position, spacing: float, most: int = MAX_STROKE_SAMPLES) -> np.ndarray:
     """Samples of a polyline (all features interpolated) evenly spaced about `spacing` apart along its positions,
-    its ends included; 2 to MAX_STROKE_SAMPLES of them."""
+    its ends included; 2 to `most` of them."""
     pos = points[:, list(position)]
     seg = np.linalg.norm(np.diff(pos, axis=0), axis=1)
     along = np.concatenate([[0.0], np.cumsum(seg)])
-    count = int(np.clip(np.ceil(along[-1] / spacing) + 1, 2, MAX_STROKE_SAMPLES))
+    count = int(np.clip(np.ceil(along[-1] / spacing) + 1, 2, max(2, most)))
     at = np.linspace(0.0, along[-1], count)
     return np.stack([np.interp(at, along, points[:, d]) for d in range(points.shape[1])], axis=1)

@@ -49,6 +49,7 @@ from .controls import ControlEdits
 from .files import SessionFiles
 from .frames import Frame, FrameListener, FrameStream
 from .operations import Publish, Reset, Restart
+from . import revolving
 from .refining import refined_preset
 from .settings import SessionSettings
 from .state import GPU_MAX_VERTICES, ModellingState, build, max_vertices_for
@@ -351,6 +352,14 @@ class Session:
         """A polyline (m >= 2 points) as one control whose samples pull the clay along it (`control_edits
         .add_stroke`). Returns the index of its first sample."""
         return self.control_edits.add_stroke(points, radius)
+
+    def revolve(self, profile_points, axis="z", n: int = 16, radius: float | None = None) -> int:
+        """Lathe the clay: its nodes placed on the surface of revolution of the profile (m >= 2 points beside the axis
+        "x", "y" or "z" through the origin; each node keeps its angle about the axis and its place along the clay's
+        meridian), n-fold radial symmetry about the axis, and the profile's samples as a stroke control (radius:
+        None for the preset's) with its copies in place of the controls. One undo step; nothing trains until the
+        next intent. Returns the stroke's sample count (revolving.py)."""
+        return revolving.revolve(self, profile_points, axis, n, radius)
 
     def remove_control(self, index: int) -> None:
         self.control_edits.remove(index)
