@@ -226,4 +226,9 @@ export const intents = {
   // A polyline of 2 to MAX_STROKE_POINTS points as one control (its samples act as one); radius optional.
   // (points: number[][], radius: number (optional))
   stroke: (points, radius) => compact({ type: 'stroke', points, radius }),
+  // A profile of 2 to MAX_STROKE_POINTS points drawn beside the axis of the radial group in effect (none: the
+  // z-axis, 16 copies): the clay is lathed around it and the profile becomes its stroke control
+  // (Session.revolve); radius optional.
+  // (points: number[][], radius: number (optional))
+  revolve: (points, radius) => compact({ type: 'revolve', points, radius }),
 };
