@@ -23,6 +23,7 @@ if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
     pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
 
 VIEW = "document.getElementById('clay-view')?.somview"
+SHOTS = os.environ.get("SOMWIDGET_SHOTS")  # a folder: the tests leave pictures of the clay view there (docs/shapes)
 #: The vase the person draws beside the tube's axis (x: the distance from the axis, z: the height), from the foot up.
 VASE = [[0.35, 0.0, -1.0], [0.55, 0.0, -0.8], [0.7, 0.0, -0.35], [0.45, 0.0, 0.1], [0.25, 0.0, 0.55],
         [0.3, 0.0, 0.8], [0.55, 0.0, 1.05]]
@@ -85,6 +86,14 @@ def draw(page, model_points, per_segment: int = 8) -> None:
     page.mouse.up()
 
 
+def shot(page, name: str) -> None:
+    """The clay view as the person sees it, kept under $SOMWIDGET_SHOTS when set."""
+    if SHOTS:
+        os.makedirs(SHOTS, exist_ok=True)
+        page.wait_for_timeout(500)
+        page.locator("#clay-view").screenshot(path=os.path.join(SHOTS, f"{name}.png"))
+
+
 def table_numbers(page) -> list[str]:
     return [t.strip() for t in page.locator("#controls-table td.control-index").all_inner_texts()]
 
@@ -124,6 +133,7 @@ def test_the_open_presets_are_in_the_menu_and_keep_their_shape_until_the_person_
             assert rows_shown(page, len(preset.controls)) == [str(i) for i in range(len(preset.controls))]
             v = page.evaluate(f"() => {VIEW}.describe()")
             assert v["k"] == len(preset.controls) and v["kEff"] == len(preset.effective_controls())
+            shot(page, name)
     finally:
         page.close()
 
@@ -167,6 +177,17 @@ def test_a_vase_from_the_tube_in_five_actions(browser, server):
         assert page.locator("#controls-table .stroke-mark").count() == 1
         v = page.evaluate(f"() => {VIEW}.describe()")
         assert v["tool"] is None and v["desktop"]["revolves"] == 1  # one profile, one revolve: the tool let go
+        page.mouse.move(5, 5)  # off the view: no disc under the cursor in the pictures
+        shot(page, "vase-side")
+        if SHOTS:  # and seen from a little above (a drag on empty space orbits)
+            box = page.locator("#clay-view canvas").bounding_box()
+            x, y = box["x"] + 60, box["y"] + 60
+            page.mouse.move(x, y)
+            page.mouse.down()
+            page.mouse.move(x + 30, y + 90, steps=8)
+            page.mouse.up()
+            page.mouse.move(5, 5)
+            shot(page, "vase")
         page.locator("#undo-button").click()  # one step back: the tube
         server.wait(lambda s: s["session"]["history"][0] == steps and len(s["session"]["controls"]) == 5,
                     what="the tube again")
