@@ -112,7 +112,8 @@ def build_page(server, panel: PanelModel):
         client.Script(RECONNECT_JS)
         # what trame draws in the page's place while its websocket is closed (instead of "Connection closed")
         server.state.trame__template_error = '<trame-loading message="The page reloads when the server is back" />'
-        with layout.content:
+        with layout.content, html.Div(style="position: relative"):
+            _alerts()  # over the view's top left corner: they never move the panel nor cover its fields
             # the clay view mounts here (MOUNT_VIEW_JS); Vue leaves the element's children alone
             html.Div(id="clay-view", style="position: relative; width: 100%; height: calc(100vh - 88px)")
     return layout
@@ -132,15 +133,16 @@ def _on_enter_or_change(handler: str) -> list[str]:
     return [f'@change="{handler}"', f'@keydown.enter="{handler}"']
 
 
-#: The panel's alerts lie over the foot of the drawer, the newest lowest, so that showing or closing one never moves
-#: the panel's fields (at the top of the panel they took 50-66 px, and every field moved down by as much).
-_ALERTS = ("position: fixed; left: 8px; bottom: 8px; width: 374px; z-index: 1010; display: flex; "
+#: The panel's alerts lie over the clay view's top left corner, below the view's own bar line, so that showing or
+#: closing one never moves the panel's fields (at the top of the panel they took 50-66 px, and every field moved
+#: down by as much) and never covers them (over the foot of the drawer they hid the export buttons).
+_ALERTS = ("position: absolute; left: 8px; top: 40px; width: min(440px, 55%); z-index: 20; display: flex; "
            "flex-direction: column; gap: 6px")
 
 
 def _alerts() -> None:
-    """The alerts (a refusal, news, a recovered session, a failing autosave, saved sessions set aside) over the foot of
-    the drawer (_ALERTS): they come and go without moving the panel."""
+    """The alerts (a refusal, news, a recovered session, a failing autosave, saved sessions set aside) over the clay
+    view's corner (_ALERTS): they come and go without moving the panel."""
     with html.Div(id="panel-alerts", style=_ALERTS):
         v3.VAlert(v_if="error_message", text=("error_message",), type="error", density="compact",
                   closable=True, id="error-alert", click_close="error_message = ''", elevation=4)
@@ -160,7 +162,6 @@ def _alerts() -> None:
 
 def _panel(panel: PanelModel) -> None:
     with v3.VContainer(classes="pa-2 text-body-2", id="panel", style="position: relative"):
-        _alerts()
         # busy: a bar over the top of the panel (it takes no room)
         v3.VProgressLinear(v_if="busy", indeterminate=True, style="position: absolute; left: 0; top: 0; z-index: 5")
 
@@ -221,7 +222,7 @@ def _panel(panel: PanelModel) -> None:
             html.Div("Controls (position; gap to the nearest node: original / copy; radius)",
                      classes="text-subtitle-2", title=GAP_HELP)
             v3.VSpacer()
-            v3.VTextField(key=_revision_key("radius", "'all'"), model_value=("all_radii",), placeholder="all radii",
+            v3.VTextField(key=_revision_key("radius", "'all'"), model_value=("all_radii",), label="all radii",
                           density="compact", type="number", variant="underlined", hide_details=True, min=0, step=0.05,
                           id="all-radii",
                           style="max-width: 80px", title="Every control's radius of influence at once: type it and "
