@@ -371,7 +371,8 @@ export class ClayView {
       synapsesShown: this.clay.segments ? this.clay.segments.visible : null,
       ...this.labels.describe(), // labels, behind, markers
       ...this.rig.describe(), // camera, target, distance (to the target), fitDistance, projection, zoom
-      display: this.display.describe(), selected: this.handle.selected, tool: this.tool,
+      display: this.display.describe(), selected: this.handle.selected,
+      tool: this.desktop.strokeTool ? 'stroke' : this.desktop.revolveTool ? 'revolve' : null,
       radii: [...clay.radii], strokes: [...clay.strokes], controlIds: [...clay.controlIds],
       radiusBall: { of: this.radius.shownFor, shown: this.radius.ball.visible, radius: this.radius.ball.scale.x },
       radiusDisc: { ...this.disc.describe(), px: this.disc.disc.visible
@@ -416,10 +417,6 @@ export class ClayView {
     this.guide.show(name === 'revolve');
     this.desktop.hover(null);
     this.dirty = true;
-  }
-
-  get tool() {
-    return this.desktop.strokeTool ? 'stroke' : this.desktop.revolveTool ? 'revolve' : null;
   }
 
   selectControl(j) {
