@@ -269,9 +269,10 @@ def test_alerts_never_move_the_layout(browser, server):
     try:
         choose_preset(page, server, "Sphere", "sphere")
 
-        def places():
-            return [page.locator(sel).bounding_box()["y"] for sel in ("#preset-select", "#iteration-text",
-                                                                       "#controls-table", "#symmetry-switch")]
+        def places():  # within the panel (the drawer may scroll the field being typed in into sight)
+            top = page.locator("#panel").bounding_box()["y"]
+            return [page.locator(sel).bounding_box()["y"] - top for sel in ("#preset-select", "#iteration-text",
+                                                                             "#controls-table", "#symmetry-switch")]
 
         before = places()
         radius = page.locator("#controls-table tr").nth(1).locator(".radius-cell input")

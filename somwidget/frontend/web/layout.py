@@ -190,9 +190,11 @@ def _panel(panel: PanelModel) -> None:
                      id="iteration-text")
             v3.VProgressLinear(model_value=("stats.progress",), height=6, color="primary", classes="my-1",
                                id="progress-bar")
-            html.Div("cycle {{ stats.cycle_ms }} ms, {{ stats.fps }} frames/s; {{ stats.n_vertices }} nodes, "
-                     "{{ stats.k }} controls ({{ stats.k_eff }} with mirrors)", classes="text-caption",
-                     id="speed-text")
+            # two lines that never wrap: figures changing every frame must not move the fields below them
+            with html.Div(classes="text-caption", id="speed-text",
+                          style="white-space: nowrap; overflow: hidden; text-overflow: ellipsis"):
+                html.Div("cycle {{ stats.cycle_ms }} ms, {{ stats.fps }} frames/s")
+                html.Div("{{ stats.n_vertices }} nodes, {{ stats.k }} controls ({{ stats.k_eff }} with mirrors)")
 
         # settings: each comes from its declaration (backend/schedule.py) and shows the value in effect (bound one
         # way: what a person types goes to the session as an intent, never into the state); a refused value shows
