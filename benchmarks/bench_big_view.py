@@ -97,7 +97,7 @@ def measure(side: int, device: str, train_seconds: float) -> dict:
         t = time.perf_counter()
         topo = wire_display.topology_message(session, frame)
         topo_s = time.perf_counter() - t
-        topo_bytes = len(json.dumps(topo))
+        topo_bytes = len(json.dumps(topo.to_json()))
         t = time.perf_counter()
         for _ in range(10):
             data = wire_frames.encode_frame(frame, session)

@@ -10,8 +10,10 @@ import numpy as np
 import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
-from somwidget import benchmark  # noqa: E402
-from somwidget.backend import cycle_kernels, som  # noqa: E402
+from somwidget.backend import cuda_path, cycle_kernels, rows_path, som_model  # noqa: E402
+from somwidget.cli import load_bench_harness  # noqa: E402
+
+benchmark = load_bench_harness()
 
 DEV = "cuda:0"
 
@@ -30,7 +32,7 @@ def per_cycle(engine) -> float:
 
 
 for size in (32, 64, 128):  # whole warps: the tile primitives of the winner search need them
-    cycle_kernels.CUDA_BLOCK = som.CUDA_BLOCK = wp.constant(size)
+    cycle_kernels.CUDA_BLOCK = som_model.CUDA_BLOCK = cuda_path.CUDA_BLOCK = rows_path.CUDA_BLOCK = wp.constant(size)
     cycle_kernels.cycle_kernels.cache_clear()
     row = []
     for case in ("space-grid", "space-grid-smooth", "car", "big"):

@@ -1,7 +1,7 @@
 """Engine benchmark, no install needed: `PYTHONPATH=. python benchmarks/bench_engine.py [--device cuda] [...]`.
 
-The same harness as `somwidget bench` (somwidget/benchmark.py), which needs only numpy and warp-lang. Arguments
-are those of `somwidget bench --help`.
+The same harness as `somwidget bench` (engine_harness.py, beside this file), which needs only numpy and warp-lang.
+Arguments are those of `somwidget bench --help`.
 """
 
 import os

@@ -89,7 +89,7 @@ def s_change(root: Path, folder: Path) -> None:
             async def send():
                 import aiohttp
 
-                url = srv.base.replace("http", "ws") + "/xr/ws"
+                url = srv.base.replace("http", "ws") + "/view/ws"
                 async with aiohttp.ClientSession() as cs, cs.ws_connect(url) as ws:
                     await ws.send_json({"type": "set", "name": "iterations", "value": S})
 
@@ -207,12 +207,12 @@ for name in ("car", grid):
     s = Session("car", device="cpu", start=False)
     if name != "car":
         s.load_mesh(name)
-    assert s.flush_autosave(60)
+    assert s.autosave.flush(60)
     times = []
     for i in range(5):
-        s.set_reach(0.1 + 0.01 * i)
+        s.settings.set("reach", 0.1 + 0.01 * i)
         t = time.perf_counter()
-        assert s.flush_autosave(60)
+        assert s.autosave.flush(60)
         times.append(time.perf_counter() - t)
     print(f"autosave of a completed step, {s.preset.name} ({s.preset.n_vertices:,} nodes): median "
           f"{1e3 * sorted(times)[2]:.1f} ms", flush=True)

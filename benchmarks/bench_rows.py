@@ -21,7 +21,7 @@ import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
 from somwidget import Som, Topology  # noqa: E402
-from somwidget.backend import rows_path  # noqa: E402
+from somwidget.backend import row_cache  # noqa: E402
 from somwidget.backend.topology import RowSearch  # noqa: E402
 from device_timing import device_timer  # noqa: E402 (beside this script)
 
@@ -77,7 +77,7 @@ def check():
                 som.train()
                 out[(dev, mode, cache)] = som.weights
                 if mode == "rows" and dev == DEV:
-                    info = f"rows {som._cache.computed} stalls {som._cache.stalls}"
+                    info = f"rows {som.parts.model.cache.computed} stalls {som.parts.model.cache.stalls}"
             ref = out[(DEV, "dense", None)]
             diffs = {f"{d}/{m}/{c}": float(np.abs(w - ref).max()) for (d, m, c), w in out.items()}
             worst = max(worst, *(v for k, v in diffs.items() if k.startswith(DEV)))
@@ -93,7 +93,8 @@ def check():
             som.train()
             som.reset()
         dt, _ = timed(som.train)
-        extra = f" rows {som._cache.computed} stalls {som._cache.stalls}" if mode == "rows" else ""
+        cache = som.parts.model.cache
+        extra = f" rows {cache.computed} stalls {cache.stalls}" if mode == "rows" else ""
         print(f"grid128 {mode}: train {dt / 1000 * 1e6:.1f} us/cycle (warm){extra}", flush=True)
         if mode == "dense":
             dense_w = som.weights
@@ -140,7 +141,7 @@ def big():
         return Som(topo, W, C, iterations=S, mirror=(1,), device=DEV, distances="rows", **kw)
 
     t_som, som = timed(make)
-    cache = som._cache
+    cache = som.parts.model.cache
     print(f"{SIDE}^2 grid: build {t_build:.2f} s, d_max {d_max} in {t_d:.2f} s, Som {t_som:.2f} s, cache {cache.size} "
           f"rows, search {cache._search.method(d_max)}", flush=True)
     dt, _ = timed(som.train)
@@ -179,14 +180,14 @@ def big():
           f"{np.mean(np.array(new) > 0):.2f}; hops moved mean {drift.mean():.2f}, <= 1 hop {np.mean(drift <= 1):.2f}",
           flush=True)
     # without misses: a cache that holds a whole run's winner rows (none searched ahead), run again from reset
-    rings, rows_path._PREFETCH_RINGS = rows_path._PREFETCH_RINGS, 0
+    rings, row_cache._PREFETCH_RINGS = row_cache._PREFETCH_RINGS, 0
     som = make(S=200, cache_rows=8000)
-    cache = som._cache
+    cache = som.parts.model.cache
     som.train()
     som.reset()
     c0, s0 = cache.computed, cache.stalls
     dt, _ = timed(som.train)
-    rows_path._PREFETCH_RINGS = rings
+    row_cache._PREFETCH_RINGS = rings
     print(f"  no misses (S=200, cache 8000 rows, second run): {dt / 200 * 1e6:.1f} us/cycle; rows searched "
           f"{cache.computed - c0}, stalls {cache.stalls - s0}", flush=True)
     # one miss: rows for neurons not cached

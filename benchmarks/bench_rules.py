@@ -66,7 +66,8 @@ import numpy as np
 
 from somwidget.backend import metrics, presets
 from somwidget.backend.schedule import sigma_of
-from somwidget.backend.som import restart_iteration
+from somwidget.backend.som_schedule import restart_iteration
+from somwidget.backend.topology import Topology
 
 UNREACHABLE = 65535
 REACHES = (0.1, 0.2, 0.3, 0.5)
@@ -284,7 +285,7 @@ def fine_sphere() -> presets.Preset:
     coarse = presets.sphere_preset().controls
     near = [int(np.argmin(np.linalg.norm(pts - c, axis=1))) for c in coarse]
     return presets.Preset(name="sphere-fine", title="Sphere (fine)", description="The sphere at twice the resolution",
-                          topology=presets.Topology.from_faces(faces, len(pts)), weights=pts,
+                          topology=Topology.from_faces(faces, len(pts)), weights=pts,
                           controls=pts[near].copy(), layout=presets.XYZ)
 
 

@@ -12,7 +12,7 @@ Three parts, each printed as a table:
              Figures: the largest dihedral angle (degrees, the start's in brackets), the volume over the start's, the
              far half's 90th-percentile move and the moved control's gap to the surface (shares of the size).
   pass band  the sphere with only smoothing (strength 0.2, no control moved, the whole schedule): volume after over
-             before for the paper's Laplacian and Taubin's step at three pass bands (shaping_path.PASS_BAND).
+             before for the paper's Laplacian and Taubin's step at three pass bands (smoothing_kernels.PASS_BAND).
   frames     a drag frame on the sphere (set_controls from the anchor, step(10), the weights read back), median of
              --frames, for the shaping path against the same mesh with point controls (radius 0: the paper's
              kernels), in one run on each device asked for.
@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from somwidget.backend import metrics, presets, shaping_path
+from somwidget.backend import metrics, presets, smoothing_kernels
 from somwidget.backend.som import Som
 
 
@@ -84,9 +84,9 @@ def pull(p: presets.Preset, control: int, share: float, device: str, direction=N
 
 
 def pass_band_volume(rule: str, band: float | None, device: str) -> float:
-    kept = shaping_path.PASS_BAND
+    kept = smoothing_kernels.PASS_BAND
     if band is not None:
-        shaping_path.PASS_BAND = band
+        smoothing_kernels.PASS_BAND = band
     try:
         p = presets.get_preset("sphere")
         som = Som(p.topology, p.weights, p.controls, radii=p.control_radii(), smoothing=0.2, smoothing_rule=rule,
@@ -96,7 +96,7 @@ def pass_band_volume(rule: str, band: float | None, device: str) -> float:
         som.train()
         return metrics.mesh_volume(som.weights[:, :3].astype(np.float64), faces) / v0
     finally:
-        shaping_path.PASS_BAND = kept
+        smoothing_kernels.PASS_BAND = kept
 
 
 def frame_ms(device: str, point: bool, frames: int) -> float:
@@ -143,7 +143,7 @@ def main() -> None:
 
     print(f"pass band ({device}): sphere volume after smoothing 0.2 over the whole schedule")
     print(f"  laplacian            {pass_band_volume('laplacian', None, device):.4f}")
-    for band in (0.1, 0.0, shaping_path.PASS_BAND):
+    for band in (0.1, 0.0, smoothing_kernels.PASS_BAND):
         print(f"  taubin, band {band:<6} {pass_band_volume('taubin', band, device):.4f}")
 
     print("frames: sphere drag frame (set_controls from anchor + step(10) + weights), median ms")

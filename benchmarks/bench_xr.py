@@ -66,7 +66,7 @@ def stream(session: Session, srv: XRServer, seconds: float) -> dict:
 
     async def main():
         async with aiohttp.ClientSession() as cs:
-            async with cs.ws_connect(srv.base + "/xr/ws", compress=0) as ws:
+            async with cs.ws_connect(srv.base + "/view/ws", compress=0) as ws:
                 frames = nbytes = text = 0
                 sizes = []
                 t0 = None
@@ -117,7 +117,7 @@ def protocol_latency(session: Session, srv: XRServer, repeats: int) -> dict:
     async def main():
         out = []
         async with aiohttp.ClientSession() as cs:
-            async with cs.ws_connect(srv.base + "/xr/ws") as ws:
+            async with cs.ws_connect(srv.base + "/view/ws") as ws:
                 last = None
 
                 async def next_frame(timeout=30):

@@ -1,5 +1,6 @@
 """Command line: ``somwidget serve`` (the web app), ``somwidget sweep`` (design variants) and ``somwidget bench``
-(engine benchmarks).
+(engine benchmarks, from a checkout of the repository: their harness is benchmarks/engine_harness.py, no part of the
+package).
 
 Heavy imports (warp, trame, pyvista) happen inside the subcommands, so ``somwidget --help`` is fast.
 """
@@ -7,10 +8,16 @@ Heavy imports (warp, trame, pyvista) happen inside the subcommands, so ``somwidg
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import re
 import sys
+from pathlib import Path
+from types import ModuleType
 
 from .backend.schedule import KEYS
+
+#: The engine benchmark's harness in a checkout: benchmarks/ beside the somwidget package.
+BENCH_HARNESS = Path(__file__).resolve().parent.parent / "benchmarks" / "engine_harness.py"
 
 
 def device_name(text: str) -> str:
@@ -67,7 +74,8 @@ def _build_parser() -> argparse.ArgumentParser:
         "bench",
         help="time the engine against a numpy baseline on the paper's case studies",
         description="Time the Warp engine (a whole run, and step(10) frames as the app calls it) against a "
-        "vectorised numpy float32 baseline doing the same cycles, and print a table.",
+        "vectorised numpy float32 baseline doing the same cycles, and print a table. Runs from a checkout of the "
+        "repository (benchmarks/engine_harness.py).",
     )
     bench.add_argument(
         "--device",
@@ -209,9 +217,29 @@ def _serve(args: argparse.Namespace) -> int:
     return 0
 
 
-def _bench(args: argparse.Namespace) -> int:
-    from somwidget import benchmark
+def load_bench_harness() -> ModuleType:
+    """benchmarks/engine_harness.py of the checkout this somwidget runs from (`BENCH_HARNESS`); FileNotFoundError
+    saying so where there is none (an installed package carries no benchmarks)."""
+    if not BENCH_HARNESS.is_file():
+        raise FileNotFoundError(
+            f"bench: the engine benchmark runs from a checkout of the somwidget repository, and this somwidget has "
+            f"none beside it ({BENCH_HARNESS} is missing); clone the repository and run `somwidget bench` or "
+            f"`python benchmarks/bench_engine.py` in it")
+    name = "somwidget_engine_harness"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, BENCH_HARNESS)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module  # (its dataclasses look their module up)
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[name]
+            raise
+    return sys.modules[name]
 
+
+def _bench(args: argparse.Namespace) -> int:
+    benchmark = load_bench_harness()
     cases = None
     if args.cases:
         cases = [c.strip() for c in args.cases.split(",") if c.strip()]

@@ -30,8 +30,12 @@ from .device import resolve, usable_cores, warp_exclusive, warp_lock
 from .metrics import bounding_diagonal, median_edge
 from .schedule import BY_NAME, KEYS, SMOOTHING_RULES, learning_table
 from .shaping_kernels import CARRY_CUT
-from .shaping_path import SIGMA_OF_RADIUS, taubin_mu
-from .som import MAX_CONTROLS, MAX_DIMS, check_radii, restart_iteration
+from .cycle_kernels import MAX_CONTROLS
+from .shaping_path import SIGMA_OF_RADIUS
+from .smoothing_kernels import taubin_mu
+from .som_controls import check_radii
+from .som_model import MAX_DIMS
+from .som_schedule import restart_iteration
 from .topology import Topology, _components
 
 #: Learning-table entries (rows of every distinct schedule x (d_max + 1), float32) a batch may hold: 2 GiB.
@@ -55,7 +59,7 @@ def _per_variant(name: str, value, n: int) -> np.ndarray:
 
 def _scale(topology: Topology, start: np.ndarray, dims: list[int]) -> tuple[float, float]:
     """(the median edge length, the carrying floor) of a start mesh, as a Som measures them on its start weights
-    (shaping_path.ShapingPath._median_edge; CARRY_CUT of the size)."""
+    (som_model.SomModel.median_edge and carry_floor)."""
     p = start[:, dims]
     return median_edge(p, topology.edges) or 1.0, CARRY_CUT * (bounding_diagonal(p) or 1.0)
 

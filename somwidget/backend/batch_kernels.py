@@ -10,9 +10,9 @@ algorithm's three steps (som.py, The cycle; the same arithmetic as cycle_kernels
    shared memory; a barrier;
 2. move: each thread moves its neurons by the controls in list order, W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v), or
    a mirrored pair at once (`move_pair`, scaled by 1 / max(1, l1 + l2));
-3. smoothing (a variant with lambda > 0): the moved weights go to a scratch array, a barrier, then one Jacobi step;
-   with Taubin's rule (`taubin`) a barrier and a second step of strength mu < 0 into the scratch array, a barrier and
-   a copy back: the volume-keeping pair of shaping_path.py.
+3. smoothing (a variant with lambda > 0): the moved weights go to a scratch array, a barrier, then one Jacobi step
+   (smoothing_kernels.smoothed on the variant's row); with Taubin's rule (`taubin`) a barrier and a second step of
+   strength mu < 0 into the scratch array, a barrier and a copy back: the volume-keeping pair.
 
 Winner keys rotate through three buffers (cycle s fills buffer s % 3 and clears buffer s + 1), so one barrier a
 cycle is enough without smoothing. On the CPU, where Warp runs a block as one thread, the keys live in a global
@@ -27,6 +27,7 @@ import warp as wp
 
 from .cycle_kernels import MAX_CONTROLS
 from .primitives import INDEX_MASK, KEY_NONE, UNREACHABLE, sync_block, winner_key
+from .smoothing_kernels import smoothed
 
 #: int32 words of the winner keys a block holds in shared memory: three buffers of MAX_CONTROLS uint64 keys.
 _SHARED_WORDS = 3 * MAX_CONTROLS * 2
@@ -75,10 +76,12 @@ SEARCH = 4
 
 
 @functools.cache
-def variant_funcs(n_dims: int, searched: int, unit_metric: bool) -> SimpleNamespace:
-    """The device functions both batched kernels use (this module's and batch_shaping_kernels'): `distance` (the
-    metric's squared distance; `unit_metric` skips the weights), `smoothed` (one Jacobi step of a variant's neuron)
-    and `search` (step 1: `searched` controls at a time over a thread's neurons, offered to the block's keys)."""
+def variant_funcs(n_dims: int, searched: int, unit_metric: bool, taubin: bool) -> SimpleNamespace:
+    """The steps both batched kernels take (this module's and batch_shaping_kernels'), for variant b run by a block
+    of `threads` threads (thread t): `start_run` (the keys of its first cycle cleared), `find_winners` (step 1 of
+    cycle s: `searched` controls at a time over each thread's neurons, offered to the block's keys; `unit_metric`
+    skips the metric weights) and `smooth` (step 3 from the moved weights, smoothing_kernels.smoothed on the
+    variant's row; with `taubin` the second step of Taubin's pair, its strength `second`)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     keys_of = wp.types.vector(length=searched, dtype=wp.uint64)
     targets_of = wp.types.matrix(shape=(searched, n_dims), dtype=wp.float32)
@@ -89,21 +92,6 @@ def variant_funcs(n_dims: int, searched: int, unit_metric: bool) -> SimpleNamesp
         if wp.static(unit_metric):
             return wp.dot(diff, diff)
         return wp.dot(wp.cw_mul(diff, metric), diff)
-
-    @wp.func
-    def smoothed(weights: wp.array2d(dtype=vec), b: int, v: int, offsets: wp.array(dtype=wp.int32),
-                 neighbors: wp.array(dtype=wp.int32), pull: vec) -> vec:
-        """Variant b's neuron v after one Jacobi step, W_v + pull (mean of W over v's neighbours - W_v), from
-        `weights`; a neuron without neighbours stays."""
-        w = weights[b, v]
-        lo = offsets[v]
-        hi = offsets[v + 1]
-        if hi > lo:
-            total = vec()
-            for e in range(lo, hi):
-                total += weights[b, neighbors[e]]
-            w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
-        return w
 
     @wp.func
     def search(weights: wp.array2d(dtype=vec), controls: wp.array2d(dtype=vec), b: int, c0: int, k: int, m: vec,
@@ -122,7 +110,43 @@ def variant_funcs(n_dims: int, searched: int, unit_metric: bool) -> SimpleNamesp
             if c0 + g < k:
                 offer_key(keys, base, buf + c0 + g, best[g])
 
-    return SimpleNamespace(distance=distance, smoothed=smoothed, search=search)
+    @wp.func
+    def start_run(keys: wp.array(dtype=wp.uint64), base: int, s0: int, k: int, t: int):
+        """Before the first cycle s0: its keys cleared, then a barrier."""
+        if t == 0:
+            for c in range(k):
+                clear_key(keys, base, (s0 % 3) * k + c)
+        sync_block()
+
+    @wp.func
+    def find_winners(weights: wp.array2d(dtype=vec), controls: wp.array2d(dtype=vec), b: int, k: int, m: vec,
+                     t: int, threads: int, keys: wp.array(dtype=wp.uint64), base: int, s: int):
+        """Step 1 of cycle s from W(s) into keys buffer s % 3 (buffer s + 1 cleared for the next), then a barrier."""
+        if t == 0:
+            for c in range(k):
+                clear_key(keys, base, ((s + 1) % 3) * k + c)
+        for c0 in range(0, k, searched):
+            search(weights, controls, b, c0, k, m, t, threads, keys, base, (s % 3) * k)
+        sync_block()
+
+    @wp.func
+    def smooth(weights: wp.array2d(dtype=vec), moved: wp.array2d(dtype=vec), b: int, t: int, threads: int,
+               offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32), pull: vec, push: vec):
+        """Step 3: `moved` (the moved weights) smoothed into `weights` by pull = lambda mask; with `taubin` then
+        by push = mu mask into `moved` and copied back, barriers between."""
+        n = weights.shape[1]
+        sync_block()
+        for v in range(t, n, threads):
+            weights[b, v] = smoothed(moved[b], v, offsets, neighbors, pull)
+        if wp.static(taubin):
+            sync_block()
+            for v in range(t, n, threads):
+                moved[b, v] = smoothed(weights[b], v, offsets, neighbors, push)
+            sync_block()
+            for v in range(t, n, threads):
+                weights[b, v] = moved[b, v]
+
+    return SimpleNamespace(distance=distance, start_run=start_run, find_winners=find_winners, smooth=smooth)
 
 
 @functools.cache
@@ -139,8 +163,7 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
     group_of = wp.types.matrix(shape=(gather, n_dims), dtype=wp.float32)
     group_ints = wp.types.vector(length=gather, dtype=wp.int32)
     options = {"max_unroll": 32}
-    shared = variant_funcs(n_dims, searched, unit_metric)
-    search, smoothed = shared.search, shared.smoothed
+    steps = variant_funcs(n_dims, searched, unit_metric, taubin)
 
     @wp.func
     def move_pair(w: vec, l1: wp.float32, l2: wp.float32, a: vec, b: vec) -> vec:
@@ -213,44 +236,20 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
         threads = wp.block_dim()
         if wp.static(cuda):
             reserved = wp.tile_zeros(shape=(_SHARED_WORDS,), dtype=wp.int32, storage="shared")  # noqa: F841 (keys)
-        n = weights.shape[1]
         k = n_controls
         base = b * 3 * k  # the variant's keys in `keys` (CPU only)
         m = metric[0]
         lam = smoothing[b]
-        pull = lam * mask[0]
         into_moved = int(lam > wp.float32(0.0))
-        s0 = s_from[b]
-        if t == 0:
-            for c in range(k):
-                clear_key(keys, base, (s0 % 3) * k + c)
-        sync_block()
-        for s in range(s0, s_to[b]):
-            buf = (s % 3) * k
-            if t == 0:
-                for c in range(k):
-                    clear_key(keys, base, ((s + 1) % 3) * k + c)
-            # 1. winners from W(s)
-            for c0 in range(0, k, searched):
-                search(weights, controls, b, c0, k, m, t, threads, keys, base, buf)
-            sync_block()
+        steps.start_run(keys, base, s_from[b], k, t)
+        for s in range(s_from[b], s_to[b]):
+            steps.find_winners(weights, controls, b, k, m, t, threads, keys, base, s)  # 1. winners from W(s)
             # 2. every neuron applies the controls in list order (pairs at once)
             row = table_row[b] + s
             for c0 in range(0, k, gather):
-                move_group(weights, moved, into_moved, c0, b, controls, k, tables, row, distances, keys, base, buf,
-                           t, threads)
-            # 3. one Jacobi step of Laplacian smoothing from the moved weights
-            if into_moved != 0:
-                sync_block()
-                for v in range(t, n, threads):
-                    weights[b, v] = smoothed(moved, b, v, offsets, neighbors, pull)
-                if wp.static(taubin):  # Taubin's second step, from the smoothed weights, into `moved` and back
-                    push = second[b] * mask[0]
-                    sync_block()
-                    for v in range(t, n, threads):
-                        moved[b, v] = smoothed(weights, b, v, offsets, neighbors, push)
-                    sync_block()
-                    for v in range(t, n, threads):
-                        weights[b, v] = moved[b, v]
+                move_group(weights, moved, into_moved, c0, b, controls, k, tables, row, distances, keys, base,
+                           (s % 3) * k, t, threads)
+            if into_moved != 0:  # 3. smoothing from the moved weights
+                steps.smooth(weights, moved, b, t, threads, offsets, neighbors, lam * mask[0], second[b] * mask[0])
 
     return train_variants

@@ -27,7 +27,7 @@ import functools
 
 import warp as wp
 
-from .batch_kernels import _SHARED_WORDS, clear_key, rate, read_key, variant_funcs
+from .batch_kernels import _SHARED_WORDS, rate, read_key, variant_funcs
 from .primitives import INDEX_MASK, sync_block
 from .shaping_kernels import FIT_TURN
 
@@ -41,8 +41,7 @@ def shaping_variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int =
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     order = 2 if pairs else 1
     options = {"max_unroll": 32}
-    shared = variant_funcs(n_dims, searched, unit_metric)
-    search, smoothed = shared.search, shared.smoothed
+    steps = variant_funcs(n_dims, searched, unit_metric, taubin)
 
     @wp.func
     def moved_by_group(w: vec, b: int, v: int, lo: int, rest: wp.array2d(dtype=vec),
@@ -123,28 +122,17 @@ def shaping_variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int =
         base = b * 3 * k  # the variant's keys in `keys` (CPU only)
         m = metric[0]
         lam = smoothing[b]
-        pull = lam * mask[0]
         into_moved = int(lam > wp.float32(0.0))
         row0 = table_row[b]
         floor_b = floor[b]
-        s0 = s_from[b]
         fit = fresh[b]
         if fit != 0:
             for v in range(t, n, threads):
                 rest[b, v] = weights[b, v]
-        if t == 0:
-            for c in range(k):
-                clear_key(keys, base, (s0 % 3) * k + c)
-        sync_block()
-        for s in range(s0, s_to[b]):
+        steps.start_run(keys, base, s_from[b], k, t)
+        for s in range(s_from[b], s_to[b]):
             buf = (s % 3) * k
-            if t == 0:
-                for c in range(k):
-                    clear_key(keys, base, ((s + 1) % 3) * k + c)
-            # 1. winners from W(s)
-            for c0 in range(0, k, searched):
-                search(weights, controls, b, c0, k, m, t, threads, keys, base, buf)
-            sync_block()
+            steps.find_winners(weights, controls, b, k, m, t, threads, keys, base, s)  # 1. winners from W(s)
             # 2. each control's winner, its weights and offset before any move; at a restart its falloff's width
             for c in range(t, k, threads):
                 u = int(read_key(keys, base, buf + c) & INDEX_MASK)
@@ -179,18 +167,7 @@ def shaping_variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int =
                     moved[b, v] = w
                 else:
                     weights[b, v] = w
-            # 4. smoothing from the moved weights (and Taubin's second step)
-            if into_moved != 0:
-                sync_block()
-                for v in range(t, n, threads):
-                    weights[b, v] = smoothed(moved, b, v, offsets, neighbors, pull)
-                if wp.static(taubin):
-                    push = second[b] * mask[0]
-                    sync_block()
-                    for v in range(t, n, threads):
-                        moved[b, v] = smoothed(weights, b, v, offsets, neighbors, push)
-                    sync_block()
-                    for v in range(t, n, threads):
-                        weights[b, v] = moved[b, v]
+            if into_moved != 0:  # 4. smoothing from the moved weights (and Taubin's second step)
+                steps.smooth(weights, moved, b, t, threads, offsets, neighbors, lam * mask[0], second[b] * mask[0])
 
     return train_shaping_variants

@@ -1,86 +1,95 @@
-"""The CPU's cycle (a path of `Som`, som.py): each core replays a graph of its own share, the neurons split between
-the cores for the move and smoothing, the controls for the winner search, a spinning barrier between the phases
-(cycle_kernels.py). Small meshes run on one core.
+"""The paper's cycle on the CPU with the dense table: each core replays a captured graph of its own share, the neurons
+split between the cores for steps 2 and 3, the controls for step 1, a spinning barrier between the phases
+(cycle_kernels.py, cpu_cores.py). Small meshes run on one core.
 """
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 import warp as wp
 
-from .device import usable_cores
-from .primitives import barrier, sched_yield_address
-
-_YIELD = sched_yield_address()
-#: Neuron-control pairs a cycle must have per core before the CPU cycle is split (about 1 ms of work each).
-PAIRS_PER_EXTRA_CORE = 1 << 18
-
-
-def _cpu_cores(n_neurons: int, n_controls: int) -> int:
-    """Cores for a CPU Som: one for small cycles (a barrier costs more than it saves on a busy machine), else
-    those this process may use, at most 8."""
-    if n_neurons * n_controls < PAIRS_PER_EXTRA_CORE:
-        return 1
-    return max(1, min(usable_cores(), 8, n_neurons * n_controls // PAIRS_PER_EXTRA_CORE))
+from .cpu_cores import CpuCores
+from .som_controls import Controls
+from .som_model import SomModel
+from .som_schedule import SomSchedule
+from .som_state import Graphs, SomState
 
 
 class CpuPath:
-    """The CPU cycle of a Som (mixed into `Som`; its state lives there)."""
+    """The CPU's dense cycle: `run` replays each core's graph (`record` captures it), `winners` finds the winners of
+    the current weights. It also runs distance rows on the CPU when rows_path.RowsPath drives it (the full
+    computation the local cycle must equal)."""
 
-    def _plan_cores(self) -> None:
-        """Split the CPU cycle: neuron ranges for the move and smoothing, a thread per extra core."""
-        cores = min(self._cpu_cores or _cpu_cores(self.n_neurons, self._k_eff), self.n_neurons)
-        bounds = np.linspace(0, self.n_neurons, cores + 1).astype(int)
-        self._ranges = list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
-        if cores > 1 and self._pool is None:
-            self._pool = ThreadPoolExecutor(63, thread_name_prefix="som-core")
-        if cores != self._cores:
-            self._meet.zero_()  # barrier generations count in multiples of the core count
-        self._cores = cores
+    def __init__(self, cores: CpuCores):
+        self.cores = cores
+        self.graphs = Graphs("cpu")
 
-    def _run_cpu(self, cycles: int, fresh: bool, smoothing: bool) -> None:
-        graphs = [self._graph((cycles, fresh, smoothing, core), lambda core=core: self._record_cpu(core, cycles, fresh,
-                                                                                                smoothing))
-                  for core in range(self._cores)]
-        self._replay_cpu(graphs)
+    def winners(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule) -> np.ndarray:
+        state.fresh_winners(lambda: self.find_winners(model, state))
+        return controls.from_slots(state.winners(state.n_slots))
 
-    def _replay_cpu(self, graphs: list) -> None:
-        """Each core's graph on its own thread (the first on this one)."""
-        others = [self._pool.submit(wp.capture_launch, g) for g in graphs[1:]] if self._pool else []
-        wp.capture_launch(graphs[0])
-        for job in others:
-            job.result()
-        if self._cores > 1 and self._meet_failed.numpy()[0]:
-            self._meet_failed.zero_()
-            self._meet.zero_()
-            raise RuntimeError("Som: a CPU core did not reach the cycle barrier (was a worker thread stopped?)")
+    @staticmethod
+    def find_winners(model: SomModel, state: SomState) -> None:
+        """Step 1 on the CPU from the current weights, every control on this core: keys[s % 3] (s = cycle[0])."""
+        wp.launch(model.kernels.find_part, dim=1, device="cpu", inputs=[state.w, state.c, state.n_slots, model.m,
+                                                                        state.keys, state.cycle[0], 0, 1, 0,
+                                                                        state.stalled])
 
-    def _record_cpu(self, core: int, cycles: int, fresh: bool, smoothing: bool) -> None:
+    def forget(self) -> None:
+        """Drop the captured graphs (before the learning table they hold is made again)."""
+        self.graphs.clear()
+
+    def prepare(self, model: SomModel, controls: Controls, schedule: SomSchedule) -> None:
+        """Before a run: the cores' plan and the graphs for these controls and this schedule."""
+        self.cores.plan(model.n_neurons, controls.n_slots)
+        self.graphs.valid_for(controls, schedule)
+
+    def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
+        """`cycles` cycles from s (at most cycle_kernels.LONGEST_GRAPH)."""
+        fresh = state.start_run()
+        smoothing = schedule.values.smoothing > 0.0
+        self.prepare(model, controls, schedule)
+        self.replay(model, state, controls, schedule, (cycles, fresh, smoothing), cycles, fresh, smoothing)
+        state.weights_replaced()
+        state.s += cycles
+        state.winners_valid = True
+
+    def run_known(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule,
+                  cycles: int) -> int:
+        """`cycles` cycles from s whose first winners are known (distance rows mode). Returns the cycle reached, short
+        of s + cycles where a cycle stalled on a missing row."""
+        smoothing = schedule.values.smoothing > 0.0
+        self.replay(model, state, controls, schedule, ("rows", cycles, smoothing), cycles, False, smoothing)
+        return int(state.cycle[0].numpy()[0])
+
+    def replay(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, key: tuple,
+               cycles: int, fresh: bool, smoothing: bool) -> None:
+        """Each core's graph of `key` (captured the first time) on its own thread."""
+        self.cores.replay([self.graphs.get((*key, core), lambda core=core: self.record(
+            model, state, controls, schedule, core, cycles, fresh, smoothing)) for core in range(self.cores.count)])
+
+    def record(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, core: int,
+               cycles: int, fresh: bool, smoothing: bool) -> None:
         """One core's share: move and smooth its neurons, find the winners of its controls, meet between phases.
         Without `fresh` the winners of the first cycle are known (always so in distance rows mode)."""
-        kern, cores, (lo, hi), counter = self._kernels, self._cores, self._ranges[core], self._cycle[core]
-        move_part = self._movers().move_part
-        stalled = self._stalled
-
-        def meet():
-            if cores > 1:
-                wp.launch(barrier, dim=1, device="cpu", inputs=[self._meet, cores, _YIELD, self._meet_failed])
-
-        find = [self._w, self._c, self._k_eff, self._m, self._keys, counter, core, cores]
+        kern, cores, counter = model.kernels, self.cores, state.cycle[core]
+        lo, hi = cores.ranges[core]
+        move_part = model.kernels_for(controls.pairs(schedule.table_max)).move_part
+        k, stalled = state.n_slots, state.stalled
+        find = [state.w, state.c, k, model.m, state.keys, counter, core, cores.count]
         if fresh:
             wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 0, stalled])
-            meet()
-        moved = self._w_moved if smoothing else self._w
+            cores.meet_between_phases()
+        moved = state.w_moved if smoothing else state.w
         for _ in range(cycles):
             wp.launch(move_part, dim=1, device="cpu",
-                      inputs=[self._w, moved, self._c, 0, self._k_eff, self._table, self._distances, self._slot_of,
-                              self._keys, counter, lo, hi, stalled])
-            meet()
+                      inputs=[state.w, moved, state.c, 0, k, schedule.table, model.distances, model.slot_of,
+                              state.keys, counter, lo, hi, stalled])
+            cores.meet_between_phases()
             if smoothing:
-                wp.launch(kern.smooth_part, dim=1, device="cpu", inputs=[moved, self._w, self._offsets, self._neighbors,
-                                                                      self._mask, self._smoothing, lo, hi, stalled])
-                meet()
+                wp.launch(kern.smooth_part, dim=1, device="cpu",
+                          inputs=[moved, state.w, model.offsets, model.neighbors, model.mask,
+                                  schedule.values.smoothing, lo, hi, stalled])
+                cores.meet_between_phases()
             wp.launch(kern.find_part, dim=1, device="cpu", inputs=[*find, 1, stalled])
-            meet()
+            cores.meet_between_phases()

@@ -1,16 +1,21 @@
-"""The CUDA cycle (a path of `Som`, som.py): a run of cycles captured as a graph of one kernel a cycle (two with
-smoothing where the halos do not fit), launched dependent on the one before where the GPU allows
-(dependent_launch.py); small meshes with up to 32 controls spread the controls over the warps of a block
-(spread_kernels.py), and with smoothing move each block's halo too (halos.py).
+"""The paper's cycle on CUDA: a run of cycles captured as a graph of one kernel a cycle (two with smoothing where the
+halos do not fit), launched dependent on the one before where the GPU allows (dependent_launch.py); small meshes with
+up to 32 controls spread the controls over the warps of a block (spread_kernels.py), and with smoothing move each
+block's halo too (halos.py).
 """
 
 from __future__ import annotations
 
+import numpy as np
 import warp as wp
 
 from . import dependent_launch
 from .cycle_kernels import CUDA_BLOCK, SINGLES, cycle_kernels
 from .halos import block_halos
+from .som_controls import Controls
+from .som_model import SomModel
+from .som_schedule import SomSchedule
+from .som_state import KEY_NONE, Graphs, SomState
 from .spread_kernels import (SHARED_TABLE_WORDS, spread_cycle_inputs, spread_cycle_kernel,
                              spread_smoothing_cycle_inputs, spread_smoothing_cycle_kernel)
 
@@ -47,14 +52,84 @@ class _DeviceHalos:
 
 
 class CudaPath:
-    """The CUDA cycle of a Som (mixed into `Som`; its state lives there)."""
+    """The CUDA cycle: `run` launches a captured graph of the run (`record` captures it), `winners` finds the winners
+    of the current weights. rows_path.RowsPath drives it in distance rows mode."""
 
-    def _record_cuda(self, cycles: int, fresh: bool, parity: int, smoothing: bool, anchored: bool = False) -> list:
+    def __init__(self, model: SomModel):
+        self.graphs = Graphs(model.device)
+        self.halos = self._block_halos(model)
+
+    @staticmethod
+    def _block_halos(model: SomModel) -> _DeviceHalos | None:
+        """The block halos of the one-kernel smoothing cycle (dense table, small mesh), uploaded once here, never
+        inside a graph capture; None where it does not apply or they do not fit."""
+        if model.rows or model.n_neurons > SMALL_MESH:
+            return None
+        found = block_halos(model.topology.offsets, model.topology.neighbors, model.n_neurons)
+        if found.chunks > _SPREAD_MOST_WARPS or found.width > _SMOOTHING_MOST_NEIGHBOURS:
+            return None
+        return _DeviceHalos(found, model.device)
+
+    def smoothing_in_one_kernel(self, n_slots: int) -> _DeviceHalos | None:
+        """The block halos where a smoothing cycle runs as one kernel (at most 32 controls), else None."""
+        return self.halos if n_slots <= _SPREAD_MOST_CONTROLS else None
+
+    def winners(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule) -> np.ndarray:
+        state.fresh_winners(lambda: self.find_winners(model, state))
+        return controls.from_slots(state.winners(state.n_slots))
+
+    @staticmethod
+    def find_winners(model: SomModel, state: SomState) -> None:
+        """Step 1 on CUDA from the current weights into keys[s % 3] (s = cycle[0]), cleared first."""
+        state.keys.fill_(KEY_NONE)
+        wp.launch_tiled(model.kernels.find_winners, dim=[model.blocks], block_dim=int(CUDA_BLOCK),
+                        device=model.device, inputs=[state.w, state.c, state.n_slots, model.m, state.keys,
+                                                     state.cycle[0]])
+
+    def forget(self) -> None:
+        """Drop the captured graphs (before the learning table they hold is made again)."""
+        self.graphs.clear()
+
+    def prepare(self, model: SomModel, controls: Controls, schedule: SomSchedule) -> None:
+        """Before a run: the graphs for these controls and this schedule."""
+        self.graphs.valid_for(controls, schedule)
+
+    def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
+        """`cycles` cycles from s (at most cycle_kernels.LONGEST_GRAPH), replayed from a captured graph."""
+        fresh = state.start_run()
+        smoothing = schedule.values.smoothing > 0.0
+        parity = 0 if fresh else state.parity
+        two_kernels = smoothing and self.smoothing_in_one_kernel(state.n_slots) is None
+        anchored, state.anchor_pending = state.anchor_pending, False  # the graph copies the anchor back first
+        self.prepare(model, controls, schedule)
+        graph = self.graphs.get((cycles, fresh, parity, smoothing, anchored), lambda: self.record(
+            model, state, controls, schedule, cycles, fresh, parity, smoothing, anchored))
+        wp.capture_launch(graph)
+        state.parity = parity if two_kernels else (parity + cycles) % 2  # a kernel a cycle passes the counter on
+        state.s += cycles
+        state.winners_valid = True
+
+    def run_known(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule,
+                  cycles: int) -> int:
+        """`cycles` cycles from s whose first winners are known (distance rows mode): every such graph starts from
+        counter 0 (one graph per length), which then gets the last one's count. Returns the cycle reached, short of
+        s + cycles where a cycle stalled on a missing row."""
+        smoothing = schedule.values.smoothing > 0.0
+        wp.capture_launch(self.graphs.get(("rows", cycles, smoothing), lambda: self.record(
+            model, state, controls, schedule, cycles, False, 0, smoothing)))
+        last = 0 if smoothing else cycles % 2
+        reached = int(state.cycle[last].numpy()[0])
+        if last:
+            state.cycle[0].fill_(reached)
+        return reached
+
+    def record(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int,
+               fresh: bool, parity: int, smoothing: bool, anchored: bool = False) -> list:
         """A kernel a cycle (move + next winners), or two with smoothing (move; smooth + next winners). Without
         `fresh` the winners of the first cycle are known (always so in distance rows mode); `anchored` starts with
         the anchored weights copied back (`set_controls(..., from_anchor=True)`). Returns the packed arguments of
         the dependent launches, which the graph needs as long as it lives."""
-        dev, threads, k = self.device, int(CUDA_BLOCK), self._k_eff
+        dev, threads, k, blocks = model.device, int(CUDA_BLOCK), state.n_slots, model.blocks
         dependent = dependent_launch.available(dev)
         after_kernel = False
         records = []
@@ -62,75 +137,57 @@ class CudaPath:
         def launch(kernel, inputs, threads=threads):
             nonlocal after_kernel
             if dependent and after_kernel:
-                records.append(dependent_launch.launch_tiled_after_kernel(kernel, self._blocks, threads, inputs, dev))
+                records.append(dependent_launch.launch_tiled_after_kernel(kernel, blocks, threads, inputs, dev))
             else:
-                wp.launch_tiled(kernel, dim=[self._blocks], block_dim=threads, device=dev, inputs=inputs)
+                wp.launch_tiled(kernel, dim=[blocks], block_dim=threads, device=dev, inputs=inputs)
             after_kernel = True
 
-        pairs = self._pairs
-        move, move_threads, spread = self._movers().move, threads, False
-        shared_table = self._table.shape[1] <= SHARED_TABLE_WORDS
-        halos = self._smoothing_in_one_kernel() if smoothing else None
-        if self.n_neurons <= SMALL_MESH:
+        pairs = controls.pairs(schedule.table_max)
+        table, lam, w, w_moved, c = schedule.table, schedule.values.smoothing, state.w, state.w_moved, state.c
+        move, move_threads, spread = model.kernels_for(pairs).move, threads, False
+        shared_table = table.shape[1] <= SHARED_TABLE_WORDS
+        halos = self.smoothing_in_one_kernel(k) if smoothing else None
+        if model.n_neurons <= SMALL_MESH:
             if k <= _SPREAD_MOST_CONTROLS and not smoothing:
                 warps, per_warp = _spread_shape(k, 1, pairs != SINGLES)
-                move = spread_cycle_kernel(self.n_dims, warps, per_warp, shared_table, self._rows_mode, pairs)
+                move = spread_cycle_kernel(model.n_dims, warps, per_warp, shared_table, model.rows, pairs)
                 move_threads, spread = 32 * warps, True
             else:
-                move = cycle_kernels(self.n_dims, min(32, 8 * ((k + 7) // 8)), pairs).move
+                move = cycle_kernels(model.n_dims, min(32, 8 * ((k + 7) // 8)), pairs).move
 
         if anchored:
-            wp.copy(self._w, self._w_anchor)
+            wp.copy(w, state.w_anchor)
         if fresh:
-            self._launch_find()
+            self.find_winners(model, state)
             after_kernel = True
-        if halos is not None:  # a kernel a cycle from one weights array to the other, then back in self._w
+        if halos is not None:  # a kernel a cycle from one weights array to the other, then back in state.w
             warps, per_warp = _spread_shape(k, halos.chunks, pairs != SINGLES)
-            kernel = spread_smoothing_cycle_kernel(self.n_dims, warps, per_warp, shared_table, halos.chunks,
+            kernel = spread_smoothing_cycle_kernel(model.n_dims, warps, per_warp, shared_table, halos.chunks,
                                                    halos.width, pairs)
-            pair = (self._w, self._w_moved)
+            pair = (w, w_moved)
             for i in range(cycles):
                 p = (parity + i) % 2
                 launch(kernel, spread_smoothing_cycle_inputs(
-                    pair[i % 2], pair[1 - i % 2], self._c, k, self._m, self._table, self._distances, self._keys,
-                    self._cycle[p], self._cycle[1 - p], halos.neurons, halos.local, self._offsets, self._mask,
-                    self._smoothing), 32 * warps)
+                    pair[i % 2], pair[1 - i % 2], c, k, model.m, table, model.distances, state.keys,
+                    state.cycle[p], state.cycle[1 - p], halos.neurons, halos.local, model.offsets, model.mask, lam),
+                    32 * warps)
             if cycles % 2:
-                wp.copy(self._w, self._w_moved)
+                wp.copy(w, w_moved)
             return records
         p = parity
         for _ in range(cycles):
-            c_in, c_out = self._cycle[p], self._cycle[1 - p]
-            moved = self._w_moved if smoothing else self._w
+            c_in, c_out = state.cycle[p], state.cycle[1 - p]
+            moved = w_moved if smoothing else w
             if spread:
-                launch(move, spread_cycle_inputs(self._w, moved, self._c, k, self._m, self._table, self._distances,
-                                                 self._slot_of, self._keys, c_in, c_out, self._stalled),
-                       move_threads)
+                launch(move, spread_cycle_inputs(w, moved, c, k, model.m, table, model.distances, model.slot_of,
+                                                 state.keys, c_in, c_out, state.stalled), move_threads)
             else:
-                launch(move, [self._w, moved, self._c, 0, k, k, self._m, self._table, self._distances,
-                              self._slot_of, self._keys, c_in, c_out, int(not smoothing), self._stalled], move_threads)
+                launch(move, [w, moved, c, 0, k, k, model.m, table, model.distances, model.slot_of, state.keys, c_in,
+                              c_out, int(not smoothing), state.stalled], move_threads)
             if smoothing:
-                launch(self._kernels.smooth, [self._w_moved, self._w, self._offsets, self._neighbors, self._mask,
-                                              self._smoothing, self._c, k, self._m, self._keys, c_out, c_in,
-                                              self._stalled])
+                launch(model.kernels.smooth, [w_moved, w, model.offsets, model.neighbors, model.mask, lam, c, k,
+                                              model.m, state.keys, c_out, c_in, state.stalled])
             else:
                 p = 1 - p
         return records
 
-    def _movers(self):
-        """The kernels of step 2 for the current controls: pair by pair when mirrored."""
-        return cycle_kernels(self.n_dims, 8, self._pairs)
-
-    def _block_halos(self) -> _DeviceHalos | None:
-        """The block halos of the one-kernel smoothing cycle on CUDA (dense table, small mesh), uploaded once here,
-        never inside a graph capture; None where it does not apply or they do not fit."""
-        if self.device == "cpu" or self._rows_mode or self.n_neurons > SMALL_MESH:
-            return None
-        found = block_halos(self.topology.offsets, self.topology.neighbors, self.n_neurons)
-        if found.chunks > _SPREAD_MOST_WARPS or found.width > _SMOOTHING_MOST_NEIGHBOURS:
-            return None
-        return _DeviceHalos(found, self.device)
-
-    def _smoothing_in_one_kernel(self) -> _DeviceHalos | None:
-        """The block halos where a smoothing cycle runs as one kernel (at most 32 controls), else None."""
-        return self._halos if self._k_eff <= _SPREAD_MOST_CONTROLS else None

@@ -21,6 +21,7 @@ from typing import Any
 import warp as wp
 
 from .primitives import FLOAT_MAX, INDEX_MASK, KEY_NONE, UNREACHABLE, wait_for_previous_grid, winner_key
+from .smoothing_kernels import smoothed
 
 
 #: Effective controls a cycle takes (originals plus mirrored copies): the winner keys' buffers hold this many.
@@ -152,23 +153,6 @@ def cycle_kernels(n_dims: int, gather: int = 8, pairs: int = SINGLES) -> SimpleN
         """sum_j m_j (C_cj - W_vj)^2: the winner criterion with metric weights."""
         diff = target - w
         return wp.dot(wp.cw_mul(diff, metric), diff)
-
-    @wp.func
-    def smoothed(
-        weights: wp.array(dtype=vec), v: int, offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32),
-        pull: vec,
-    ) -> vec:
-        """One Jacobi step of uniform Laplacian smoothing: W_v + lambda (mean of W over v's neighbours - W_v) on the
-        masked dims (pull = lambda * mask), from the pre-smoothing weights; a neuron without neighbours stays."""
-        w = weights[v]
-        lo = offsets[v]
-        hi = offsets[v + 1]
-        if hi > lo:
-            total = vec()
-            for e in range(lo, hi):
-                total += weights[neighbors[e]]
-            w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
-        return w
 
     @wp.func
     def move_pair(w: vec, l1: wp.float32, l2: wp.float32, a: vec, b: vec) -> vec:
@@ -324,7 +308,7 @@ def cycle_kernels(n_dims: int, gather: int = 8, pairs: int = SINGLES) -> SimpleN
         cycle_out: wp.array(dtype=wp.int32),
         stalled: wp.array(dtype=wp.int32),
     ):
-        """Step 3 of cycle s (smoothing, see `smoothed`), then the winners of cycle s + 1 and the counter advance;
+        """Step 3 of cycle s (smoothing_kernels.smoothed), then the winners of cycle s + 1 and the counter advance;
         skipped (the counter passed on) when the cycle stalled."""
         wait_for_previous_grid()
         block, lane = wp.tid()

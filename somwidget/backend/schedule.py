@@ -1,16 +1,19 @@
-"""The training schedule, declared once: its parameters (S, l_start, l_end, smoothing, reach) with their bounds,
-defaults and help, the `Schedule` that holds one set of them, and the learning table L[s, d] = alpha(s) * theta(d, s)
-of the paper's section III that they make.
+"""Every setting a person or a view can set, declared once; the training schedule they make: the `Schedule` that
+holds one set of its settings, and the learning table L[s, d] = alpha(s) * theta(d, s) of the paper's section III.
 
-`Som`, `BatchSom`, the variants, the session files (io.py) and every panel take their checks, defaults and labels
-from `SETTINGS`: a new schedule parameter is declared here and implemented in the engine, nothing else.
+`SETTINGS` declares each setting: its name, type, bounds, default, help, the panel section it shows in and how.
+From it are built the session's settings (frontend/model/settings.py: values, checks, the "set" intent and what
+the topology message declares to the views), both panels (web/layout.py, notebook/panel.py), session files
+(session_file.py: one member per setting, the default for a member an older file lacks) and the autosave's
+manifests (frontend/model/store.py: likewise). A new setting is one line here plus its use in the engine (a
+keyword and attribute of `Som`, `BatchSom` and `Preset` of its name, for a setting of scope "engine").
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
 from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
@@ -27,62 +30,135 @@ MAX_ITERATIONS = 1_000_000
 #: control among the values that do (a smaller reach pulls a narrower, pointier bump; a larger one wears down the
 #: neighbourhoods of the other controls).
 DEFAULT_REACH = 0.08
+#: The largest radius of influence of a control, in model units.
+MAX_RADIUS = 1e6
+
+_TRUE, _FALSE = ("true", "on", "1"), ("false", "off", "0")
 
 
 @dataclass(frozen=True)
 class Setting:
-    """One schedule parameter: what it is called, its bounds and default, and how a panel shows it."""
+    """One setting: what it is called, its type, bounds and default, and how a panel shows it.
+
+    kind: "int", "float", "bool", or "text" (a symmetry group's spec). per: "" (one value), "dim" (one per feature
+    dimension) or "control" (one per control). scope: "engine" (a keyword and attribute of Som of this name; a
+    change restarts the schedule locally) or "session" (the session's own: the engine never sees it). saved: files
+    keep it as a member of its name (False: it follows from what they keep, as the symmetry switch follows the
+    group). widget: "field" (a number field; a slider in the notebook), "slider", "switch", "choice" or "table".
+    vary: a sweep's range around a value v, (lo, hi, floor, least): max(floor, lo v) to min(high, max(least, hi v)).
+    """
 
     name: str  # the keyword of Som, BatchSom and Session.set_parameter
     label: str  # what a panel and an error message call it
-    kind: str  # "int" or "float"
-    low: float
-    high: float
-    default: float
+    kind: str
+    low: float = 0.0
+    high: float = 1.0
+    default: float | bool | str = 0.0
     low_open: bool = False  # low itself is refused
     slider: tuple[float, float, float] | None = None  # a panel slider's (min, max, step)
     help: str = ""
+    section: str = "schedule"  # the panel section it shows in (SECTIONS)
+    widget: str = "field"
+    short: str = ""  # a narrow panel's label (default: the label)
+    per: str = ""
+    scope: str = "engine"
+    saved: bool = True
+    vary: tuple[float, float, float, float] | None = None
+
+    @property
+    def by_name(self) -> bool:
+        """Set by its name alone (Session.set_parameter, the "set" intent): one number or flag."""
+        return not self.per and self.kind != "text"
 
     def check(self, value, what: str | None = None):
-        """The value as the engine keeps it (an int or a float); ValueError naming `what` (default: the label), the
-        value and the bounds."""
+        """The value as the engine keeps it (an int, a float, a bool); ValueError naming `what` (default: the
+        label), the value and the bounds."""
         what = self.label if what is None else what
+        if self.kind == "bool":
+            if not isinstance(value, (bool, np.bool_)):
+                raise ValueError(f"{what}: expected true or false, got {value!r}")
+            return bool(value)
+        if self.kind == "text":
+            if not isinstance(value, str):
+                raise ValueError(f"{what}: expected a text, got {value!r}")
+            return value
         if self.kind == "int":
             return checks.integer(what, value, int(self.low), int(self.high))
         return checks.real(what, value, self.low, self.high, low_open=self.low_open)
 
     def parse(self, value, what: str | None = None):
-        """`check` for a value that may come as text, as a form field sends it ("600", " 1e3 ")."""
+        """`check` for a value that may come as a form field sends it ("600", " 1e3 ", a checkbox's "on")."""
+        what = self.label if what is None else what
         if self.kind == "int":
-            return checks.integer_text(self.label if what is None else what, value, int(self.low), int(self.high))
+            return checks.integer_text(what, value, int(self.low), int(self.high))
+        if self.kind == "bool":
+            if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and value in (0, 1):
+                return bool(value)
+            if isinstance(value, str) and value.strip().lower() in (*_TRUE, *_FALSE):
+                return value.strip().lower() in _TRUE
         return self.check(value, what)
+
+    def range_around(self, value) -> tuple:
+        """A sweep's (low, high) around `value` (`vary`)."""
+        lo, hi, floor, least = self.vary or (1.0, 1.0, self.low, self.low)
+        a, b = max(floor, lo * value), min(self.high, max(least, hi * value))
+        return (max(1, int(a)), int(b)) if self.kind == "int" else (a, b)
 
     def describe(self) -> dict:
         """The declaration as JSON (for the views)."""
         d = asdict(self)
         d["slider"] = list(self.slider) if self.slider else None
+        d["vary"] = list(self.vary) if self.vary else None
         return d
 
 
+#: The panel sections settings show in: (title, what it is about: a note under or beside the title).
+SECTIONS: dict[str, tuple[str, str]] = {
+    "schedule": ("Schedule", "alpha(s) from l_start to l_end over S cycles"),
+    "symmetry": ("Symmetry", "every copy of a control acts together with it"),
+    "features": ("Feature dimensions (metric weights)", "the m_j of the winner search"),
+    "controls": ("Controls", "each control's radius of influence"),
+}
+
 SETTINGS: tuple[Setting, ...] = (
-    Setting("iterations", "S (iterations)", "int", 1, MAX_ITERATIONS, 1000, slider=(10, 5000, 10),
+    Setting("iterations", "S (iterations)", "int", 1, MAX_ITERATIONS, 1000, slider=(10, 5000, 10), short="S",
+            vary=(0.5, 1.5, 1, 1),
             help="Cycles in a run: the learning rate and the neighbourhood shrink from l_start to l_end over S "
                  "cycles (the paper's S). More cycles settle the shape more finely, and take longer."),
     Setting("l_start", "l_start", "float", 0.0, 1.0, 0.25, low_open=True, slider=(0.001, 1.0, 0.001),
+            vary=(0.7, 1.3, 0.01, 0.0),
             help="The learning rate at the first cycle (the paper's l(0)): how far the winner moves toward a "
                  "control at the start of a run."),
     Setting("l_end", "l_end", "float", 0.0, 1.0, 0.03, low_open=True, slider=(0.001, 1.0, 0.001),
+            vary=(0.7, 1.3, 0.005, 0.0),
             help="The learning rate at the last cycle (the paper's l(S)): how far the winner moves at the end."),
-    Setting("smoothing", "smoothing", "float", 0.0, 1.0, 0.0, slider=(0.0, 1.0, 0.01),
+    Setting("smoothing", "smoothing", "float", 0.0, 1.0, 0.0, slider=(0.0, 1.0, 0.01), vary=(0.0, 2.0, 0.0, 0.05),
             help="One Laplacian step per cycle of this strength pulls each node toward its neighbours' mean "
                  "(0: off). It smooths creases and spikes; too much shrinks the clay."),
     Setting("reach", "reach", "float", 0.0, 1.0, DEFAULT_REACH, low_open=True, slider=(0.01, 1.0, 0.01),
+            widget="slider", vary=(0.5, 2.0, 0.01, 0.0),
             help="How far a moved control's pull spreads when the clay follows it: small keeps the rest of your "
                  "shape, 1 regrows the whole mesh."),
+    Setting("symmetry", "symmetry (mirror across the xz-plane)", "bool", default=False, section="symmetry",
+            widget="switch", short="symmetry", scope="session", saved=False,
+            help="Each control gets a mirrored copy across the xz-plane; a control and its copy act as one pair, "
+                 "so the shape stays exactly symmetric."),
+    Setting("group", "group", "text", default="none", section="symmetry", widget="choice", scope="session",
+            saved=False,
+            help="The symmetry group: every copy of a control acts together with it. Off, the copies become "
+                 "controls of their own and nothing moves; on, images pair up again."),
+    Setting("metric_weights", "metric weight", "float", 0.0, 1e6, 1.0, section="features", widget="table",
+            per="dim",
+            help="How much this feature dimension counts when a control finds its winner (the paper's m_j): 0 "
+                 "ignores it, larger makes it matter more than the others."),
+    Setting("radius", "radius", "float", 0.0, MAX_RADIUS, 0.0, section="controls", widget="table", per="control",
+            help="The control's radius of influence (model units): moving it carries the clay around its nearest "
+                 "node with a smooth falloff of about this radius. 0 is the paper's point control, which draws the "
+                 "clay to a point."),
 )
 BY_NAME: dict[str, Setting] = {s.name: s for s in SETTINGS}
-#: The schedule's parameter names, in declaration order.
-KEYS: tuple[str, ...] = tuple(BY_NAME)
+#: The engine's schedule: the settings of one value that Som, BatchSom and Preset take by name, in declaration order.
+KEYS: tuple[str, ...] = tuple(s.name for s in SETTINGS if s.scope == "engine" and not s.per)
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
-"""The shaping cycle's kernels: controls with a radius of influence, symmetry groups of any size, and a smoothing
-step that keeps the volume (shaping_path.py runs them; som.py's docstring states the rules).
+"""The shaping cycle's kernels: controls with a radius of influence, symmetry groups of any size and strokes
+(shaping_path.py runs them; its smoothing steps, Taubin's pair among them, are smoothing_kernels.py's).
 
 One cycle, as the algorithm's three steps, generic on the CPU and on CUDA (a thread per neuron or per control):
   1. `find`: u_c = argmin_v sum_j m_j (C_cj - W_vj)^2 for every effective control, from the weights before the
@@ -26,8 +26,8 @@ One cycle, as the algorithm's three steps, generic on the CPU and on CUDA (a thr
      the largest dim) is below `floor` (CARRY_CUT of the start shape's size: under the rounding of its
      coordinates), so a drag touches only the nodes within reach of a control that moves (local_path.py skips the
      rest on the CPU; `balls` gives each control's reach);
-  3. `smooth`: one Jacobi step of uniform Laplacian smoothing with `strength` on the masked dims (twice per cycle
-     for Taubin's pair: lambda, then the negative mu that undoes the shrinking).
+  3. smoothing: smoothing_kernels.smooth_kernel, once a cycle, twice for Taubin's pair (lambda, then the negative
+     mu that undoes the shrinking).
 """
 
 import functools
@@ -327,24 +327,8 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 if moved != 0:
                     moved_block(weights, lo_box, hi_box, super_lo, super_hi, moved_blocks, moved_supers, b)
 
-    @wp.kernel(enable_backward=False, module="unique", module_options=options)
-    def smooth(weights_in: wp.array(dtype=vec), weights_out: wp.array(dtype=vec), offsets: wp.array(dtype=wp.int32),
-               neighbors: wp.array(dtype=wp.int32), pull: vec):
-        """Step 3 for neuron v: W_v + pull * (mean of W over v's neighbours - W_v), pull = strength * mask, from
-        the weights before the step; a neuron without neighbours stays."""
-        v = wp.tid()
-        w = weights_in[v]
-        lo = offsets[v]
-        hi = offsets[v + 1]
-        if hi > lo:
-            total = vec()
-            for e in range(lo, hi):
-                total += weights_in[neighbors[e]]
-            w = w + wp.cw_mul(pull, total / wp.float32(hi - lo) - w)
-        weights_out[v] = w
-
     for source in (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32)):
         wp.overload(move, {"distances": source})
         wp.overload(move_blocks, {"distances": source})
     return SimpleNamespace(vec=vec, find=find, hold=hold, gather=gather, fit=fit, move=move, balls=balls,
-                           move_blocks=move_blocks, smooth=smooth)
+                           move_blocks=move_blocks)

@@ -9,12 +9,11 @@ from types import SimpleNamespace
 
 import warp as wp
 
+from .cycle_kernels import SINGLES, cycle_kernels, row_missing
 from .primitives import (INDEX_MASK, KEY_NONE, UNREACHABLE, float_bits, let_next_grid_launch, shared_get_float,
                          shared_set_float, sync_block, sync_block_any, wait_for_previous_grid, warp_least_key,
-
-
                          warp_shuffle)
-from .cycle_kernels import SINGLES, cycle_kernels, row_missing
+from .smoothing_kernels import laplacian_step
 
 
 #: Words of the learning table's row s that a spread cycle kernel copies into shared memory (tables with longer rows
@@ -330,9 +329,10 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
 
     Step 2 as in `spread_cycle_kernel`, for every chunk: warp g looks up the rates of its controls for all chunks,
     then moves chunk g into shared memory. Step 3: every warp smooths the block's own neurons from the moved weights
-    (the same sums in the same order as `smoothed`), and lets the next kernel launch (H200: 2.84 -> 2.78 us). Step 1
-    of cycle s + 1 from the smoothed weights. Only the controls, metric and mask are read before the wait: the
-    block's lists read there too made the cycle slower (H200, with Warp array parameters: 3.22 against 3.13 us).
+    (smoothing_kernels.laplacian_step, the sums in `smoothed`'s order), and lets the next kernel launch (H200:
+    2.84 -> 2.78 us). Step 1 of cycle s + 1 from the smoothed weights. Only the controls, metric and mask are read
+    before the wait: the block's lists read there too made the cycle slower (H200, with Warp array parameters: 3.22
+    against 3.13 us).
     """
     vec = cycle_kernels(n_dims).vec
     slots = warps * per_warp
@@ -417,7 +417,7 @@ def spread_smoothing_cycle_kernel(n_dims: int, warps: int, per_warp: int, shared
             total = vec()
             for j in range(width):  # the neighbours in the topology's order; past the last, + 0 changes nothing
                 total += wp.where(j < count, moved_weight(wp.max(near[j], 0)), vec())
-            smooth = smooth + wp.cw_mul(pull, total / wp.float32(count) - smooth)
+            smooth = laplacian_step(smooth, total, count, pull)
         let_next_grid_launch()
         if g == 0 and first + lane < n:
             weights_out[first + lane] = smooth

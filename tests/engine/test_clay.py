@@ -1,4 +1,4 @@
-"""The clay's rules on the real engine (somwidget/backend/som.py, Restarts and Mirrored pairs): a moved control is
+"""The clay's rules on the real engine (somwidget/backend/som.py, Restarts and step 2): a moved control is
 followed locally, nothing collapses, the rest of the shape stays, mirrored pairs keep a symmetric shape exactly
 symmetric, and no preset grows needles at its controls. The figures are those of the clay issue;
 `benchmarks/bench_clay.py` prints them."""

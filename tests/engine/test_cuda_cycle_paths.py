@@ -70,7 +70,7 @@ def test_fast_paths_equal_general_path(monkeypatch, n_dims, k, mirror, smoothing
         assert launched, "no kernel was launched dependent on a device that allows it"
         assert any(_spread(key) for key in launched) == spread, launched
     if distances:
-        assert fast_som._cache.stalls >= 1  # a graph stopped on a missing row and went on
+        assert fast_som.parts.model.cache.stalls >= 1  # a graph stopped on a missing row and went on
     _general_path(monkeypatch)
     general = _trained(topology, weights, controls, **kw).weights
     assert np.array_equal(fast, general), f"largest difference {np.abs(fast - general).max():.3e}"
@@ -87,7 +87,7 @@ def test_spread_kernel_with_a_long_table_row(monkeypatch):
     controls = rng.uniform(-1, 1, (6, 3))
     launched = _record_dependent_launches(monkeypatch)
     som = _trained(topology, points, controls, iterations=80)
-    assert som._table.shape[1] > SHARED_TABLE_WORDS
+    assert som.learning_table().shape[1] > SHARED_TABLE_WORDS
     if dependent_launch.available(DEVICE):
         assert any(_spread(key) for key in launched), launched
     _general_path(monkeypatch)

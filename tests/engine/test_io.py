@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from somwidget.backend import io
+from somwidget.backend import io, session_file
 from somwidget.backend.presets import (KEPT_SHAPE_REACH, XYZ, FeatureLayout, Preset, colours_of, get_preset,
                                        line_display_mesh)
 from somwidget.backend.topology import Topology
@@ -296,21 +296,21 @@ def test_session_round_trip(tmp_path, name):
     som.set_controls(som.controls + 0.1)
     som.step(3)
     assert som.iteration == som.restart_iteration + 3
-    state = io.session_state(p, som)
+    state = session_file.session_state(p, som)
     path = tmp_path / "session.somwidget"  # any extension: written as it is, no ".npz" appended
-    io.save_session(path, state)
+    session_file.save_session(path, state)
     assert path.is_file() and sorted(p.name for p in tmp_path.iterdir()) == ["session.somwidget"]
     assert zipfile.is_zipfile(path)
     with np.load(path, allow_pickle=False) as z:  # plain arrays only: readable without pickle
-        assert int(z["format_version"]) == io.SESSION_FORMAT_VERSION
+        assert int(z["format_version"]) == session_file.SESSION_FORMAT_VERSION
         assert all(z[k].dtype != object for k in z.files)
-    back = io.load_session(path)
-    assert back["format_version"] == io.SESSION_FORMAT_VERSION
+    back = session_file.load_session(path)
+    assert back["format_version"] == session_file.SESSION_FORMAT_VERSION
     assert back["iteration"] == som.iteration and back["preset"] == name and back["reach"] == p.reach
     assert_states_equal(state | {"smooth_dims": tuple(state["smooth_dims"]), "mirror": tuple(state["mirror"])}, back)
     # a saved session comes back to life: same start, controls and settings; carry on exactly from the saved
     # weights and s, as the saved run would have gone on
-    again = io.preset_from_session(back)
+    again = session_file.preset_from_session(back)
     som2 = again.make_som(device="cpu")
     som2.restore(back["weights"], back["iteration"])
     np.testing.assert_array_equal(som2.weights, som.weights)
@@ -320,8 +320,8 @@ def test_session_round_trip(tmp_path, name):
     som2.train()
     np.testing.assert_array_equal(som2.weights, som.weights)
     # a loaded state saves again unchanged
-    io.save_session(tmp_path / "again.npz", back)
-    assert_states_equal(back, io.load_session(tmp_path / "again.npz"))
+    session_file.save_session(tmp_path / "again.npz", back)
+    assert_states_equal(back, session_file.load_session(tmp_path / "again.npz"))
 
 
 def test_session_defaults_and_mixed_faces(tmp_path):
@@ -332,8 +332,8 @@ def test_session_defaults_and_mixed_faces(tmp_path):
     w = np.arange(48, dtype=np.float32).reshape(8, 6) / 48
     state = {"weights": w, "start_weights": w * 2, "controls": w[:2], "topology": topo, "layout": layout,
              "metric_weights": np.array([1, 1, 1, 0.5, 0.5, 0.5]), "smooth_dims": (0, 1)}
-    io.save_session(tmp_path / "s.npz", state)
-    back = io.load_session(tmp_path / "s.npz")
+    session_file.save_session(tmp_path / "s.npz", state)
+    back = session_file.load_session(tmp_path / "s.npz")
     assert [list(f) for f in back["topology"].faces] == faces
     assert back["iterations"] == 1000 and back["iteration"] == 0 and back["mirror"] == () and back["preset"] == ""
     assert back["smooth_dims"] == (0, 1) and back["metric_weights"].tolist() == [1, 1, 1, 0.5, 0.5, 0.5]
@@ -342,21 +342,21 @@ def test_session_defaults_and_mixed_faces(tmp_path):
 
 def test_save_session_refuses_bad_states(tmp_path):
     p = get_preset("sphere")
-    good = io.session_state(p)
+    good = session_file.session_state(p)
     path = tmp_path / "bad.npz"
     missing = dict(good)
     del missing["controls"]
     with pytest.raises(ValueError, match="'controls'") as info:
-        io.save_session(path, missing)
+        session_file.save_session(path, missing)
     assert "bad.npz" in str(info.value)
     with pytest.raises(ValueError, match="unknown session keys"):
-        io.save_session(path, good | {"colour": "red"})
+        session_file.save_session(path, good | {"colour": "red"})
     with pytest.raises(ValueError, match="'weights'"):
-        io.save_session(path, good | {"weights": good["weights"][:-1]})
+        session_file.save_session(path, good | {"weights": good["weights"][:-1]})
     with pytest.raises(ValueError, match="'iteration'"):
-        io.save_session(path, good | {"iteration": 2000})
+        session_file.save_session(path, good | {"iteration": 2000})
     with pytest.raises(ValueError, match="'topology'"):
-        io.save_session(path, good | {"topology": "sphere"})
+        session_file.save_session(path, good | {"topology": "sphere"})
     assert not path.exists() and list(tmp_path.iterdir()) == []  # nothing half-written
 
 
@@ -372,7 +372,7 @@ def _rewrite(src, dst, drop=(), **replace):
 def test_load_session_errors(tmp_path):
     p = get_preset("car")
     good = tmp_path / "good.npz"
-    io.save_session(good, io.session_state(p))
+    session_file.save_session(good, session_file.session_state(p))
     cases = {
         "missing.npz": (None, "no such session file"),
         "garbage.npz": (b"this is not a zip archive" * 10, "not a readable somwidget session"),
@@ -383,12 +383,12 @@ def test_load_session_errors(tmp_path):
         if content is not None:
             path.write_bytes(content)
         with pytest.raises(ValueError, match=problem) as info:
-            io.load_session(path)
+            session_file.load_session(path)
         assert name in str(info.value)
     npy = tmp_path / "array.npy"
     np.save(npy, np.zeros(3))
     with pytest.raises(ValueError, match="npz") as info:
-        io.load_session(npy)
+        session_file.load_session(npy)
     assert "array.npy" in str(info.value)
     keyed = {
         "no_weights.npz": (dict(drop=("weights",)), "'weights'"),
@@ -406,7 +406,7 @@ def test_load_session_errors(tmp_path):
     for name, (change, problem) in keyed.items():
         path = _rewrite(good, tmp_path / name, **change)
         with pytest.raises(ValueError, match=problem) as info:
-            io.load_session(path)
+            session_file.load_session(path)
         assert name in str(info.value), info.value
 
 
@@ -421,7 +421,7 @@ def test_load_session_refuses_a_member_that_would_unpack_too_large(tmp_path):
         archive.writestr("weights.npy", buf.getvalue())
     assert bomb.stat().st_size < 1_000_000
     with pytest.raises(ValueError, match="bomb.npz.*unpacks to"):
-        io.load_session(bomb)
+        session_file.load_session(bomb)
 
 
 def test_a_mesh_past_the_limit_is_refused_with_the_figures_or_loaded_decimated(tmp_path):

@@ -1,6 +1,6 @@
 """A drag costs what it touches (backend/local_path.py): the CPU's local cycle, which moves only the blocks of neurons
-within reach of a winner and searches only the blocks that may hold one, against the full computation (every
-neuron moved and searched by the engine's full kernels: the same weights bit for bit) and against the float64
+within reach of a winner and searches only the blocks that may hold one, against the full computation (the engine's
+paths that move and search every neuron, run on the Som's parts: the same weights bit for bit) and against the float64
 reference with the cuts the engine states: past the dense table theta < 2^-24 is 0 (schedule.NEIGHBOURHOOD_CUT), and
 a carrying group leaves a node where it could move it by less than 2^-24 of the start shape's size
 (shaping_kernels.CARRY_CUT). Past the cuts the nodes stay exactly where they were.
@@ -15,9 +15,11 @@ from reference import ROWS_CUT, ReferenceSom, edges_from_faces, grid_quads
 from test_engine import _assert_matches, _scale
 
 from somwidget import Som, Topology
-from somwidget.backend.cycle_kernels import MAX_CONTROLS, cycle_kernels
+from somwidget.backend.cpu_path import CpuPath
 from somwidget.backend.local_kernels import BLOCK
-from somwidget.backend.shaping_kernels import shaping_kernels
+from somwidget.backend.local_path import find_in_blocks
+from somwidget.backend.rows_path import RowsPath
+from somwidget.backend.shaping_path import ShapingPath
 
 S = 200
 
@@ -31,20 +33,12 @@ def _strip(nx: int = 16, ny: int = 40):
     return Topology.from_faces(quads), edges_from_faces(quads), pts.astype(np.float32)
 
 
-def _full_cycle(som: Som) -> None:
-    """One cycle of the paper's rule as the full computation runs it, with the Som's own state and cut table: every
-    neuron moved (cycle_kernels' move_part) and searched (find_part)."""
-    kern = cycle_kernels(som.n_dims, 8, som._pairs)
-    winners = som._current_winners()
-    som._cache.fetch(list(dict.fromkeys(winners.tolist())), som._d_max)
-    som._counter_words[:] = som._s
-    wp.launch(kern.move_part, dim=1, device="cpu", inputs=[som._w, som._w, som._c, 0, som._k_eff, som._table,
-                                                             som._distances, som._slot_of, som._keys, som._cycle[0],
-                                                             0, som.n_neurons, som._stalled])
-    wp.launch(kern.find_part, dim=1, device="cpu", inputs=[som._w, som._c, som._k_eff, som._m, som._keys,
-                                                             som._cycle[0], 0, 1, 1, som._stalled])
-    som._weights_replaced()  # (going back to the anchor then copies every neuron)
-    som._s += 1
+def _full_run(som: Som, cycles: int) -> None:
+    """`cycles` cycles of the paper's rule as the full computation runs them, with the Som's own state and cut table:
+    distance rows mode driving the CPU's dense cycle (rows_path.RowsPath over cpu_path.CpuPath: every neuron moved
+    and searched)."""
+    parts = som.parts
+    RowsPath(CpuPath(parts.cores)).run(parts.model, parts.state, parts.controls, parts.schedule, cycles)
 
 
 def _drag(pts: np.ndarray, controls: np.ndarray, frames: int = 4):
@@ -91,11 +85,9 @@ def test_paper_rule_local_equals_full_computation(mirror, cores):
         local.set_controls(moved, from_anchor=True)
         local.step(5)
         full.set_controls(moved, from_anchor=True)
-        full.winners()  # the first winners by the full search
-        for _ in range(5):
-            _full_cycle(full)
+        _full_run(full, 5)
         np.testing.assert_array_equal(local.weights, full.weights)
-        assert local._current_winners().tolist() == full._current_winners().tolist()
+        assert local.winners().tolist() == full.winners().tolist()
         same = (local.weights == pts).all(axis=1)
         untouched = max(untouched, int(same.reshape(-1)[: len(same) // BLOCK * BLOCK].reshape(-1, BLOCK)
                                        .all(axis=1).sum()))
@@ -113,40 +105,12 @@ def test_paper_rule_local_matches_reference_with_the_cut():
     _drag_matches_reference(som, ref, pts, controls)
 
 
-def _shaping_full_cycle(som: Som) -> None:
-    """One cycle of the shaping rules with the full kernels: the winners by the full scan (a carrying control keeping
-    the one it grabbed at the restart), every neuron moved by the thread-per-neuron `move`."""
-    kern = shaping_kernels(som.n_dims)
-    if som._sh_controls is None:
-        som._upload_shaping()
-    if som._sh_rest_pending:
-        wp.copy(som._sh_rest, som._w)
-        som._sh_rest_pending, som._sh_fit_pending = False, True
-    som._sh_keys.fill_(np.uint64(0xFFFFFFFFFFFFFFFF))
-    stretches = -(-som.n_neurons // 256)
-    wp.launch(kern.find, dim=len(som._sh_keys) * stretches, device="cpu",
-              inputs=[som._w, som._sh_controls, som._m, som._sh_keys, stretches])
-    if som._sh_fit_pending:  # a restart's first cycle: each control grabs its winner
-        wp.copy(som._sh_grabbed, som._sh_keys)
-    else:  # a carrying control keeps it
-        wp.launch(kern.hold, dim=len(som._sh_keys), device="cpu",
-                  inputs=[som._sh_keys, som._sh_grabbed, som._sh_sigma])
-    wp.launch(kern.gather, dim=len(som._sh_keys), device="cpu",
-              inputs=[som._w, som._sh_keys, som._sh_controls, som._sh_winners, som._sh_offsets])
-    if som._rows_mode:  # the point controls' rows, whole
-        winners = (som._sh_keys.numpy() & np.uint64(0xFFFFFFFF)).astype(np.int64)
-        som._cache.fetch(list(dict.fromkeys(winners.tolist())), som._d_max)
-    position = som._kernels.vec(1.0, 1.0, 1.0)
-    if som._sh_fit_pending:
-        wp.launch(kern.fit, dim=len(som._sh_keys), device="cpu",
-                  inputs=[som._sh_controls, som._sh_winners, som._sh_sigma, float(som._edge), position, som._sh_inv])
-        som._sh_fit_pending = False
-    wp.launch(kern.move, dim=som.n_neurons, device="cpu",
-              inputs=[som._w, som._sh_rest, som._sh_controls, som._sh_winners, som._sh_keys, som._sh_inv,
-                      som._sh_offsets, som._component, som._sh_groups, som._sh_stroke, som._sh_n_groups, som._table,
-                      som._s, som._distances, som._slot_of, position, som._floor])
-    som._weights_replaced()
-    som._s += 1
+def _shaping_full_run(som: Som, cycles: int) -> None:
+    """`cycles` cycles of the shaping rules with the full kernels (shaping_path.ShapingPath without the CPU's
+    cores): the winners by the full scan (a carrying control keeping the one it grabbed at the restart), every neuron
+    moved by the thread-per-neuron `move`, the point controls' rows searched whole."""
+    parts = som.parts
+    ShapingPath(None).run(parts.model, parts.state, parts.controls, parts.schedule, cycles)
 
 
 @pytest.mark.parametrize(("distances", "cores"), [("dense", 1), ("rows", 1), ("rows", 2)])
@@ -165,9 +129,7 @@ def test_shaping_local_equals_full_computation(distances, cores):
         local.set_controls(moved, from_anchor=True)
         local.step(5)
         full.set_controls(moved, from_anchor=True)
-        full._settle_anchor()
-        for _ in range(5):
-            _shaping_full_cycle(full)
+        _shaping_full_run(full, 5)
         np.testing.assert_array_equal(local.weights, full.weights)
     assert (local.weights[-64:] == pts[-64:]).all()
 
@@ -198,9 +160,11 @@ def test_block_search_equals_full_scan():
     topo = Topology.from_edges(np.stack([np.arange(n - 1), np.arange(1, n)], 1), n)
     som = Som(topo, pts, controls, metric_weights=[1.0, 0.5, 2.0, 0.0], distances="rows", device="cpu")
     full = som.winners()
+    parts = som.parts
+    k = len(controls)
     for hint in (0, n - 1, 777):  # the search starts in a hinted block: any will do
-        som._keys_host[1, : len(controls)] = hint
-        som._local_find(som._c, len(controls), som._flat_keys, MAX_CONTROLS, 2 * MAX_CONTROLS)
-        found = (som._keys_host[2, : len(controls)] & np.uint64(0xFFFFFFFF)).astype(np.int64)
+        keys = wp.full(2 * k, hint, dtype=wp.uint64, device="cpu")  # hints, then the keys found
+        find_in_blocks(parts.model, parts.state, parts.cores, parts.state.c, k, keys, 0, k)
+        found = (keys.numpy()[k:] & np.uint64(0xFFFFFFFF)).astype(np.int64)
         assert found.tolist() == full.tolist()
     assert full[0] == 7 and full[1] == n // 3

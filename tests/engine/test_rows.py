@@ -215,7 +215,7 @@ def test_rows_stall_and_cache_paths_run(device):
         som = Som(case.topo, W, C, iterations=40, mirror=(1,), device=device, distances="rows", cache_rows=size)
         som.train()
         np.testing.assert_allclose(som.weights, dense.weights, rtol=0, atol=1e-6)
-        cache = som._cache
+        cache = som.parts.model.cache
         assert cache.size == (case.n if size is None else max(size, 2))
         assert cache.computed >= len(set(som.winners().tolist()))
         if size is None:  # winners moved during the run: on CUDA a graph stopped and went on (the CPU fetches
@@ -303,7 +303,7 @@ def test_grid_past_dense_cap_matches_reference(device):
     C = (W[[77403, 40530]] + [[0.0018, -0.0016, -0.0027], [-0.0006, -0.0018, -0.0025]]).astype(np.float32)
     S, cycles = 100, 5
     som = Som(topo, W, C, iterations=S, device=device)
-    assert som.distances == "rows" and som._d_max == 598
+    assert som.distances == "rows" and som.parts.schedule.d_max == 598
     assert som.step(2) == 2 and som.step(3) == 3
 
     table = learning_table(S, 598, cut=ROWS_CUT)
@@ -315,13 +315,13 @@ def test_grid_past_dense_cap_matches_reference(device):
         for c, u in zip(c64, winners, strict=True):
             ref += table[s, np.abs(ii - ii[u]) + np.abs(jj - jj[u])][:, None] * (c - ref)
     np.testing.assert_allclose(som.weights, ref, rtol=0, atol=1e-4)
-    assert som._cache.computed >= 2
+    assert som.parts.model.cache.computed >= 2
 
 
 def test_cpu_cache_holds_a_quarter_gib_at_262144():
     """A CPU session's memory stays bounded at its largest mesh (issue 28: 1 GB for 262,144 vertices): the distance
     rows of a 262,144-neuron mesh take at most 256 MiB (256 rows), a GPU's its own share."""
-    from somwidget.backend.rows_path import RowCache
+    from somwidget.backend.row_cache import RowCache
 
     n = 262_144
     cache = RowCache(_path(n), "cpu", None)

@@ -10,6 +10,7 @@ import pytest
 from reference import ReferenceSom
 
 from somwidget.backend import io, metrics, presets
+from somwidget.backend.shaping_path import ShapingPath
 from somwidget.backend.som import Som
 from somwidget.backend.symmetry import Symmetry
 from somwidget.backend.topology import Topology
@@ -37,15 +38,20 @@ def _compare(som: Som, ref: ReferenceSom, cycles: int, tol: float) -> None:
     assert err < tol, f"engine and float64 reference part by {err:.2e} of the size"
 
 
+def _on_shaping_path(som: Som) -> bool:
+    """Whether the shaping path runs the Som's next cycles (Som.parts, the engine's internal API)."""
+    return isinstance(som.parts.next_path(), ShapingPath)
+
+
 def test_point_controls_keep_the_case_studies_path():
     topo, pts, _ = _mesh()
     som = Som(topo, pts, pts[[0, 20]], device="cpu", radii=[0.0, 0.0], mirror=(1,))
-    assert not som._shaping  # the case studies' paths, bit for bit
+    assert not _on_shaping_path(som)  # the case studies' paths, bit for bit
     som.radii = [0.0, 0.3]
-    assert som._shaping
+    assert _on_shaping_path(som)
     som.radii = [0.0, 0.0]
     som.smoothing, som.smoothing_rule = 0.2, "laplacian"
-    assert not som._shaping
+    assert not _on_shaping_path(som)
 
 
 @pytest.mark.parametrize("mirror", [(), (1,)])
@@ -194,40 +200,41 @@ def test_a_session_s_controls_carry_their_radii_through_edits_undo_and_files(tmp
 
     with Session("sphere", device="cpu", autosave=False) as s:
         size = metrics.bounding_diagonal(s.preset.weights)
-        assert np.allclose(s.radii, presets.KEPT_SHAPE_RADIUS * size)  # a kept shape's controls start with a radius
+        # a kept shape's controls start with a radius
+        assert np.allclose(s.control_edits.radii, presets.KEPT_SHAPE_RADIUS * size)
         i = s.add_control([0.0, 0.0, 1.3], radius=0.3)
         s.set_control_radius(0, 0.5)
         s.set_control_radius(0, 0.45)  # a slider's drag: one step
         assert s.wait_applied(30)
         np.testing.assert_allclose(s.frame.radii[[0, i]], [0.45, 0.3])
-        np.testing.assert_allclose(s.clay.som.radii[[0, i]], [0.45, 0.3])
+        np.testing.assert_allclose(s.modelling.som.radii[[0, i]], [0.45, 0.3])
         with pytest.raises(ValueError, match="radius"):
             s.set_control_radius(0, -1)
         with pytest.raises(ValueError, match="new control radius"):
             s.add_control([0.0, 0.0, 1.0], radius=float("inf"))
-        s.set_symmetry("radial-4-z")
+        s.settings.set_symmetry("radial-4-z")
         assert s.wait_applied(30) and s.wait_idle(60)
         assert s.parameters["group"] == "radial-4-z" and len(s.frame.effective_controls) == 4 * s.n_controls
         assert s.n_controls < 7  # the four controls around the equator are one control and its copies now
         s.save(tmp_path / "s.npz")
-        radii = s.radii
+        radii = s.control_edits.radii
         assert s.undo() and s.parameters["group"] == "none"
         # both radius changes: one step
-        assert s.undo() and s.radii[0] == pytest.approx(presets.KEPT_SHAPE_RADIUS * size)
+        assert s.undo() and s.control_edits.radii[0] == pytest.approx(presets.KEPT_SHAPE_RADIUS * size)
         s.load(tmp_path / "s.npz")
         assert s.parameters["group"] == "radial-4-z"
-        np.testing.assert_allclose(s.radii, radii)
+        np.testing.assert_allclose(s.control_edits.radii, radii)
         s.remove_control(s.n_controls - 1)
-        assert len(s.radii) == s.n_controls == len(radii) - 1
+        assert len(s.control_edits.radii) == s.n_controls == len(radii) - 1
 
 
 def test_a_case_study_keeps_its_point_controls():
     from somwidget.frontend.model import Session
 
     with Session("car", device="cpu", autosave=False, start=False) as s:
-        assert not s.radii.any() and not s.clay.som._shaping
+        assert not s.control_edits.radii.any() and not _on_shaping_path(s.modelling.som)
         s.add_control(s.controls[0])
-        assert s.radii[-1] == 0.0
+        assert s.control_edits.radii[-1] == 0.0
 
 
 # -- refine --------------------------------------------------------------------------------------------------------
@@ -281,12 +288,12 @@ def test_a_session_refines_its_clay_as_one_step():
         s.move_control(0, c[0])
         assert s.wait_idle(60)
         before = s.frame.positions.copy()
-        radii, n, p_faces = s.radii, s.preset.n_vertices, s.preset.topology.faces
+        radii, n, p_faces = s.control_edits.radii, s.preset.n_vertices, s.preset.topology.faces
         m = s.refine()
         assert s.wait_applied(30)
         assert s.preset.n_vertices == m == s.frame.positions.shape[0] > 3 * n
         np.testing.assert_array_equal(s.frame.positions[:n], before)  # the shape as it was, nothing trained
-        np.testing.assert_allclose(s.radii, radii)
+        np.testing.assert_allclose(s.control_edits.radii, radii)
         from somwidget.backend import refine
 
         np.testing.assert_array_equal(s.frame.positions, refine.subdivide(p_faces, before)[1])  # the same surface
@@ -333,8 +340,8 @@ def test_a_stroke_drawn_over_the_grid_raises_a_smooth_ridge():
         line = np.array([[-0.6, -0.3, 0.0], [0.0, 0.1, 0.0], [0.6, 0.3, 0.0]])
         radius = 0.25 * size
         first = s.add_stroke(line, radius=radius)
-        n = s.strokes[-1]
-        assert first == 4 and n >= 3 and s.n_controls == 4 + n and s.strokes == (1,) * 4 + (n,)
+        n = s.control_edits.strokes[-1]
+        assert first == 4 and n >= 3 and s.n_controls == 4 + n and s.control_edits.strokes == (1,) * 4 + (n,)
         lifted = s.controls
         lifted[first:, 2] += 0.2 * size
         with s.gesture():
@@ -353,7 +360,7 @@ def test_a_stroke_drawn_over_the_grid_raises_a_smooth_ridge():
         assert np.nanmax(near) < 30.0, np.nanmax(near)
         assert np.isfinite(angles).any() and np.linalg.norm(w - s.preset.weights, axis=1).max() > 0.15 * size
         s.remove_control(first + 2)  # the whole stroke goes
-        assert s.n_controls == 4 and s.strokes == (1,) * 4
+        assert s.n_controls == 4 and s.control_edits.strokes == (1,) * 4
         assert s.undo() and s.n_controls == 4 + n
         assert s.undo() and s.undo() and s.n_controls == 4
         with pytest.raises(ValueError, match="at least 2 points"):

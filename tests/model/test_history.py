@@ -14,7 +14,7 @@ from somwidget.frontend.model import Session
 
 def state_of(session: Session) -> dict:
     """Everything undo promises to put back, read between steps."""
-    snap = session.snapshot()
+    snap = session.files.snapshot()
     return {"preset": snap["preset"].name, "weights": snap["weights"], "controls": snap["controls"],
             "iteration": snap["iteration"], "parameters": snap["parameters"]}
 

@@ -38,7 +38,7 @@ def strip_obj(path, n: int = 4096) -> None:
 async def _set(base: str, name: str, value) -> None:
     import aiohttp
 
-    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/xr/ws") as ws:
+    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/view/ws") as ws:
         await ws.send_json({"type": "set", "name": name, "value": value})  # 54 bytes
         await ws.send_json({"type": "ping", "t": 1})
         while True:
@@ -150,7 +150,7 @@ print(json.dumps({"message": message, "seconds": time.perf_counter() - t, "extra
 def test_a_gpu_sized_import_is_counted_before_it_is_expanded(tmp_path):
     import trimesh
 
-    from somwidget.frontend.model.clay import GPU_MAX_VERTICES
+    from somwidget.frontend.model.state import GPU_MAX_VERTICES
 
     ball = trimesh.creation.icosphere(subdivisions=4)  # 2,562 vertices
     scene = trimesh.Scene()

@@ -1,7 +1,7 @@
 """Work is never lost (issue 27), each test written as the fault: a real `somwidget serve` stopped by SIGTERM, SIGINT
 and SIGKILL (mid-drag too), then started again; two servers and a Python session at once; many stopped sessions;
 a directory and a corrupt file where a saved session should be. The servers are driven through the views' websocket
-(/xr/ws) and read through GET /api/state (positions are the weights' position dims, exactly)."""
+(/view/ws) and read through GET /api/state (positions are the weights' position dims, exactly)."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ async def _send(base: str, messages: list, pause: float = 0.05, hold=None) -> No
     client that goes away mid-drag ends the drag: a test that kills the server mid-drag keeps it open)."""
     import aiohttp
 
-    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/xr/ws") as ws:
+    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/view/ws") as ws:
         for m in messages:
             await ws.send_json(m)
             await asyncio.sleep(pause)
@@ -194,8 +194,8 @@ CHILD = textwrap.dedent("""
     with s.gesture():
         for t in np.linspace(0.1, 1.0, 4):
             s.move_control(1, s.controls[1, :3] + t * np.float32([0.0, 0.05, 0.1]))
-    s.set_reach(0.09)
-    assert s.wait_idle(60) and s.flush_autosave()
+    s.settings.set("reach", 0.09)
+    assert s.wait_idle(60) and s.autosave.flush()
     print(json.dumps({"controls": s.controls.tolist(), "weights": s.frame.weights.tolist(),
                       "history": list(s.history)}), flush=True)
     time.sleep(600)
@@ -257,7 +257,7 @@ def test_a_notebook_kernel_that_closes_keeps_its_session(tmp_path, monkeypatch):
             from somwidget.frontend.model import Session
             s = Session("sphere", device="cpu", start=False)
             s.move_control(1, s.controls[1, :3] + 0.1)
-            print(json.dumps([(s.autosave_path / "manifest.json").exists(), s.controls.tolist()]))
+            print(json.dumps([(s.autosave.path / "manifest.json").exists(), s.controls.tolist()]))
         """), timeout=120, output_hook=lambda m: printed.append(m["content"].get("text", "")))
         assert reply["content"]["status"] == "ok", reply["content"]
     finally:
@@ -278,9 +278,9 @@ def test_stopped_sessions_are_pruned_by_age_count_and_size(tmp_path, monkeypatch
     monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(tmp_path))
     s = Session("grid", device="cpu", start=False)
     s.add_control()
-    assert s.flush_autosave()
+    assert s.autosave.flush()
     s.close()
-    source = s.autosave_path
+    source = s.autosave.path
     folder = storage.autosave_dir()
     now = time.time()
     ages_days = [0.1 * i for i in range(60)] + [40.0, 45.0]  # 62 stopped sessions; two past KEEP_DAYS
@@ -319,9 +319,9 @@ def test_serve_starts_past_unreadable_saved_sessions_and_keeps_them_aside(tmp_pa
     monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(data))
     s = Session("torus", device="cpu", start=False, origin="serve")
     s.add_control()
-    assert s.flush_autosave()
+    assert s.autosave.flush()
     s.close()
-    good = s.autosave_path
+    good = s.autosave.path
     damaged = {}
     for i, damage in enumerate(["manifest is a folder", "manifest cut short", "step file cut short"]):
         folder = good.with_name(f"damaged-{i}")

@@ -183,17 +183,17 @@ def test_a_full_disk_shows_in_the_notebook_panel_and_heals(disk, monkeypatch):
     session = Session("grid", device="cpu")
     panel = Panel(session)
     try:
-        assert session.wait_idle(30) and session.flush_autosave()
+        assert session.wait_idle(30) and session.autosave.flush()
         disk.fill()
         session.add_control()
         t0 = time.monotonic()
         wait_for(lambda: "autosave failed" in panel.saving.value, 5, "the notebook panel's alert")
         assert time.monotonic() - t0 < 1.0
-        assert str(disk.path / "data") in panel.saving.value and not session.flush_autosave(0.5)
+        assert str(disk.path / "data") in panel.saving.value and not session.autosave.flush(0.5)
         disk.free()
         wait_for(lambda: panel.saving.value == "", 5, "the alert to go")
-        assert session.flush_autosave(5)
-        manifest = _store.peek(session.autosave_path)
+        assert session.autosave.flush(5)
+        manifest = _store.peek(session.autosave.path)
         assert [len(manifest["undo"]), len(manifest["redo"])] == list(session.history)
     finally:
         panel.close()

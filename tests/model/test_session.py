@@ -92,7 +92,7 @@ def test_step_size_targets_the_frame_rate():
         s.set_iterations(200_000)
         s.add_listener(frames.append, replay=False)
         s.train()
-        budget = s.step_fraction / s.frame_rate
+        budget = s.trainer.step_fraction / s.trainer.frame_rate
 
         def steps():
             return [f for f in list(frames) if f.step_cycles > 0]
@@ -158,13 +158,13 @@ def test_bad_move_is_refused_and_changes_nothing(session, bad):
 
 def test_parameters_are_validated_and_reach_the_som(session):
     session.set_iterations(500)
-    session.set_learning_rates(0.4, 0.05)
+    session.settings.update(l_start=0.4, l_end=0.05)
     session.set_smoothing(0.2)
     session.set_parameter("S", "600")  # a text field's value
     assert session.wait_idle(30)
     p = session.parameters
     assert (p["iterations"], p["l_start"], p["l_end"], p["smoothing"]) == (600, 0.4, 0.05, 0.2)
-    som = session.clay.som
+    som = session.modelling.som
     assert (som.iterations, som.l_start, som.l_end, som.smoothing) == (600, 0.4, 0.05, 0.2)
     assert session.frame.iteration == 600
     for name, value in [("iterations", 0), ("iterations", -3), ("iterations", 2.5), ("iterations", "ten"),
@@ -176,9 +176,9 @@ def test_parameters_are_validated_and_reach_the_som(session):
         with pytest.raises(ValueError):
             session.set_parameter(name, value)
     assert session.parameters == p
-    session.set_metric_weights([1, 1, 1, 0.5, 0])
+    session.settings.set_metric_weights([1, 1, 1, 0.5, 0])
     assert session.wait_idle(30)
-    np.testing.assert_allclose(session.clay.som.metric_weights, [1, 1, 1, 0.5, 0])
+    np.testing.assert_allclose(session.modelling.som.metric_weights, [1, 1, 1, 0.5, 0])
 
 
 def test_symmetry_off_and_on_moves_nothing(session):
@@ -186,18 +186,18 @@ def test_symmetry_off_and_on_moves_nothing(session):
     again, they pair up as before (9 controls and their copies), and still no node moves."""
     assert session.wait_idle(30)
     before = session.frame.weights.copy()
-    session.set_symmetry(False)
+    session.settings.set_symmetry(False)
     assert session.wait_applied(30) and session.wait_idle(30)
     assert session.n_controls == 18 and session.frame.effective_controls.shape == (18, 5)
     assert session.parameters["symmetry"] is False and session.parameters["group"] == "none"
     np.testing.assert_array_equal(session.frame.weights, before)
-    session.set_symmetry(True)
+    session.settings.set_symmetry(True)
     assert session.wait_applied(30) and session.wait_idle(30)
     assert session.n_controls == 9 and session.frame.effective_controls.shape == (18, 5)
     assert session.parameters["group"] == "mirror-y"
     np.testing.assert_array_equal(session.frame.weights, before)
     assert session.undo() and session.n_controls == 18  # each change one step
-    session.set_symmetry("radial-3-z")  # a group whose copies are not there yet: they appear and the clay follows
+    session.settings.set_symmetry("radial-3-z")  # a group whose copies are not there yet: they appear, the clay follows
     assert session.wait_applied(30) and session.wait_idle(30)
     assert session.n_controls == 18 and session.frame.effective_controls.shape == (54, 5)
 
@@ -310,7 +310,7 @@ def test_intents_from_many_threads_leave_a_consistent_session(session):
                 elif r < 0.7:
                     session.set_iterations(int(rng.integers(50, 400)))
                 elif r < 0.8:
-                    session.set_l_start(float(rng.uniform(0.1, 0.9)))
+                    session.settings.set("l_start", float(rng.uniform(0.1, 0.9)))
                 elif r < 0.85:
                     session.reset()
                 else:
@@ -344,7 +344,7 @@ def test_load_preset_and_bad_inputs(session, tmp_path):
     assert session.wait_idle(30)
     f = session.frame
     assert f.generation == gen + 1 and f.weights.shape == (602, 8) and f.effective_controls.shape == (16, 8)
-    assert session.display == "lines"
+    assert session.preset.display == "lines"
     bad = tmp_path / "bad.obj"
     bad.write_text("this is not a mesh\n")
     with pytest.raises(ValueError):
@@ -386,7 +386,7 @@ def test_save_load_and_export(session, tmp_path):
     f = session.frame
     np.testing.assert_allclose(f.weights, weights, atol=1e-6)  # paused: the saved weights, untouched
     np.testing.assert_allclose(f.controls[1, :3], [-1.8, 1.2, -0.4])
-    assert session.parameters["iterations"] == 300 and session.display == "surface"
+    assert session.parameters["iterations"] == 300 and session.preset.display == "surface"
     junk = tmp_path / "junk.npz"
     junk.write_bytes(b"PK\x03\x04 not really a zip")
     with pytest.raises(ValueError):
@@ -433,10 +433,11 @@ def test_wait_applied_counts_intents_handled_by_the_training_thread(session):
     assert session.wait_idle(30)
     applied = session.frame.applied
     session.set_smoothing(0.1)
-    session.set_learning_rates(0.3, 0.05)  # two intents
+    session.settings.update(l_start=0.3, l_end=0.05)  # two intents
     assert session.wait_applied(30)
     assert session.frame.applied == applied + 3
-    assert (session.clay.som.smoothing, session.clay.som.l_start, session.clay.som.l_end) == (0.1, 0.3, 0.05)
+    som = session.modelling.som
+    assert (som.smoothing, som.l_start, som.l_end) == (0.1, 0.3, 0.05)
     never_started = Session("sphere", device="cpu", start=False)
     try:
         never_started.set_smoothing(0.2)
@@ -467,20 +468,20 @@ def test_set_iterations_refuses_an_S_the_engine_would_refuse():
         with pytest.raises(ValueError, match=rf"{limit + 1}.*at most {limit}"):
             s.set_parameter("S", str(limit + 1))
         assert s.parameters == before and s.error is None
-        assert s.max_iterations == limit
+        assert s.settings.max_iterations == limit
         assert s.wait_idle(30)
-        assert s.clay.som.iterations == before["iterations"]
-        with s.clay.som_lock:  # the engine draws the line at the same place
+        assert s.modelling.som.iterations == before["iterations"]
+        with s.modelling.som_lock:  # the engine draws the line at the same place
             with pytest.raises(ValueError, match="learning table"):
-                s.clay.som.iterations = limit + 1
+                s.modelling.som.iterations = limit + 1
         s.set_iterations(5000)
         assert s.wait_applied(30)
-        assert s.clay.som.iterations == s.parameters["iterations"] == 5000 and s.error is None
+        assert s.modelling.som.iterations == s.parameters["iterations"] == 5000 and s.error is None
     finally:
         s.close()
     car = Session("car", device="cpu", start=False)
     try:
-        assert car.max_iterations == MAX_ITERATIONS  # d_max is small: the session's own cap holds
+        assert car.settings.max_iterations == MAX_ITERATIONS  # d_max is small: the session's own cap holds
     finally:
         car.close()
 
@@ -500,30 +501,30 @@ def test_a_refused_intent_is_rolled_back_and_the_rest_of_its_batch_still_lands(m
         monkeypatch.setattr(Som, "smoothing", property(smoothing.fget, refuse))
         target = np.float32([2.5, 0.7, 0.3])
         # hold the training thread off: the three intents of one gesture (one undo step) reach it as one batch
-        with s.clay.som_lock, s.gesture():
+        with s.modelling.som_lock, s.gesture():
             s.set_smoothing(0.3)
             s.move_control(2, target)
-            s.set_l_start(0.45)
+            s.settings.set("l_start", 0.45)
             assert s.parameters["smoothing"] == 0.3  # the session's view changes at once...
         assert s.wait_applied(30)
         assert "smoothing" in s.error and "no smoothing today" in s.error
-        assert s.parameters["smoothing"] == before["smoothing"] == s.clay.som.smoothing  # ...and back when refused
+        assert s.parameters["smoothing"] == before["smoothing"] == s.modelling.som.smoothing  # ...and back when refused
         # the intents after the refused one reached the Som and the frame
-        np.testing.assert_allclose(s.clay.som.controls[2, :3], target)
+        np.testing.assert_allclose(s.modelling.som.controls[2, :3], target)
         np.testing.assert_allclose(s.frame.controls[2, :3], target)
         np.testing.assert_array_equal(s.frame.controls, s.controls)
-        assert s.clay.som.l_start == s.parameters["l_start"] == 0.45
+        assert s.modelling.som.l_start == s.parameters["l_start"] == 0.45
         # a refused intent followed by a later one of the same kind: the later value stands
-        with s.clay.som_lock:
+        with s.modelling.som_lock:
             s.set_smoothing(0.3)
             s.set_smoothing(0.25)
         assert s.wait_applied(30)
-        assert s.parameters["smoothing"] == s.clay.som.smoothing == 0.25
+        assert s.parameters["smoothing"] == s.modelling.som.smoothing == 0.25
         monkeypatch.undo()
         s.set_smoothing(0.2)
         s.train()
         assert s.wait_idle(30)
-        assert s.error is None and s.clay.som.smoothing == s.parameters["smoothing"] == 0.2
+        assert s.error is None and s.modelling.som.smoothing == s.parameters["smoothing"] == 0.2
         assert s.frame.iteration == s.frame.iterations
     finally:
         s.close()
@@ -595,7 +596,7 @@ def test_a_65536_vertex_upload_trains_on_the_cpu(tmp_path):
     while the far side stays exactly where it was (the local cycle touches only what the drag reaches)."""
     import trimesh
 
-    from somwidget.frontend.model.clay import DEFAULT_MAX_VERTICES
+    from somwidget.frontend.model.state import DEFAULT_MAX_VERTICES
 
     faces, pts = presets.open_grid(256, 256)
     pts[:, 2] = 0.2 * np.sin(3 * pts[:, 0]) * np.cos(2 * pts[:, 1])
@@ -606,7 +607,7 @@ def test_a_65536_vertex_upload_trains_on_the_cpu(tmp_path):
         assert s.max_vertices == DEFAULT_MAX_VERTICES == 262_144
         s.load_mesh(str(path))
         s.start()
-        assert s.preset.n_vertices == 65_536 and s.clay.som.distances == "rows"
+        assert s.preset.n_vertices == 65_536 and s.modelling.som.distances == "rows"
         assert s.wait_idle(60)
         before = s.frame.positions.copy()
         s.set_control_radius(0, 0.1)

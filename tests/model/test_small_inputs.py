@@ -25,7 +25,7 @@ LIMIT_S = 10.0
 PROBE = """
 import json, resource, sys, time
 import trimesh
-from somwidget.backend import io
+from somwidget.backend import io, session_file
 from somwidget.backend.schedule import MAX_ITERATIONS
 kind, path = sys.argv[1], sys.argv[2]
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -34,7 +34,7 @@ try:
     if kind == "mesh":
         io.load_mesh(path, max_vertices=16384)
     else:
-        io.load_session(path, max_vertices=16384, max_iterations=MAX_ITERATIONS)
+        session_file.load_session(path, max_vertices=16384, max_iterations=MAX_ITERATIONS)
     message = None
 except ValueError as exc:
     message = str(exc)
@@ -74,10 +74,10 @@ def test_a_small_glb_placing_one_mesh_thousands_of_times_is_refused_before_it_is
 
 
 def _saved_session(tmp_path):
-    from somwidget.backend import io, presets
+    from somwidget.backend import presets, session_file
 
     path = tmp_path / "car.npz"
-    io.save_session(path, io.session_state(presets.get_preset("car")))
+    session_file.save_session(path, session_file.session_state(presets.get_preset("car")))
     return path
 
 

@@ -56,7 +56,7 @@ def test_a_sweep_from_a_session_restarts_from_its_shape_and_a_variant_is_one_und
     with Session("lattice", device="cpu") as session:
         session.move_control(0, session.controls[0, :3] + 0.2)
         session.wait_idle(60)
-        shape = session.snapshot()["weights"]
+        shape = session.files.snapshot()["weights"]
         v = somwidget.sweep(session, n=3, jitter=0.1, seed=1, device="cpu", progress=False)
         lattice = presets.get_preset("lattice")
         params = v.params[1]

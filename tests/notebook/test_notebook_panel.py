@@ -106,7 +106,7 @@ def test_undo_redo_reload_and_reach_from_the_panel(panel, session):
     np.testing.assert_array_equal(session.controls, original)
     panel.reach.value = 0.12
     assert session.parameters["reach"] == 0.12
-    assert session.wait_applied(30) and session.clay.som.reach == 0.12
+    assert session.wait_applied(30) and session.modelling.som.reach == 0.12
     panel.undo_button.click()  # the reach, then the reload, go back
     assert session.parameters["reach"] == session.preset.reach
 
@@ -150,8 +150,8 @@ def test_refused_value_shows_the_message_and_reverts(panel, session):
 def test_a_recovered_session_shows_a_banner_that_can_be_dismissed(tmp_path, monkeypatch):
     monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(tmp_path / "data"))
     stopped = Session("torus", device="cpu")  # a kernel's session: a step, then the kernel goes
-    stopped.set_reach(0.2)
-    assert stopped.wait_idle(30) and stopped.flush_autosave()
+    stopped.settings.set("reach", 0.2)
+    assert stopped.wait_idle(30) and stopped.autosave.flush()
     stopped.close()
     recovered = Session.recover(device="cpu")
     plain = Panel(Session("grid", device="cpu", autosave=False), auto_refresh=False)
@@ -174,7 +174,7 @@ def test_session_intents_update_the_widgets(panel, session):
     wait_for(lambda: panel.progress.value == 1000 and "converged" in panel.status.value, what="converged panel")
     seq = panel.last_frame_seq
     session.set_iterations(500)  # as another view (the web app, a script) would
-    session.set_l_end(0.02)
+    session.settings.set("l_end", 0.02)
     wait_for(lambda: panel.S.value == 500 and panel.progress.max == 500, what="S in the panel")
     assert panel.l_end.value == pytest.approx(0.02)
     assert panel.last_frame_seq > seq
@@ -617,7 +617,10 @@ def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened
                 def saved_picture():
                     page.keyboard.press("Control+s")
                     page.wait_for_timeout(1000)
-                    state = json.loads(path.read_text()).get("metadata", {}).get("widgets", {})
+                    try:
+                        state = json.loads(path.read_text()).get("metadata", {}).get("widgets", {})
+                    except ValueError:  # read while Jupyter was writing it: look again
+                        return None
                     models = state.get("application/vnd.jupyter.widget-state+json", {}).get("state", {})
                     pictures = [m["state"].get("picture", "") for m in models.values()]
                     return next((x for x in pictures if x.startswith("data:image/png;base64,")), None)

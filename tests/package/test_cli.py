@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from somwidget.cli import _build_parser, main
+from somwidget import cli
+from somwidget.cli import _build_parser, load_bench_harness, main
 
 ROOT = Path(__file__).resolve().parents[2]
 SERVE_OPTIONS = ("--preset", "--mesh", "--host", "--port", "--device", "--open")
@@ -89,6 +90,14 @@ def test_bench_refuses_unknown_case(capsys):
     assert "teapot" in capsys.readouterr().err
 
 
+def test_bench_says_it_needs_a_checkout(monkeypatch, tmp_path, capsys):
+    """An installed somwidget has no benchmarks/ beside it: `somwidget bench` says where it runs, and exits 2."""
+    monkeypatch.setattr(cli, "BENCH_HARNESS", tmp_path / "benchmarks" / "engine_harness.py")
+    assert main(["bench", "--device", "cpu", "--cases", "car", "--cycles", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "checkout of the somwidget repository" in err and "engine_harness.py is missing" in err
+
+
 def test_bench_tiny_run_on_cpu(tmp_path):
     """A real run: the table has ratio columns holding positive finite numbers (no timing thresholds)."""
     report = tmp_path / "bench.json"
@@ -152,7 +161,8 @@ def _reference(weights, controls, distances, table, cycles, metric, smoothing, s
 @pytest.mark.parametrize("update", ["fused", "sequential"])
 def test_numpy_baseline_matches_reference(shape, update):
     from somwidget.backend.topology import Topology
-    from somwidget.benchmark import NumpySom, learning_table
+
+    harness = load_bench_harness()
 
     rng = np.random.default_rng(7)
     side = 6
@@ -169,9 +179,9 @@ def test_numpy_baseline_matches_reference(shape, update):
     metric = np.array([1.0, 1.0, 0.5, 2.0], np.float32)
     dims = (0, 1, 3)  # not contiguous
     cycles = 6
-    table = learning_table(cycles, topo.d_max, 0.3, 0.03)
+    table = harness.learning_table(cycles, topo.d_max, 0.3, 0.03)
     distances = topo.grid_distances()
-    base = NumpySom(distances, topo.offsets, topo.neighbors, weights, controls, table, metric_weights=metric,
+    base = harness.NumpySom(distances, topo.offsets, topo.neighbors, weights, controls, table, metric_weights=metric,
                     smoothing=0.3, smooth_dims=dims, update=update)
     assert base._padded == (shape == "grid")
     ref, margin = _reference(weights, controls, distances, table, cycles, metric, 0.3, list(dims), topo.offsets,

@@ -16,7 +16,7 @@ import helpers
 import numpy as np
 import pytest
 
-from somwidget.backend import io
+from somwidget.backend import io, session_file
 
 INTERNALS = re.compile(r"IndexError|KeyError|TypeError|allow_pickle|pickle|Traceback|/tmp/|somwidget-upload")
 
@@ -65,7 +65,7 @@ def test_reader_messages_say_what_is_wrong_without_python_internals(tmp_path):
         assert not INTERNALS.search(message), message
     (tmp_path / "not-a-session.npz").write_text("hello, this is text")
     with pytest.raises(ValueError) as info:
-        io.load_session(tmp_path / "not-a-session.npz")
+        session_file.load_session(tmp_path / "not-a-session.npz")
     message = str(info.value).replace(str(tmp_path / "not-a-session.npz"), "FILE")
     assert "not an .npz archive" in message and not INTERNALS.search(message), message
 

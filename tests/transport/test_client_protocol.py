@@ -1,144 +1,173 @@
-"""The browser client's protocol (client/src/protocol.js, link.js) in step with its Python declaration
-(transport/messages.py): the version, header size, magic, flag bits, the frame header's offsets, the intents and
-the server's message types. The JavaScript is read as text (no node needed); each test names what is out of step.
+"""The browser's side of the wire protocol (client/src/protocol.js) is generated from its declaration in Python
+(transport/messages.py) by transport/codegen.py: the committed file must be what the generator writes now, and the
+generated code, run by Node, must read what Python writes and write what Python accepts: a frame encoded from a real
+session parses to the same header, flags and arrays as Python's decoder gives; each intent builder's message passes
+`parse_intent` as the intent it names; link.js hands each server message type to a handler of the view.
 """
 
 from __future__ import annotations
 
-import re
+import base64
+import dataclasses
+import json
+import shutil
 import struct
+import subprocess
 from pathlib import Path
 
-from somwidget.frontend.transport import messages
+import numpy as np
+import pytest
+
+from somwidget.frontend.transport import codegen, frames, messages
 
 CLIENT_SRC = Path(__file__).resolve().parents[2] / "somwidget" / "frontend" / "client" / "src"
-#: The frame header's fields, in HEADER_FORMAT's order (messages.py documents them).
-HEADER_FIELDS = ("magic", "version", "flags", "seq", "generation", "iteration", "iterations", "n", "k", "k_eff")
+NODE = shutil.which("node")
+needs_node = pytest.mark.skipif(NODE is None, reason="Node.js is not installed (the client's build needs it too)")
 
 
-def read_js(name: str) -> str:
-    """A client source file without its // comments (none of the code read here has // inside a string)."""
-    text = (CLIENT_SRC / name).read_text(encoding="utf-8")
-    return re.sub(r"(^|\s)//.*$", r"\1", text, flags=re.MULTILINE)
+def run_node(tmp_path: Path, body: str, data) -> object:
+    """Run an ES module importing the client's protocol.js and link.js (`data` is the JSON on stdin as `input`);
+    what it prints as JSON."""
+    script = tmp_path / "check.mjs"
+    script.write_text(
+        f"import * as protocol from {json.dumps((CLIENT_SRC / 'protocol.js').as_uri())};\n"
+        f"import * as link from {json.dumps((CLIENT_SRC / 'link.js').as_uri())};\n"
+        "import { readFileSync } from 'node:fs';\n"
+        "const input = JSON.parse(readFileSync(0, 'utf8'));\n"
+        f"{body}\n", encoding="utf-8")
+    done = subprocess.run([NODE, str(script)], input=json.dumps(data), capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, f"node failed:\n{done.stderr}"
+    return json.loads(done.stdout)
 
 
-def js_constants(text: str) -> dict[str, int]:
-    """`export const NAME = <integer>;` declarations."""
-    return {m[1]: int(m[2], 0) for m in re.finditer(r"^export const (\w+) = (\d+|0x[0-9a-fA-F]+);", text, re.M)}
+def test_protocol_js_is_what_the_generator_writes():
+    committed = codegen.TARGET.read_text(encoding="utf-8")
+    assert committed == codegen.render(), (
+        f"{codegen.TARGET} is out of date with transport/messages.py: run "
+        "`python -m somwidget.frontend.transport.codegen` and commit the file")
+    assert codegen.main(["--check"]) == 0
 
 
-def block(text: str, opening: str, what: str) -> str:
-    """The text between `opening` (which ends with "{") and its matching "}"."""
-    start = text.find(opening)
-    assert start >= 0, f"{what}: `{opening}` not found"
-    depth, i = 1, start + len(opening)
-    while depth:
-        assert i < len(text), f"{what}: no closing brace"
-        depth += {"{": 1, "}": -1}.get(text[i], 0)
-        i += 1
-    return text[start + len(opening):i - 1]
+def test_the_frame_layout_is_declared_consistently():
+    assert struct.calcsize(messages.HEADER_FORMAT) == messages.HEADER_SIZE == 32
+    assert frames.HEADER.size == messages.HEADER_SIZE
+    assert [f.name for f in dataclasses.fields(messages.FrameHeader)][:2] == ["magic", "version"]
+    assert messages.frame_size(602, 18) == 32 + 15 * (602 + 18)  # already a multiple of 4
+    assert messages.frame_size(1, 0) == 48  # 32 + 15, padded
+    assert len(set(messages.FLAGS.values())) == len(messages.FLAGS)
+    assert all(bit & (bit - 1) == 0 for bit in messages.FLAGS.values())  # one bit each
 
 
-def out_of_step(problems: list[str]) -> str:
-    return "the browser client is out of step with transport/messages.py:\n  " + "\n  ".join(problems)
+@pytest.fixture(scope="module")
+def encoded():
+    """A frame of the car (9 controls, mirrored) as the outbox encodes it, and the same with every flag set."""
+    from somwidget.frontend.model import Session
+
+    with Session("car", device="cpu", start=False) as s:
+        data = frames.encode_frame(s.frame, s)
+    flagged = bytearray(data)
+    struct.pack_into("<H", flagged, 6, sum(messages.FLAGS.values()))
+    return [data, bytes(flagged)]
 
 
-def test_header_layout_declared_consistently_in_python():
-    codes = re.findall(r"\d*[a-zA-Z?]", messages.HEADER_FORMAT)
-    assert len(codes) == len(HEADER_FIELDS), f"HEADER_FORMAT {messages.HEADER_FORMAT!r} vs fields {HEADER_FIELDS}"
-    assert struct.calcsize(messages.HEADER_FORMAT) == messages.HEADER_SIZE
+@needs_node
+def test_the_generated_parser_reads_what_python_encodes(tmp_path, encoded):
+    body = """
+const out = input.map((b64) => {
+  const buf = Buffer.from(b64, 'base64');
+  const f = protocol.parseFrame(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength));
+  for (const [k, v] of Object.entries(f)) if (ArrayBuffer.isView(v)) f[k] = Array.from(v);
+  return f;
+});
+let refused = null;
+try {
+  const buf = Buffer.from(input[0], 'base64');
+  protocol.parseFrame(buf.buffer.slice(buf.byteOffset, buf.byteOffset + buf.byteLength - 4));
+} catch (err) {
+  refused = err.message;
+}
+console.log(JSON.stringify({ out, refused }));
+"""
+    result = run_node(tmp_path, body, [base64.b64encode(d).decode() for d in encoded])
+    assert "expected" in result["refused"]  # a frame cut short is refused
+    for data, js in zip(encoded, result["out"]):
+        py = frames.decode_frame(data)
+        assert js["bytes"] == len(data)
+        for name, value in py.items():
+            js_name = codegen.camel(name)
+            assert js_name in js, f"parseFrame gives no {js_name} (Python's decoder gives {name})"
+            if isinstance(value, np.ndarray):
+                np.testing.assert_array_equal(np.asarray(js[js_name], value.dtype), value.ravel(), err_msg=name)
+            else:
+                assert js[js_name] == value, name
+    assert result["out"][1]["canUndo"] and result["out"][1]["running"] and not result["out"][0]["canRedo"]
 
 
-def test_version_header_size_flags_and_magic():
-    js = read_js("protocol.js")
-    consts = js_constants(js)
-    problems = []
-    for name in ("PROTOCOL_VERSION", "HEADER_SIZE", "MAX_STROKE_POINTS"):
-        if consts.get(name) != getattr(messages, name):
-            problems.append(f"protocol.js {name} = {consts.get(name)}, messages.{name} = {getattr(messages, name)}")
-    js_flags = {name.removeprefix("FLAG_").lower(): value for name, value in consts.items() if name.startswith("FLAG_")}
-    for flag, bit in messages.FLAGS.items():
-        if flag not in js_flags:
-            problems.append(f"protocol.js has no FLAG_{flag.upper()} (messages.FLAGS[{flag!r}] = {bit})")
-        elif js_flags[flag] != bit:
-            problems.append(f"protocol.js FLAG_{flag.upper()} = {js_flags[flag]}, messages.FLAGS[{flag!r}] = {bit}")
-    for flag in js_flags.keys() - messages.FLAGS.keys():
-        problems.append(f"protocol.js FLAG_{flag.upper()} is not in messages.FLAGS")
-    magic = re.search(r"const MAGIC = \[([^\]]*)\]", js)
-    js_magic = bytes(int(b, 0) for b in magic[1].split(",")) if magic else None
-    if js_magic != messages.MAGIC:
-        problems.append(f"protocol.js MAGIC = {js_magic!r}, messages.MAGIC = {messages.MAGIC!r}")
-    assert not problems, out_of_step(problems)
+#: Arguments for each wire type's field, as a view would pass them.
+SAMPLES = {"id": 3, "position": [0.5, -0.25, 1.0], "radius": 0.3, "t": 12.5, "name": "reach", "value": 0.2,
+           "points": [[0.0, 0.0, 0.0], [1.0, 0.5, 0.25]]}
 
 
-def test_frame_parser_reads_the_header_at_its_offsets():
-    """Each DataView read in parseFrame (`name = dv.getUint16(offset, true)` or `name: dv.get...`) is the header
-    field of that name at the offset and size HEADER_FORMAT gives it, little-endian; every field is read."""
-    parser = block(read_js("protocol.js"), "export function parseFrame(buffer) {", "parseFrame")
-    codes = re.findall(r"\d*[a-zA-Z?]", messages.HEADER_FORMAT.lstrip("<>=!@"))
-    offsets = {f: struct.calcsize("<" + "".join(codes[:i])) for i, f in enumerate(HEADER_FIELDS)}
-    sizes = {f: struct.calcsize("<" + c) for f, c in zip(HEADER_FIELDS, codes)}
-    reads = re.findall(r"(\w+)\s*[:=]\s*dv\.getUint(\d+)\((\d+), true\)", parser)
-    problems = []
-    if len(reads) != parser.count("dv.get"):
-        problems.append("parseFrame has DataView reads that are not `name = dv.getUintN(offset, true)`")
-    seen = set()
-    for js_name, bits, offset in reads:
-        field = re.sub(r"([A-Z])", r"_\1", js_name).lower()  # kEff -> k_eff
-        if field not in offsets:
-            problems.append(f"parseFrame reads {js_name} at {offset}: no such header field {HEADER_FIELDS}")
-            continue
-        seen.add(field)
-        if (int(offset), int(bits) // 8) != (offsets[field], sizes[field]):
-            problems.append(f"parseFrame reads {js_name} as {bits} bits at offset {offset}; HEADER_FORMAT "
-                            f"{messages.HEADER_FORMAT!r} has {field} as {8 * sizes[field]} bits at {offsets[field]}")
-    for field in set(HEADER_FIELDS) - {"magic"} - seen:
-        problems.append(f"parseFrame does not read the header field {field} (offset {offsets[field]})")
-    assert not problems, out_of_step(problems)
+@needs_node
+def test_every_intent_builder_makes_a_message_python_accepts(tmp_path):
+    calls = {}
+    for kind, cls in messages.INTENTS.items():
+        fields = [f for f in messages.declared_fields(cls) if f.browser]
+        calls[kind] = [[SAMPLES[f.name] for f in fields]]
+        while fields and not fields[-1].required and fields[-1].name not in cls.one_of:  # optional ones left out
+            fields = fields[:-1]
+            calls[kind].append([SAMPLES[f.name] for f in fields])
+    body = """
+const out = {};
+for (const [kind, argLists] of Object.entries(input)) {
+  out[kind] = argLists.map((args) => (protocol.intents[kind] ? protocol.intents[kind](...args) : null));
+}
+out.builders = Object.keys(protocol.intents);
+console.log(JSON.stringify(out));
+"""
+    result = run_node(tmp_path, body, calls)
+    assert result.pop("builders") == list(messages.INTENTS)
+    for kind, built in result.items():
+        for message, args in zip(built, calls[kind]):
+            intent = messages.parse_intent(json.dumps(message), n_controls=9)
+            assert type(intent) is messages.INTENTS[kind] and intent.to_json() == message, (kind, message)
+            given = {f.name: getattr(intent, f.name) for f in messages.declared_fields(type(intent))
+                     if getattr(intent, f.name) is not None}
+            assert len(given) == len(args), (kind, message)  # every argument went out, nothing else
 
 
-def test_intent_builders_match_intents():
-    """The `intents` object's builders: one per type in messages.INTENTS, each object literal it builds of its own
-    type, with the type's required fields and no field that INTENTS does not allow (values are names or strings)."""
-    body = block(read_js("protocol.js"), "export const intents = {", "protocol.js intents")
-    builders = dict(re.findall(r"^\s*(\w+):\s*(.*?)(?=^\s*\w+:\s*\(|\Z)", body, re.M | re.S))
-    problems = []
-    for kind in messages.INTENTS.keys() - builders.keys():
-        problems.append(f"protocol.js intents has no builder for the intent {kind!r}")
-    for kind in builders.keys() - messages.INTENTS.keys():
-        problems.append(f"protocol.js intents.{kind} is not an intent in messages.INTENTS")
-    for kind, code in builders.items():
-        literals = re.findall(r"\{([^{}]*)\}", code)
-        if not literals:
-            problems.append(f"protocol.js intents.{kind} builds no object literal")
-        required, optional = messages.INTENTS.get(kind, (set(), set()))
-        for literal in literals:
-            fields = {}
-            for item in filter(None, (s.strip() for s in literal.split(","))):
-                key, _, value = item.partition(":")
-                fields[key.strip()] = value.strip()
-            if fields.get("type") != f"'{kind}'":
-                problems.append(f"protocol.js intents.{kind} builds type {fields.get('type')}, not '{kind}'")
-            fields.pop("type", None)
-            if kind not in messages.INTENTS:
-                continue
-            if extra := sorted(fields.keys() - required - optional):
-                problems.append(f"protocol.js intents.{kind} sends {extra}; messages.INTENTS[{kind!r}] allows "
-                                f"{sorted(required | optional)}")
-            if missing := sorted(required - fields.keys()):
-                problems.append(f"protocol.js intents.{kind} leaves out the required {missing}")
-    assert not problems, out_of_step(problems)
+#: What the view's handler for each server message is called with (the handlers of view.js, main.js).
+HANDED = {"topology": ("onTopology", lambda j: [j]), "grabs": ("onGrabs", lambda j: [j["grabs"]]),
+          "controls": ("onControls", lambda j: [j["ids"], j]), "error": ("onError", lambda j: [j]),
+          "pong": ("onPong", lambda j: [j]), "status": ("onServerStatus", lambda j: [j]),
+          "autosave": ("onAutosave", lambda j: [j])}
 
 
-def test_dispatch_text_takes_every_server_message():
-    """link.js's dispatchText takes each JSON message type a server sends; the notebook's frames, {"type": "frame"}
-    with the frame as a binary buffer, are somview.js's to parse before it hands the rest to dispatchText."""
-    body = block(read_js("link.js"), "export function dispatchText(msg, handlers) {", "link.js dispatchText")
-    handled = set(re.findall(r"msg\.type === '(\w+)'", body))
-    problems = [f"link.js dispatchText does not handle the server message {t!r}"
-                for t in messages.SERVER_MESSAGES if t not in handled]
-    problems += [f"link.js dispatchText handles {t!r}, which is not in messages.SERVER_MESSAGES"
-                 for t in sorted(handled - set(messages.SERVER_MESSAGES))]
-    if "msg.type === 'frame'" not in read_js("somview.js"):
-        problems.append("somview.js does not take the notebook's {\"type\": \"frame\"} messages")
-    assert not problems, out_of_step(problems)
+@needs_node
+def test_link_hands_every_server_message_to_a_view_handler(tmp_path):
+    samples = [messages.TopologyMessage(generation=1, preset="car", title="Car", display="surface", n_vertices=3,
+                                        n_nodes=3, triangles=[0, 1, 2], segments=[0, 1], points=False,
+                                        bounds={"min": [0, 0, 0], "max": [1, 1, 1]}, control_radius=0.1,
+                                        colour_space="hs", feature_names=["x", "y", "z"]),
+               messages.GrabsMessage(grabs=[messages.HeldControl(index=0, id=4, own=True)]),
+               messages.ControlsMessage(ids=[4], radii=[0.0], strokes=[1]),
+               messages.ErrorMessage(message="no", intent="grab"), messages.PongMessage(t=1.5),
+               messages.StatusMessage.of(0.002, 30.0), messages.AutosaveMessage.of("disk full")]
+    assert sorted(m.type for m in samples) == sorted(messages.SERVER_MESSAGES) == sorted(HANDED)
+    body = """
+const out = [];
+for (const msg of [...input, { type: 'unknown' }, { type: 'constructor' }, null]) {
+  const seen = [];
+  const handlers = new Proxy({}, { get: (_, name) => (...args) => seen.push([name, args]) });
+  link.dispatchText(msg, handlers);
+  out.push(seen);
+}
+console.log(JSON.stringify({ out, handled: Object.keys(link.HANDLERS), declared: protocol.SERVER_MESSAGES }));
+"""
+    result = run_node(tmp_path, body, [m.to_json() for m in samples])
+    assert result["declared"] == list(messages.SERVER_MESSAGES)
+    assert sorted(result["handled"]) == sorted(messages.SERVER_MESSAGES), "link.js HANDLERS vs SERVER_MESSAGES"
+    for message, seen in zip(samples, result["out"]):
+        name, args = HANDED[message.type]
+        assert seen == [[name, args(message.to_json())]], (message.type, seen)
+    assert result["out"][len(samples):] == [[], [], []]  # unknown types (and Object's own names) reach no handler

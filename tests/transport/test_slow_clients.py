@@ -24,7 +24,7 @@ def passive_socket(port: int) -> socket.socket:
     s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # before connecting: a small window
     s.connect(("127.0.0.1", port))
     key = base64.b64encode(os.urandom(16)).decode()
-    s.sendall((f"GET /xr/ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+    s.sendall((f"GET /view/ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
                f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n").encode())
     return s
 
@@ -32,7 +32,7 @@ def passive_socket(port: int) -> socket.socket:
 async def normal_client(base: str, seconds: float, out: dict) -> None:
     import aiohttp
 
-    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/xr/ws") as ws:
+    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/view/ws") as ws:
         frames, pongs, t0 = 0, [], time.perf_counter()
         sent = {}
 
@@ -63,7 +63,7 @@ async def normal_client(base: str, seconds: float, out: dict) -> None:
 async def bursty_client(base: str, seconds: float, out: dict) -> None:
     import aiohttp
 
-    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/xr/ws") as ws:
+    async with aiohttp.ClientSession() as cs, cs.ws_connect(base.replace("http", "ws") + "/view/ws") as ws:
         t0, sent, answered, closed = time.perf_counter(), {}, [], False
 
         async def reader():

@@ -1,4 +1,4 @@
-"""The WebXR websocket protocol (/xr/ws), shown with Python clients (aiohttp) against the XR route and a real Session.
+"""The views' websocket protocol (/view/ws), shown with Python clients (aiohttp) against the route and a real Session.
 
 These tests send intents themselves: they show the protocol, not the interaction (test_xr_browser.py does that
 through an emulated headset). Covered: the topology message and the binary frame layout (decoded and checked
@@ -87,7 +87,7 @@ class Client:
 
 
 async def connect(cs, srv, **kw) -> Client:
-    ws = await cs.ws_connect(srv.base + "/xr/ws", **kw)
+    ws = await cs.ws_connect(srv.base + "/view/ws", **kw)
     c = Client(ws)
     await c.until(lambda m: isinstance(m, dict) and "positions" in m)  # topology, then the first frame
     return c
@@ -127,7 +127,7 @@ def test_other_displays_encode(preset, display, n):
 
     with Session(preset, device="cpu", start=False) as s:
         frame = s.frame
-        t = wire_display.topology_message(s, frame)
+        t = wire_display.topology_message(s, frame).to_json()
         f = wire_frames.decode_frame(wire_frames.encode_frame(frame, s))
     assert t["display"] == display and t["n_vertices"] == n and f["n"] == n
     if display == "lines":  # roots then tips, quads as two triangles, one root -> tip segment per node
@@ -200,8 +200,8 @@ def test_parse_intent_refuses(message, reason):
 
 
 def test_parse_intent_accepts():
-    assert wire.parse_intent('{"type": "move", "index": 3, "position": [1, -2.5, 0.25]}', 9) == wire.Intent(
-        "move", 3, (1.0, -2.5, 0.25))
+    assert wire.parse_intent('{"type": "move", "index": 3, "position": [1, -2.5, 0.25]}', 9) == wire.MoveIntent(
+        index=3, position=(1.0, -2.5, 0.25))
     assert wire.parse_intent('{"type": "release", "index": 8}', 9).position is None
     assert wire.parse_intent('{"type": "ping", "t": 12.5}', 9).t == 12.5
     for kind in ("reset", "train", "pause"):
@@ -261,7 +261,7 @@ def test_fuzz_bad_messages_are_refused_and_harmless(srv, session):
     np.testing.assert_array_equal(session.controls[others], controls[others])
     assert session.parameters == params and session.paused and session.error is None
     assert np.isfinite(session.frame.positions).all() and session.frame.seq >= seq
-    session.set_controls(controls)  # back as it was for the other tests
+    session.control_edits.replace(controls)  # back as it was for the other tests
     assert session.wait_applied(30)
 
 
@@ -271,7 +271,7 @@ def test_add_radius_stroke_and_remove_intents(srv, session):
     radius, "stroke" adds a line as one control, "remove" takes one away; the "controls" message before the next
     frame carries the radii and strokes."""
     assert session.wait_applied(30)
-    controls, radii, weights = session.controls, session.radii, session.frame.weights.copy()
+    controls, radii, weights = session.controls, session.control_edits.radii, session.frame.weights.copy()
     point = [float(v) for v in session.frame.positions[10]]
 
     async def main():
@@ -299,7 +299,7 @@ def test_add_radius_stroke_and_remove_intents(srv, session):
     run(main())
     assert session.wait_applied(30)
     np.testing.assert_array_equal(session.controls, controls)
-    np.testing.assert_array_equal(session.radii, radii)
+    np.testing.assert_array_equal(session.control_edits.radii, radii)
     np.testing.assert_array_equal(session.frame.weights, weights)  # paused: nothing trained, nothing moved
 
 
@@ -358,8 +358,31 @@ def test_two_clients_share_the_session_and_grabs(srv, session):
 
     run(main())
     assert not srv.hub.grabs
-    session.set_controls(start)
+    session.control_edits.replace(start)
     assert session.wait_applied(30)
+
+
+def test_the_old_route_xr_ws_is_the_same_views_socket(srv, session):
+    """A headset paired before the route was named /view/ws connects to /xr/ws: it gets the topology and frames and
+    shares the grabs with the views on /view/ws."""
+    async def main():
+        async with aiohttp.ClientSession() as cs:
+            a = await connect(cs, srv)
+            old = Client(await cs.ws_connect(srv.base + "/xr/ws"))
+            await old.until(lambda m: isinstance(m, dict) and "positions" in m)
+            assert old.topology["n_vertices"] == a.topology["n_vertices"] == 602
+            await a.send({"type": "grab", "index": 5})
+            await old.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [
+                {"index": 5, "id": session.control_ids[5], "own": False}])
+            err = await old.error_for({"type": "grab", "index": 5})
+            assert "held by another client" in err["message"]
+            await a.send({"type": "release", "index": 5})
+            await old.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [])
+            await a.ws.close()
+            await old.ws.close()
+
+    run(main())
+    assert not srv.hub.grabs
 
 
 def test_train_pause_reset_intents(srv, session):
@@ -426,10 +449,10 @@ def test_token_required(session):
                     async with cs.get(srv.base + "/xr/" + bad) as r:
                         assert r.status == 403, bad
                 with pytest.raises(aiohttp.WSServerHandshakeError) as info:
-                    await cs.ws_connect(srv.base + "/xr/ws")
+                    await cs.ws_connect(srv.base + "/view/ws")
                 assert info.value.status == 403
                 with pytest.raises(aiohttp.WSServerHandshakeError):
-                    await cs.ws_connect(srv.base + "/xr/ws?token=nope")
+                    await cs.ws_connect(srv.base + "/view/ws?token=nope")
                 async with cs.get(srv.base + "/xr/status", headers={"Authorization": f"Bearer {token}"}) as r:
                     assert r.status == 200
             # with the token in the URL: the page, a cookie for the rest, and the websocket

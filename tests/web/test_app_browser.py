@@ -410,7 +410,7 @@ def test_the_panel_comes_from_the_parameters_declaration_and_follows_a_change_ma
     comes back to that client as an error and changes nothing."""
     import aiohttp
 
-    from somwidget.frontend.model.parameters import PARAMETERS
+    from somwidget.frontend.model.settings import PARAMETERS
 
     page = open_page(browser, server)
     try:
@@ -418,7 +418,7 @@ def test_the_panel_comes_from_the_parameters_declaration_and_follows_a_change_ma
             assert page.locator(f"#param-{p.name}").get_attribute("title") == p.help, p.name
 
         async def send(*intents, expect_error=False):
-            async with aiohttp.ClientSession() as cs, cs.ws_connect(server.base.replace("http", "ws") + "/xr/ws",
+            async with aiohttp.ClientSession() as cs, cs.ws_connect(server.base.replace("http", "ws") + "/view/ws",
                                                                     headers={"Origin": server.base}) as ws:
                 for intent in intents:
                     await ws.send_json(intent)

@@ -73,23 +73,23 @@ def test_the_notebook_panel_sets_a_radius_and_a_symmetry_group():
                                                                    "mirror across z"]
         panel.radius_of.value = 3
         panel.radius.value = 0.4
-        assert session.radii[3] == pytest.approx(0.4)
+        assert session.control_edits.radii[3] == pytest.approx(0.4)
         panel.group.value = "radial-8-z"
         assert session.parameters["group"] == "radial-8-z"
         assert session.wait_applied(30)
         panel.refresh()
         assert "radius" in panel.controls_html.value
         shown = [float(x) for x in re.findall(r'somwidget-radius">([0-9.e+-]+)<', panel.controls_html.value)]
-        np.testing.assert_allclose(shown, session.radii, rtol=1e-2)
+        np.testing.assert_allclose(shown, session.control_edits.radii, rtol=1e-2)
         steps = session.history[0]
         panel.all_radii.value = "0.3"  # every control's radius at once: one step
-        np.testing.assert_allclose(session.radii, 0.3)
+        np.testing.assert_allclose(session.control_edits.radii, 0.3)
         assert session.history[0] == steps + 1
         panel.all_radii.value = "-1"  # refused: the message, the radii as they were
         assert "radius" in panel.error.value
-        np.testing.assert_allclose(session.radii, 0.3)
+        np.testing.assert_allclose(session.control_edits.radii, 0.3)
         panel.radius.value = 2e6  # past the widget's bound (a few sizes): it holds the radius there
-        assert session.radii.max() <= 2.0 * panel.model.size + 1e-4
+        assert session.control_edits.radii.max() <= 2.0 * panel.model.size + 1e-4
         panel.symmetry.value = False
         assert session.parameters["group"] == "none"
         wait_for(lambda: session.wait_applied(1), what="the group off applied")

@@ -114,14 +114,14 @@ def test_https_with_token_end_to_end(tmp_path):
                 async with cs.get(srv.base + "/xr/") as r:
                     assert r.status == 403
                 with pytest.raises(aiohttp.WSServerHandshakeError) as info:
-                    await cs.ws_connect(srv.base.replace("https", "wss") + "/xr/ws")
+                    await cs.ws_connect(srv.base.replace("https", "wss") + "/view/ws")
                 assert info.value.status == 403
                 async with cs.get(srv.url) as r:
                     assert r.status == 200
                     assert "Secure" in r.headers.get("Set-Cookie", "") and "HttpOnly" in r.headers["Set-Cookie"]
                     # named per port: two servers on one machine keep their own tokens
                     assert r.headers["Set-Cookie"].startswith(f"somwidget_token_{srv.port}=")
-                async with cs.ws_connect(srv.base.replace("https", "wss") + "/xr/ws") as ws:  # the cookie
+                async with cs.ws_connect(srv.base.replace("https", "wss") + "/view/ws") as ws:  # the cookie
                     topo = json.loads((await ws.receive(timeout=10)).data)
                     msg = await ws.receive(timeout=10)
                     while msg.type != aiohttp.WSMsgType.BINARY:  # replies (grabs) go out before frames
@@ -197,7 +197,7 @@ def test_xr_server_refuses_other_sites_and_host_names():
 
     with Session("car", device="cpu", paused=True) as session, XRServer(session) as srv:
         async def main():
-            ws = srv.base.replace("http", "ws") + "/xr/ws"
+            ws = srv.base.replace("http", "ws") + "/view/ws"
             async with aiohttp.ClientSession() as cs:
                 with pytest.raises(aiohttp.WSServerHandshakeError) as info:
                     await cs.ws_connect(ws, headers={"Origin": "http://evil.example"})

@@ -416,9 +416,9 @@ def test_desktop_drag_of_a_radial_copy_moves_its_control_by_the_inverse_rotation
             try:
                 assert page.evaluate("somxr.state().group") == "none"
                 # the group comes in a "controls" message, before the first frame with the copies
-                session.set_symmetry("radial-4-z")
+                session.settings.set_symmetry("radial-4-z")
                 assert session.wait_idle(60)
-                assert session.symmetry is not None and session.symmetry.spec == "radial-4-z"
+                assert session.settings.symmetry is not None and session.settings.symmetry.spec == "radial-4-z"
                 k = session.frame.n_controls
                 assert len(session.frame.effective_controls) == 4 * k
                 maps = np.array(group_maps("radial-4-z")).reshape(-1, 3, 3)
@@ -529,10 +529,11 @@ def test_strokes_and_radii_in_the_headset(ar_page, server, session):
     wait_frames(ar_page, 2)
     glide(ar_page, dev, [-0.12, 0.02, 0.0], steps=10)
     ar_page.evaluate(f"{dev}.updateButtonValue('trigger', 0)")
-    wait_for(lambda: len(session.strokes) and session.strokes[-1] >= 2 and len(session.controls) > k0,
+    edits = session.control_edits
+    wait_for(lambda: len(edits.strokes) and edits.strokes[-1] >= 2 and len(session.controls) > k0,
              what="the stroke added")
-    run = session.strokes[-1]
-    np.testing.assert_allclose(session.radii[-run:], r1, rtol=1e-3)  # the ball's radius
+    run = session.control_edits.strokes[-1]
+    np.testing.assert_allclose(session.control_edits.radii[-run:], r1, rtol=1e-3)  # the ball's radius
     first = np.array(ar_page.evaluate("(p) => somxr.worldToModel(p)", [float(v) for v in start]))
     assert np.linalg.norm(session.controls[-run, :3] - first) < 0.05 * 2 * ar_page.evaluate("somxr.worldRadius()") \
         / ar_page.evaluate("somxr.state().scale")  # it begins where the trigger was pulled
@@ -576,7 +577,7 @@ def test_strokes_and_radii_in_the_headset(ar_page, server, session):
     ar_page.evaluate(f"{dev}.updateAxes('thumbstick', 0, -1)")
     wait_frames(ar_page, 12)
     ar_page.evaluate(f"{dev}.updateAxes('thumbstick', 0, 0); {dev}.updateButtonValue('trigger', 0)")
-    wait_for(lambda: session.radii[3] > 0, what="control 3's radius from the thumbstick")
+    wait_for(lambda: session.control_edits.radii[3] > 0, what="control 3's radius from the thumbstick")
     assert session.wait_idle(120)
     while session.history[0] > steps:  # the module's other tests start from the converged car
         session.undo()

@@ -1,4 +1,4 @@
-"""The WebXR page through the real command: `somwidget serve` (a subprocess) serves /xr/ and /xr/ws next to the
+"""The WebXR page through the real command: `somwidget serve` (a subprocess) serves /xr/ and /view/ws next to the
 trame app, on the same Session; `somwidget serve --lan` serves everything over HTTPS behind an access token.
 
 The headset is Chromium on an emulated Quest 3 (iwer, /xr/emulator.html); Playwright moves its controller and pulls
@@ -54,7 +54,7 @@ def test_serve_has_the_xr_page_and_socket(serve):
 
     async def main():
         async with aiohttp.ClientSession() as cs:
-            async with cs.ws_connect(serve.base + "/xr/ws") as ws:
+            async with cs.ws_connect(serve.base + "/view/ws") as ws:
                 topo = json.loads((await ws.receive(timeout=20)).data)
                 frame = wire_frames.decode_frame(await next_binary(ws))
         return topo, frame
@@ -134,7 +134,7 @@ def test_serve_lan_https_token(tmp_path):
         async def main():
             wss = s.base.replace("https", "wss")
             async with aiohttp.ClientSession(connector=aiohttp.TCPConnector(ssl=insecure_context())) as cs:
-                for path in ("/xr/ws", "/ws"):
+                for path in ("/view/ws", "/xr/ws", "/ws"):
                     with pytest.raises(aiohttp.WSServerHandshakeError) as info:
                         await cs.ws_connect(wss + path)
                     assert info.value.status == 403
@@ -143,7 +143,7 @@ def test_serve_lan_https_token(tmp_path):
                         await cs.ws_connect(wss + path, params={"token": token},
                                             headers={"Origin": "https://evil.example"})
                     assert info.value.status == 403
-                async with cs.ws_connect(wss + "/xr/ws", params={"token": token}) as ws:
+                async with cs.ws_connect(wss + "/view/ws", params={"token": token}) as ws:
                     topo = json.loads((await ws.receive(timeout=20)).data)
                     frame = wire_frames.decode_frame(await next_binary(ws))
                 return topo, frame
@@ -156,8 +156,8 @@ def test_serve_lan_https_token(tmp_path):
 
 def test_serve_refuses_other_sites_and_other_host_names(serve):
     """On loopback: a websocket opened by a page of another site (its Origin) is refused on trame's /ws and on
-    /xr/ws, and a request whose Host is not a loopback name (DNS rebinding) is refused on every route; the server's
-    own origin, and localhost / [::1] spellings of it, are served."""
+    /view/ws (and its old name /xr/ws), and a request whose Host is not a loopback name (DNS rebinding) is refused on
+    every route; the server's own origin, and localhost / [::1] spellings of it, are served."""
     port = serve.port
     for path in ("/api/state", "/", "/index.html", "/xr/", "/xr/status"):
         status, body = serve.get(path, headers={"Host": "evil.example"})
@@ -170,7 +170,7 @@ def test_serve_refuses_other_sites_and_other_host_names(serve):
     async def main():
         ws_base = serve.base.replace("http", "ws")
         async with aiohttp.ClientSession() as cs:
-            for path in ("/ws", "/xr/ws"):
+            for path in ("/ws", "/view/ws", "/xr/ws"):
                 for origin in ("http://evil.example", f"http://evil.example:{port}", "null",
                                f"http://127.0.0.1:{port + 1}", f"https://localhost:{port}"):
                     with pytest.raises(aiohttp.WSServerHandshakeError) as info:

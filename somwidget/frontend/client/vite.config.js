@@ -6,9 +6,9 @@ import { defineConfig } from 'vite';
 
 export default defineConfig({
   base: './',
-  // `npm run dev` serves the pages on :5173; their websocket (ws next to the page) goes to `somwidget serve` on :8080
+  // `npm run dev` serves the pages on :5173; their websocket (/view/ws) goes to `somwidget serve` on :8080
   server: {
-    proxy: { '/ws': { target: 'http://127.0.0.1:8080', ws: true, rewrite: () => '/xr/ws' } },
+    proxy: { '/view/ws': { target: 'http://127.0.0.1:8080', ws: true } },
   },
   build: {
     outDir: 'dist',

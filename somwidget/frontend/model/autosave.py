@@ -23,8 +23,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from . import store as _store
-from .store import SessionStore, Saving, Unreadable
+from .files import preset_of, read
+from .operations import Publish
+from .state import ModellingState, max_vertices_for
+from .store import Saving, SessionStore, Unreadable, autosave_dir, lock, peek, set_aside, stopped
+from .timeline import Timeline
+from .trainer import Trainer
 
 log = logging.getLogger(__name__)
 
@@ -121,20 +125,39 @@ class Autosave:
 
 
 class SessionAutosave:
-    """When a session's state is written (the module's docstring). `snapshot()` gives the Saving of the session now
-    (called under the Som's lock and the clay's lock, with no intent queued); `quiet()`: no intent is queued;
-    `settled()`: training has nothing to do; `drain()`: apply the queued intents now (caller holds the Som's lock)."""
+    """When a session's state is written (the module's docstring): its modelling state with the undo history of its
+    timeline, between the training thread's turns."""
 
-    def __init__(self, clay, store: SessionStore, snapshot: Callable[[], Saving], quiet: Callable[[], bool],
-                 settled: Callable[[], bool], drain: Callable[[], object], on_status: Callable[[], None]):
-        self.clay = clay
-        self.snapshot = snapshot
-        self.quiet = quiet
-        self.settled = settled
-        self.drain = drain
-        self.writer = Autosave(store, on_status)
+    def __init__(self, state: ModellingState, store: SessionStore, timeline: Timeline, trainer: Trainer):
+        self.state = state
+        self.timeline = timeline
+        self.trainer = trainer
+        self.writer = Autosave(store, self._publish)
         self._saved_at = 0.0
-        self._completed = -1  # clay.completed at the latest save (-1: a new session's first state is due)
+        self._completed = -1  # state.completed at the latest save (-1: a new session's first state is due)
+
+    def snapshot(self) -> Saving:
+        """What a save writes now (caller holds the Som's lock and the state lock, no intent queued)."""
+        undo, redo = self.timeline.history.steps()
+        return Saving(self.state.capture(), undo, redo, gesture=self.timeline.gesture_recorded)
+
+    def quiet(self) -> bool:
+        """No intent is queued."""
+        return not self.trainer.ops
+
+    def settled(self) -> bool:
+        """Training has nothing to do."""
+        return not self.trainer.should_step() and not self.trainer.ops
+
+    def drain(self) -> None:
+        """Apply the queued intents now (caller holds the Som's lock)."""
+        self.trainer.drain()
+
+    def _publish(self) -> None:
+        """A frame for every view now (the autosave's status changed: the views show it)."""
+        with self.state.lock:
+            if not self.trainer.closed:
+                self.trainer.enqueue(Publish(), intent=False)
 
     @property
     def path(self):
@@ -146,19 +169,19 @@ class SessionAutosave:
         return self.writer.error
 
     def _due(self) -> bool:
-        clay = self.clay
-        if clay.completed != self._completed:
+        state = self.state
+        if state.completed != self._completed:
             return True
-        return clay.unsaved and (self.settled() or time.monotonic() - self._saved_at >= AUTOSAVE_SECONDS)
+        return state.unsaved and (self.settled() or time.monotonic() - self._saved_at >= AUTOSAVE_SECONDS)
 
     def if_due(self) -> None:
         """Training thread, after each turn: write the state if a step completed since the last save, or if it
         changed and training has settled (or AUTOSAVE_SECONDS have passed)."""
-        clay = self.clay
-        with clay.lock:
+        state = self.state
+        with state.lock:
             if not self._due():
                 return
-        with clay.som_lock, clay.lock:
+        with state.som_lock, state.lock:
             if not self._due() or not self.quiet():
                 return  # an intent is on its way: the next turn saves with it
             saving = self._take()
@@ -167,32 +190,32 @@ class SessionAutosave:
     def _take(self) -> Saving:
         """The state to save now (caller holds both locks), marked as saved."""
         saving = self.snapshot()
-        self.clay.unsaved = False
-        self._completed = self.clay.completed
+        self.state.unsaved = False
+        self._completed = self.state.completed
         self._saved_at = time.monotonic()
         return saving
 
-    def flush(self, timeout: float) -> bool:
+    def flush(self, timeout: float = 10.0) -> bool:
         """Write the current state now (the queued intents applied first) and wait until it is on disk; False at the
         timeout or while saves fail."""
-        clay = self.clay
-        with clay.som_lock:
+        state = self.state
+        with state.som_lock:
             self.drain()
-            with clay.lock:
+            with state.lock:
                 saving = self._take()
         self.writer.submit(saving)
         return self.writer.flush(timeout)
 
     def close(self, timeout: float) -> bool:
         """Write what changed since the last save and let go of the folder; False when it could not be written."""
-        clay = self.clay
-        with clay.lock:
-            due = clay.unsaved or clay.completed != self._completed
+        state = self.state
+        with state.lock:
+            due = state.unsaved or state.completed != self._completed
         try:
             if due:
-                with clay.som_lock:
+                with state.som_lock:
                     self.drain()
-                    with clay.lock:
+                    with state.lock:
                         saving = self._take()
                 self.writer.submit(saving)
         except Exception:  # pragma: no cover - closing must go on
@@ -218,13 +241,11 @@ def recover(session_class, origin: str | None = None, **options):
     history and its folder (it goes on saving there), and nothing trains until the next intent; `options` go to
     `session_class` (device, start...). A folder that cannot be read is set aside (renamed, never deleted) and the next
     one tried; each notice says what was wrong and where."""
-    from .clay import max_vertices_for
-
     notices: list[str] = []
     start = options.pop("start", True)
     max_vertices = options.get("max_vertices") or max_vertices_for(options.get("device"))
-    for folder in _store.stopped(notices):
-        manifest = _store.peek(folder)
+    for folder in stopped(notices):
+        manifest = peek(folder)
         if manifest is not None and origin is not None and manifest.get("origin") != origin:
             continue
         try:
@@ -253,7 +274,7 @@ def recover(session_class, origin: str | None = None, **options):
             store.release()
             notices.append(f"the saved session in {folder} cannot be brought back here: {exc}")
             continue
-        session._bring_back(saved)
+        session.timeline.bring_back(saved.current, saved.undo, saved.redo)
         session.recovered = {"path": str(folder), "saved": saved.saved, "preset": saved.current.preset.name,
                              "gesture": saved.gesture, "undo": len(saved.undo), "redo": len(saved.redo),
                              "message": recovered_message(saved.saved, saved.current.preset.title or
@@ -275,7 +296,7 @@ LEGACY_SUFFIX = ".npz"
 def legacy_stopped() -> list[Path]:
     """Autosaves written by somwidget before 2026-11-25 (one session file each, no undo history) of sessions that
     stopped (their lock free or gone), newest first."""
-    folder = _store.autosave_dir()
+    folder = autosave_dir()
     if not folder.is_dir():
         return []
     found = []
@@ -285,7 +306,7 @@ def legacy_stopped() -> list[Path]:
         lock_path = path.with_suffix(".lock")
         if lock_path.exists():
             try:
-                handle = _store.lock(lock_path)
+                handle = lock(lock_path)
             except OSError:
                 continue
             if handle is None:
@@ -298,8 +319,6 @@ def legacy_stopped() -> list[Path]:
 def _recover_legacy(session_class, origin, notices: list[str], max_vertices: int, options: dict):
     """The newest earlier-version autosave brought back (as a loaded session file: its step, no undo history), the
     file then renamed `<id>.npz.brought-back-<time>` so it is taken once and never deleted; or None."""
-    from .files import preset_of, read
-
     for path in legacy_stopped():
         try:
             state = read(path, max_vertices)
@@ -307,7 +326,7 @@ def _recover_legacy(session_class, origin, notices: list[str], max_vertices: int
         except ValueError as exc:
             try:
                 notices.append(f"the earlier version's autosave {path} cannot be read ({exc}); it is kept at "
-                               f"{_store.set_aside(path)}")
+                               f"{set_aside(path)}")
             except OSError as err:
                 notices.append(f"the earlier version's autosave {path} cannot be read ({exc}) nor set aside ({err})")
             continue
@@ -316,7 +335,7 @@ def _recover_legacy(session_class, origin, notices: list[str], max_vertices: int
         except ValueError as exc:  # it does not fit this device
             notices.append(f"the earlier version's autosave {path} cannot be brought back here: {exc}")
             continue
-        session.restore(state)
+        session.files.restore(state)
         kept = path.with_name(f"{path.name}.brought-back-{time.strftime('%Y%m%d-%H%M%S')}")
         try:
             os.replace(path, kept)

@@ -1,18 +1,19 @@
-"""Intents on a session's controls: move one (by index or by its stable id), set one feature or its colour, replace
-them all, add one, remove one. Each is checked in the caller's thread, changes the session's view of the controls
-at once, and queues the new controls for the Som as one undo step (inside a drag: the drag's step).
+"""A session's controls (`session.control_edits`): move one (by index or by its stable id), set one feature, its
+colour or its radius, replace them all, add one or a stroke, remove one. Each intent is checked in the caller's
+thread, changes the session's view of the controls at once, and queues the new controls for the Som as one undo step
+(inside a drag: the drag's step).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ...backend import checks
+from ...backend import checks, schedule
 from ...backend import presets as _presets
 from ...backend.metrics import median_edge
 from ...backend.presets import parse_hex_colour, rgb_to_colour_dims
-from ...backend.som import MAX_RADIUS, check_radii
-from .clay import Clay
+from ...backend.som_controls import check_radii
+from .state import ModellingState
 from .frames import FrameStream
 from .operations import SetControls
 from .timeline import Timeline
@@ -46,32 +47,44 @@ def check_count(controls: np.ndarray, group) -> None:
 
 
 def check_radius(name: str, value) -> float:
-    """A radius of influence: a finite number in [0, MAX_RADIUS] model units (0: a point control)."""
-    return checks.real(name, value, 0.0, MAX_RADIUS)
+    """A radius of influence: a finite number in model units within its declared bounds (0: a point control)."""
+    return schedule.BY_NAME["radius"].check(value, name)
 
 
 class ControlEdits:
-    """The control intents of one session (see the module's docstring)."""
+    """The controls of one session and their intents (see the module's docstring)."""
 
-    def __init__(self, clay: Clay, timeline: Timeline, trainer: Trainer, frames: FrameStream):
-        self.clay = clay
+    def __init__(self, state: ModellingState, timeline: Timeline, trainer: Trainer, frames: FrameStream):
+        self.state = state
         self.timeline = timeline
         self.trainer = trainer
         self.frames = frames
 
     def _queue(self, controls: np.ndarray, keep: bool = False) -> None:
-        """The new controls (and the radii and strokes the clay holds) to the Som (caller holds clay.lock); inside a
+        """The new controls (and the radii and strokes the clay holds) to the Som (caller holds state.lock); inside a
         drag they restart from where it began; with `keep` nothing restarts (a control placed)."""
-        clay = self.clay
-        self.trainer.enqueue(SetControls(controls, clay.radii.copy(), clay.strokes, self.timeline.drag_anchor(),
-                                         clay.control_ids, keep=keep, group=clay.symmetry))
+        state = self.state
+        self.trainer.enqueue(SetControls(controls, state.radii.copy(), state.strokes, self.timeline.drag_anchor(),
+                                         state.control_ids, keep=keep, group=state.symmetry))
+
+    @property
+    def radii(self) -> np.ndarray:
+        """(k,) each control's radius of influence as the session holds it now."""
+        with self.state.lock:
+            return self.state.radii.copy()
+
+    @property
+    def strokes(self) -> tuple[int, ...]:
+        """The lengths of the runs of controls that act as one (a stroke's samples), in index order."""
+        with self.state.lock:
+            return tuple(self.state.strokes)
 
     def index_of(self, control_id) -> int:
         if isinstance(control_id, bool) or not isinstance(control_id, (int, np.integer)):
             raise ValueError(f"control id: expected an integer, got {control_id!r}")
-        with self.clay.lock:
+        with self.state.lock:
             try:
-                return self.clay.control_ids.index(int(control_id))
+                return self.state.control_ids.index(int(control_id))
             except ValueError:
                 raise ValueError(f"control {int(control_id)} no longer exists (it was removed, or the controls "
                                  "were replaced)") from None
@@ -79,19 +92,19 @@ class ControlEdits:
     def _edit(self, step: str, index, edit, control_id=None) -> None:
         """One control's values changed by `edit(i, values) -> values` (its checks inside), as one step; the other
         samples of its stroke change by as much."""
-        clay = self.clay
-        with self.timeline.step(step), clay.lock:
-            i = (check_index("control", index, clay.controls.shape[0]) if control_id is None
+        state = self.state
+        with self.timeline.step(step), state.lock:
+            i = (check_index("control", index, state.controls.shape[0]) if control_id is None
                  else self.index_of(control_id))
-            controls = clay.controls.copy()
+            controls = state.controls.copy()
             values = edit(i, controls[i].copy())
-            controls[list(clay.run_of(i))] += values - controls[i]
+            controls[list(state.run_of(i))] += values - controls[i]
             controls[i] = values  # exactly as given
-            clay.controls = controls
+            state.controls = controls
             self._queue(controls.copy())
 
     def move(self, index, position, control_id=None) -> None:
-        layout = self.clay.layout
+        layout = self.state.layout
 
         def edit(i, values):
             n = layout.n_dims
@@ -103,7 +116,7 @@ class ControlEdits:
         self._edit("controls", index, edit, control_id)
 
     def set_feature(self, index, dim, value) -> None:
-        layout = self.clay.layout
+        layout = self.state.layout
 
         def edit(i, values):
             d = checks.integer_text("feature dimension", dim, 0, layout.n_dims - 1)
@@ -114,7 +127,7 @@ class ControlEdits:
 
     def set_colour(self, index, colour) -> None:
         rgb = parse_hex_colour(colour) if isinstance(colour, str) else colour
-        layout = self.clay.layout
+        layout = self.state.layout
 
         def edit(_i, values):
             values[list(layout.colour)] = rgb_to_colour_dims(rgb, layout)
@@ -123,52 +136,52 @@ class ControlEdits:
         self._edit("colour", index, edit)
 
     def set_radius(self, index, radius) -> None:
-        clay = self.clay
+        state = self.state
         r = check_radius("every control's radius" if index is None else f"control {index} radius", radius)
-        with self.timeline.step(f"parameter:radius:{'all' if index is None else index}"), clay.lock:
-            radii = clay.radii.copy()
+        with self.timeline.step(f"parameter:radius:{'all' if index is None else index}"), state.lock:
+            radii = state.radii.copy()
             if index is None:
                 radii[:] = r
             else:
-                radii[list(clay.run_of(check_index("control", index, clay.controls.shape[0])))] = r
-            clay.radii = radii
-            self._queue(clay.controls.copy())
+                radii[list(state.run_of(check_index("control", index, state.controls.shape[0])))] = r
+            state.radii = radii
+            self._queue(state.controls.copy())
 
     def replace(self, controls, radii=None) -> None:
         arr = checks.finite_array("controls", controls, 2, np.float64)
         if np.abs(arr).max(initial=0.0) > MAX_ABS_VALUE:
             raise ValueError(f"controls: values must lie within +-{MAX_ABS_VALUE:g}")
         arr = arr.astype(np.float32)
-        clay = self.clay
-        with self.timeline.step("controls"), clay.lock:
-            n = clay.layout.n_dims
+        state = self.state
+        with self.timeline.step("controls"), state.lock:
+            n = state.layout.n_dims
             if arr.shape[1] != n:
                 raise ValueError(f"controls: expected shape (k, {n}), got {arr.shape}")
-            check_count(arr, clay.symmetry)
+            check_count(arr, state.symmetry)
             if radii is not None:
-                clay.radii = check_radii(radii, len(arr))
-            elif len(arr) != len(clay.radii):
-                clay.radii = np.full(len(arr), clay.preset.radius, np.float32)
-            if len(arr) != len(clay.controls):
-                clay.strokes = (1,) * len(arr)
-            clay.controls = arr.copy()
-            if len(arr) != len(clay.control_ids):
-                clay.control_ids = clay.fresh_ids(len(arr))
+                state.radii = check_radii(radii, len(arr))
+            elif len(arr) != len(state.radii):
+                state.radii = np.full(len(arr), state.preset.radius, np.float32)
+            if len(arr) != len(state.controls):
+                state.strokes = (1,) * len(arr)
+            state.controls = arr.copy()
+            if len(arr) != len(state.control_ids):
+                state.control_ids = state.fresh_ids(len(arr))
             self._queue(arr)
 
     def add(self, values=None, radius=None) -> int:
         """A new control where it is placed, moving nothing until it is dragged (the Som keeps its weights and s):
         `values` all n features, or a position (x, y, z) whose other features are the nearest node's; None puts it on
         the node farthest from the other controls. Returns its index."""
-        clay = self.clay
-        layout = clay.layout
+        state = self.state
+        layout = state.layout
         r = None if radius is None else check_radius("new control radius", radius)
-        with self.timeline.step("add"), clay.lock:
+        with self.timeline.step("add"), state.lock:
             weights = self.frames.latest.weights
             nodes = weights[:, list(layout.position)]
             if values is None:
                 far = np.full(len(nodes), np.inf, np.float32)
-                for c in clay.controls[:, list(layout.position)]:
+                for c in state.controls[:, list(layout.position)]:
                     far = np.minimum(far, np.linalg.norm(nodes - c, axis=1))
                 v = weights[int(np.argmax(far))].copy()
             elif np.ndim(values) == 1 and len(values) == 3 and layout.n_dims != 3:
@@ -177,12 +190,12 @@ class ControlEdits:
                 v[list(layout.position)] = position
             else:
                 v = checks.finite_vector("new control", values, layout.n_dims, MAX_ABS_VALUE)
-            controls = np.concatenate([clay.controls, v[None, :]]).astype(np.float32)
-            check_count(controls, clay.symmetry)
-            clay.radii = np.append(clay.radii, clay.preset.radius if r is None else r).astype(np.float32)
-            clay.strokes = (*clay.strokes, 1)
-            clay.controls = controls
-            clay.control_ids = (*clay.control_ids, *clay.fresh_ids(1))
+            controls = np.concatenate([state.controls, v[None, :]]).astype(np.float32)
+            check_count(controls, state.symmetry)
+            state.radii = np.append(state.radii, state.preset.radius if r is None else r).astype(np.float32)
+            state.strokes = (*state.strokes, 1)
+            state.controls = controls
+            state.control_ids = (*state.control_ids, *state.fresh_ids(1))
             self._queue(controls.copy(), keep=True)
             return controls.shape[0] - 1
 
@@ -190,50 +203,50 @@ class ControlEdits:
         """A polyline (m >= 2 points: x, y, z or all n features) as one stroke: samples spaced evenly along it,
         which act as one control (moved, removed, undone and mirrored together); returns its first sample's
         index. The features a point leaves out are the last control's."""
-        clay = self.clay
-        layout = clay.layout
+        state = self.state
+        layout = state.layout
         pts = checks.finite_array("stroke points", points, 2, np.float64)
         if len(pts) < 2 or pts.shape[1] not in (3, layout.n_dims):
             raise ValueError(f"stroke points: expected at least 2 points of 3 (x, y, z) or {layout.n_dims} values, got "
                              f"shape {pts.shape}")
         if np.abs(pts).max() > MAX_ABS_VALUE:
             raise ValueError(f"stroke points: values must lie within +-{MAX_ABS_VALUE:g}")
-        r = check_radius("stroke radius", clay.preset.radius if radius is None else radius)
-        with self.timeline.step("stroke"), clay.lock:
-            full = np.repeat(clay.controls[-1:].astype(np.float64), len(pts), axis=0)
+        r = check_radius("stroke radius", state.preset.radius if radius is None else radius)
+        with self.timeline.step("stroke"), state.lock:
+            full = np.repeat(state.controls[-1:].astype(np.float64), len(pts), axis=0)
             if pts.shape[1] == 3:
                 full[:, list(layout.position)] = pts
             else:
                 full = pts
             samples = resample(full, layout.position, self._spacing(r)).astype(np.float32)
-            controls = np.concatenate([clay.controls, samples]).astype(np.float32)
-            check_count(controls, clay.symmetry)
-            first = len(clay.controls)
-            clay.radii = np.concatenate([clay.radii, np.full(len(samples), r, np.float32)])
-            clay.strokes = (*clay.strokes, len(samples))
-            clay.controls = controls
-            clay.control_ids = (*clay.control_ids, *clay.fresh_ids(len(samples)))
+            controls = np.concatenate([state.controls, samples]).astype(np.float32)
+            check_count(controls, state.symmetry)
+            first = len(state.controls)
+            state.radii = np.concatenate([state.radii, np.full(len(samples), r, np.float32)])
+            state.strokes = (*state.strokes, len(samples))
+            state.controls = controls
+            state.control_ids = (*state.control_ids, *state.fresh_ids(len(samples)))
             self._queue(controls.copy())
             return first
 
     def _spacing(self, radius: float) -> float:
         """How far apart a stroke's samples are: SPACING_SHARE of its radius, at least the clay's median edge."""
-        edge = median_edge(self.frames.latest.positions, self.clay.preset.topology.edges)
+        edge = median_edge(self.frames.latest.positions, self.state.preset.topology.edges)
         return max(edge, SPACING_SHARE * radius, 1e-6)
 
     def remove(self, index) -> None:
-        clay = self.clay
-        with self.timeline.step("remove"), clay.lock:
-            i = check_index("control", index, clay.controls.shape[0])
-            run = clay.run_of(i)  # a stroke goes whole
-            if len(run) >= clay.controls.shape[0]:
+        state = self.state
+        with self.timeline.step("remove"), state.lock:
+            i = check_index("control", index, state.controls.shape[0])
+            run = state.run_of(i)  # a stroke goes whole
+            if len(run) >= state.controls.shape[0]:
                 raise ValueError("controls: cannot remove the last control")
-            clay.controls = np.delete(clay.controls, list(run), axis=0)
-            clay.radii = np.delete(clay.radii, list(run))
-            clay.strokes = tuple(n for n, first in zip(clay.strokes, np.cumsum((0, *clay.strokes[:-1])))
+            state.controls = np.delete(state.controls, list(run), axis=0)
+            state.radii = np.delete(state.radii, list(run))
+            state.strokes = tuple(n for n, first in zip(state.strokes, np.cumsum((0, *state.strokes[:-1])))
                                  if first != run.start)
-            clay.control_ids = clay.control_ids[:run.start] + clay.control_ids[run.stop:]
-            self._queue(clay.controls.copy())
+            state.control_ids = state.control_ids[:run.start] + state.control_ids[run.stop:]
+            self._queue(state.controls.copy())
 
 
 #: The most samples a stroke has (each a control: MAX_CONTROLS bounds them with their copies).

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .clay import engine_symmetry, som_group
+from .state import engine_symmetry, som_group
 
 
 class Operation:
@@ -28,19 +28,19 @@ class Operation:
     def apply(self, som) -> None:
         raise NotImplementedError
 
-    def applied(self, clay) -> None:
-        """After `apply` succeeded (caller holds clay.lock)."""
+    def applied(self, state) -> None:
+        """After `apply` succeeded (caller holds state.lock)."""
 
-    def roll_back(self, clay, som) -> None:
-        """After `apply` failed: the session's view back to what `som` holds (caller holds clay.lock)."""
+    def roll_back(self, state, som) -> None:
+        """After `apply` failed: the session's view back to what `som` holds (caller holds state.lock)."""
 
 
-def _controls_back(clay, som) -> None:
+def _controls_back(state, som) -> None:
     """The session's controls, radii, strokes and ids back to what the Som holds."""
-    clay.controls = np.array(som.controls, dtype=np.float32)
-    clay.radii = np.array(som.radii, dtype=np.float32)
-    clay.strokes = tuple(som.strokes)
-    clay.control_ids = clay.applied_ids
+    state.controls = np.array(som.controls, dtype=np.float32)
+    state.radii = np.array(som.radii, dtype=np.float32)
+    state.strokes = tuple(som.strokes)
+    state.control_ids = state.applied_ids
 
 
 @dataclass(frozen=True)
@@ -75,16 +75,16 @@ class SetControls(Operation):
         else:
             som.set_controls(self.controls, self.radii, strokes=self.strokes, from_anchor=self.anchor is som)
 
-    def applied(self, clay) -> None:
-        clay.applied_ids = self.ids  # the ids of the controls the Som now holds
+    def applied(self, state) -> None:
+        state.applied_ids = self.ids  # the ids of the controls the Som now holds
 
-    def roll_back(self, clay, som) -> None:
-        _controls_back(clay, som)
+    def roll_back(self, state, som) -> None:
+        _controls_back(state, som)
 
 
 @dataclass(frozen=True)
 class SetParameter(Operation):
-    """One schedule parameter (backend/schedule.py: iterations, l_start, l_end, smoothing, reach): a local restart."""
+    """One setting of the engine (backend/schedule.py, scope "engine"): a local restart."""
 
     name: str
     value: float
@@ -96,8 +96,8 @@ class SetParameter(Operation):
     def apply(self, som) -> None:
         setattr(som, self.name, self.value)
 
-    def roll_back(self, clay, som) -> None:
-        clay.params[self.name] = type(clay.params[self.name])(getattr(som, self.name))
+    def roll_back(self, state, som) -> None:
+        state.params[self.name] = type(state.params[self.name])(getattr(som, self.name))
 
 
 @dataclass(frozen=True)
@@ -122,12 +122,12 @@ class SetSymmetry(Operation):
         som.regroup(self.controls, self.radii, *engine_symmetry(self.group), keep_shape=self.keep,
                     strokes=self.strokes)
 
-    def applied(self, clay) -> None:
-        clay.applied_ids = self.ids
+    def applied(self, state) -> None:
+        state.applied_ids = self.ids
 
-    def roll_back(self, clay, som) -> None:
-        _controls_back(clay, som)
-        clay.set_symmetry(som_group(som, clay.layout))
+    def roll_back(self, state, som) -> None:
+        _controls_back(state, som)
+        state.set_symmetry(som_group(som, state.layout))
 
 
 @dataclass(frozen=True)
@@ -138,8 +138,8 @@ class SetMetricWeights(Operation):
     def apply(self, som) -> None:
         som.metric_weights = self.weights
 
-    def roll_back(self, clay, som) -> None:
-        clay.params["metric_weights"] = [float(x) for x in som.metric_weights]
+    def roll_back(self, state, som) -> None:
+        state.params["metric_weights"] = [float(x) for x in som.metric_weights]
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """The panel model: what every panel of a session shows and does, with no UI. The web app's trame panel
 (web/panel.py) and the notebook's ipywidgets panel (notebook/panel.py) bind their widgets to one of these:
 
-- the fields: the parameters' declarations (parameters.py) and their values as the session holds them;
+- the fields: the settings' declarations (backend/schedule.py, SETTINGS) and their values as the session holds
+  them;
 - the rows: one per feature dimension (name, role, metric weight) and one per control (colour, position, gap);
 - the status line and the run button's label (Pause / Resume / Train: what a press does now), from a frame;
 - the actions (ACTIONS: train or pause, undo, redo, reset, the preset again) and the edits (a parameter, a metric
@@ -18,14 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...backend import metrics
+from ...backend import metrics, schedule
 from ...backend import presets as _presets
 from ...backend.presets import hex_colour
 from ...backend.symmetry import Symmetry
 from .controls import check_index
 from .frames import Frame
-from .parameters import BY_NAME, METRIC_WEIGHT, PARAMETERS
 from .session import Session
+from .settings import PARAMETERS
 from .variants import MAX_GALLERY_VARIANTS, THUMBNAIL, VARIED, vary_around
 from .variants import sweep as sweep_variants
 
@@ -54,9 +55,16 @@ ACTION_NAMES = tuple(a.name for a in ACTIONS)
 TRAIN_HELP = {"Pause": "Pause the training",
               "Resume": "Go on with the schedule from where it stopped",
               "Train": "Train again: a local restart from the current shape"}
-#: The radial groups a panel offers (any n from 2 to 32 is one call of Session.set_symmetry away).
+#: The radial groups a panel offers (any n from 2 to 32 is one call of session.settings.set_symmetry away).
 RADIAL_CHOICES = (2, 3, 4, 5, 6, 8, 12, 16)
 RADIAL_MIRRORED_CHOICES = (3, 4, 6, 8)
+#: What every panel shows under its reach slider.
+REACH_HELP = schedule.BY_NAME["reach"].help
+#: What a panel shows beside each control's radius.
+RADIUS_HELP = schedule.BY_NAME["radius"].help
+#: What a panel shows beside the gaps of the controls table.
+GAP_HELP = ("The distance from each control (and its mirrored copy) to its nearest node: small when the clay has "
+            "reached the control.")
 
 
 def fmt(x: float | None, digits: int = 3) -> str:
@@ -64,15 +72,20 @@ def fmt(x: float | None, digits: int = 3) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
 
 
-def field_text(name: str, value) -> str | float | bool:
-    """A parameter's value as its field holds it: S as text, reach a number, symmetry a flag, the rest 6 digits."""
-    if name == "iterations":
-        return str(value)
-    if name == "reach":
-        return float(value)
-    if name == "symmetry":
+def field_text(setting: schedule.Setting, value) -> str | float | bool:
+    """A setting's value as its widget holds it: a flag for a switch, a number for a slider, text for a field (an
+    integer whole, a real number to 6 digits)."""
+    if setting.kind == "bool":
         return bool(value)
-    return fmt(value, 6)
+    if setting.widget == "slider":
+        return float(value)
+    return str(value) if setting.kind == "int" else fmt(value, 6)
+
+
+def slider_digits(setting: schedule.Setting) -> int:
+    """The digits after the point a slider shows: as many as its step has."""
+    step = setting.slider[2] if setting.slider else 1
+    return max(0, -math.floor(math.log10(step))) if step < 1 else 0
 
 
 def other_dims(layout) -> tuple[int, ...]:
@@ -96,7 +109,7 @@ class PanelModel:
     """One panel's view of a Session (see the module's docstring)."""
 
     fields = PARAMETERS
-    metric = METRIC_WEIGHT
+    metric = schedule.BY_NAME["metric_weights"]
     max_variants = MAX_GALLERY_VARIANTS
     thumbnail = THUMBNAIL  # a gallery thumbnail's size on screen (CSS pixels)
     varied = tuple(VARIED)
@@ -118,7 +131,7 @@ class PanelModel:
         return self.attempt(self.session.set_parameter, name, value)
 
     def set_metric(self, dim, value) -> str | None:
-        return self.attempt(self.session.set_metric_weight, dim, value)
+        return self.attempt(self.session.settings.set_metric_weight, dim, value)
 
     def run(self, action: str) -> str | None:
         if action not in ACTION_NAMES:
@@ -153,7 +166,7 @@ class PanelModel:
     def values(self) -> dict:
         """Each field's value as the session holds it (`field_text`), and the metric weights."""
         p = self.session.parameters
-        out = {f.name: field_text(f.name, p[f.name]) for f in self.fields}
+        out = {f.name: field_text(f, p[f.name]) for f in self.fields}
         out["metric_weights"] = [float(x) for x in p["metric_weights"]]
         out["group"] = p["group"]
         return out
@@ -256,7 +269,7 @@ class PanelModel:
 
     def set_group(self, spec) -> str | None:
         """A symmetry group by its spec ("none" for off)."""
-        return self.attempt(self.session.set_symmetry, spec if isinstance(spec, str) else "")
+        return self.attempt(self.session.settings.set_symmetry, spec if isinstance(spec, str) else "")
 
     def set_radius(self, index, value) -> str | None:
         return self.attempt(self.session.set_control_radius, index, value)
@@ -311,4 +324,4 @@ class PanelModel:
         return None if error is None else f"variants: {error}"
 
 
-__all__ = ["PanelModel", "ACTIONS", "Action", "BY_NAME", "fmt"]
+__all__ = ["PanelModel", "ACTIONS", "Action", "GAP_HELP", "RADIUS_HELP", "REACH_HELP", "fmt"]

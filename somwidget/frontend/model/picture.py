@@ -99,7 +99,7 @@ def picture_of(what, *, weights=None, layout: FeatureLayout | None = None, displ
     elif hasattr(what, "frame") and hasattr(what, "preset"):  # a Session: its latest frame
         frame = what.frame
         layout = layout or what.layout
-        pic = Picture(np.asarray(frame.weights), what.topology, layout, display or what.display,
+        pic = Picture(np.asarray(frame.weights), what.topology, layout, display or what.preset.display,
                       np.asarray(frame.controls), np.asarray(frame.effective_controls))
     else:
         raise ValueError(f"render: expected a Som, a Session, a Preset or a preset name, got {type(what).__name__}")

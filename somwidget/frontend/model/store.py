@@ -7,10 +7,11 @@ A session's folder holds:
     lock            locked (flock) for as long as a process has the session: a folder whose lock is held is never
                     read, pruned or taken by another process
     manifest.json   the session: its current step, the undo and redo steps (oldest first), each with its preset and
-                    settings; whether the current step is a drag not yet released ("gesture"); when it was saved
-                    ("saved") and which program made it ("origin": "serve" for `somwidget serve`)
+                    settings (a setting a step lacks, declared since it was written, reads as its default);
+                    whether the current step is a drag not yet released ("gesture"); when it was saved ("saved")
+                    and which program made it ("origin": "serve" for `somwidget serve`)
     s<n>.npz        one step's arrays (weights, controls, radii): written once, never changed
-    p<n>.npz        one preset's start (a session file, io.save_session): written once
+    p<n>.npz        one preset's start (a session file, backend/session_file.py): written once
 
 Every file is written whole under a temporary name, flushed to the disk (fsync) and renamed into place, the manifest
 last; so a kill at any moment leaves the previous manifest and every file it names whole. A file that no manifest
@@ -39,13 +40,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ...backend import io as sw_io
-from ...backend.io import write_atomic
+from ...backend import schedule, session_file
 from ...backend.presets import MAX_CONTROLS, Preset
-from ...backend.schedule import KEYS as SCHEDULE_KEYS
-from ...backend.schedule import MAX_ITERATIONS, Schedule
+from ...backend.session_file import write_atomic
 from ...backend.symmetry import Symmetry
 from .history import Step
+from .state import held_settings
 from .storage import autosave_dir
 
 log = logging.getLogger(__name__)
@@ -65,8 +65,6 @@ FRESH_SECONDS = 60.0
 UNREADABLE = ".unreadable"
 _STEP_FILE = re.compile(r"s(\d+)\.npz")
 _PRESET_FILE = re.compile(r"p(\d+)\.npz")
-#: The parameters a step keeps (Clay.params): the schedule, the symmetry switch, the metric weights.
-PARAMETER_KEYS = frozenset({*SCHEDULE_KEYS, "symmetry", "metric_weights"})
 
 
 class Unreadable(ValueError):
@@ -244,6 +242,28 @@ def prune(keep_days: float = KEEP_DAYS, keep_sessions: int = KEEP_SESSIONS, keep
     return gone
 
 
+def read_settings(stored: dict, n_dims: int) -> dict:
+    """A step's settings as a manifest keeps them, checked against their declaration: a setting the step lacks
+    (declared since it was written) takes its default; one no declaration names is refused (ValueError)."""
+    declared = {s.name: s for s in held_settings()}
+    unknown = sorted(set(stored) - set(declared))
+    if unknown:
+        raise ValueError(f"a step's settings {unknown[:5]} are not settings of this somwidget; it knows "
+                         f"{sorted(declared)}")
+    values = {}
+    for name, s in declared.items():
+        if name not in stored:
+            values[name] = [s.default] * n_dims if s.per else s.default
+        elif s.per:
+            value = [s.check(float(x), f"{s.label} {d}") for d, x in enumerate(stored[name])]
+            if len(value) != n_dims:
+                raise ValueError(f"{len(value)} values of {name} for {n_dims} dims")
+            values[name] = value
+        else:
+            values[name] = s.check(stored[name], name)
+    return values
+
+
 # -- one session's folder ------------------------------------------------------------------------------------------
 def _jsonable(value):
     if isinstance(value, (np.integer,)):
@@ -356,7 +376,7 @@ class SessionStore:
         if known is not None and known[0] is preset:
             return known[1]
         name = f"p{self._next()}.npz"
-        sw_io.save_session(self.folder / name, sw_io.session_state(preset))  # written, flushed and renamed
+        session_file.save_session(self.folder / name, session_file.session_state(preset))  # flushed, renamed
         self._presets[id(preset)] = (preset, name)
         return name
 
@@ -441,10 +461,11 @@ class SessionStore:
         if not _PRESET_FILE.fullmatch(str(name)):
             raise ValueError(f"a preset file named {str(name)[:40]!r}")
         try:
-            state = sw_io.load_session(self.folder / name, max_vertices=max_vertices, max_iterations=MAX_ITERATIONS)
+            state = session_file.load_session(self.folder / name, max_vertices=max_vertices,
+                                              max_iterations=schedule.MAX_ITERATIONS)
         except ValueError as exc:
             raise Unreadable(str(exc)) from None
-        preset = sw_io.preset_from_session(state)
+        preset = session_file.preset_from_session(state)
         return dataclasses.replace(preset, name=str(record["name"]), title=str(record["title"]),
                                    description=str(record["description"]), grow=bool(record["grow"]),
                                    radius=float(record["radius"]), meta=dict(record["meta"]))
@@ -486,18 +507,10 @@ class SessionStore:
             raise Unreadable(f"{path}: controls of shape {controls.shape}, expected (k, {n_dims}) finite values")
         if radii.shape != (k,) or not np.isfinite(radii).all() or (radii < 0).any():
             raise Unreadable(f"{path}: radii of shape {radii.shape}, expected {k} values >= 0")
-        parameters = dict(record["parameters"])
-        if set(parameters) != PARAMETER_KEYS:
-            raise ValueError(f"a step's parameters {sorted(parameters)}, expected {sorted(PARAMETER_KEYS)}")
-        schedule = Schedule.of(parameters)
-        metric = [float(x) for x in parameters["metric_weights"]]
-        if len(metric) != n_dims:
-            raise ValueError(f"{len(metric)} metric weights for {n_dims} dims")
-        parameters = dict(parameters, **schedule.as_dict(), symmetry=bool(parameters["symmetry"]),
-                          metric_weights=metric)
+        parameters = read_settings(dict(record["parameters"]), n_dims)
         iteration = int(record["iteration"])
-        if not 0 <= iteration <= schedule.iterations:
-            raise ValueError(f"iteration {iteration} outside 0..{schedule.iterations}")
+        if not 0 <= iteration <= parameters["iterations"]:
+            raise ValueError(f"iteration {iteration} outside 0..{parameters['iterations']}")
         group = record.get("symmetry")
         group = None if group is None else Symmetry(**{k: tuple(v) if isinstance(v, list) else v
                                                        for k, v in dict(group).items()})

@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 
 from ...backend.schedule import MAX_ITERATIONS
-from .clay import Clay
+from .state import ModellingState
 from .frames import Frame, FrameStream
 from .operations import Operation, SetControls
 
@@ -28,9 +28,9 @@ class Trainer:
 
     make_frame(cycles): a frame of the Som now; after_turn(): called after each turn (the autosave's chance)."""
 
-    def __init__(self, clay: Clay, frames: FrameStream, make_frame: Callable[[int], Frame],
+    def __init__(self, state: ModellingState, frames: FrameStream, make_frame: Callable[[int], Frame],
                  after_turn: Callable[[], None], frame_rate: float, step_fraction: float):
-        self.clay = clay
+        self.state = state
         self.frames = frames
         self.make_frame = make_frame
         self.after_turn = after_turn
@@ -48,7 +48,7 @@ class Trainer:
 
     # -- lifetime ----------------------------------------------------------------------------------------------
     def start(self) -> None:
-        with self.clay.lock:
+        with self.state.lock:
             if self.closed:
                 raise RuntimeError("session is closed")
             if self.thread is not None:
@@ -58,10 +58,10 @@ class Trainer:
 
     def close(self, timeout: float) -> bool:
         """Stop the thread; False if it was closed already."""
-        with self.clay.wake:
+        with self.state.wake:
             already = self.closed
             self.closed = True
-            self.clay.wake.notify_all()
+            self.state.wake.notify_all()
         t = self.thread
         if t is not None and t is not threading.current_thread():
             t.join(timeout)
@@ -78,7 +78,7 @@ class Trainer:
 
     # -- the queue ---------------------------------------------------------------------------------------------
     def enqueue(self, op: Operation, intent: bool = True) -> None:
-        """Queue an operation (caller holds clay.lock). An intent gets the next number; the session's own operations
+        """Queue an operation (caller holds state.lock). An intent gets the next number; the session's own operations
         (intent False: a frame to publish) share the latest one."""
         if self.closed:
             raise RuntimeError("session is closed")
@@ -89,7 +89,7 @@ class Trainer:
         else:
             self.ops.append(entry)
         self.busy = True
-        self.clay.wake.notify_all()
+        self.state.wake.notify_all()
 
     def discard_queued(self) -> None:
         """Forget the queued operations, as handled (caller holds both locks: they belonged to a mesh that goes)."""
@@ -97,13 +97,13 @@ class Trainer:
         self.applied = self.enqueued
 
     def drain(self) -> bool:
-        """Apply every queued operation to the Som, in order (caller holds clay.som_lock); True if there were any."""
-        clay = self.clay
-        with clay.lock:  # taken under the Som lock: a preset installed in between cannot strand these operations
+        """Apply every queued operation to the Som, in order (caller holds state.som_lock); True if there were any."""
+        state = self.state
+        with state.lock:  # taken under the Som lock: a preset installed in between cannot strand these operations
             ops, self.ops = self.ops, []
             if ops:  # handled from here on, whatever happens: every later frame is made after them
                 self.applied = max(self.applied, ops[-1][1])
-                clay.unsaved = True
+                state.unsaved = True
         for i, (op, _number) in enumerate(ops):
             self._apply(op, ops[i + 1:])
         return bool(ops)
@@ -111,45 +111,45 @@ class Trainer:
     def _apply(self, op: Operation, later) -> None:
         """Apply one operation; if the engine refuses it, roll the session's view back (unless a later operation
         of the same key sets it again), record the error and carry on."""
-        clay, som = self.clay, self.clay.som
+        state, som = self.state, self.state.som
         try:
             if op.acts:
-                with clay.lock:
-                    clay.hold = False  # the person acted: training goes on
+                with state.lock:
+                    state.hold = False  # the person acted: training goes on
             op.apply(som)
-            with clay.lock:
-                op.applied(clay)
+            with state.lock:
+                op.applied(state)
         except Exception as exc:
             log.warning("%s refused by the engine: %s", type(op).__name__, exc)
-            with clay.lock:
+            with state.lock:
                 pending = {o.key for o, _ in later} | {o.key for o, _ in self.ops}
                 try:
                     if op.key is not None and op.key not in pending:
-                        op.roll_back(clay, som)
+                        op.roll_back(state, som)
                 except Exception:  # pragma: no cover - the Som's getters do not fail
                     log.exception("could not roll back %s", op)
-                clay.error = f"the engine refused {op.key or type(op).__name__.lower()}: {exc}"
+                state.error = f"the engine refused {op.key or type(op).__name__.lower()}: {exc}"
 
     def should_step(self) -> bool:
-        """Training has work (caller holds clay.lock): not paused, not held, s < S."""
-        clay = self.clay
-        return not clay.paused and not clay.hold and clay.som.iteration < clay.som.iterations
+        """Training has work (caller holds state.lock): not paused, not held, s < S."""
+        state = self.state
+        return not state.paused and not state.hold and state.som.iteration < state.som.iterations
 
     # -- the thread --------------------------------------------------------------------------------------------
     def _run(self) -> None:
-        clay = self.clay
+        state = self.state
         try:
             self._loop()
         except BaseException as exc:  # a bug in the session itself: never die silently
             log.exception("the session's training thread stopped")
-            with clay.wake:
+            with state.wake:
                 self.thread_error = f"training thread stopped: {type(exc).__name__}: {exc}"
-                clay.paused = True
+                state.paused = True
                 self.busy = False
-                clay.wake.notify_all()
+                state.wake.notify_all()
 
     def _loop(self) -> None:
-        wake = self.clay.wake
+        wake = self.state.wake
         while True:
             with wake:
                 while not self.closed and not self.ops and not self.should_step():
@@ -181,14 +181,14 @@ class Trainer:
             self.frames.publish(frame)
 
     def _apply_and_step(self) -> Frame:
-        clay = self.clay
-        with clay.som_lock:
+        state = self.state
+        with state.som_lock:
             drained = self.drain()
-            som = clay.som
+            som = state.som
             cycles = 0
-            with clay.lock:
+            with state.lock:
                 stepping = self.should_step()
-                dragging = clay.gesture
+                dragging = state.gesture
             if stepping:
                 k = self.cycles_per_step
                 if drained and not dragging:  # a fresh intent: a short first step gets the change out sooner
@@ -201,7 +201,7 @@ class Trainer:
                 dt = time.perf_counter() - t
                 if cycles > 0:
                     self._tune(dt / cycles)
-                    clay.unsaved = True
+                    state.unsaved = True
             return self.make_frame(cycles)
 
     def _tune(self, per_cycle: float) -> None:
@@ -214,17 +214,17 @@ class Trainer:
 
     def _error_frame(self, message: str) -> Frame | None:
         """After a failed step: pause, show `message`, and return a frame to publish. Never raises."""
-        clay = self.clay
+        state = self.state
         try:
-            with clay.lock:
-                clay.error = message
-                clay.paused = True
+            with state.lock:
+                state.error = message
+                state.paused = True
             try:
-                with clay.som_lock:
+                with state.som_lock:
                     return self.make_frame(0)
             except Exception:
                 log.exception("could not make a frame after the error")
-            with clay.lock:  # the last frame again, marked paused, with the intents handled since
+            with state.lock:  # the last frame again, marked paused, with the intents handled since
                 return self.frames.again(self.frames.latest, applied=self.applied, running=False, paused=True,
                                          step_cycles=0)
         except Exception:  # pragma: no cover - nothing above should fail
@@ -236,7 +236,7 @@ class Trainer:
         """Block until every queued intent is applied and training has stopped (s = S or paused); False at the
         timeout, and at once if the thread has stopped on an error."""
         deadline = time.monotonic() + timeout
-        wake = self.clay.wake
+        wake = self.state.wake
         with wake:
             while True:
                 t = self.thread
@@ -255,7 +255,7 @@ class Trainer:
         """Block until every intent queued so far has reached the Som and a published frame shows it; False at the
         timeout, and at once if the thread is not running."""
         deadline = time.monotonic() + timeout
-        wake = self.clay.wake
+        wake = self.state.wake
         with wake:
             target = self.enqueued
             while self.frames.latest.applied < target:

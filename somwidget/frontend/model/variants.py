@@ -3,7 +3,7 @@ batched on the GPU (or the CPU, or a Dask cluster: backend/variants.py), and ret
 figures, a gallery picture, and a way back into a session as one undo step.
 
     import somwidget
-    v = somwidget.sweep("car", n=256, jitter=0.05, params={"l_start": (0.15, 0.35)})
+    v = somwidget.sweep("car", n=256, jitter=0.05, params={"reach": (0.05, 0.2)})
     v.metrics["gap"].argmin()              # the variant that reaches its controls best
     v.picture("gallery.png")               # thumbnails of the first 16 (or v.picture(indices=[...]))
     session = v.session(best)              # a live session showing variant `best` (undo goes back to the preset)
@@ -18,63 +18,39 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from ...backend import checks
 from ...backend import presets as _presets
-from ...backend.schedule import KEYS as SCHEDULE_KEYS
+from ...backend import schedule
 from ...backend.presets import Preset
 from ...backend.variants import FIGURES, VariantPlan, plan_variants, run_plan
-from ...backend.schedule import BY_NAME, MAX_ITERATIONS
 
 #: Thumbnails a gallery shows when no indices are given.
 GALLERY_COUNT = 16
 #: The apps' gallery thumbnails in CSS pixels: two to a row in a panel, large enough to compare designs by eye; drawn
 #: at twice that, so they stay sharp on a high-density screen.
 THUMBNAIL = (170, 136)
-#: The apps' Variants sections: how many variants a sweep there trains at most (each gets a thumbnail), and the
-#: range each varied schedule parameter takes around its current value.
+#: The apps' Variants sections: how many variants a sweep there trains at most (each gets a thumbnail).
 MAX_GALLERY_VARIANTS = 48
-VARIED = {
-    "l_start": lambda v: (max(0.01, 0.7 * v), min(1.0, 1.3 * v)),
-    "l_end": lambda v: (max(0.005, 0.7 * v), min(1.0, 1.3 * v)),
-    "iterations": lambda v: (max(1, int(0.5 * v)), min(MAX_ITERATIONS, int(1.5 * v))),
-    "smoothing": lambda v: (0.0, min(1.0, max(0.05, 2.0 * v))),
-    "reach": lambda v: (max(0.01, 0.5 * v), min(1.0, 2.0 * v)),
-}
+#: The settings a Variants section may vary (each over its declared `vary` range around its current value).
+VARIED = tuple(setting.name for setting in schedule.SETTINGS if setting.vary)
 VARIANTS_HELP = ("Design variants: each control moved at random by up to the jitter (a share of the model's size), "
-                 "the chosen schedule parameters varied around their values, all trained at once from the current "
+                 "the chosen schedule settings varied around their values, all trained at once from the current "
                  "shape. Pick one to continue from it (Undo goes back).")
 
 
-def check_variant(preset: Preset, controls, parameters: Mapping, weights):
-    """(controls, schedule changes, weights) of a variant checked against the mesh of `preset`; ValueError naming
-    what does not fit."""
-    w = checks.finite_array("weights", weights, 2)
-    if w.shape != preset.weights.shape:
-        raise ValueError(f"weights: expected shape {preset.weights.shape} (this session's mesh), got {w.shape}")
-    n_dims = preset.layout.n_dims
-    c = checks.finite_array("controls", controls, 2)
-    if c.shape[1] != n_dims or not len(c):
-        raise ValueError(f"controls: expected (k, {n_dims}) with k >= 1, got {c.shape}")
-    unknown = sorted(set(parameters) - set(SCHEDULE_KEYS))
-    if unknown:
-        raise ValueError(f"parameters: unknown {unknown}; a variant sets some of {list(SCHEDULE_KEYS)}")
-    return c, {name: BY_NAME[name].check(value) for name, value in parameters.items()}, w
-
-
 def vary_around(names, parameters: Mapping) -> dict:
-    """sweep's params for the apps' Variants sections: each named parameter over its VARIED range around its value
+    """sweep's params for the apps' Variants sections: each named setting over its declared range around its value
     in `parameters` (a session's)."""
     unknown = sorted(set(names) - set(VARIED))
     if unknown:
         raise ValueError(f"vary: unknown parameter(s) {unknown}; expected some of {list(VARIED)}")
-    return {name: VARIED[name](parameters[name]) for name in names}
+    return {name: schedule.BY_NAME[name].range_around(parameters[name]) for name in names}
 
 
 class Variants:
     """n trained variants of one design.
 
-    controls (n, k, dims), weights (n, N, dims), params (a dict per variant: iterations, l_start, l_end, smoothing,
-    reach), metrics (each of gap, spike, symmetry, size: an (n,) array; see backend.variants.figures), preset (the
+    controls (n, k, dims), weights (n, N, dims), params (a dict per variant: its schedule, schedule.KEYS),
+    metrics (each of gap, spike, symmetry, size: an (n,) array; see backend.variants.figures), preset (the
     mesh they share), source (the Session they were swept from, or None)."""
 
     def __init__(self, plan: VariantPlan, weights: np.ndarray, figures: dict, preset: Preset, source=None):
@@ -152,7 +128,7 @@ class Variants:
         if session.preset.n_vertices != self.plan.n_vertices or session.n_dims != self.weights.shape[2]:
             raise ValueError(f"session: its mesh ({session.preset.n_vertices} vertices, {session.n_dims} dims) is "
                              f"not the variants' ({self.plan.n_vertices} vertices, {self.weights.shape[2]} dims)")
-        session.apply_variant(self.controls[i], self.params[i], self.weights[i])
+        session.files.apply_variant(self.controls[i], self.params[i], self.weights[i])
 
     def session(self, i: int, **options):
         """A new Session of the variants' preset showing variant i (undo goes back to the preset's start).
@@ -183,8 +159,8 @@ def sweep(preset_or_session="car", n: int = 64, jitter: float = 0.05, params: Ma
         train()), or a Session (each a local restart from the session's current weights, as a move of its
         controls would be);
     jitter: each control moves by up to this share of the model's size (its bounding diagonal);
-    params: per schedule parameter (iterations, l_start, l_end, smoothing, reach) a (low, high) range, a list of
-        values or one value; the others keep the design's;
+    params: per schedule setting (schedule.KEYS) a (low, high) range, a list of values or one value; the others
+        keep the design's;
     seed: the same seed gives the same variants; device: where to train here (None: the GPU when there is one);
     client: a dask.distributed.Client to spread the batches over its workers (the results are the same);
     progress: True for a progress bar on stderr, False for none, or a callable progress(done, total).
@@ -196,22 +172,22 @@ def sweep(preset_or_session="car", n: int = 64, jitter: float = 0.05, params: Ma
         preset = _presets.get_preset(preset_or_session)
     elif isinstance(preset_or_session, Preset):
         preset = preset_or_session
-    elif hasattr(preset_or_session, "snapshot") and hasattr(preset_or_session, "apply_variant"):
+    elif hasattr(preset_or_session, "files") and hasattr(preset_or_session.files, "apply_variant"):
         source = preset_or_session
     else:
         raise ValueError("sweep: expected a preset name, a Preset or a Session, got "
                          f"{type(preset_or_session).__name__}")
     if source is not None:
-        snap = source.snapshot()
+        snap = source.files.snapshot()
         preset = snap["preset"]
         p = snap["parameters"]
         start, controls = snap["weights"], snap["controls"]
-        base = {key: p[key] for key in SCHEDULE_KEYS}
+        base = {key: p[key] for key in schedule.KEYS}
         mirror, metric = tuple(p["mirror"]), np.asarray(p["metric_weights"], np.float32)
         radii, group, rule, strokes = snap["radii"], snap["symmetry"], snap["smoothing_rule"], snap["strokes"]
     else:
         start, controls = preset.weights, preset.controls
-        base = {key: getattr(preset, key) for key in SCHEDULE_KEYS}
+        base = {key: getattr(preset, key) for key in schedule.KEYS}
         mirror, metric = preset.mirror, preset.metric_weights
         radii, group, rule, strokes = preset.control_radii(), preset.symmetry, preset.smoothing_rule, preset.strokes
     radial = group if group is not None and group.kind == "radial" else None

@@ -1,13 +1,15 @@
 """The notebook's panel: ipywidgets bound to a Session through its panel model (model/panel.py), the same model the
-web app's panel binds to: preset, S, l_start, l_end, smoothing, reach, symmetry, the feature dimensions with their
-metric weights, Train / Pause / Reset, Undo / Redo, progress, the controls and their gaps, the variants. `show()`
-(show.py) puts it beside the clay view (widget.py). Both talk to the same `Session`:
+web app's panel binds to: preset, the settings (a slider or a checkbox each, from their declaration in
+backend/schedule.py), the feature dimensions with their metric weights, Train / Pause / Reset, Undo / Redo,
+progress, the controls and their gaps, the variants. `show()` (show.py) puts it beside the clay view (widget.py).
+Both talk to the same `Session`:
 
-    panel widget --set_iterations / set_l_start / ... --> Session --frames--> panel (iteration, gaps, parameters)
+    panel widget --set_parameter(name, value)--> Session --frames--> panel (iteration, gaps, settings)
     view (drag a sphere) --grab / move / release--> Session --frames--> every view and panel
 
-The panel works without a frontend: its widgets are plain Python objects, so tests (and scripts) can set
-`panel.S.value = 300` and watch the session follow, or move a control and watch `panel.progress.value` restart.
+The panel works without a frontend: its widgets are plain Python objects (`panel.fields[name]`, also an attribute
+of its short name: `panel.S`), so tests (and scripts) can set `panel.S.value = 300` and watch the session follow,
+or move a control and watch `panel.progress.value` restart.
 """
 
 from __future__ import annotations
@@ -22,19 +24,15 @@ from contextlib import contextmanager
 import ipywidgets as widgets
 
 from ...backend import presets as _presets
+from ...backend.schedule import BY_NAME, SECTIONS, Setting
 from ..model import Frame, Session
-from ..model.panel import PanelModel
-from ..model.parameters import BY_NAME as _PARAM
-from ..model.parameters import GAP_HELP, RADIUS_HELP, REACH_HELP
+from ..model.panel import GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
 from .variants import VariantsSection
 
 log = logging.getLogger(__name__)
 
 #: The panel refreshes its numbers at most this often per second (frames arrive at up to 60 a second).
 PANEL_HZ = 8
-#: The S slider's range and step (the session accepts any S >= 1 through `session.set_iterations`; the slider's
-#: range widens to show a larger one).
-S_SLIDER = _PARAM["iterations"].slider
 #: Text blocks: the notebook's default line height spreads small print apart.
 _BLOCK = '<div style="line-height:1.35">{}</div>'
 
@@ -89,26 +87,16 @@ class Panel(widgets.VBox):
         self.progress = widgets.IntProgress(min=0, max=1, value=0, description="progress", style=style,
                                             layout=wide)
         self.status = widgets.HTML()
-        # the sliders and their tooltips come from the parameters' declaration (parameters.py)
-        def slider(name: str, kind, digits: str | None = None, description: str | None = None):
-            p = _PARAM[name]
-            lo, hi, step = p.slider
-            extra = {"readout_format": digits} if digits else {}
-            return kind(description=description or p.label, min=lo, max=hi, step=step, continuous_update=False,
-                        style=style, layout=wide, tooltip=p.help, **extra)
-
-        self.S = slider("iterations", widgets.IntSlider, description="S")
-        self.l_start = slider("l_start", widgets.FloatSlider, ".3f")
-        self.l_end = slider("l_end", widgets.FloatSlider, ".3f")
-        self.smoothing = slider("smoothing", widgets.FloatSlider, ".2f")
-        self.reach = slider("reach", widgets.FloatSlider, ".2f")
-        self.symmetry = widgets.Checkbox(description=_PARAM["symmetry"].label, indent=False,
-                                         tooltip=_PARAM["symmetry"].help)
+        # a widget per setting a panel sets by name, from its declaration (backend/schedule.py); each is also an
+        # attribute of its short name (panel.S, panel.reach, panel.symmetry)
+        self.fields: dict[str, widgets.ValueWidget] = {p.name: _field(p, style, wide) for p in self.model.fields}
+        for name, w in self.fields.items():
+            setattr(self, BY_NAME[name].short or name, w)
         self.features_box = widgets.VBox()
         self.metric: list[widgets.BoundedFloatText] = []
-        self.group = widgets.Dropdown(options=self.model.group_choices(), description="group", style=style,
-                                      layout=widgets.Layout(width="290px"),
-                                      tooltip="The symmetry group: every copy of a control acts together with it")
+        group = BY_NAME["group"]
+        self.group = widgets.Dropdown(options=self.model.group_choices(), description=group.label, style=style,
+                                      layout=widgets.Layout(width="290px"), tooltip=group.help)
         self.radius_of = widgets.Dropdown(description="control", style=style, layout=widgets.Layout(width="170px"),
                                           tooltip="The control whose position, features and radius the fields show")
         self.position = widgets.Text(placeholder="x, y, z", continuous_update=False,
@@ -132,13 +120,9 @@ class Panel(widgets.VBox):
             widgets.HBox([self.preset, self.reload_button, self.refine_button]),
             widgets.HBox([self.train_button, self.undo_button, self.redo_button, self.reset_button]),
             self.progress, self.status, self.error,
-            widgets.HTML(_BLOCK.format("<b>Schedule</b> <small>(alpha(s) from l_start to l_end over S cycles)"
-                                       "</small>")),
-            self.S, self.l_start, self.l_end, self.smoothing, self.reach,
-            widgets.HTML(_BLOCK.format(f"<small>{_html.escape(REACH_HELP)}</small>")),
-            widgets.HBox([self.symmetry, self.group]),
-            widgets.HTML(_BLOCK.format("<b>Feature dimensions</b> <small>(metric weights m<sub>j</sub> of the "
-                                       "winner search)</small>")),
+            _heading("schedule"), *self._section("schedule"),
+            widgets.HBox([*self._section("symmetry"), self.group]),
+            _heading("features"),
             self.features_box,
             widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(GAP_HELP)}">Controls</b> <small>(gap: distance to '
                                        'the nearest node, original / mirror)</small>')),
@@ -147,11 +131,10 @@ class Panel(widgets.VBox):
             self.variants,
         ], layout=widgets.Layout(width="360px", min_width="360px", padding="4px"))
 
-        for w, setter in ((self.S, session.set_iterations), (self.l_start, session.set_l_start),
-                          (self.l_end, session.set_l_end), (self.smoothing, session.set_smoothing),
-                          (self.reach, session.set_reach), (self.symmetry, session.set_symmetry)):
-            w.observe(lambda change, setter=setter: self._intent(setter, change["new"]), names="value")
-        self.group.observe(lambda change: self._intent(session.set_symmetry, change["new"]), names="value")
+        for name, w in self.fields.items():
+            w.observe(lambda change, name=name: self._intent(session.set_parameter, name, change["new"]),
+                      names="value")
+        self.group.observe(lambda change: self._intent(session.settings.set_symmetry, change["new"]), names="value")
         self.radius_of.observe(lambda _change: self.refresh(), names="value")
         self.position.observe(lambda change: self._intent(self._typed, self.model.set_position, change["new"]),
                               names="value")
@@ -175,6 +158,16 @@ class Panel(widgets.VBox):
         if auto_refresh:
             self._thread = threading.Thread(target=self._refresh_loop, name="somwidget-panel", daemon=True)
             self._thread.start()
+
+    def _section(self, section: str) -> list:
+        """The widgets of a section's settings, each slider followed by its help."""
+        out = []
+        for p in self.model.fields:
+            if p.section == section:
+                out.append(self.fields[p.name])
+                if p.widget == "slider":
+                    out.append(widgets.HTML(_BLOCK.format(f"<small>{_html.escape(p.help)}</small>")))
+        return out
 
     # -- widget -> session ------------------------------------------------------------------------------------
     @contextmanager
@@ -221,7 +214,7 @@ class Panel(widgets.VBox):
             self.refresh()
 
     def set_metric_weight(self, dim: int, value) -> None:
-        self._intent(self.session.set_metric_weight, dim, value)
+        self._intent(self.session.settings.set_metric_weight, dim, value)
 
     # -- session -> widgets -----------------------------------------------------------------------------------
     def _on_frame(self, frame: Frame) -> None:
@@ -255,14 +248,8 @@ class Panel(widgets.VBox):
             if frame.generation != self._generation or session.preset.name != self._preset_name:
                 self._rebuild()
             p = session.parameters
-            self.S.max = max(S_SLIDER[1], int(p["iterations"]))
-            self.S.min = min(S_SLIDER[0], int(p["iterations"]))
-            _set(self.S, int(p["iterations"]))
-            _set(self.l_start, float(p["l_start"]))
-            _set(self.l_end, float(p["l_end"]))
-            _set(self.smoothing, float(p["smoothing"]))
-            _set(self.reach, float(p["reach"]))
-            _set(self.symmetry, bool(p["symmetry"]))
+            for name, w in self.fields.items():
+                _show(w, BY_NAME[name], p[name])
             choices = self.model.group_choices()
             if list(self.group.options) != choices:
                 self.group.options = choices
@@ -344,10 +331,38 @@ class Panel(widgets.VBox):
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(2.0)
         self.variants.close()
-        for w in [*self.children, *self.metric, *self.features_box.children, self.group, self.radius_of, self.radius,
-                  self.position, self.features, self.all_radii, *self.recovered.children]:
+        for w in [*self.children, *self.fields.values(), *self.metric, *self.features_box.children, self.group,
+                  self.radius_of, self.radius, self.position, self.features, self.all_radii, *self.recovered.children]:
             w.close()
         super().close()
+
+
+def _heading(section: str) -> widgets.HTML:
+    """A section's title and what it is about (backend/schedule.py, SECTIONS)."""
+    title, about = SECTIONS[section]
+    return widgets.HTML(_BLOCK.format(f"<b>{_html.escape(title)}</b> <small>({_html.escape(about)})</small>"))
+
+
+def _field(p: Setting, style: dict, layout) -> widgets.ValueWidget:
+    """A setting's widget: a checkbox for a flag, else a slider over its declared range (its value may lie past it:
+    `_show` widens the range)."""
+    if p.kind == "bool":
+        return widgets.Checkbox(description=p.label, indent=False, tooltip=p.help)
+    low, high, step = p.slider
+    kind, extra = (widgets.IntSlider, {}) if p.kind == "int" else (
+        widgets.FloatSlider, {"readout_format": f".{slider_digits(p)}f"})
+    return kind(description=p.short or p.label, min=low, max=high, step=step, continuous_update=False, style=style,
+                layout=layout, tooltip=p.help, **extra)
+
+
+def _show(widget, p: Setting, value) -> None:
+    """A setting's value in its widget (a slider's range widened to hold a value past it)."""
+    if p.kind == "bool":
+        return _set(widget, bool(value))
+    value = int(value) if p.kind == "int" else float(value)
+    widget.max = max(p.slider[1], value)
+    widget.min = min(p.slider[0], value)
+    _set(widget, value)
 
 
 def _banner(message: str) -> widgets.HBox:

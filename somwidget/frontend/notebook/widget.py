@@ -4,12 +4,13 @@ Session's frames.
 Frames travel as binary buffers of custom messages over the kernel's comm (the widget protocol), intents come back
 the same way, both in the one protocol of transport/messages.py: no server, no port, no iframe, so it works wherever
 the notebook's widgets do (JupyterLab, Notebook 7, VS Code, Colab, marimo). Each output of the widget is its own view
-with its own camera; every widget of a session follows it.
+with its own camera (the outputs of one widget act as one view); every widget of a session follows it.
 
-Threads: the session's outbox (transport/outbox.py) wakes the widget on the training thread; a sender thread of the
-widget takes what the outbox made for it and sends it, at most `max_fps` a second (a slow kernel link skips frames,
-never queues them). Intents arrive on the kernel's thread (`_on_message`) and go to the Session through `Gestures`,
-as the websocket's do.
+The widget is the pipe and the lifecycle of one `ViewConnection` (transport/connection.py), as each websocket client
+of the web hub is: a JSON message is a custom message, a frame a custom message {"type": "frame"} with the frame as
+its one buffer. Threads: the session's outbox (transport/outbox.py) wakes the widget on the training thread; a sender
+thread of the widget hands the connection the latest frame, at most `max_fps` a second (a slow kernel link skips
+frames, never queues them). Intents arrive on the kernel's thread (`_on_message`).
 """
 
 from __future__ import annotations
@@ -25,17 +26,16 @@ import traitlets
 
 from ..client import view_module
 from ..transport import messages
-from ..transport.gestures import Gestures
-from ..transport.outbox import Peer, outbox_for
+from ..transport.connection import ViewConnection
+from ..transport.holders import HolderRegistry
 
 log = logging.getLogger(__name__)
 
 PICTURE_PREFIX = "data:image/png;base64,"
 #: A bound on the picture a browser may set (a 4K view's PNG is a few MB).
 MAX_PICTURE_CHARS = 16 * 1024 * 1024
-
-#: The one client of a widget's gestures (every output of a widget acts as one client).
-_CLIENT = "notebook"
+#: A frame's envelope over the comm (its one buffer is the frame).
+FRAME_ENVELOPE = messages.FrameMessage().to_json()
 
 
 class ClayWidget(anywidget.AnyWidget):
@@ -62,20 +62,32 @@ class ClayWidget(anywidget.AnyWidget):
         super().__init__(_esm=view_module(), height=int(height), **kwargs)
         self.session = session
         self.max_fps = float(max_fps)
-        self.gestures = Gestures(session, on_change=self._send_grabs)
         self.frames_sent = 0
-        self.intents = 0
-        self.refused = 0
-        self.outbox = outbox_for(session)
-        self._peer = Peer()
+        self.connection = ViewConnection(session, HolderRegistry(session), self, name="the notebook view")
+        self.outbox = self.connection.outbox
         self._fresh = True  # a frame came that is not sent yet
         self._wake = threading.Condition()
-        self._send_lock = threading.Lock()  # the sender thread and the kernel's thread (a hello) both send frames
         self._closed = False
         self.on_msg(self._on_message)
         self._sender = threading.Thread(target=self._send_loop, name="somwidget-view", daemon=True)
         self._sender.start()
         self.outbox.subscribe(self._on_frame)
+
+    @property
+    def intents(self) -> int:
+        return self.connection.intents
+
+    @property
+    def refused(self) -> int:
+        return self.connection.refused
+
+    # -- the pipe -----------------------------------------------------------------------------------------------
+    def send_json(self, message: dict) -> None:
+        self.send(message)
+
+    def send_frame(self, frame: bytes) -> None:
+        self.send(FRAME_ENVELOPE, buffers=[frame])
+        self.frames_sent += 1
 
     # -- session -> browser ------------------------------------------------------------------------------------
     def _on_frame(self) -> None:
@@ -94,54 +106,23 @@ class ClayWidget(anywidget.AnyWidget):
                 self._fresh = False
             t = time.monotonic()
             try:
-                self._send_frame()
+                self.connection.send_latest()
             except Exception:  # a closed comm, an odd frame: the next one tries again
                 log.debug("sending a frame to the notebook view failed", exc_info=True)
             rest = period - (time.monotonic() - t)
             if rest > 0:
                 time.sleep(rest)
 
-    def _send_frame(self, topology: bool = False) -> None:
-        with self._send_lock:
-            frame = self.outbox.latest
-            if frame.seq == self._peer.seq and not topology:
-                return
-            if topology:
-                self._peer.forget()
-            for packet in self.outbox.packets(self._peer, frame):
-                if isinstance(packet, bytes):
-                    self.send({"type": "frame"}, buffers=[packet])
-                    self.frames_sent += 1
-                else:
-                    self.send(packet)
-            for _holder, message in self.gestures.prune(frame.control_ids):
-                self.send(message)
-
-    def _send_grabs(self) -> None:
-        self.send(self.gestures.message_for(_CLIENT))
-
     # -- browser -> session ------------------------------------------------------------------------------------
     def _on_message(self, _widget, content, _buffers) -> None:
-        try:
-            intent = messages.parse_intent(json.dumps(content), self.session.n_controls)
-            if intent.type == "hello":  # a new output: the topology and the latest frame for it
-                self._send_frame(topology=True)
-                self._send_grabs()
-                return
-            reply = self.gestures.apply(_CLIENT, intent)
-            self.intents += 1
-            if reply is not None:
-                self.send(reply)
-        except (ValueError, RuntimeError, TypeError) as exc:  # IntentError is a ValueError
-            self.refused += 1
-            self.send(messages.error_message(str(exc), getattr(exc, "intent", None)))
+        self.connection.receive(json.dumps(content))
 
     def close(self) -> None:
         """Stop following the session (the session goes on) and close the widget."""
         if not hasattr(self, "outbox"):  # __init__ stopped before it followed the session (ClientNotBuilt)
             return super().close()
         self.outbox.unsubscribe(self._on_frame)
-        self.gestures.drop(_CLIENT)
+        self.connection.close()
         with self._wake:
             self._closed = True
             self._wake.notify()

@@ -1,6 +1,6 @@
 """What a view draws: the display mesh of a session's preset (triangles, segments, points; a decimated mesh for a
 clay too big to stream), each frame's display positions and colours, and the topology message that describes them
-(messages.py documents its fields). Made once per preset and kept: a million-vertex mesh takes seconds to
+(messages.TopologyMessage). Made once per preset and kept: a million-vertex mesh takes seconds to
 triangulate and decimate.
 """
 
@@ -10,10 +10,9 @@ import numpy as np
 
 from ...backend import io as _io
 from ...backend import presets as _presets
-from ..model import parameters as _parameters
 from ...backend.refine import cluster_on_grid
 from ...backend.symmetry import Symmetry
-from .messages import MAX_COORDINATE, MAX_MESSAGE_BYTES, PROTOCOL_VERSION
+from .messages import TopologyMessage
 
 #: Most display vertices a frame streams whole: 32,768 x 15 bytes = 0.5 MB a frame, 15 MB/s at 30 frames/s, which a
 #: headset's Wi-Fi and a laptop's browser both take. A bigger clay is shown decimated (`decimate_display`).
@@ -109,9 +108,9 @@ def mirror_axes(group: str) -> list[bool]:
     return [symmetry is not None and symmetry.kind == "mirror" and symmetry.axis == a for a in range(3)]
 
 
-def topology_message(session, frame) -> dict:
-    """The JSON topology message for `frame` (whose generation must be the session's current one), but for what each
-    view's copy adds (Outbox: its client id, the controls' ids, group, radii and strokes as they are now)."""
+def topology_message(session, frame) -> TopologyMessage:
+    """The topology message for `frame` (whose generation must be the session's current one), but for the fields
+    each view's copy fills in (Outbox: its client id, the controls' ids, group, radii and strokes as they are now)."""
     geo = display_of(session)
     pos, _ = display_arrays(frame, session)
     start = _presets.positions_of(session.preset.weights, session.layout)
@@ -120,15 +119,10 @@ def topology_message(session, frame) -> dict:
     everything = np.concatenate([start, np.asarray(frame.effective_positions, np.float32).reshape(-1, 3)])
     lo, hi = everything.min(axis=0), everything.max(axis=0)
     span = float(np.linalg.norm(hi - lo)) or 1.0
-    return {
-        "type": "topology", "protocol": PROTOCOL_VERSION, "generation": int(frame.generation),
-        "preset": session.preset.name, "title": session.preset.title, "display": geo["display"],
-        "n_vertices": int(geo["n_vertices"]), "n_nodes": int(session.topology.n_vertices),
-        "triangles": geo["triangles"].ravel().tolist(), "segments": geo["segments"].ravel().tolist(),
-        "points": bool(geo["points"]), "up_axis": 2,
-        "bounds": {"min": [float(x) for x in lo], "max": [float(x) for x in hi]},
-        "control_radius": 0.035 * span, "colour_space": session.layout.colour_space,
-        "feature_names": list(session.layout.names), "max_coordinate": MAX_COORDINATE,
-        "max_message_bytes": MAX_MESSAGE_BYTES,
-        "parameters": [p.describe() for p in _parameters.PARAMETERS],
-    }
+    return TopologyMessage(
+        generation=int(frame.generation), preset=session.preset.name, title=session.preset.title,
+        display=geo["display"], n_vertices=int(geo["n_vertices"]), n_nodes=int(session.topology.n_vertices),
+        triangles=geo["triangles"].ravel().tolist(), segments=geo["segments"].ravel().tolist(),
+        points=bool(geo["points"]), bounds={"min": [float(x) for x in lo], "max": [float(x) for x in hi]},
+        control_radius=0.035 * span, colour_space=session.layout.colour_space,
+        feature_names=list(session.layout.names))

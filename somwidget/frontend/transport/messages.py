@@ -1,199 +1,514 @@
-"""The wire messages between a session and its views, declared once: what a server sends every view, what it accepts
-from one, and how it checks it.
+"""The wire messages between a session and its views, declared once: one dataclass per message, what a server sends
+every view and what it accepts from one. Validation, the Python encoders and the browser's side
+(client/src/protocol.js, written by `python -m somwidget.frontend.transport.codegen`) are derived from these classes.
 
-One protocol for every view: the web app's page and the XR page over the websocket /xr/ws (web/hub.py), the
-notebook widget over the kernel's comm (notebook/widget.py; a frame there is a custom message {"type": "frame"}
-whose one binary buffer is the frame below). Binary frames are encoded in frames.py, the topology message's
-geometry in display.py; both send through outbox.py. The JavaScript twin is client/src/protocol.js (a test keeps the
-two in step).
+One protocol for every view: the web app's page and the XR page over the websocket /view/ws (web/hub.py; /xr/ws is
+the same route under its old name), the notebook widget over the kernel's comm (notebook/widget.py); both through
+one `ViewConnection` (connection.py). Field types and bounds are the wire field types of fields.py.
 
-Server -> client
-----------------
-1. Text, JSON, once per connection and again whenever the session's generation changes (a new preset or mesh):
+Server -> client: a `TopologyMessage` once per connection and again whenever the session's generation changes (a new
+preset or mesh); then binary frames (`FrameHeader` and FRAME_ARRAYS below: the latest state, a slow view skips
+frames, never lags); then, as things happen, the other `ServerMessage`s. Over the notebook's comm a frame is a
+`FrameMessage` whose one binary buffer is the frame.
 
-   {"type": "topology", "protocol": 1, "generation": g, "preset": "car", "title": "Car",
-    "display": "surface" | "lines" | "points",
-    "n_vertices": n,            display vertices in each frame (N nodes; 2N for "lines": roots then tips)
-    "n_nodes": N,
-    "triangles": [i, j, k, ...] flat triangle list over the display vertices (faces fanned; quads for "lines")
-    "segments": [i, j, ...]     flat line-segment list (mesh edges / synapses; root -> tip for "lines")
-    "points": bool              draw each vertex as a point ("points" display)
-    "n_controls": k, "n_effective": k_eff,
-    "mirror_axes": [bool, bool, bool]  the position axes a mirrored copy negates (a mirror group)
-    "group": "radial-8-z",      the symmetry group of the controls ("none": each control alone)
-    "group_maps": [[9 floats], ...]  the group's maps of a position (3 x 3, row-major), the identity first: effective
-                                control j is control j mod k under map j // k
-    "up_axis": 2,               the model's up axis (z; x forward, y sideways)
-    "bounds": {"min": [x, y, z], "max": [x, y, z]}  start mesh and controls, for placing the clay
-    "control_radius": r,        the drawn radius of a control (model units)
-    "radii": [r, ...], "strokes": [n, ...]  each control's radius of influence and the runs that act as one (as in
-                                the "controls" message)
-    "colour_space": "hs", "feature_names": [...], "max_coordinate": 1e4, "max_message_bytes": 2048,
-    "client": id}
-
-2. Binary frames (little-endian), each the latest state of the session; a slow client skips frames, never lags:
-
-   offset  size       type  field
-   0       4          4s    magic b"SOMF"
-   4       2          u16   protocol version (1)
-   6       2          u16   flags: 1 running, 2 paused, 4 mirrored copies present, 8 a step to undo, 16 a step
-                              to redo
-   8       4          u32   seq: the session's frame number (increases by one per published frame)
-   12      4          u32   generation (matches the latest topology message)
-   16      4          u32   iteration s
-   20      4          u32   iterations S
-   24      4          u32   n: display vertices
-   28      2          u16   k: controls (the originals)
-   30      2          u16   k_eff: effective controls (originals, then mirrored copies)
-   32      12 n       f32   vertex positions (n, 3), model units
-   ..      12 k_eff   f32   effective control positions (k_eff, 3)
-   ..      3 n        u8    vertex colours (n, 3) RGB
-   ..      3 k_eff    u8    effective control colours (k_eff, 3) RGB
-   ..      0-3        -     zero padding to a multiple of 4 bytes
-   Total: 32 + 15 (n + k_eff) rounded up to 4. The float arrays come first so they are 4-byte aligned.
-
-3. Text, JSON, as things happen:
-   {"type": "grabs", "grabs": [{"index": i, "id": c, "own": bool}, ...]}   controls held now (own: this client)
-   {"type": "controls", "ids": [c, ...], "group": g,               each control's stable id, in index order, and
-    "group_maps": [...], "radii": [r, ...], "strokes": [n, ...]}   the group (as in the topology), each control's
-                                                                   radius of influence (model units) and the runs of
-                                                                   controls that act as one (a stroke's samples):
-                                                                   sent (before the frame) whenever they change (a
-                                                                   control added or removed, a radius, new controls,
-                                                                   a group on or off)
-   {"type": "error", "message": "...", "intent": "move" | null}     a refused message (see below)
-   {"type": "pong", "t": t}                                        the answer to a ping
-   {"type": "status", "cycle_ms": c, "fps": f}                     the engine's time per cycle and the frames
-                                                                   published per second (about twice a second
-                                                                   while frames flow)
-   {"type": "autosave", "ok": false, "message": "..."}             the autosave cannot write (what and where; it
-                                                                   tries again every second): shown until a message
-                                                                   with "ok": true says a save is on disk again
-
-Client -> server: JSON text, one intent per message, at most MAX_MESSAGE_BYTES bytes
-------------------------------------------------------------------------------------
-   {"type": "grab", "id": c}                             hold the control whose id is c (the topology's
-                                                         "control_ids", then "controls" messages); refused while
-                                                         another client holds it. "index": i (0 <= i < k) instead
-                                                         of "id" names a control by its place now
-   {"type": "move", "id": c, "position": [x, y, z]}      move a held control (model units)
-   {"type": "release", "id": c}                          let go (optionally with a last "position"); a grab to
-                                                         its release is one undo step (one gesture). A held control
-                                                         that is removed (elsewhere) ends the grab, with an error
-                                                         message to the client that held it
-   {"type": "reset"} | {"type": "train"} | {"type": "pause"} | {"type": "undo"} | {"type": "redo"}
-   {"type": "ping", "t": number}
-   {"type": "hello"}                                     send the topology and the latest frame again (a new view
-                                                         on an existing connection: the notebook's outputs)
-   {"type": "add", "position": [x, y, z], "radius": r}   a new control there (its other features the nearest
-                                                         node's; radius optional: the preset's); it moves nothing
-                                                         until it is dragged
-   {"type": "remove", "id": c}                           remove a control (a stroke goes whole)
-   {"type": "radius", "id": c, "radius": r}              a control's radius of influence (model units, >= 0); the
-                                                         same control's radius again within a moment joins its step
-   {"type": "stroke", "points": [[x, y, z], ...],        a polyline of 2 to MAX_STROKE_POINTS points as one control
-    "radius": r}                                         (its samples act as one); radius optional
-   {"type": "set", "name": n, "value": v}                set a parameter declared in model/parameters.py (the topology
-                                                         message lists them: "parameters"), checked against its
-                                                         bounds
-
-Anything else is refused with an error message sent back (and logged) and changes nothing: binary messages,
-messages over the size limit, text that is not JSON (NaN and Infinity included), non-objects, unknown types,
-unknown or missing fields, indices that are not integers or out of range, positions that are not three finite
-numbers within +-MAX_COORDINATE. A mirrored copy is moved through its original (the client reflects the point).
+Client -> server: JSON text, one `Intent` per message, at most MAX_MESSAGE_BYTES bytes. Anything else is refused with
+an `ErrorMessage` sent back (and logged) and changes nothing: binary messages, messages over the size limit, text
+that is not JSON (NaN and Infinity included), non-objects, unknown types, unknown or missing fields, and fields that
+break their declared type (fields.py). A mirrored copy is moved through its original (the client reflects the
+point).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
-import math
-from dataclasses import dataclass
+import struct
+import typing
+from dataclasses import dataclass, field
+from typing import Annotated, ClassVar, Literal
 
-from ..model import parameters as _parameters
+from ..model import settings as _settings
+from .fields import (
+    MAX_COORDINATE,
+    MAX_STROKE_POINTS,
+    ControlId,
+    ControlIndex,
+    IntentError,
+    Number,
+    OneOf,
+    Point,
+    Polyline,
+    Radius,
+    Value,
+    WireType,
+    finite,
+)
 
 PROTOCOL_VERSION = 1
 MAGIC = b"SOMF"
-#: The binary frame's header: magic, version, flags, seq, generation, s, S, n, k, k_eff (frames.py packs it).
-HEADER_FORMAT = "<4sHHIIIIIHH"
-HEADER_SIZE = 32
-#: The frame header's flag bits.
-FLAGS = {"running": 1, "paused": 2, "mirrored": 4, "can_undo": 8, "can_redo": 16}
 #: Frames a second a view is sent at most (the websocket hub and the notebook widget alike).
 MAX_FPS = 60.0
 #: Seconds between status messages (cycle time, frames/s) while frames flow.
 STATUS_PERIOD = 0.5
 #: Longest intent message accepted (bytes of UTF-8 text).
 MAX_MESSAGE_BYTES = 2048
-#: Largest |coordinate| a move may carry (model units; the presets span a few units, meshes are normalised).
-MAX_COORDINATE = 1e4
-
-#: Client -> server: each intent's type -> (required fields, optional fields) besides "type".
-INTENTS = {
-    "grab": (set(), {"index", "id"}),
-    "move": ({"position"}, {"index", "id"}),
-    "release": (set(), {"index", "id", "position"}),
-    "reset": (set(), set()),
-    "train": (set(), set()),
-    "pause": (set(), set()),
-    "undo": (set(), set()),
-    "redo": (set(), set()),
-    "ping": ({"t"}, set()),
-    "hello": (set(), set()),
-    "set": ({"name", "value"}, set()),
-    "add": ({"position"}, {"radius"}),
-    "remove": (set(), {"index", "id"}),
-    "radius": ({"radius"}, {"index", "id"}),
-    "stroke": ({"points"}, {"radius"}),
-}
-#: Intents that name one control (by "id", or by "index").
-CONTROL_INTENTS = ("grab", "move", "release", "remove", "radius")
-#: Most points a stroke intent carries (the session samples the line again, MAX_STROKE_SAMPLES at most).
-MAX_STROKE_POINTS = 64
-
-#: Server -> client JSON messages (besides binary frames), by their "type".
-SERVER_MESSAGES = ("topology", "grabs", "controls", "error", "pong", "status", "autosave")
+#: The identity of a symmetry group's maps (3 x 3, row-major): the group "none".
+IDENTITY_MAP = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 
 
-class IntentError(ValueError):
-    """A refused client message; `intent` is its type when that much was readable."""
+# -- the settings' part of the schema ------------------------------------------------------------------------------
+def settings_schema() -> list[dict]:
+    """The settings a view may set by name ("set"), as the topology message lists them ("parameters")."""
+    return _settings.wire_schema()
 
-    def __init__(self, message: str, intent: str | None = None):
-        super().__init__(message)
-        self.intent = intent
+
+def setting_names() -> tuple[str, ...]:
+    return tuple(s.name for s in _settings.settable())
+
+
+#: A "set" intent's name: a declared setting.
+SettingName = Annotated[str, OneOf(setting_names, "parameter")]
+
+
+def check_setting(name: str, value):
+    """`value` checked against the setting `name`'s declaration (type, bounds); ValueError naming the problem."""
+    declared = {s.name: s for s in _settings.settable()}[name]
+    if declared.kind != "bool":
+        value = finite(value, name, "set")
+    return _settings.check_set(name, value)
+
+
+# -- the binary frame ---------------------------------------------------------------------------------------------
+def _packed(code: str, doc: str):
+    """A header field: its struct code (little-endian) and what it holds."""
+    return field(metadata={"struct": code, "doc": doc})
 
 
 @dataclass(frozen=True)
+class FrameHeader:
+    """The binary frame's header (little-endian, 32 bytes), followed by FRAME_ARRAYS and zero padding to a multiple
+    of 4 bytes. The float arrays come first so they are 4-byte aligned."""
+
+    magic: bytes = _packed("4s", 'b"SOMF"')
+    version: int = _packed("H", "the protocol version (PROTOCOL_VERSION)")
+    flags: int = _packed("H", "FLAGS: 1 running, 2 paused, 4 mirrored copies present, 8 a step to undo, 16 to redo")
+    seq: int = _packed("I", "the session's frame number (one more per published frame)")
+    generation: int = _packed("I", "matches the latest topology message")
+    iteration: int = _packed("I", "the iteration s")
+    iterations: int = _packed("I", "the iterations S")
+    n: int = _packed("I", "display vertices")
+    k: int = _packed("H", "controls (the originals)")
+    k_eff: int = _packed("H", "effective controls (the originals, then the mirrored copies)")
+
+
+#: The frame header's flag bits.
+FLAGS = {"running": 1, "paused": 2, "mirrored": 4, "can_undo": 8, "can_redo": 16}
+HEADER_FORMAT = "<" + "".join(f.metadata["struct"] for f in dataclasses.fields(FrameHeader))
+HEADER_SIZE = struct.calcsize(HEADER_FORMAT)
+
+
+@dataclass(frozen=True)
+class FrameArray:
+    """One array of a frame's body: `rows` rows (a header field) of `width` values of `dtype` (numpy's)."""
+
+    name: str
+    dtype: Literal["<f4", "u1"]
+    rows: str
+    width: int
+    doc: str
+
+    @property
+    def row_bytes(self) -> int:
+        return self.width * (4 if self.dtype == "<f4" else 1)
+
+
+#: The frame's body after its header, in order.
+FRAME_ARRAYS = (
+    FrameArray("positions", "<f4", "n", 3, "vertex positions, model units"),
+    FrameArray("control_positions", "<f4", "k_eff", 3, "effective control positions"),
+    FrameArray("colours", "u1", "n", 3, "vertex colours, RGB"),
+    FrameArray("control_colours", "u1", "k_eff", 3, "effective control colours, RGB"),
+)
+
+
+def frame_size(n: int, k_eff: int) -> int:
+    """Bytes of a frame of n display vertices and k_eff effective controls (padding included)."""
+    rows = {"n": n, "k_eff": k_eff}
+    size = HEADER_SIZE + sum(a.row_bytes * rows[a.rows] for a in FRAME_ARRAYS)
+    return size + (-size % 4)
+
+
+# -- server -> client ------------------------------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class ServerMessage:
+    """A JSON message from the server to a view (its "type", then its fields)."""
+
+    type: ClassVar[str]
+
+    def to_json(self) -> dict:
+        out = {"type": self.type}
+        for f in dataclasses.fields(self):
+            out[f.name] = _plain(getattr(self, f.name))
+        return out
+
+
+def _plain(value):
+    """A field's JSON form: dataclasses as objects, tuples as lists; a flat list (a mesh's triangles) as it is."""
+    if dataclasses.is_dataclass(value):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, (list, tuple)):
+        flat = not any(isinstance(v, (list, tuple)) or dataclasses.is_dataclass(v) for v in value[:1])
+        return value if flat and isinstance(value, list) else [_plain(v) for v in value]
+    return value
+
+
+@dataclass(frozen=True, kw_only=True)
+class TopologyMessage(ServerMessage):
+    """What a view draws, once per connection and again whenever the session's generation changes (a new preset or
+    mesh). `n_vertices`: display vertices in each frame (N nodes; 2N for "lines": roots then tips); `triangles`: a
+    flat triangle list over them (faces fanned; quads for "lines"); `segments`: a flat segment list (mesh edges;
+    root -> tip for "lines"); `points`: draw each vertex as a point; `bounds`: {"min": [x, y, z], "max": [...]} of the
+    start mesh and controls; `control_radius`: a control's drawn radius; `parameters`: the settings a "set" may name.
+    The fields after `parameters` are the view's own: its client id (None over the notebook's comm) and the
+    controls as a `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates), `n_controls`
+    and `n_effective` (originals, then mirrored copies)."""
+
+    type: ClassVar[str] = "topology"
+    protocol: int = PROTOCOL_VERSION
+    generation: int
+    preset: str
+    title: str
+    display: Literal["surface", "lines", "points"]
+    n_vertices: int
+    n_nodes: int
+    triangles: list[int]
+    segments: list[int]
+    points: bool
+    up_axis: int = 2
+    bounds: dict[str, list[float]]
+    control_radius: float
+    colour_space: str
+    feature_names: list[str]
+    max_coordinate: float = MAX_COORDINATE
+    max_message_bytes: int = MAX_MESSAGE_BYTES
+    parameters: list[dict] = field(default_factory=settings_schema)
+    client: int | None = None
+    control_ids: list[int] = field(default_factory=list)
+    group: str = "none"
+    group_maps: list[list[float]] = field(default_factory=lambda: [list(IDENTITY_MAP)])
+    mirror_axes: list[bool] = field(default_factory=lambda: [False, False, False])
+    n_controls: int = 0
+    n_effective: int = 0
+    radii: list[float] = field(default_factory=list)
+    strokes: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ControlsMessage(ServerMessage):
+    """Each control's stable id in index order, the symmetry group (its maps of a position, 3 x 3 row-major, the
+    identity first: effective control j is control j mod k under map j // k), each control's radius of influence
+    (model units) and the runs of controls that act as one (a stroke's samples). Sent before the frame whenever one
+    of them changes."""
+
+    type: ClassVar[str] = "controls"
+    ids: list[int]
+    group: str = "none"
+    group_maps: list[list[float]] = field(default_factory=lambda: [list(IDENTITY_MAP)])
+    radii: list[float] = field(default_factory=list)
+    strokes: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class HeldControl:
+    """A control held now: its index now, its id, and whether the view it is sent to holds it."""
+
+    index: int
+    id: int
+    own: bool
+
+
+@dataclass(frozen=True, kw_only=True)
+class GrabsMessage(ServerMessage):
+    """The controls held now, as the view it is sent to sees them."""
+
+    type: ClassVar[str] = "grabs"
+    grabs: list[HeldControl]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ErrorMessage(ServerMessage):
+    """A refused intent: why, and its type when that much was readable."""
+
+    type: ClassVar[str] = "error"
+    message: str
+    intent: str | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class PongMessage(ServerMessage):
+    """The answer to a ping, with its `t`."""
+
+    type: ClassVar[str] = "pong"
+    t: float | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class StatusMessage(ServerMessage):
+    """The engine's time per cycle (ms) and the frames published per second, every STATUS_PERIOD while frames
+    flow."""
+
+    type: ClassVar[str] = "status"
+    cycle_ms: float
+    fps: float
+
+    @classmethod
+    def of(cls, cycle_time: float, frames_per_second: float) -> StatusMessage:
+        return cls(cycle_ms=round(float(cycle_time) * 1e3, 6), fps=round(float(frames_per_second), 2))
+
+
+@dataclass(frozen=True, kw_only=True)
+class AutosaveMessage(ServerMessage):
+    """The autosave cannot write (`ok` false: what and where; it tries again every second), shown until a message
+    with `ok` true says a save is on disk again."""
+
+    type: ClassVar[str] = "autosave"
+    ok: bool
+    message: str
+
+    @classmethod
+    def of(cls, error: str | None) -> AutosaveMessage:
+        return cls(ok=error is None, message=error or "autosave works again: all is on disk")
+
+
+@dataclass(frozen=True, kw_only=True)
+class FrameMessage(ServerMessage):
+    """Over the notebook's comm only: a binary frame travels as this message with the frame as its one buffer (a
+    websocket sends the frame bare)."""
+
+    type: ClassVar[str] = "frame"
+
+
+#: Server -> client JSON messages by their "type" (the frame's envelope aside: the view's pipe opens it).
+SERVER_MESSAGES: dict[str, type[ServerMessage]] = {
+    m.type: m for m in (TopologyMessage, GrabsMessage, ControlsMessage, ErrorMessage, PongMessage, StatusMessage,
+                        AutosaveMessage)
+}
+
+
+# -- client -> server ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
 class Intent:
-    type: str
-    index: int | None = None
-    position: tuple[float, float, float] | None = None
-    t: float | None = None
-    name: str | None = None
-    value: float | bool | None = None
-    control_id: int | None = None
-    radius: float | None = None
-    points: tuple[tuple[float, float, float], ...] | None = None
+    """A view's request, one JSON object per message. A field without a default is required; a field whose
+    metadata says browser=False is for older clients (the browser's builders leave it out)."""
+
+    type: ClassVar[str]
+    #: Fields of which exactly one must be given.
+    one_of: ClassVar[tuple[str, ...]] = ()
+
+    def checked(self) -> Intent:
+        """Checks across fields, once each field passed its own (IntentError); the intent, perhaps refined."""
+        return self
+
+    def to_json(self) -> dict:
+        """The message a client sends (fields left at None are left out)."""
+        out = {"type": self.type}
+        for f in dataclasses.fields(self):
+            if getattr(self, f.name) is not None:
+                out[f.name] = _plain(getattr(self, f.name))
+        return out
 
 
-# -- intents ---------------------------------------------------------------------------------------------------
+#: A control by its place now (older clients; the browser names controls by id).
+_BY_PLACE = {"browser": False}
+
+
+@dataclass(frozen=True, kw_only=True)
+class ControlIntent(Intent):
+    """An intent that names one control: by its stable id (the topology's "control_ids", then "controls" messages),
+    or by its index now."""
+
+    one_of: ClassVar[tuple[str, ...]] = ("id", "index")
+    id: ControlId | None = None
+    index: ControlIndex | None = field(default=None, metadata=_BY_PLACE)
+
+
+@dataclass(frozen=True, kw_only=True)
+class GrabIntent(ControlIntent):
+    """Hold a control; refused while another view holds it. A grab to its release is one undo step (a gesture)."""
+
+    type: ClassVar[str] = "grab"
+
+
+@dataclass(frozen=True, kw_only=True)
+class MoveIntent(ControlIntent):
+    """Move a held control to `position` (model units)."""
+
+    type: ClassVar[str] = "move"
+    position: Point
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReleaseIntent(ControlIntent):
+    """Let go of a held control (optionally at a last `position`). A held control removed elsewhere ends the grab,
+    with an error message to the view that held it."""
+
+    type: ClassVar[str] = "release"
+    position: Point | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class RemoveIntent(ControlIntent):
+    """Remove a control (a stroke goes whole)."""
+
+    type: ClassVar[str] = "remove"
+
+
+@dataclass(frozen=True, kw_only=True)
+class RadiusIntent(ControlIntent):
+    """A control's radius of influence (model units); the same control's radius again within a moment joins its
+    step."""
+
+    type: ClassVar[str] = "radius"
+    radius: Radius
+
+
+@dataclass(frozen=True, kw_only=True)
+class AddIntent(Intent):
+    """A new control at `position` (its other features the nearest node's; radius left out: the preset's); it moves
+    nothing until it is dragged."""
+
+    type: ClassVar[str] = "add"
+    position: Point
+    radius: Radius | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class StrokeIntent(Intent):
+    """A polyline of 2 to MAX_STROKE_POINTS points as one control (its samples act as one); radius optional."""
+
+    type: ClassVar[str] = "stroke"
+    points: Polyline
+    radius: Radius | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class SetIntent(Intent):
+    """Set a setting by name (the topology message lists them: "parameters"), checked against its declaration."""
+
+    type: ClassVar[str] = "set"
+    name: SettingName
+    value: Value
+
+    def checked(self) -> SetIntent:
+        try:
+            return dataclasses.replace(self, value=check_setting(self.name, self.value))
+        except IntentError:
+            raise
+        except ValueError as exc:
+            raise IntentError(f"set: {exc}", "set") from None
+
+
+@dataclass(frozen=True, kw_only=True)
+class PingIntent(Intent):
+    """Answered at once with a `PongMessage` carrying the same `t`."""
+
+    type: ClassVar[str] = "ping"
+    t: Annotated[float, Number()]
+
+
+@dataclass(frozen=True, kw_only=True)
+class HelloIntent(Intent):
+    """Send the topology and the latest frame again (a new output of the same connection: a notebook's)."""
+
+    type: ClassVar[str] = "hello"
+
+
+@dataclass(frozen=True, kw_only=True)
+class ResetIntent(Intent):
+    """Train the whole schedule again from the start mesh."""
+
+    type: ClassVar[str] = "reset"
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainIntent(Intent):
+    """Resume training."""
+
+    type: ClassVar[str] = "train"
+
+
+@dataclass(frozen=True, kw_only=True)
+class PauseIntent(Intent):
+    """Pause training."""
+
+    type: ClassVar[str] = "pause"
+
+
+@dataclass(frozen=True, kw_only=True)
+class UndoIntent(Intent):
+    """Take back the last step."""
+
+    type: ClassVar[str] = "undo"
+
+
+@dataclass(frozen=True, kw_only=True)
+class RedoIntent(Intent):
+    """Bring back the step last undone."""
+
+    type: ClassVar[str] = "redo"
+
+
+#: Client -> server intents by their "type", in the order the browser's builders list them.
+INTENTS: dict[str, type[Intent]] = {
+    i.type: i for i in (GrabIntent, MoveIntent, ReleaseIntent, ResetIntent, TrainIntent, PauseIntent, UndoIntent,
+                        RedoIntent, PingIntent, HelloIntent, SetIntent, AddIntent, RemoveIntent, RadiusIntent,
+                        StrokeIntent)
+}
+
+
+@dataclass(frozen=True)
+class Declared:
+    """One field of a message as declared: its name, Python type, wire type (intents), and whether it is required."""
+
+    name: str
+    hint: object
+    wire: WireType | None
+    required: bool
+    browser: bool
+
+
+def declared_fields(cls) -> tuple[Declared, ...]:
+    """The fields of a message class with their types resolved (what validation and the code generator read)."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    out = []
+    for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        out.append(Declared(f.name, hint, _wire_type(hint), f.default is dataclasses.MISSING
+                            and f.default_factory is dataclasses.MISSING, f.metadata.get("browser", True)))
+    return tuple(out)
+
+
+def _wire_type(hint) -> WireType | None:
+    """The WireType in an Annotated hint (also inside `X | None`)."""
+    for arg in (hint, *typing.get_args(hint)):
+        for meta in getattr(arg, "__metadata__", ()):
+            if isinstance(meta, WireType):
+                return meta
+    return None
+
+
+_DECLARED = {kind: declared_fields(cls) for kind, cls in INTENTS.items()}
+for _kind, _fields in _DECLARED.items():
+    if any(f.wire is None for f in _fields):
+        raise TypeError(f"intent {_kind!r}: every field needs a wire type (fields.py), as Annotated[type, WireType]")
+
+
 def _no_constants(name: str):
     raise ValueError(f"{name} is not allowed")
 
 
-def _number(value, what: str, kind: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise IntentError(f"{kind}: {what} must be a number, got {json.dumps(value)[:40]}", kind)
-    try:
-        x = float(value)
-    except OverflowError:
-        raise IntentError(f"{kind}: {what} is too large", kind) from None
-    if not math.isfinite(x):
-        raise IntentError(f"{kind}: {what} must be finite", kind)
-    return x
-
-
 def parse_intent(message, n_controls: int) -> Intent:
-    """Check one client message (str, or bytes for a binary frame) against the protocol; IntentError if refused."""
+    """Check one client message (str, or bytes for a binary frame) against its declaration; IntentError if refused."""
     if isinstance(message, (bytes, bytearray, memoryview)):
         raise IntentError("binary messages are not accepted: send JSON text like {\"type\": \"train\"}")
     if not isinstance(message, str):
@@ -206,102 +521,31 @@ def parse_intent(message, n_controls: int) -> Intent:
     except (ValueError, RecursionError) as exc:  # JSONDecodeError is a ValueError; so is a 5000-digit integer
         raise IntentError(f"not valid JSON: {str(exc)[:80]}") from None
     if not isinstance(data, dict):
-        raise IntentError("expected a JSON object like {\"type\": \"move\", \"index\": 0, \"position\": [0, 0, 0]}")
+        raise IntentError("expected a JSON object like {\"type\": \"move\", \"id\": 0, \"position\": [0, 0, 0]}")
     kind = data.get("type")
     if not isinstance(kind, str) or kind not in INTENTS:
         shown = json.dumps(kind)[:40] if kind is not None else "missing"
         raise IntentError(f"unknown intent type {shown}; known: {', '.join(INTENTS)}")
-    required, optional = INTENTS[kind]
-    fields = set(data) - {"type"}
-    extra = sorted(fields - required - optional)
+    cls, declared = INTENTS[kind], _DECLARED[kind]
+    names = {f.name for f in declared}
+    given = set(data) - {"type"}
+    extra = sorted(given - names)
     if extra:
-        allowed = ", ".join(sorted(required | optional)) or "none"
+        allowed = ", ".join(sorted(names)) or "none"
         raise IntentError(f"{kind}: unknown field(s) {', '.join(repr(f[:30]) for f in extra)}; allowed: {allowed}",
                           kind)
-    missing = sorted(required - fields)
+    missing = sorted(f.name for f in declared if f.required and f.name not in given)
     if missing:
         raise IntentError(f"{kind}: missing field(s) {', '.join(missing)}", kind)
-    index = position = t = control_id = None
-    if kind in CONTROL_INTENTS and ("index" in data) == ("id" in data):
-        raise IntentError(f"{kind}: give the control's \"id\" (or its \"index\"), one of the two", kind)
-    if "id" in data:
-        control_id = data["id"]
-        if isinstance(control_id, bool) or not isinstance(control_id, int) or not 0 <= control_id < 2**31:
-            raise IntentError(f"{kind}: id must be a control's id (an integer >= 0), got "
-                              f"{json.dumps(control_id)[:40]}", kind)
-    if "index" in data:
-        index = data["index"]
-        if isinstance(index, bool) or not isinstance(index, int):
-            raise IntentError(f"{kind}: index must be an integer, got {json.dumps(index)[:40]}", kind)
-        if not 0 <= index < n_controls:
-            raise IntentError(f"{kind}: control index {index} is out of range (there are {n_controls} controls: "
-                              f"0..{n_controls - 1})", kind)
-    if "position" in data:
-        position = _point(data["position"], "position", kind)
-    if "t" in data:
-        t = _number(data["t"], "t", kind)
-    radius = points = None
-    if "radius" in data:
-        radius = _number(data["radius"], "radius", kind)
-        if not 0.0 <= radius <= MAX_COORDINATE:
-            raise IntentError(f"{kind}: radius {radius:g} is out of bounds (0 <= radius <= {MAX_COORDINATE:g})", kind)
-    if "points" in data:
-        pts = data["points"]
-        if not isinstance(pts, list) or not 2 <= len(pts) <= MAX_STROKE_POINTS:
-            raise IntentError(f"{kind}: points must be a list of 2 to {MAX_STROKE_POINTS} points [x, y, z], got "
-                              f"{json.dumps(pts)[:60]}", kind)
-        points = tuple(_point(p, "points", kind) for p in pts)
-    name = value = None
-    if kind == "set":
-        name, value = data["name"], data["value"]
-        if not isinstance(name, str) or name not in _parameters.BY_NAME:
-            raise IntentError(f"set: unknown parameter {json.dumps(name)[:40]}; known: "
-                              f"{', '.join(_parameters.BY_NAME)}", kind)
-        declared = _parameters.BY_NAME[name]
-        if declared.kind != "bool":
-            value = _number(value, name, kind)
-        try:
-            value = declared.check(value)
-        except ValueError as exc:
-            raise IntentError(f"set: {exc}", kind) from None
-    return Intent(kind, index, position, t, name, value, control_id, radius, points)
+    if cls.one_of and sum(name in given for name in cls.one_of) != 1:
+        raise IntentError(f"{kind}: give {' or '.join(json.dumps(n) for n in cls.one_of)}, one of the two", kind)
+    values = {f.name: f.wire.check(data[f.name], f.name, kind, n_controls) for f in declared if f.name in given}
+    return cls(**values).checked()
 
 
-def _point(p, what: str, kind: str) -> tuple[float, float, float]:
-    """Three finite numbers within +-MAX_COORDINATE (a position, a stroke's point)."""
-    if not isinstance(p, list) or len(p) != 3:
-        raise IntentError(f"{kind}: {what} must be a list of 3 numbers, got {json.dumps(p)[:60]}", kind)
-    xyz = tuple(_number(v, what, kind) for v in p)
-    if max(abs(v) for v in xyz) > MAX_COORDINATE:
-        raise IntentError(f"{kind}: {what} {list(xyz)} is out of bounds (|coordinate| <= {MAX_COORDINATE:g})", kind)
-    return xyz
-
-
-def error_message(message: str, intent: str | None = None) -> dict:
-    return {"type": "error", "message": message, "intent": intent}
-
-
-def status_message(cycle_time: float, frames_per_second: float) -> dict:
-    return {"type": "status", "cycle_ms": round(float(cycle_time) * 1e3, 6), "fps": round(float(frames_per_second), 2)}
-
-
-def autosave_message(error: str | None) -> dict:
-    """The autosave's state: `error` (what and where) while saves fail, None once one is on disk again."""
-    return {"type": "autosave", "ok": error is None, "message": error or "autosave works again: all is on disk"}
-
-
-def controls_message(control_ids, group: str = "none", maps: list | None = None, radii=(), strokes=()) -> dict:
-    """The ids of the controls, in index order, their symmetry group, radii and strokes: sent before the first frame
-    whose controls they name."""
-    return {"type": "controls", "ids": [int(i) for i in control_ids], "group": group,
-            "group_maps": maps if maps is not None else [[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]],
-            "radii": [round(float(r), 6) for r in radii], "strokes": [int(n) for n in strokes]}
-
-
-def grabs_message(grabs: list[dict]) -> dict:
-    """The controls held now: [{"index": i, "id": c, "own": bool}, ...] as one client sees them."""
-    return {"type": "grabs", "grabs": grabs}
-
-
-def pong_message(t: float | None) -> dict:
-    return {"type": "pong", "t": t}
+__all__ = ["PROTOCOL_VERSION", "MAGIC", "MAX_FPS", "STATUS_PERIOD", "MAX_MESSAGE_BYTES", "MAX_COORDINATE",
+           "MAX_STROKE_POINTS", "FLAGS", "HEADER_FORMAT", "HEADER_SIZE", "FrameHeader", "FrameArray", "FRAME_ARRAYS",
+           "frame_size", "ServerMessage", "TopologyMessage", "ControlsMessage", "HeldControl", "GrabsMessage",
+           "ErrorMessage", "PongMessage", "StatusMessage", "AutosaveMessage", "FrameMessage", "SERVER_MESSAGES",
+           "Intent", "ControlIntent", "INTENTS", "IntentError", "parse_intent", "declared_fields", "settings_schema",
+           "check_setting"]

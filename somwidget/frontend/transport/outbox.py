@@ -1,10 +1,10 @@
 """One outbox per session: what the session sends to every view, made once and handed to each transport.
 
-The websocket hub (web/hub.py) and every notebook widget (notebook/widget.py) of a session send from the same
-outbox: each published frame is encoded once (frames.py), the topology message once per generation (display.py),
-and each view (a `Peer`) gets, in order, the topology when its generation is new (else the control ids when they
-changed), the frame, the autosave's state when it changed (a save failed, or works again), and a status line every
-STATUS_PERIOD seconds. A view that falls behind skips frames: it is only ever handed the latest.
+Every view of a session (a `ViewConnection`, connection.py: the web hub's clients, the notebook widgets) sends from
+the same outbox: each published frame is encoded once (frames.py), the topology message once per generation
+(display.py), and each view (a `Peer`) gets, in order, the topology when its generation is new (else the control ids
+when they changed), the frame, the autosave's state when it changed (a save failed, or works again), and a status
+line every STATUS_PERIOD seconds. A view that falls behind skips frames: it is only ever handed the latest.
 
 Threads: the session calls `_on_frame` on its training thread, which only keeps the frame and wakes the
 subscribers; encoding happens in `packets`, on whichever thread sends (the event loop, a widget's sender).
@@ -16,12 +16,19 @@ import threading
 import time
 import weakref
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..model import Frame, Session
 from .display import group_maps, mirror_axes, topology_message
 from .frames import encode_frame
-from .messages import STATUS_PERIOD, autosave_message, controls_message, status_message
+from .messages import (
+    STATUS_PERIOD,
+    AutosaveMessage,
+    ControlsMessage,
+    ServerMessage,
+    StatusMessage,
+    TopologyMessage,
+)
 
 
 @dataclass
@@ -48,7 +55,7 @@ class Outbox:
         self._lock = threading.Lock()
         self._latest: Frame | None = None
         self._encoded: tuple[int, bytes] = (-1, b"")
-        self._topology: tuple[int, dict | None] = (-1, None)
+        self._topology: tuple[int, TopologyMessage | None] = (-1, None)
         self._subscribers: list[Callable[[], None]] = []
         session.add_listener(self._on_frame, replay=False)
 
@@ -84,9 +91,9 @@ class Outbox:
         return current if latest is None or current.seq > latest.seq else latest
 
     # -- what a view is sent ------------------------------------------------------------------------------------
-    def packets(self, peer: Peer, frame: Frame | None = None) -> list:
-        """What `peer` should be sent for `frame` (default: the latest), in order: JSON messages (dicts), then the
-        frame (bytes), then perhaps a status line (a dict). Empty while a newer preset is being installed (its own
+    def packets(self, peer: Peer, frame: Frame | None = None) -> list[ServerMessage | bytes]:
+        """What `peer` should be sent for `frame` (default: the latest), in order: messages, then the frame (bytes),
+        then perhaps the autosave's state and a status line. Empty while a newer preset is being installed (its own
         frames follow)."""
         frame = self.latest if frame is None else frame
         session = self.session
@@ -99,28 +106,29 @@ class Outbox:
             if self._encoded[0] != frame.seq:
                 self._encoded = (frame.seq, encode_frame(frame, session))
             data = self._encoded[1]
-        out: list = []
-        radii = tuple(round(float(r), 6) for r in frame.radii)
-        controls = (frame.control_ids, frame.group, radii, frame.strokes)
+        out: list[ServerMessage | bytes] = []
+        radii = [round(float(r), 6) for r in frame.radii]
+        controls = (frame.control_ids, frame.group, tuple(radii), frame.strokes)
         if peer.generation != frame.generation:
-            out.append({**topology, "client": peer.id, "control_ids": list(frame.control_ids), "group": frame.group,
-                        "group_maps": group_maps(frame.group), "mirror_axes": mirror_axes(frame.group),
-                        "n_controls": frame.n_controls, "n_effective": len(frame.effective_controls),
-                        "radii": list(radii), "strokes": list(frame.strokes)})
+            out.append(replace(topology, client=peer.id, control_ids=list(frame.control_ids), group=frame.group,
+                               group_maps=group_maps(frame.group), mirror_axes=mirror_axes(frame.group),
+                               n_controls=frame.n_controls, n_effective=len(frame.effective_controls), radii=radii,
+                               strokes=list(frame.strokes)))
             peer.generation, peer.control_ids = frame.generation, controls
         elif peer.control_ids != controls:  # a control added or removed, a radius, a group: before the frame
-            out.append(controls_message(frame.control_ids, frame.group, group_maps(frame.group), radii,
-                                        frame.strokes))
+            out.append(ControlsMessage(ids=[int(i) for i in frame.control_ids], group=frame.group,
+                                       group_maps=group_maps(frame.group), radii=radii,
+                                       strokes=[int(n) for n in frame.strokes]))
             peer.control_ids = controls
         out.append(data)
         peer.seq = frame.seq
         if session.save_error != peer.save_error:  # a save failed, or works again: every view says so
             peer.save_error = session.save_error
-            out.append(autosave_message(peer.save_error))
+            out.append(AutosaveMessage.of(peer.save_error))
         now = time.monotonic()
         if now - peer.last_status >= STATUS_PERIOD:
             peer.last_status = now
-            out.append(status_message(frame.cycle_time, session.frames_per_second))
+            out.append(StatusMessage.of(frame.cycle_time, session.frames_per_second))
         return out
 
 

@@ -3,7 +3,7 @@
 `somwidget serve` calls `run_server` (serve.py). One server holds one `Session`; every tab on it shares the session,
 so any tab can drag a control and all of them see the clay follow. The 3-D view is the browser's own (the client's
 module, served at /xr/somview.js and mounted into the page's #clay-view): it draws the frames the hub (hub.py)
-streams over the websocket /xr/ws and sends the drags back as intents, so each tab keeps its own camera and nothing is
+streams over the websocket /view/ws and sends the drags back as intents, so each tab keeps its own camera and nothing is
 rendered on the server. The panel (layout.py) is bound to the session's panel model (model/panel.py) through
 trame's state and triggers.
 
@@ -14,9 +14,9 @@ fields when the preset or the history changes.
 A read-only JSON route, GET /api/state, reports the session, the panel and the connected clients (for tests,
 benchmarks and scripts); add ?positions=1 for every node's position.
 
-Every bind gets `lan.request_guard`: websockets (trame's /ws, /xr/ws) from pages of other sites are refused, and a
-loopback-bound server answers only loopback Host names (no DNS rebinding). Beyond loopback, `run_server` adds HTTPS
-and the access token (lan.py).
+Every bind gets `lan.request_guard`: websockets (trame's /ws, the view's /view/ws) from pages of other sites are
+refused, and a loopback-bound server answers only loopback Host names (no DNS rebinding). Beyond loopback,
+`run_server` adds HTTPS and the access token (lan.py).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from wslink.websocket import LinkProtocol
 from ...backend import presets as _presets
 from ..model import Session
 from ...backend.io import TooManyVertices
-from ..model.parameters import REACH_HELP
+from ..model.panel import REACH_HELP
 from ..transport.limits import bound_messages
 from . import lan as _lan
 from . import uploads
@@ -73,7 +73,7 @@ class SomApp:
         self.xr_token: str | None = None  # the LAN access token, when served beyond loopback
         # on a loopback bind, answer only loopback Host names (False behind a proxy that forwards the browser's Host)
         self.check_host = True
-        self.xr = None  # the clay view's hub (/xr/ws, /xr/somview.js), once the server is bound
+        self.view_hub = None  # the clay view's routes and clients (/view/ws, /xr/...), once the server is bound
         self.server = server if server is not None else get_server("somwidget", client_type="vue3")
         self.server.client_type = "vue3"
         self.state, self.ctrl = self.server.state, self.server.controller
@@ -95,8 +95,8 @@ class SomApp:
         """Detach from the session (the app and its hub; call on the server's thread, after it stopped)."""
         uploads.sweep_uploads(own=True)
         self.panel_state.close()
-        if self.xr is not None:
-            self.xr.detach()
+        if self.view_hub is not None:
+            self.view_hub.detach()
         if self._pump_task is not None:
             self._pump_task.cancel()
             self._pump_task = None
@@ -321,11 +321,11 @@ class SomApp:
         if not guard_state_updates(wslink_server):
             log.warning("could not guard the page's state updates (trame's state.update not found)")
         wslink_server.app.router.add_get("/api/state", self._api_state)
-        self.xr = attach_hub(wslink_server, self.session, token=self.xr_token)
+        self.view_hub = attach_hub(wslink_server, self.session, token=self.xr_token)
 
     async def _api_state(self, request: web.Request) -> web.Response:
         positions = request.query.get("positions", "0") not in ("0", "", "false")
-        hub = self.xr
+        hub = self.view_hub
         body = {"session": self.session.state(positions=positions), "clients": len(self.clients),
                 "views": {"clients": len(hub.clients) if hub else 0,
                           "frames_sent": sum(c.frames_sent for c in hub.clients.values()) if hub else 0,

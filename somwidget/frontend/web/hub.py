@@ -1,16 +1,18 @@
-"""The clay view's server side: the websocket /xr/ws that feeds every browser view of a Session (the web app's
-page and the XR page), the XR page at /xr/ and the view's module at /xr/somview.js, on an aiohttp app.
+"""The clay view's server side on an aiohttp app: the websocket /view/ws that feeds every browser view of a Session
+(the web app's page, the XR page; /xr/ws is the same route under the name headsets paired before it had), the XR page
+at /xr/ and the view's module at /xr/somview.js.
 
 `attach(server, session, token=None)` adds the routes to a running trame/wslink server (call it from
-`ctrl.on_server_bind`, whose argument is the wslink server) or to any aiohttp `web.Application`. One `XRHub` per
-app holds the connected clients and who holds which control; every client shares the one `Session`, so a desktop
-tab, the trame panel and a headset all see each other's moves.
+`ctrl.on_server_bind`, whose argument is the wslink server) or to any aiohttp `web.Application`. One `ViewHub` per
+app holds the connected clients, each a `ViewConnection` (transport/connection.py) over its websocket, and one
+`HolderRegistry` for all of them; every client shares the one `Session`, so a desktop tab, the trame panel and a
+headset all see each other's moves.
 
-Threads: the session's outbox (transport/outbox.py) calls `XRHub._on_frame` on the training thread; that only wakes
-the event loop. Everything else (encoding, sending, intents) happens on the event loop's thread. Each client has a
-slot for the latest frame and a bounded queue of JSON messages, sent first: a slow client gets the latest frame,
-never a backlog, and its replies never wait behind frames. A client whose queue overflows, or that stops reading
-(a send that does not finish within SEND_TIMEOUT), is dropped.
+Threads: the session's outbox (transport/outbox.py) calls `ViewHub._on_frame` on the training thread; that only
+wakes the event loop. Everything else (encoding, sending, intents) happens on the event loop's thread. Each client
+has a slot for the latest frame and a bounded queue of JSON messages, sent first: a slow client gets the latest
+frame, never a backlog, and its replies never wait behind frames. A client whose queue overflows, or that stops
+reading (a send that does not finish within SEND_TIMEOUT), is dropped.
 """
 
 from __future__ import annotations
@@ -28,12 +30,16 @@ from aiohttp import WSMsgType, web
 
 from ..client import BUILD_HINT, DIST
 from ..transport import messages
-from ..transport.gestures import Gestures
-from ..transport.outbox import Peer, outbox_for
+from ..transport.connection import ViewConnection
+from ..transport.holders import HolderRegistry
+from ..transport.outbox import outbox_for
 from . import lan
 
 log = logging.getLogger(__name__)
 
+#: The websocket every view connects to, and the older name of the same route (headsets paired before).
+VIEW_SOCKET = "/view/ws"
+OLD_VIEW_SOCKET = "/xr/ws"
 #: Refused messages a client may send within ERROR_WINDOW seconds before the server closes its socket.
 MAX_ERRORS = 200
 ERROR_WINDOW = 10.0
@@ -46,6 +52,9 @@ NOT_BUILT = ('<!doctype html><meta charset="utf-8"><title>somwidget: the client 
 
 
 class _Client:
+    """One websocket client: the pipe of its ViewConnection (a queue of JSON texts, sent first, and a slot for the
+    latest frame) and its counters."""
+
     def __init__(self, cid: int, ws: web.WebSocketResponse, remote: str | None):
         self.id = cid
         self.ws = ws
@@ -53,31 +62,28 @@ class _Client:
         self.texts: collections.deque = collections.deque()  # JSON messages, sent before any frame
         self.frame: bytes | None = None  # the latest frame not yet sent (a newer one replaces it)
         self.wake = asyncio.Event()
-        self.peer = Peer(id=cid)  # what this client has been sent (outbox.py)
+        self.connection: ViewConnection | None = None
         self.errors: collections.deque = collections.deque()
-        self.refused = 0
         self.frames_sent = 0
         self.bytes_sent = 0
         self.closed = False
         self.close_reason = b""
         self.transport = None  # the connection, to cut when the client stops reading
 
-    def push(self, packets) -> None:
-        """Queue what the outbox made for this client: JSON messages (dicts) and the frame (bytes)."""
-        for packet in packets:
-            if isinstance(packet, bytes):
-                self.push_frame(packet)
-            else:
-                self.push_text(json.dumps(packet))
+    @property
+    def refused(self) -> int:
+        return self.connection.refused if self.connection is not None else 0
 
-    def push_text(self, text: str) -> None:
+    def send_json(self, message: dict) -> None:
+        if self.closed:
+            return
         if len(self.texts) >= MAX_TEXTS:  # it does not read what it asked for: drop it, keep no more
             self.drop(b"too slow")
             return
-        self.texts.append(text)
+        self.texts.append(json.dumps(message))
         self.wake.set()
 
-    def push_frame(self, data: bytes) -> None:
+    def send_frame(self, data: bytes) -> None:
         self.frame = data  # not sent yet: the newer frame replaces it
         self.wake.set()
 
@@ -89,8 +95,8 @@ class _Client:
         self.wake.set()
 
 
-class XRHub:
-    """The /xr/ routes and their clients, for one Session."""
+class ViewHub:
+    """The view's routes (/view/ws, /xr/...) and their websocket clients, for one Session."""
 
     def __init__(self, session, token: str | None = None, dist: Path | None = None, max_fps: float = messages.MAX_FPS):
         self.session = session
@@ -98,7 +104,7 @@ class XRHub:
         self.dist = Path(dist) if dist is not None else DIST
         self.max_fps = float(max_fps)
         self.clients: dict[int, _Client] = {}
-        self.gestures = Gestures(session, on_change=self._broadcast_grabs)
+        self.holders = HolderRegistry(session)
         self.outbox = outbox_for(session)
         self.refused_total = 0
         self.intents_total = 0
@@ -112,7 +118,8 @@ class XRHub:
     def add_routes(self, router) -> None:
         router.add_get("/xr", self._redirect)
         router.add_get("/xr/", self._index)
-        router.add_get("/xr/ws", self._websocket)
+        router.add_get(VIEW_SOCKET, self._websocket)
+        router.add_get(OLD_VIEW_SOCKET, self._websocket)
         router.add_get("/xr/status", self._status)
         router.add_get("/xr/somview.js", self._view_module)
         router.add_get("/xr/{name:[A-Za-z0-9_.-]+\\.html}", self._page)
@@ -166,7 +173,7 @@ class XRHub:
         return web.Response(status=503, text=NOT_BUILT, content_type="text/html")
 
     async def _status(self, request):
-        """JSON: connected XR clients, grabs, counters (for tests and benchmarks)."""
+        """JSON: the connected views, grabs, counters (for tests and benchmarks)."""
         if not self._allowed(request):
             return lan.forbidden()
         body = {"clients": [{"id": c.id, "frames_sent": c.frames_sent, "bytes_sent": c.bytes_sent,
@@ -190,9 +197,9 @@ class XRHub:
 
     def _send_frame(self, client: _Client, frame=None) -> None:
         try:
-            client.push(self.outbox.packets(client.peer, frame))
+            client.connection.send_latest(frame)
         except Exception:  # never let one odd frame stop the stream
-            log.exception("encoding a frame for client %d failed", client.id)
+            log.exception("encoding a frame for view client %d failed", client.id)
 
     def _broadcast(self) -> None:
         with self._scheduled_lock:
@@ -200,19 +207,11 @@ class XRHub:
         frame = self.outbox.latest
         for client in list(self.clients.values()):
             self._send_frame(client, frame)
-        for holder, message in self.gestures.prune(frame.control_ids):
-            if holder in self.clients:
-                self.clients[holder].push_text(json.dumps(message))
 
     @property
     def grabs(self) -> dict[int, int]:
         """Control index (now) -> the id of the client holding it."""
-        ids = self.session.control_ids
-        return {ids.index(c): who for c, who in self.gestures.grabs.items() if c in ids}
-
-    def _broadcast_grabs(self) -> None:
-        for c in self.clients.values():
-            c.push_text(json.dumps(self.gestures.message_for(c.id)))
+        return {index: view.client_id for index, view in self.holders.held().items()}
 
     async def _sender(self, client: _Client) -> None:
         """Sends the client's JSON messages first, then its latest frame at most max_fps a second; a send that
@@ -242,7 +241,7 @@ class XRHub:
                     client.frames_sent += 1
                     client.bytes_sent += len(data)
         except asyncio.TimeoutError:
-            log.warning("XR client %d stopped reading (a send took over %g s); dropping it", client.id, SEND_TIMEOUT)
+            log.warning("view client %d stopped reading (a send took over %g s); dropping it", client.id, SEND_TIMEOUT)
             client.drop(b"not reading")
             if client.transport is not None:  # a close frame would wait behind the unread data: cut it
                 client.transport.abort()
@@ -256,7 +255,7 @@ class XRHub:
     # -- websocket -----------------------------------------------------------------------------------------------
     async def _websocket(self, request):
         if not self._allowed(request):
-            log.info("refused an XR websocket from %s: no valid token", request.remote)
+            log.info("refused a view websocket from %s: no valid token", request.remote)
             return lan.forbidden()
         ws = web.WebSocketResponse(heartbeat=20.0, max_msg_size=64 * 1024, compress=False)
         await ws.prepare(request)
@@ -264,67 +263,45 @@ class XRHub:
             self._loop = asyncio.get_running_loop()
         client = _Client(self._next_id, ws, request.remote)
         client.transport = request.transport
+        client.connection = ViewConnection(self.session, self.holders, client, client_id=client.id,
+                                           name=f"view client {client.id}")
         self._next_id += 1
         self.clients[client.id] = client
-        log.info("XR client %d connected from %s", client.id, request.remote)
+        log.info("view client %d connected from %s (%s)", client.id, request.remote, request.path)
         sender = asyncio.ensure_future(self._sender(client))
         try:
-            self._send_frame(client)
-            self._broadcast_grabs()
+            client.connection.open()
             async for msg in ws:
-                if msg.type == WSMsgType.TEXT:
-                    self._handle(client, msg.data)
-                elif msg.type == WSMsgType.BINARY:
-                    self._handle(client, msg.data)
+                if msg.type in (WSMsgType.TEXT, WSMsgType.BINARY):
+                    self._receive(client, msg.data)
                 elif msg.type == WSMsgType.ERROR:
                     break
                 if client.closed:
-                    log.warning("XR client %d dropped: %s", client.id, client.close_reason.decode())
+                    log.warning("view client %d dropped: %s", client.id, client.close_reason.decode())
                     await ws.close(code=1008, message=client.close_reason)
                     break
         finally:
             self.clients.pop(client.id, None)
-            self.gestures.drop(client.id)  # a client gone mid-grab: its drag is a completed step
+            client.connection.close()  # a client gone mid-grab: its drag is a completed step
             client.wake.set()
             sender.cancel()
-            log.info("XR client %d disconnected (%d frames, %d bytes sent, %d refused)", client.id,
+            log.info("view client %d disconnected (%d frames, %d bytes sent, %d refused)", client.id,
                      client.frames_sent, client.bytes_sent, client.refused)
         return ws
 
-    def _refuse(self, client: _Client, exc: Exception, intent: str | None) -> None:
-        client.refused += 1
+    def _receive(self, client: _Client, data) -> None:
+        """One message of a client to its connection; a client refused more than MAX_ERRORS times within
+        ERROR_WINDOW seconds is dropped."""
+        if client.connection.receive(data):
+            self.intents_total += 1
+            return
         self.refused_total += 1
         now = time.monotonic()
         client.errors.append(now)
         while client.errors and now - client.errors[0] > ERROR_WINDOW:
             client.errors.popleft()
-        if client.refused <= 20 or client.refused % 100 == 0:
-            log.warning("XR client %d: refused a message (%d so far): %s", client.id, client.refused, exc)
-        client.push_text(json.dumps(messages.error_message(str(exc), intent)))
         if len(client.errors) > MAX_ERRORS:
             client.drop(b"too many refused messages")
-
-    def _handle(self, client: _Client, data) -> None:
-        try:
-            intent = messages.parse_intent(data, self.session.n_controls)
-        except messages.IntentError as exc:
-            self._refuse(client, exc, exc.intent)
-            return
-        try:
-            self._apply(client, intent)
-            self.intents_total += 1
-        except (ValueError, RuntimeError) as exc:  # the session's own checks (or a closed session)
-            self._refuse(client, exc, intent.type)
-
-    def _apply(self, client: _Client, intent: messages.Intent) -> None:
-        if intent.type == "hello":
-            client.peer.forget()  # the topology again, then the latest frame
-            self._send_frame(client)
-            client.push_text(json.dumps(self.gestures.message_for(client.id)))
-            return
-        reply = self.gestures.apply(client.id, intent)
-        if reply is not None:
-            client.push_text(json.dumps(reply))
 
     async def close(self, *_):
         for c in list(self.clients.values()):
@@ -334,20 +311,20 @@ class XRHub:
         self.outbox.unsubscribe(self._on_frame)
 
 
-def attach(server, session, token: str | None = None, dist=None) -> XRHub:
-    """Serve the WebXR client on `server`: a wslink server (what `ctrl.on_server_bind` passes), an aiohttp
-    `web.Application` or its router. Adds GET /xr/ (the page; /xr redirects), /xr/<page>.html, /xr/assets/...,
-    the websocket /xr/ws and GET /xr/status. With `token`, every one of them answers 403 unless the request
-    carries it (?token=, the cookie, or Authorization: Bearer). Returns the hub."""
+def attach(server, session, token: str | None = None, dist=None) -> ViewHub:
+    """Serve the clay view's routes on `server`: a wslink server (what `ctrl.on_server_bind` passes), an aiohttp
+    `web.Application` or its router. Adds the websocket /view/ws (and /xr/ws, the same), GET /xr/ (the XR page;
+    /xr redirects), /xr/<page>.html, /xr/assets/..., /xr/somview.js and /xr/status. With `token`, every one of them
+    answers 403 unless the request carries it (?token=, the cookie, or Authorization: Bearer). Returns the hub."""
     app = getattr(server, "app", server)
     router = getattr(app, "router", app)
     if not hasattr(router, "add_get"):
         raise TypeError(f"attach: expected a wslink server, an aiohttp Application or a router, got {server!r}")
-    hub = XRHub(session, token=token, dist=dist)
+    hub = ViewHub(session, token=token, dist=dist)
     hub.add_routes(router)
     if isinstance(app, web.Application) and not app.frozen:
         app.on_shutdown.append(hub.close)
     return hub
 
 
-__all__ = ["XRHub", "attach", "DIST"]
+__all__ = ["ViewHub", "attach", "DIST", "VIEW_SOCKET", "OLD_VIEW_SOCKET"]

@@ -1,6 +1,7 @@
-"""The web app's page, laid out with trame's vuetify widgets: the toolbar, the panel (fields generated from the
-panel model's declarations, tables bound to the state app.py keeps), and the element the clay view mounts into.
-The page's own scripts: the keyboard shortcuts, the view's mount and the reconnect.
+"""The web app's page, laid out with trame's vuetify widgets: the toolbar, the panel (the settings' fields, sliders
+and switches generated from their declaration, backend/schedule.py; tables bound to the state app.py keeps), and the
+element the clay view mounts into. The page's own scripts: the keyboard shortcuts, the view's mount and the
+reconnect.
 """
 
 from __future__ import annotations
@@ -9,16 +10,11 @@ from trame.ui.vuetify3 import SinglePageWithDrawerLayout
 from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
-from ..model.panel import PanelModel
-from ..model.parameters import BY_NAME as _PARAM
-from ..model.parameters import GAP_HELP, METRIC_WEIGHT, RADIUS_HELP
+from ...backend.schedule import BY_NAME, SECTIONS, Setting
+from ..model.panel import GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
 from ..model.variants import VARIANTS_HELP
+from .state_guard import state_key
 from .uploads import MIME
-
-
-def state_key(name: str) -> str:
-    """The trame state key of a parameter's field."""
-    return "param_S" if name == "iterations" else f"param_{name}"
 
 
 #: The page's keyboard shortcuts: Ctrl+Z undoes, Ctrl+Shift+Z or Ctrl+Y redoes (Cmd on a Mac), except while a text
@@ -184,38 +180,15 @@ def _panel(panel: PanelModel) -> None:
                      "{{ stats.k }} controls ({{ stats.k_eff }} with mirrors)", classes="text-caption",
                      id="speed-text")
 
-        # schedule: the fields come from the parameters' declaration (parameters.py). Each shows the value in effect
-        # (bound one way: what a person types goes to the session as an intent, never into the state); a refused
-        # value shows its message and the field is drawn anew with the value in effect (field_revs, panel_state.py).
-        html.Div("Schedule", classes="text-subtitle-2 mt-2")
-        with v3.VRow(dense=True):
-            for name in ("iterations", "smoothing", "l_start", "l_end"):
-                p = _PARAM[name]
-                with v3.VCol(cols=6), html.Div(id=f"param-{name}", title=p.help):
-                    v3.VTextField(model_value=(state_key(name),), key=_revision_key(name), label=p.label,
-                                  density="compact", type="number",
-                                  error_messages=(f"param_errors['{name}'] || []",), hide_details="auto",
-                                  id=f"field-{name}",
-                                  raw_attrs=_on_enter_or_change(
-                                      f"trigger('set_param', ['{name}', $event.target.value])"))
-        reach = _PARAM["reach"]
-        with html.Div(id="param-reach", title=reach.help):
-            v3.VSlider(v_model=("param_reach",), label=("'reach ' + Number(param_reach).toFixed(2)",),
-                       min=reach.slider[0], max=reach.slider[1], step=reach.slider[2], density="compact",
-                       hide_details="auto", thumb_label=True, id="reach-slider", classes="mt-1",
-                       error_messages=("param_errors['reach'] || []",),
-                       end="trigger('set_param', ['reach', $event])")
-        html.Div("{{ reach_help }}", classes="text-caption", id="reach-help")
-        with html.Div(id="param-symmetry", title=_PARAM["symmetry"].help, classes="d-flex align-center ga-2"):
-            v3.VSwitch(v_model=("param_symmetry",), label="symmetry", density="compact",
-                       hide_details=True, color="primary", id="symmetry-switch")
-            v3.VSelect(v_model=("param_group",), items=("group_items",), label="group", density="compact",
-                       hide_details=True, id="symmetry-group", style="max-width: 210px",
-                       title="The symmetry group: every copy of a control acts together with it. Off, the copies "
-                             "become controls of their own and nothing moves; on, images pair up again.")
+        # settings: each comes from its declaration (backend/schedule.py) and shows the value in effect (bound one
+        # way: what a person types goes to the session as an intent, never into the state); a refused value shows
+        # its message and the field is drawn anew with the value in effect (field_revs, panel_state.py).
+        _schedule_section(panel)
+        _symmetry_section()
 
         # features
-        html.Div("Feature dimensions (metric weights)", classes="text-subtitle-2 mt-2")
+        title, about = SECTIONS["features"]
+        html.Div(title, classes="text-subtitle-2 mt-2", title=about)
         with v3.VTable(density="compact", id="features-table"):
             with html.Tbody():
                 with html.Tr(v_for="f in features_ui", key=_revision_key("metric_weights", "f.d")):
@@ -224,7 +197,7 @@ def _panel(panel: PanelModel) -> None:
                     html.Td("{{ f.role }}", classes="text-caption")
                     with html.Td(style="width: 96px"):
                         v3.VTextField(model_value=("f.weight",), density="compact", type="number",
-                                      hide_details="auto", variant="plain", title=METRIC_WEIGHT.help,
+                                      hide_details="auto", variant="plain", title=BY_NAME["metric_weights"].help,
                                       error_messages=("param_errors['metric_weights_' + f.d] || []",),
                                       raw_attrs=_on_enter_or_change(
                                           "trigger('set_metric', [f.d, $event.target.value])"))
@@ -320,3 +293,43 @@ def _panel(panel: PanelModel) -> None:
         v3.VFileInput(v_model=("session_upload",), label="Load a session (.npz)", density="compact",
                       hide_details=True, prepend_icon="mdi-folder-open", accept=".npz", id="session-upload",
                       disabled=("busy",))
+
+
+def _schedule_section(panel: PanelModel) -> None:
+    """The schedule's settings: number fields two to a row, then each slider with its help under it."""
+    title, about = SECTIONS["schedule"]
+    html.Div(title, classes="text-subtitle-2 mt-2", title=about)
+    with v3.VRow(dense=True):
+        for p in panel.fields:
+            if p.section == "schedule" and p.widget == "field":
+                with v3.VCol(cols=6), html.Div(id=f"param-{p.name}", title=p.help):
+                    v3.VTextField(model_value=(state_key(p.name),), key=_revision_key(p.name), label=p.label,
+                                  density="compact", type="number",
+                                  error_messages=(f"param_errors['{p.name}'] || []",), hide_details="auto",
+                                  id=f"field-{p.name}",
+                                  raw_attrs=_on_enter_or_change(
+                                      f"trigger('set_param', ['{p.name}', $event.target.value])"))
+    for p in panel.fields:
+        if p.section == "schedule" and p.widget == "slider":
+            _slider(p)
+
+
+def _slider(p: Setting) -> None:
+    """A setting's slider (its value shown in its label) and its help under it."""
+    key, low, high, step = state_key(p.name), *p.slider
+    with html.Div(id=f"param-{p.name}", title=p.help):
+        v3.VSlider(v_model=(key,), label=(f"'{p.short or p.label} ' + Number({key}).toFixed({slider_digits(p)})",),
+                   min=low, max=high, step=step, density="compact", hide_details="auto", thumb_label=True,
+                   id=f"{p.name}-slider", classes="mt-1", error_messages=(f"param_errors['{p.name}'] || []",),
+                   end=f"trigger('set_param', ['{p.name}', $event])")
+    html.Div(p.help, classes="text-caption", id=f"{p.name}-help")
+
+
+def _symmetry_section() -> None:
+    """The symmetry switch and the group beside it."""
+    switch, group = BY_NAME["symmetry"], BY_NAME["group"]
+    with html.Div(id=f"param-{switch.name}", title=switch.help, classes="d-flex align-center ga-2"):
+        v3.VSwitch(v_model=(state_key(switch.name),), label=switch.short or switch.label, density="compact",
+                   hide_details=True, color="primary", id="symmetry-switch")
+        v3.VSelect(v_model=(state_key(group.name),), items=("group_items",), label=group.label, density="compact",
+                   hide_details=True, id="symmetry-group", style="max-width: 210px", title=group.help)

@@ -14,9 +14,9 @@ import time
 
 from ..model import Frame, Session
 from ..model.panel import PanelModel, fmt
-from ..model.parameters import BY_NAME
 from ..model.picture import png_bytes
-from .layout import state_key
+from ..model.settings import BY_NAME
+from .state_guard import state_key
 
 log = logging.getLogger(__name__)
 

@@ -11,7 +11,7 @@ import sys
 from ...backend import device as _device
 from ..model import Session
 from ..model import autosave as _autosave
-from ..model.clay import max_vertices_for
+from ..model.state import max_vertices_for
 from . import lan as _lan
 from .app import build_app
 

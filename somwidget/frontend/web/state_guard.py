@@ -9,6 +9,8 @@ from __future__ import annotations
 import logging
 import math
 
+from ...backend.schedule import SETTINGS
+
 log = logging.getLogger(__name__)
 
 MAX_TEXT = 200  # characters in a field's text or a preset name
@@ -44,8 +46,17 @@ def _file(value) -> bool:
                                    for v in items)
 
 
-def _reach(value) -> bool:
+def _number(value) -> bool:
     return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+
+
+def state_key(name: str) -> str:
+    """The trame state key of a setting's field."""
+    return "param_S" if name == "iterations" else f"param_{name}"
+
+
+#: The settings' widgets the page binds both ways (the others send triggers): the value each may write.
+_BOUND = {"slider": _number, "switch": _flag, "choice": _text}
 
 
 #: key -> check of the value a client may send for it
@@ -54,9 +65,7 @@ WRITABLE = {
     "preset_name": _text,
     "mesh_upload": _file,
     "session_upload": _file,
-    "param_reach": _reach,
-    "param_symmetry": _flag,
-    "param_group": _text,
+    **{state_key(s.name): _BOUND[s.widget] for s in SETTINGS if s.widget in _BOUND},
     "variants_n": _number_or_text,
     "variants_jitter": _number_or_text,
     "variants_vary": lambda value: isinstance(value, list) and len(value) <= 5 and all(

@@ -1,5 +1,5 @@
 // somwidget XR: the clay on a headset (WebXR immersive-ar, else immersive-vr) and, without one, a desktop preview.
-// It shares the server's modelling session through the websocket /xr/ws (see protocol.js).
+// It shares the server's modelling session through the websocket /view/ws (link.js, protocol.js).
 
 import * as THREE from 'three';
 import { HUD_ACTIONS, trainLabel } from './actions.js';

@@ -1,80 +1,229 @@
-// The /xr/ws protocol, client side: the twin of somwidget/frontend/transport/messages.py (the layout is documented
-// there; tests/test_client_protocol.py keeps the two in step).
-//
-// Binary frame, little-endian: a 32-byte header (magic "SOMF", u16 version, u16 flags, u32 seq, u32 generation,
-// u32 iteration, u32 iterations, u32 n, u16 k, u16 kEff), then Float32 positions (n x 3), Float32 control
-// positions (kEff x 3), Uint8 RGB colours (n x 3), Uint8 RGB control colours (kEff x 3), zero padding to 4 bytes.
+// The views' wire protocol, client side. GENERATED from somwidget/frontend/transport/messages.py by
+//   python -m somwidget.frontend.transport.codegen
+// Do not edit: change messages.py and run that again (tests/transport/test_client_protocol.py fails
+// while this file is not what it writes).
 
 export const PROTOCOL_VERSION = 1;
+export const MAX_MESSAGE_BYTES = 2048;
+export const MAX_COORDINATE = 10000;
+export const MAX_STROKE_POINTS = 64;
 export const HEADER_SIZE = 32;
+export const MAGIC = [0x53, 0x4f, 0x4d, 0x46]; // 'SOMF'
 export const FLAG_RUNNING = 1;
 export const FLAG_PAUSED = 2;
 export const FLAG_MIRRORED = 4;
 export const FLAG_CAN_UNDO = 8;
 export const FLAG_CAN_REDO = 16;
-const MAGIC = [0x53, 0x4f, 0x4d, 0x46]; // "SOMF"
+
+// The binary frame, little-endian: a header of HEADER_SIZE bytes, then the arrays, then zero padding to a
+// multiple of 4 bytes. The header:
+//     0  4s  magic: b"SOMF"
+//     4  H   version: the protocol version (PROTOCOL_VERSION)
+//     6  H   flags: FLAGS: 1 running, 2 paused, 4 mirrored copies present, 8 a step to undo, 16 to redo
+//     8  I   seq: the session's frame number (one more per published frame)
+//    12  I   generation: matches the latest topology message
+//    16  I   iteration: the iteration s
+//    20  I   iterations: the iterations S
+//    24  I   n: display vertices
+//    28  H   k: controls (the originals)
+//    30  H   k_eff: effective controls (the originals, then the mirrored copies)
+// The arrays, in order:
+//   positions: n x 3 Float32Array (vertex positions, model units)
+//   control_positions: k_eff x 3 Float32Array (effective control positions)
+//   colours: n x 3 Uint8Array (vertex colours, RGB)
+//   control_colours: k_eff x 3 Uint8Array (effective control colours, RGB)
+
+export function frameSize(n, kEff) {
+  const size = HEADER_SIZE + 12 * n + 12 * kEff + 3 * n + 3 * kEff;
+  return size + ((4 - (size % 4)) % 4);
+}
 
 export function parseFrame(buffer) {
   if (!(buffer instanceof ArrayBuffer) || buffer.byteLength < HEADER_SIZE) {
     throw new Error(`frame too short (${buffer && buffer.byteLength} bytes)`);
   }
-  const bytes = new Uint8Array(buffer, 0, 4);
-  for (let i = 0; i < 4; i++) {
-    if (bytes[i] !== MAGIC[i]) throw new Error('not a somwidget frame (bad magic)');
-  }
+  const bytes = new Uint8Array(buffer, 0, MAGIC.length);
+  if (MAGIC.some((b, i) => bytes[i] !== b)) throw new Error('not a somwidget frame (bad magic)');
   const dv = new DataView(buffer);
   const version = dv.getUint16(4, true);
   if (version !== PROTOCOL_VERSION) throw new Error(`frame protocol ${version}, expected ${PROTOCOL_VERSION}`);
-  const flags = dv.getUint16(6, true);
-  const n = dv.getUint32(24, true);
-  const k = dv.getUint16(28, true);
-  const kEff = dv.getUint16(30, true);
-  let size = HEADER_SIZE + 15 * (n + kEff);
-  size += (4 - (size % 4)) % 4;
-  if (buffer.byteLength !== size) throw new Error(`frame of ${buffer.byteLength} bytes, expected ${size}`);
-  let o = HEADER_SIZE;
-  const positions = new Float32Array(buffer, o, 3 * n);
-  o += 12 * n;
-  const controlPositions = new Float32Array(buffer, o, 3 * kEff);
-  o += 12 * kEff;
-  const colours = new Uint8Array(buffer, o, 3 * n);
-  o += 3 * n;
-  const controlColours = new Uint8Array(buffer, o, 3 * kEff);
-  return {
-    flags,
-    running: (flags & FLAG_RUNNING) !== 0,
-    paused: (flags & FLAG_PAUSED) !== 0,
-    canUndo: (flags & FLAG_CAN_UNDO) !== 0,
-    canRedo: (flags & FLAG_CAN_REDO) !== 0,
+  const header = {
+    flags: dv.getUint16(6, true),
     seq: dv.getUint32(8, true),
     generation: dv.getUint32(12, true),
     iteration: dv.getUint32(16, true),
     iterations: dv.getUint32(20, true),
-    n, k, kEff, positions, controlPositions, colours, controlColours,
+    n: dv.getUint32(24, true),
+    k: dv.getUint16(28, true),
+    kEff: dv.getUint16(30, true),
+  };
+  const size = frameSize(header.n, header.kEff);
+  if (buffer.byteLength !== size) throw new Error(`frame of ${buffer.byteLength} bytes, expected ${size}`);
+  let o = HEADER_SIZE;
+  const positions = new Float32Array(buffer, o, 3 * header.n);
+  o += 12 * header.n;
+  const controlPositions = new Float32Array(buffer, o, 3 * header.kEff);
+  o += 12 * header.kEff;
+  const colours = new Uint8Array(buffer, o, 3 * header.n);
+  o += 3 * header.n;
+  const controlColours = new Uint8Array(buffer, o, 3 * header.kEff);
+  return {
+    ...header,
+    running: (header.flags & FLAG_RUNNING) !== 0,
+    paused: (header.flags & FLAG_PAUSED) !== 0,
+    mirrored: (header.flags & FLAG_MIRRORED) !== 0,
+    canUndo: (header.flags & FLAG_CAN_UNDO) !== 0,
+    canRedo: (header.flags & FLAG_CAN_REDO) !== 0,
+    positions, controlPositions, colours, controlColours,
     bytes: buffer.byteLength,
   };
 }
 
-// Intents (client -> server), one JSON object per message.
-export const intents = {
-  // controls are named by their stable id (the topology's control_ids, then "controls" messages)
-  grab: (id) => ({ type: 'grab', id }),
-  move: (id, position) => ({ type: 'move', id, position }),
-  release: (id, position) => (position ? { type: 'release', id, position } : { type: 'release', id }),
-  reset: () => ({ type: 'reset' }),
-  train: () => ({ type: 'train' }),
-  pause: () => ({ type: 'pause' }),
-  undo: () => ({ type: 'undo' }),
-  redo: () => ({ type: 'redo' }),
-  ping: (t) => ({ type: 'ping', t }),
-  hello: () => ({ type: 'hello' }),
-  set: (name, value) => ({ type: 'set', name, value }),
-  // a control placed at a point of the clay (radius: model units; left out, the preset's)
-  add: (position, radius) => (radius === undefined ? { type: 'add', position } : { type: 'add', position, radius }),
-  remove: (id) => ({ type: 'remove', id }),
-  radius: (id, radius) => ({ type: 'radius', id, radius }),
-  // a polyline of 2 to MAX_STROKE_POINTS points [x, y, z] as one control
-  stroke: (points, radius) => (radius === undefined ? { type: 'stroke', points } : { type: 'stroke', points, radius }),
-};
+// Server -> client JSON messages, by their type (a view's link hands each to its handler).
+export const SERVER_MESSAGES = ['topology', 'grabs', 'controls', 'error', 'pong', 'status', 'autosave'];
+// Over the notebook's comm, a frame comes as this message with the frame as its one buffer.
+export const FRAME_MESSAGE = 'frame';
 
-export const MAX_STROKE_POINTS = 64;
+/**
+ * What a view draws, once per connection and again whenever the session's generation changes (a new preset or
+ * mesh). `n_vertices`: display vertices in each frame (N nodes; 2N for "lines": roots then tips); `triangles`: a
+ * flat triangle list over them (faces fanned; quads for "lines"); `segments`: a flat segment list (mesh edges;
+ * root -> tip for "lines"); `points`: draw each vertex as a point; `bounds`: {"min": [x, y, z], "max": [...]} of
+ * the start mesh and controls; `control_radius`: a control's drawn radius; `parameters`: the settings a "set"
+ * may name. The fields after `parameters` are the view's own: its client id (None over the notebook's comm) and
+ * the controls as a `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates),
+ * `n_controls` and `n_effective` (originals, then mirrored copies).
+ * @typedef {object} TopologyMessage
+ * @property {'topology'} type
+ * @property {number} protocol
+ * @property {number} generation
+ * @property {string} preset
+ * @property {string} title
+ * @property {'surface'|'lines'|'points'} display
+ * @property {number} n_vertices
+ * @property {number} n_nodes
+ * @property {number[]} triangles
+ * @property {number[]} segments
+ * @property {boolean} points
+ * @property {number} up_axis
+ * @property {Object<string, number[]>} bounds
+ * @property {number} control_radius
+ * @property {string} colour_space
+ * @property {string[]} feature_names
+ * @property {number} max_coordinate
+ * @property {number} max_message_bytes
+ * @property {object[]} parameters
+ * @property {number|null} client
+ * @property {number[]} control_ids
+ * @property {string} group
+ * @property {number[][]} group_maps
+ * @property {boolean[]} mirror_axes
+ * @property {number} n_controls
+ * @property {number} n_effective
+ * @property {number[]} radii
+ * @property {number[]} strokes
+ */
+
+/**
+ * The controls held now, as the view it is sent to sees them.
+ * @typedef {object} GrabsMessage
+ * @property {'grabs'} type
+ * @property {{index: number, id: number, own: boolean}[]} grabs
+ */
+
+/**
+ * Each control's stable id in index order, the symmetry group (its maps of a position, 3 x 3 row-major, the
+ * identity first: effective control j is control j mod k under map j // k), each control's radius of influence
+ * (model units) and the runs of controls that act as one (a stroke's samples). Sent before the frame whenever
+ * one of them changes.
+ * @typedef {object} ControlsMessage
+ * @property {'controls'} type
+ * @property {number[]} ids
+ * @property {string} group
+ * @property {number[][]} group_maps
+ * @property {number[]} radii
+ * @property {number[]} strokes
+ */
+
+/**
+ * A refused intent: why, and its type when that much was readable.
+ * @typedef {object} ErrorMessage
+ * @property {'error'} type
+ * @property {string} message
+ * @property {string|null} intent
+ */
+
+/**
+ * The answer to a ping, with its `t`.
+ * @typedef {object} PongMessage
+ * @property {'pong'} type
+ * @property {number|null} t
+ */
+
+/**
+ * The engine's time per cycle (ms) and the frames published per second, every STATUS_PERIOD while frames flow.
+ * @typedef {object} StatusMessage
+ * @property {'status'} type
+ * @property {number} cycle_ms
+ * @property {number} fps
+ */
+
+/**
+ * The autosave cannot write (`ok` false: what and where; it tries again every second), shown until a message
+ * with `ok` true says a save is on disk again.
+ * @typedef {object} AutosaveMessage
+ * @property {'autosave'} type
+ * @property {boolean} ok
+ * @property {string} message
+ */
+
+// Client -> server intents: one builder per intent, its arguments the intent's fields in order (an
+// optional one left undefined is left out).
+function compact(message) {
+  return Object.fromEntries(Object.entries(message).filter(([, v]) => v !== undefined));
+}
+
+export const intents = {
+  // Hold a control; refused while another view holds it. A grab to its release is one undo step (a gesture).
+  // (id: number)
+  grab: (id) => ({ type: 'grab', id }),
+  // Move a held control to `position` (model units).
+  // (id: number, position: number[])
+  move: (id, position) => ({ type: 'move', id, position }),
+  // Let go of a held control (optionally at a last `position`). A held control removed elsewhere ends the
+  // grab, with an error message to the view that held it.
+  // (id: number, position: number[] (optional))
+  release: (id, position) => compact({ type: 'release', id, position }),
+  // Train the whole schedule again from the start mesh.
+  reset: () => ({ type: 'reset' }),
+  // Resume training.
+  train: () => ({ type: 'train' }),
+  // Pause training.
+  pause: () => ({ type: 'pause' }),
+  // Take back the last step.
+  undo: () => ({ type: 'undo' }),
+  // Bring back the step last undone.
+  redo: () => ({ type: 'redo' }),
+  // Answered at once with a `PongMessage` carrying the same `t`.
+  // (t: number)
+  ping: (t) => ({ type: 'ping', t }),
+  // Send the topology and the latest frame again (a new output of the same connection: a notebook's).
+  hello: () => ({ type: 'hello' }),
+  // Set a setting by name (the topology message lists them: "parameters"), checked against its declaration.
+  // (name: string, value: number|boolean)
+  set: (name, value) => ({ type: 'set', name, value }),
+  // A new control at `position` (its other features the nearest node's; radius left out: the preset's); it
+  // moves nothing until it is dragged.
+  // (position: number[], radius: number (optional))
+  add: (position, radius) => compact({ type: 'add', position, radius }),
+  // Remove a control (a stroke goes whole).
+  // (id: number)
+  remove: (id) => ({ type: 'remove', id }),
+  // A control's radius of influence (model units); the same control's radius again within a moment joins its
+  // step.
+  // (id: number, radius: number)
+  radius: (id, radius) => ({ type: 'radius', id, radius }),
+  // A polyline of 2 to MAX_STROKE_POINTS points as one control (its samples act as one); radius optional.
+  // (points: number[][], radius: number (optional))
+  stroke: (points, radius) => compact({ type: 'stroke', points, radius }),
+};

@@ -1,6 +1,7 @@
-"""Benchmarks: the Warp engine against a vectorised numpy float32 baseline that does the same cycles.
+"""The engine benchmark's harness (`somwidget bench`, benchmarks/bench_engine.py): the Warp engine against a vectorised
+numpy float32 baseline that does the same cycles. A baseline, not part of the package: it lives in a checkout.
 
-Cases (the paper's case studies, presets.py):
+Cases (the paper's case studies, backend/presets):
   space-grid         case study 1: 16^3 lattice, 8 controls, 3-D, S 1000, no smoothing
   space-grid-smooth  the same with the preset's Laplacian step each cycle (lambda 0.2)
   car                case study 2: 602 neurons, 9 controls mirrored = 18, 5-D
@@ -12,8 +13,8 @@ as the app calls it (`step(10)` between frames), the numpy baseline's time per c
 compile, graph capture) is timed and reported apart. Then the engine and each baseline run cycle by cycle from the
 start and their winners and weights are compared, so the figures are known to come from the same cycles.
 
-Imports only numpy, warp and somwidget.backend: it runs on a GPU machine with nothing else installed. Run it as
-`somwidget bench` or `python benchmarks/bench_engine.py` (both parse their arguments in cli.py and call `run`).
+Imports only numpy, warp and somwidget.backend: it runs on a GPU machine with nothing else installed. somwidget/cli.py
+parses the arguments (`somwidget bench`, or bench_engine.py without an install) and calls `run`.
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
-"""The clay: what every part of a session shares. The installed preset and its Som, the controls and parameters as
-the views see them (an intent changes them at once; the Som follows on the training thread), and the run flags.
+"""The modelling state: what every part of a session shares. The installed preset and its Som, the controls and
+settings as the views see them (an intent changes them at once; the Som follows on the training thread), and the run
+flags.
 
 Two locks: `lock` guards this state (`wake` is its condition: waiters wake on every change that matters), `som_lock`
 guards the Som, which the training thread holds while it steps. Whoever needs both takes `som_lock` first.
@@ -13,8 +14,8 @@ import numpy as np
 
 from ...backend import device as _device
 from ...backend import presets as _presets
+from ...backend import schedule
 from ...backend.presets import Preset
-from ...backend.schedule import KEYS as SCHEDULE_KEYS
 from ...backend.symmetry import Symmetry, mirror_dims_of, mirror_of_dims
 from .history import Step
 
@@ -68,6 +69,31 @@ def som_group(som, layout) -> Symmetry | None:
     return mirror_of_dims(som.mirror, layout.position, layout.direction) if som.mirror else None
 
 
+def held_settings() -> tuple[schedule.Setting, ...]:
+    """The settings a session holds by name (`ModellingState.params`): those of one value and those of one value per
+    feature dimension (a control's radius is held with the controls, the symmetry group as a Symmetry)."""
+    return tuple(s for s in schedule.SETTINGS if s.by_name or s.per == "dim")
+
+
+def settings_of(som) -> dict:
+    """The held settings of a Som: the engine's as it keeps them (a list of floats for one per dimension), the
+    session's own at their defaults."""
+    values = {}
+    for s in held_settings():
+        if s.scope != "engine":
+            values[s.name] = s.default
+        elif s.per:
+            values[s.name] = [float(x) for x in getattr(som, s.name)]
+        else:
+            values[s.name] = s.check(getattr(som, s.name))
+    return values
+
+
+def with_defaults(values: dict) -> dict:
+    """`values` with each held setting it lacks at its default (a step recorded before that setting was declared)."""
+    return {**{s.name: s.default for s in held_settings() if s.name not in values}, **values}
+
+
 def build(preset: str | Preset | None, device: str | None, max_vertices: int) -> tuple[Preset, object]:
     """(preset, its Som) for a preset name or a Preset on `device`; ValueError for an unknown preset or a mesh over
     `max_vertices`. A shape that does not grow (a general shape, an uploaded mesh) is shown as it is: its Som holds
@@ -90,7 +116,7 @@ def build(preset: str | Preset | None, device: str | None, max_vertices: int) ->
     return preset, som
 
 
-class Clay:
+class ModellingState:
     """The shared state of one session (see the module's docstring)."""
 
     def __init__(self, preset: Preset, som, paused: bool = False):
@@ -108,7 +134,7 @@ class Clay:
         self.install(preset, som)
 
     def install(self, preset: Preset, som) -> None:
-        """A new preset and its Som (caller holds both locks, or nothing runs yet): new ids, parameters from the Som,
+        """A new preset and its Som (caller holds both locks, or nothing runs yet): new ids, settings from the Som,
         the next generation."""
         self.preset, self.som, self.layout = preset, som, preset.layout
         self.controls = np.array(som.controls, dtype=np.float32)
@@ -116,10 +142,9 @@ class Clay:
         self.strokes = tuple(som.strokes)
         self.control_ids = self.applied_ids = self.fresh_ids(len(self.controls))
         self.symmetry = som_group(som, preset.layout)
+        self.params = settings_of(som)
+        self.set_symmetry(self.symmetry)
         self.default_group = self.symmetry or default_group(preset)  # what "symmetry on" brings
-        self.params = {name: type(getattr(som, name))(getattr(som, name)) for name in SCHEDULE_KEYS}
-        self.params["symmetry"] = self.symmetry is not None
-        self.params["metric_weights"] = [float(x) for x in som.metric_weights]
         self.generation += 1
 
     def fresh_ids(self, k: int) -> tuple[int, ...]:
@@ -145,17 +170,16 @@ class Clay:
             self.default_group = group
 
     def parameters(self) -> dict:
-        """A copy of the parameters, with "mirror" (the dims a mirror group negates) and "group" (the group's spec,
-        "none" when off) (caller holds lock)."""
-        p = dict(self.params)
-        p["metric_weights"] = list(p["metric_weights"])
+        """A copy of the held settings, with "mirror" (the dims a mirror group negates) and "group" (the group's
+        spec, "none" when off) (caller holds lock)."""
+        p = {name: list(v) if isinstance(v, list) else v for name, v in self.params.items()}
         p["mirror"] = list(mirror_dims_of(self.symmetry) or ())
         p["group"] = self.symmetry.spec if self.symmetry is not None else "none"
         return p
 
     def capture(self) -> Step:
         """The state now as an undo step (caller holds both locks, with no operation queued)."""
-        params = dict(self.params, metric_weights=list(self.params["metric_weights"]))
+        params = {name: list(v) if isinstance(v, list) else v for name, v in self.params.items()}
         return Step(preset=self.preset, controls=self.controls.copy(), parameters=params, weights=self.som.weights,
                     iteration=int(self.som.iteration), radii=self.radii.copy(), symmetry=self.symmetry,
                     strokes=self.strokes)
@@ -163,23 +187,24 @@ class Clay:
     def put_back(self, step: Step) -> None:
         """Put a recorded state into the Som exactly, and the session's view with it; nothing trains until the next
         intent (caller holds both locks; the step's preset is the installed one)."""
-        som, p = self.som, step.parameters
-        for name in SCHEDULE_KEYS:
-            if name != "reach" and getattr(som, name) != p[name]:
-                setattr(som, name, p[name])
-        if list(som.metric_weights) != list(p["metric_weights"]):
-            som.metric_weights = np.asarray(p["metric_weights"], np.float32)
+        som, p = self.som, with_defaults(step.parameters)
+        for s in held_settings():
+            if s.scope != "engine":
+                continue
+            if s.per and list(getattr(som, s.name)) != list(p[s.name]):
+                setattr(som, s.name, np.asarray(p[s.name], np.float32))
+            elif not s.per and getattr(som, s.name) != p[s.name]:
+                setattr(som, s.name, p[s.name])
         radii = np.zeros(len(step.controls), np.float32) if step.radii is None else step.radii
         som.regroup(step.controls, radii, *engine_symmetry(step.symmetry), strokes=step.strokes)
-        som.reach = p["reach"]
         som.restore(step.weights, step.iteration)
         self.controls = np.array(step.controls, np.float32)
         self.radii = np.array(radii, np.float32)
         self.strokes = tuple(som.strokes)
-        self.set_symmetry(step.symmetry)
         if len(self.controls) != len(self.control_ids):  # a control added or removed: new ids (a grab on an id
             self.control_ids = self.fresh_ids(len(self.controls))  # that is gone ends)
         self.applied_ids = self.control_ids
-        self.params = dict(p, metric_weights=list(p["metric_weights"]))
+        self.params = {name: list(v) if isinstance(v, list) else v for name, v in p.items()}
+        self.set_symmetry(step.symmetry)
         self.hold = True
         self.error = None
