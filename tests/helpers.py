@@ -42,6 +42,37 @@ def wave_mesh(path: Path, side: int) -> Path:
     return path
 
 
+def read_3dm(path) -> dict:
+    """What rhino3dm reads back from a .3dm: {"units": the unit system's name, "layers": [names], "clay": the mesh as a
+    trimesh.Trimesh (vertices, faces, vertex colours) or a trimesh.PointCloud, "controls": {name: ((3,) position,
+    layer name, radius text)} of the points}."""
+    import numpy as np
+    import rhino3dm
+    import trimesh
+
+    model = rhino3dm.File3dm.Read(str(path))
+    assert model is not None, f"rhino3dm cannot read {path}"
+    layers = [layer.Name for layer in model.Layers]
+    out = {"units": str(model.Settings.ModelUnitSystem).split(".")[-1], "layers": layers, "clay": None,
+           "controls": {}}
+    for obj in model.Objects:
+        g, attrs = obj.Geometry, obj.Attributes
+        if isinstance(g, rhino3dm.Point):
+            p = g.Location
+            out["controls"][attrs.Name] = (np.array([p.X, p.Y, p.Z]), layers[attrs.LayerIndex],
+                                           attrs.GetUserString("radius"))
+        elif isinstance(g, rhino3dm.Mesh):
+            assert attrs.Name == "clay" and layers[attrs.LayerIndex] == "clay"
+            v = np.array([[p.X, p.Y, p.Z] for p in g.Vertices.ToPoint3dArray()])
+            faces = [g.Faces[i] for i in range(g.Faces.Count)]
+            assert all(f[2] == f[3] for f in faces)  # triangles (a quad would have its own fourth corner)
+            colours = np.array([g.VertexColors[i] for i in range(len(g.VertexColors))])
+            out["clay"] = trimesh.Trimesh(v, np.array([f[:3] for f in faces]), vertex_colors=colours, process=False)
+        elif isinstance(g, rhino3dm.PointCloud):
+            out["clay"] = trimesh.PointCloud(np.array([[p.X, p.Y, p.Z] for p in g.GetPoints()]))
+    return out
+
+
 def free_port() -> int:
     import socket
 

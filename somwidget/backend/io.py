@@ -1,4 +1,5 @@
-"""Mesh files: import (any mesh trimesh reads) and export (OBJ, PLY, GLB). Session files are session_file.py's.
+"""Mesh files: import (any mesh trimesh reads) and export (OBJ, PLY, binary STL, glTF / GLB with the controls as named
+nodes, Rhino's .3dm with the controls as named points on a layer of their own). Session files are session_file.py's.
 
 Every failure a person can cause (a missing or broken file, an unsupported format) is a ValueError whose message
 starts with the file's path and says what is wrong.
@@ -20,7 +21,9 @@ from .topology import Topology
 #: The default vertex limit of `load_mesh`: the dense distance table's cap (2^16 neurons).
 MAX_VERTICES = 65536
 #: File extensions `export_mesh` writes.
-EXPORT_FORMATS = ("obj", "ply", "glb")
+EXPORT_FORMATS = ("obj", "ply", "stl", "glb", "gltf", "3dm")
+#: The unit a .3dm says its coordinates are in (Rhino's ModelUnitSystem), unless `export_mesh(units=...)` says.
+DEFAULT_UNITS = "meters"
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -181,8 +184,15 @@ def load_mesh(path, *, max_vertices: int = MAX_VERTICES, decimate: bool = False)
 # Export
 # --------------------------------------------------------------------------------------------------------------
 def export_mesh(path, weights, topology: Topology, layout: FeatureLayout, *, display: str | None = None,
-                transform: dict | None = None) -> None:
-    """Write the current shape to OBJ, PLY or GLB (chosen by the extension) with vertex colours from `layout`.
+                transform: dict | None = None, controls=None, radii=None, units: str = DEFAULT_UNITS) -> None:
+    """Write the current shape to OBJ, PLY, STL (binary), glTF, GLB or .3dm (chosen by the extension) with vertex
+    colours from `layout` (STL has none).
+
+    controls: (k, n) control values in the feature space of `weights` (and `radii`, (k,)), written where the format
+    has a place for them: glTF / GLB as empty nodes named "control 0", "control 1"... placed at each control, beside
+    the node "clay" that holds the mesh; .3dm as points of those names on the layer "controls" (each with its
+    radius as the user string "radius"), the mesh named "clay" on the layer "clay". units: a .3dm's unit system
+    (a name of rhino3dm.UnitSystem, case ignored: "meters", "millimeters", "inches"...).
 
     display: "surface" (the topology's faces, n-gons fan-triangulated since trimesh holds triangles), "lines" (the
     line display mesh of case study 3: 2N vertices, two triangles per edge quad), "points" (a point cloud: all three
@@ -229,15 +239,109 @@ def export_mesh(path, weights, topology: Topology, layout: FeatureLayout, *, dis
         centre = np.asarray(transform["centre"], np.float64)
         points = points / float(transform["scale"]) + centre
     rgba = np.concatenate([np.round(colours * 255.0), np.full((len(colours), 1), 255.0)], axis=1).astype(np.uint8)
-    if len(faces):
-        if display == "surface":
-            points, faces, rgba = weld(points, faces, rgba)
-        geom = trimesh.Trimesh(vertices=points, faces=faces, vertex_colors=rgba, process=False)
+    if len(faces) and display == "surface":
+        points, faces, rgba = weld(points, faces, rgba)
+    if ext == "stl" and not len(faces):
+        raise ValueError(f"{label}: STL holds triangles only; this shape has none (export .ply or .obj for points)")
+    marks = _control_marks(label, controls, radii, layout, transform)
+    if ext == "3dm":
+        data = _rhino_file(label, points, faces, rgba, marks, units)
     else:
-        geom = trimesh.PointCloud(points, colors=rgba)
-    data = geom.export(file_type=ext)
+        geom = (trimesh.Trimesh(vertices=points, faces=faces, vertex_colors=rgba, process=False) if len(faces)
+                else trimesh.PointCloud(points, colors=rgba))
+        data = _gltf(geom, marks, ext) if ext in ("glb", "gltf") else geom.export(file_type=ext)
     with open(path, "wb") as f:
         f.write(data.encode("utf-8") if isinstance(data, str) else data)
+
+
+def _control_marks(label: str, controls, radii, layout: FeatureLayout, transform: dict | None) -> list:
+    """[(name, (3,) position in the file's frame, radius)] of the controls an export names ([] without controls)."""
+    if controls is None:
+        return []
+    c = checks.finite_array("controls", controls, 2)
+    if c.shape[1] != layout.n_dims:
+        raise ValueError(f"{label}: controls have shape {c.shape}, expected (k, {layout.n_dims}) (layout dims)")
+    r = np.zeros(len(c)) if radii is None else np.asarray(radii, np.float64).reshape(-1)
+    if len(r) != len(c):
+        raise ValueError(f"{label}: {len(r)} radii for {len(c)} controls")
+    at = positions_of(c, layout).astype(np.float64)
+    if transform is not None:
+        at = at / float(transform["scale"]) + np.asarray(transform["centre"], np.float64)
+        r = r / float(transform["scale"])
+    return [(f"control {i}", at[i], float(r[i])) for i in range(len(c))]
+
+
+def _gltf(geom, marks: list, ext: str) -> bytes:
+    """A glTF scene (binary for .glb, one JSON file with its buffers inside for .gltf): the node "clay" with the
+    mesh, and an empty node per control, named and placed at it (a translation)."""
+    import trimesh
+    from trimesh.exchange import gltf
+
+    scene = trimesh.Scene()
+    scene.add_geometry(geom, node_name="clay", geom_name="clay")
+    for name, at, _radius in marks:
+        matrix = np.eye(4)
+        matrix[:3, 3] = at
+        scene.graph.update(frame_to=name, frame_from=scene.graph.base_frame, matrix=matrix)
+    if ext == "glb":
+        return gltf.export_glb(scene)
+    return next(iter(gltf.export_gltf(scene, embed_buffers=True).values()))
+
+
+def _rhino_file(label: str, points, faces, rgba, marks: list, units: str) -> bytes:
+    """A Rhino .3dm (version 8) in `units`: the mesh "clay" with its vertex colours on the layer "clay" (a point
+    cloud where there are no faces), each control a point named after it on the layer "controls"."""
+    import tempfile
+
+    import rhino3dm
+
+    unit = {name.lower(): name for name in dir(rhino3dm.UnitSystem) if not name.startswith("_")}.get(
+        str(units).lower())
+    if unit is None or unit in ("name", "value", "Unset", "None", "CustomUnits", "UnitScale"):
+        raise ValueError(f"{label}: unknown units {units!r}; use meters, millimeters, centimeters, inches, feet...")
+    model = rhino3dm.File3dm()
+    model.Settings.ModelUnitSystem = getattr(rhino3dm.UnitSystem, unit)
+
+    def layer(name: str, colour: tuple) -> int:
+        entry = rhino3dm.Layer()
+        entry.Name, entry.Color = name, colour
+        return model.Layers.Add(entry)
+
+    def named(name: str, on: int):
+        attrs = rhino3dm.ObjectAttributes()
+        attrs.Name, attrs.LayerIndex = name, on
+        return attrs
+
+    clay = layer("clay", (200, 200, 210, 255))
+    if len(faces):
+        mesh = rhino3dm.Mesh()
+        mesh.Vertices.UseDoublePrecisionVertices = True
+        for x, y, z in points.tolist():
+            mesh.Vertices.Add(x, y, z)
+        for a, b, c in np.asarray(faces, np.int64).tolist():
+            mesh.Faces.AddFace(a, b, c)
+        for r, g, b, _a in rgba.tolist():
+            mesh.VertexColors.Add(r, g, b)
+        mesh.Normals.ComputeNormals()
+        mesh.Compact()
+        model.Objects.AddMesh(mesh, named("clay", clay))
+    else:
+        cloud = rhino3dm.PointCloud()
+        for x, y, z in points.tolist():
+            cloud.Add(rhino3dm.Point3d(x, y, z))
+        model.Objects.AddPointCloud(cloud, named("clay", clay))
+    if marks:
+        on = layer("controls", (220, 60, 40, 255))
+        for name, at, radius in marks:
+            attrs = named(name, on)
+            attrs.SetUserString("radius", repr(radius))
+            model.Objects.AddPoint(rhino3dm.Point3d(*map(float, at)), attrs)
+    with tempfile.TemporaryDirectory(prefix="somwidget-3dm-") as folder:
+        out = f"{folder}/clay.3dm"
+        if not model.Write(out, 8):
+            raise ValueError(f"{label}: rhino3dm could not write the .3dm file")
+        with open(out, "rb") as f:
+            return f.read()
 
 
 #: Export: two vertices joined by an edge and closer than this share of the shape's size (its bounding diagonal)

@@ -623,3 +623,38 @@ def test_a_65536_vertex_upload_trains_on_the_cpu(tmp_path):
         assert far.sum() > 10_000 and (after[far] == before[far]).all()
     finally:
         s.close()
+
+
+def test_a_control_keeps_its_id_and_colour_while_others_come_and_go():
+    """The views number and colour a control by its stable id (issue 34: Delete renumbered and recoloured every
+    control): removing one leaves the others' ids and palette colours; its Undo brings it back with its own; Refine
+    keeps every id; another preset's controls are numbered from 0."""
+    s = Session("sphere", device="cpu", autosave=False)
+    try:
+        assert s.wait_idle(120)
+        f0 = s.frame
+        ids0, colours0 = f0.control_ids, f0.control_display_colours
+        assert ids0 == (0, 1, 2, 3, 4, 5) and len({tuple(c) for c in colours0}) == 6
+        s.remove_control(2)
+        assert s.wait_applied(30)
+        f = s.frame
+        assert f.control_ids == (0, 1, 3, 4, 5)
+        np.testing.assert_array_equal(f.control_display_colours, colours0[[0, 1, 3, 4, 5]])
+        s.add_control([0.0, 0.0, 1.0])
+        assert s.wait_applied(30)
+        assert s.frame.control_ids == (0, 1, 3, 4, 5, 6)  # a new id, never one of the others'
+        assert s.undo() and s.undo()
+        f = s.frame
+        assert f.control_ids == ids0
+        np.testing.assert_array_equal(f.control_display_colours, colours0)
+        s.remove_control(0)
+        assert s.wait_applied(30)
+        s.refine()
+        assert s.wait_applied(60)
+        assert s.frame.n_controls == 5 and s.frame.control_ids == (1, 2, 3, 4, 5)
+        np.testing.assert_array_equal(s.frame.control_display_colours, colours0[1:])
+        s.load_preset("torus")
+        assert s.wait_applied(60)
+        assert s.frame.control_ids == tuple(range(s.frame.n_controls))
+    finally:
+        s.close()

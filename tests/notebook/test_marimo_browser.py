@@ -21,10 +21,10 @@ pytest.importorskip("marimo")
 if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
     pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
 
+pytestmark = pytest.mark.browser
+
 NOTEBOOK = '''
 import marimo
-
-pytestmark = pytest.mark.browser
 
 app = marimo.App(width="medium")
 

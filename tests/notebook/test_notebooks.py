@@ -28,7 +28,7 @@ pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 EXPECTED = ["01_space_grid", "02_car", "03_lines", "04_your_own_mesh", "05_speed", "06_clay_rules", "07_variants",
-            "08_shape_briefs"]
+            "08_shape_briefs", "09_modelling_app"]
 KERNEL = "somwidget-test"
 CELL_TIMEOUT = 240  # seconds for one cell on a slow, shared machine
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import datetime
 import io
 import itertools
 import os
@@ -17,6 +18,7 @@ import time
 
 import numpy as np
 import pytest
+import helpers
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, wave_mesh
 
 pytestmark = pytest.mark.browser
@@ -162,10 +164,11 @@ def test_page_loads_on_the_car_and_renders(browser, server):
         assert not_blank(img) > 0.05, "the 3-D view looks blank"
         assert st["clients"] >= 1 and st["views"]["clients"] >= 1
         v = view_state(page)
-        # drawn by the browser from the streamed frames: the labels match the panel's control table (0..8, and
-        # the mirrored copies primed), the status line shows the iteration
+        # drawn by the browser from the streamed frames: the labels match the panel's control table (0..8; the
+        # mirrored copies are ghosts without numbers), the status line shows the iteration
         assert v["k"] == 9 and v["kEff"] == 18
-        assert sorted(v["labels"]) == sorted([str(i) for i in range(9)] + [f"{i}\u2032" for i in range(9)])
+        assert sorted(v["labels"], key=int) == [str(i) for i in range(9)]
+        assert v["numbered"] == [True] * 9 + [False] * 9
         assert v["status"].startswith("iteration 1000 / 1000")
         # and the server's own figures, sent four times a second to every view: the cycle's time in ms
         page.wait_for_function(f"() => / cycle \\d+\\.\\d{{3}} ms/.test({VIEW}.describe().status)", timeout=10000)
@@ -592,7 +595,7 @@ def test_another_tab_closing_leaves_the_drag_alone(browser, server):
 def test_a_drag_goes_on_with_its_control_when_another_tab_removes_one_before_it(browser, server):
     """Interaction in two tabs: tab A holds a control with the mouse; tab B removes control 0 from its panel. A's
     mouse keeps moving the same control (now one place earlier), never the one that slid into its place, and A's
-    release lets it go."""
+    release lets it go. The removal and the drag are two undo steps, in the order they completed."""
     a = open_page(browser, server)
     b = open_page(browser, server)
     try:
@@ -617,7 +620,12 @@ def test_a_drag_goes_on_with_its_control_when_another_tab_removes_one_before_it(
         after = np.array(st["session"]["controls"])
         assert np.linalg.norm(after[i - 1, :3] - before[i, :3]) > 0.1, "A's control stopped following the mouse"
         np.testing.assert_array_equal(after[i], before[i + 1])  # the control that slid into A's place: untouched
-        # what happened during the drag is one step (the gesture's): one undo brings the car back
+        # the removal (completed first) and the drag are a step each: the first undo takes back the drag, and
+        # keeps the removal; the second brings the car back
+        steps = st["session"]["history"][0]
+        a.locator("#undo-button").click()
+        st = server.wait(lambda s: s["session"]["history"][0] == steps - 1, what="the drag taken back")
+        assert len(st["session"]["controls"]) == 8
         a.locator("#undo-button").click()
         server.wait(lambda s: len(s["session"]["controls"]) == 9, what="the removed control back")
         server.idle()
@@ -641,14 +649,25 @@ def test_preset_chooser_lines_and_export(browser, server, tmp_path):
         shows(page, st)
         assert view_state(page)["kEff"] == 16
         assert not_blank(view_image(page)) > 0.05
-        with page.expect_download(timeout=20000) as dl:
-            page.locator("#export-obj").click()
+        day = datetime.date.today().isoformat()
+        with page.expect_download(timeout=20000) as dl:  # OBJ: the format menu's first choice
+            page.locator("#export-mesh").click()
+        assert dl.value.suggested_filename == f"lines-{day}.obj"  # named after the session
         path = tmp_path / "lines.obj"
         dl.value.save_as(path)
         text = path.read_text()
         assert text.count("\nv ") + text.startswith("v ") == 1204  # roots and tips
+        page.locator(".v-select:has(#export-format) .v-field").click()  # the format menu: Rhino
+        page.get_by_text("Rhino .3dm (mesh, controls)").click()
+        with page.expect_download(timeout=20000) as dl:
+            page.locator("#export-mesh").click()
+        assert dl.value.suggested_filename == f"lines-{day}.3dm"
+        dl.value.save_as(tmp_path / "lines.3dm")
+        rhino = helpers.read_3dm(tmp_path / "lines.3dm")
+        assert len(rhino["clay"].vertices) == 1204 and len(rhino["controls"]) == 8
         with page.expect_download(timeout=20000) as dl:
             page.locator("#save-session").click()
+        assert dl.value.suggested_filename == f"lines-{day}.npz"
         saved = tmp_path / "session.npz"
         dl.value.save_as(saved)
         assert saved.stat().st_size > 1000

@@ -40,10 +40,12 @@ CONTROL_PALETTE = np.array([[0.90, 0.30, 0.25], [0.25, 0.55, 0.90], [0.30, 0.75,
                            np.float32)
 
 
-def palette_colours(k: int, k_eff: int) -> tuple[np.ndarray, np.ndarray]:
+def palette_colours(k: int, k_eff: int, ids=None) -> tuple[np.ndarray, np.ndarray]:
     """(k, 3) and (k_eff, 3) float32 display colours of k controls and their k_eff effective copies (copy j takes
-    control j mod k's colour) from `CONTROL_PALETTE`, for layouts without colour dims."""
-    own = CONTROL_PALETTE[np.arange(k) % len(CONTROL_PALETTE)]
+    control j mod k's colour) from `CONTROL_PALETTE`, for layouts without colour dims: by the controls' stable `ids`
+    when given (a colour stays with its control while others come and go), else by index."""
+    keys = np.arange(k) if ids is None else np.asarray(ids, np.int64).reshape(k)
+    own = CONTROL_PALETTE[keys % len(CONTROL_PALETTE)]
     return own, own[np.arange(k_eff) % max(k, 1)]
 
 

@@ -5,6 +5,8 @@ states made elsewhere put in place as one undo step (a loaded session file, a de
 
 from __future__ import annotations
 
+import datetime
+import re
 from collections.abc import Callable, Mapping
 
 import numpy as np
@@ -30,6 +32,13 @@ def state_of(snapshot: dict) -> dict:
         "radii": snapshot["radii"], "strokes": snapshot["strokes"], "smoothing_rule": snapshot["smoothing_rule"],
         "symmetry": group.spec if (group := snapshot["symmetry"]) is not None and group.kind == "radial" else "none",
     }
+
+
+def export_name(session_name: str, ext: str, day: datetime.date | None = None) -> str:
+    """The file an export or a save of a session is named: "<session>-<day>.<ext>" ("sphere-2026-11-27.obj"); the
+    session's name (its preset's, a loaded file's stem) in letters, digits, "-", "_" and "." only."""
+    name = re.sub(r"[^A-Za-z0-9._-]+", "-", str(session_name).removeprefix("mesh:")).strip("-.") or "clay"
+    return f"{name[:60]}-{(day or datetime.date.today()).isoformat()}.{str(ext).lower().lstrip('.')}"
 
 
 def read(path, max_vertices: int) -> dict:
@@ -117,13 +126,19 @@ class SessionFiles:
             with self.state.lock:
                 self.state.params.update(own)
 
-    def export_mesh(self, path) -> None:
-        """Write the current mesh (OBJ, PLY, GLB by extension) with its vertex colours; a loaded mesh goes back in
-        its file's original frame (io.load_mesh normalised it)."""
+    def export_mesh(self, path, units: str = mesh_io.DEFAULT_UNITS) -> None:
+        """Write the current mesh (io.EXPORT_FORMATS by extension: OBJ, PLY, STL, glTF, GLB, .3dm) with its vertex
+        colours, and its controls where the format keeps them (glTF / GLB nodes, .3dm points); a loaded mesh goes
+        back in its file's original frame (io.load_mesh normalised it)."""
         snap = self.snapshot()
         preset = snap["preset"]
         mesh_io.export_mesh(path, snap["weights"], preset.topology, preset.layout, display=preset.display,
-                            transform=preset.meta.get("transform"))
+                            transform=preset.meta.get("transform"), controls=snap["controls"], radii=snap["radii"],
+                            units=units)
+
+    def export_name(self, ext: str) -> str:
+        """The name a download of this session's export (or save) gets: "sphere-2026-11-27.obj"."""
+        return export_name(self.state.preset.name, ext)
 
     def apply_variant(self, controls, parameters: dict, weights) -> None:
         """Make a design variant (somwidget.sweep) the current state: its controls, its schedule and its trained

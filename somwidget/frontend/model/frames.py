@@ -103,10 +103,11 @@ class Frame:
     @property
     def control_display_colours(self) -> np.ndarray:
         """(k_eff, 3) the colours the views draw the effective controls in: their colour dims' where the layout has
-        them, else the palette's (a mirrored copy in its control's colour)."""
+        them, else the palette's by the control's stable id (a mirrored copy in its control's colour)."""
         if self.preset.layout.colour_space != "none":
             return np.asarray(self.effective_colours, np.float32)
-        return _presets.palette_colours(self.n_controls, len(self.effective_controls))[1]
+        ids = self.control_ids if len(self.control_ids) == self.n_controls else None
+        return _presets.palette_colours(self.n_controls, len(self.effective_controls), ids)[1]
 
     @property
     def progress(self) -> float:

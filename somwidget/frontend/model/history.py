@@ -15,12 +15,13 @@ import logging
 import os
 import shutil
 import tempfile
-import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Protocol
 
 import numpy as np
+
+from ...backend import checks
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +48,7 @@ class Step:
     radii: np.ndarray | None = None  # each control's radius (None: all 0)
     symmetry: object = None  # the Symmetry group in effect, or None
     strokes: tuple | None = None  # the lengths of the runs of controls that act as one (None: each alone)
+    control_ids: tuple | None = None  # the controls' stable ids (None: new ones when put back)
     key: int = field(default_factory=lambda: next(_KEYS), compare=False)
 
     @property
@@ -72,14 +74,19 @@ class Step:
 
 
 def load_weights(path: Path) -> np.ndarray:
-    """The weights of a step file (an .npz with a "weights" member)."""
+    """The weights of a step file (an .npz with a "weights" member): finite float32 values within the engine's
+    bounds (checks.MAX_MAGNITUDE). ValueError in plain words when the file is not one, OSError when it cannot be
+    read."""
     try:
         with np.load(path, allow_pickle=False) as z:
             weights = z["weights"]
-    except (zipfile.BadZipFile, KeyError, EOFError) as exc:
-        raise ValueError(f"{path}: not a step file ({exc})") from None
-    if weights.dtype != np.float32 or weights.ndim != 2 or not np.isfinite(weights).all():
-        raise ValueError(f"{path}: not the weights of a step ({weights.dtype} {weights.shape})")
+    except OSError:
+        raise
+    except Exception:  # zipfile's, zlib's and numpy's own words for a damaged file: ours are given instead
+        raise ValueError(f"{path}: not a step file (cut short or damaged)") from None
+    if weights.dtype != np.float32 or weights.ndim != 2 or not np.isfinite(weights).all() \
+            or np.abs(weights).max(initial=0.0) > checks.MAX_MAGNITUDE:
+        raise ValueError(f"{path}: not the weights of a step (finite float32 values up to {checks.MAX_MAGNITUDE:g})")
     return weights
 
 
@@ -172,6 +179,11 @@ class History:
         """Take back `step` if it is the newest (the gesture it began was refused)."""
         if self._undo and self._undo[-1] is step:
             self._discard([self._undo.pop()])
+
+    def drop_redo(self) -> None:
+        """Forget the newest redo step (a view's redo of its own undo took that undo back: nothing is left to redo)."""
+        if self._redo:
+            self._discard([self._redo.pop()])
 
     def undo(self, current: Step) -> Step | None:
         """The state before the latest step (None if there is none); `current` becomes the next redo."""

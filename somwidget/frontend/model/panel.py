@@ -62,6 +62,10 @@ RADIAL_MIRRORED_CHOICES = (3, 4, 6, 8)
 REACH_HELP = schedule.BY_NAME["reach"].help
 #: What a panel shows beside each control's radius.
 RADIUS_HELP = schedule.BY_NAME["radius"].help
+#: A panel's export menu: (extension, label) of each format io.export_mesh writes, the first chosen at the start.
+EXPORT_CHOICES: tuple[tuple[str, str], ...] = (
+    ("obj", "OBJ (mesh, colours)"), ("stl", "STL (3-D printing)"), ("3dm", "Rhino .3dm (mesh, controls)"),
+    ("glb", "GLB (mesh, controls)"), ("gltf", "glTF (mesh, controls)"), ("ply", "PLY (mesh, colours)"))
 #: What a panel shows beside the gaps of the controls table.
 GAP_HELP = ("The distance from each control (and its mirrored copy) to its nearest node: small when the clay has "
             "reached the control.")
@@ -175,6 +179,11 @@ class PanelModel:
         """What the panel's banner says about a session brought back (which state came back), "" for any other."""
         return (self.session.recovered or {}).get("message", "")
 
+    def notice_message(self) -> str:
+        """What the panel's notice says about the saved sessions that could not be read whole (what was wrong, in
+        which file, what came back and where the folder is kept), "" when there is none."""
+        return " ".join(self.session.notices)
+
     @staticmethod
     def train_label(frame: Frame) -> str:
         """What the run button does now: Pause a running map, Resume one stopped part way through its schedule
@@ -244,6 +253,23 @@ class PanelModel:
                 self.session.move_control(i, typed)
 
         return self.attempt(edit)
+
+    def export_name(self, ext: str) -> str:
+        """What an export (or a saved session) of this session is called: "sphere-2026-11-27.obj"."""
+        return self.session.files.export_name(ext)
+
+    def export_bytes(self, ext: str) -> bytes:
+        """The current mesh in format `ext` (EXPORT_CHOICES) as the file's bytes; ValueError naming the format."""
+        import tempfile
+        from pathlib import Path
+
+        ext = str(ext).lower().lstrip(".")
+        if ext not in dict(EXPORT_CHOICES):
+            raise ValueError(f"export: unknown format {ext!r}; use one of {', '.join(dict(EXPORT_CHOICES))}")
+        with tempfile.TemporaryDirectory(prefix="somwidget-export-") as folder:
+            path = Path(folder) / self.export_name(ext)
+            self.session.export_mesh(path)
+            return path.read_bytes()
 
     def feature_names(self) -> str:
         """The names of the other features a control row lists ("" when there are none)."""
@@ -324,4 +350,4 @@ class PanelModel:
         return None if error is None else f"variants: {error}"
 
 
-__all__ = ["PanelModel", "ACTIONS", "Action", "GAP_HELP", "RADIUS_HELP", "REACH_HELP", "fmt"]
+__all__ = ["PanelModel", "ACTIONS", "Action", "EXPORT_CHOICES", "GAP_HELP", "RADIUS_HELP", "REACH_HELP", "fmt"]

@@ -134,13 +134,19 @@ class ModellingState:
         self.install(preset, som)
 
     def install(self, preset: Preset, som) -> None:
-        """A new preset and its Som (caller holds both locks, or nothing runs yet): new ids, settings from the Som,
-        the next generation."""
+        """A new preset and its Som (caller holds both locks, or nothing runs yet): new ids from 0 (the views number
+        and colour controls by them; the same controls, as after Refine, keep theirs), settings from the Som, the
+        next generation."""
         self.preset, self.som, self.layout = preset, som, preset.layout
-        self.controls = np.array(som.controls, dtype=np.float32)
+        controls = np.array(som.controls, dtype=np.float32)
+        same = getattr(self, "controls", None) is not None and np.array_equal(controls, self.controls)
+        self.controls = controls
         self.radii = np.array(som.radii, dtype=np.float32)
         self.strokes = tuple(som.strokes)
-        self.control_ids = self.applied_ids = self.fresh_ids(len(self.controls))
+        if not same:  # another clay's controls: numbered from 0 again (the same controls, Refine: their ids stay)
+            self._next_id = 0
+            self.control_ids = self.fresh_ids(len(self.controls))
+        self.applied_ids = self.control_ids
         self.symmetry = som_group(som, preset.layout)
         self.params = settings_of(som)
         self.set_symmetry(self.symmetry)
@@ -148,7 +154,7 @@ class ModellingState:
         self.generation += 1
 
     def fresh_ids(self, k: int) -> tuple[int, ...]:
-        """k new control ids, never used before in this session."""
+        """k new control ids, never used before on this clay (since its preset was installed)."""
         first = self._next_id
         self._next_id += k
         return tuple(range(first, first + k))
@@ -182,7 +188,7 @@ class ModellingState:
         params = {name: list(v) if isinstance(v, list) else v for name, v in self.params.items()}
         return Step(preset=self.preset, controls=self.controls.copy(), parameters=params, weights=self.som.weights,
                     iteration=int(self.som.iteration), radii=self.radii.copy(), symmetry=self.symmetry,
-                    strokes=self.strokes)
+                    strokes=self.strokes, control_ids=tuple(self.control_ids))
 
     def put_back(self, step: Step) -> None:
         """Put a recorded state into the Som exactly, and the session's view with it; nothing trains until the next
@@ -201,7 +207,10 @@ class ModellingState:
         self.controls = np.array(step.controls, np.float32)
         self.radii = np.array(radii, np.float32)
         self.strokes = tuple(som.strokes)
-        if len(self.controls) != len(self.control_ids):  # a control added or removed: new ids (a grab on an id
+        if step.control_ids is not None and len(step.control_ids) == len(self.controls):  # the ids it had: each
+            self.control_ids = tuple(step.control_ids)  # control's number and colour come back with it
+            self._next_id = max(self._next_id, max(self.control_ids, default=-1) + 1)
+        elif len(self.controls) != len(self.control_ids):  # a control added or removed: new ids (a grab on an id
             self.control_ids = self.fresh_ids(len(self.controls))  # that is gone ends)
         self.applied_ids = self.control_ids
         self.params = {name: list(v) if isinstance(v, list) else v for name, v in p.items()}

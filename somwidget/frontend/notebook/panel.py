@@ -14,27 +14,34 @@ or move a control and watch `panel.progress.value` restart.
 
 from __future__ import annotations
 
+import base64
 import html as _html
 import logging
 import math
 import threading
 import time
 from contextlib import contextmanager
+from pathlib import Path
 
 import ipywidgets as widgets
 
 from ...backend import presets as _presets
 from ...backend.schedule import BY_NAME, SECTIONS, Setting
 from ..model import Frame, Session
-from ..model.panel import GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
+from ..model.panel import EXPORT_CHOICES, GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
 from .variants import VariantsSection
 
 log = logging.getLogger(__name__)
 
 #: The panel refreshes its numbers at most this often per second (frames arrive at up to 60 a second).
 PANEL_HZ = 8
-#: Text blocks: the notebook's default line height spreads small print apart.
-_BLOCK = '<div style="line-height:1.35">{}</div>'
+#: Text blocks: the notebook's default line height spreads small print apart; long words wrap.
+_BLOCK = '<div style="line-height:1.35; white-space:normal; overflow-wrap:anywhere">{}</div>'
+#: The width of the labels that line up (the sliders', the metric weights'): the longest, "smoothing", fits.
+LABEL_WIDTH = "76px"
+#: An export's download link carries the file in the page: up to this size (larger: the file next to the notebook).
+MAX_LINK_BYTES = 20_000_000
+EXPORT_MIME = "application/octet-stream"
 
 #: The dropdown's preset names: the web app's, shorter for the case studies (the panel is narrow).
 PRESET_LABELS = {**_presets.PRESET_LABELS, "space-grid": "Case study 1: space grid",
@@ -67,26 +74,27 @@ class Panel(widgets.VBox):
         self.refreshes = 0  # refreshes applied (for tests)
         self.last_frame_seq = -1
 
-        style = {"description_width": "70px"}
-        wide = widgets.Layout(width="330px")
-        self.title = widgets.HTML()
-        self.preset = widgets.Dropdown(description="preset", style=style, layout=widgets.Layout(width="290px"))
-        self.reload_button = widgets.Button(icon="rotate-left", layout=widgets.Layout(width="36px"),
+        style = {"description_width": LABEL_WIDTH}
+        own = {"description_width": "initial"}  # a label as wide as its words
+        wide = _fluid()
+        self.title = widgets.HTML(layout=_fluid())
+        self.preset = widgets.Dropdown(description="preset", style=style, layout=_fluid("1 1 190px"))
+        self.reload_button = widgets.Button(icon="rotate-left", layout=widgets.Layout(width="36px", min_width="36px"),
                                             tooltip="This preset again as it starts: its own controls and start mesh")
-        self.train_button = widgets.Button(description="Pause", icon="pause", layout=widgets.Layout(width="100px"))
-        self.reset_button = widgets.Button(description="Reset", icon="refresh", layout=widgets.Layout(width="100px"),
+        self.train_button = widgets.Button(description="Pause", icon="pause", layout=_button())
+        self.reset_button = widgets.Button(description="Reset", icon="refresh", layout=_button(),
                                            tooltip="Back to the start mesh, the whole schedule again (the controls "
                                                    "stay)")
-        self.undo_button = widgets.Button(description="Undo", icon="undo", layout=widgets.Layout(width="80px"),
+        self.undo_button = widgets.Button(description="Undo", icon="undo", layout=_button(),
                                           tooltip="Undo the last step (a drag, a setting, a preset...)")
-        self.redo_button = widgets.Button(description="Redo", icon="repeat", layout=widgets.Layout(width="80px"),
+        self.redo_button = widgets.Button(description="Redo", icon="repeat", layout=_button(),
                                           tooltip="Redo the step undone last")
-        self.refine_button = widgets.Button(description="Refine", icon="th", layout=widgets.Layout(width="80px"),
+        self.refine_button = widgets.Button(description="Refine", icon="th", layout=_button(),
                                             tooltip="Subdivide the clay, its shape kept: every face split in four "
                                                     "(one undo step)")
         self.progress = widgets.IntProgress(min=0, max=1, value=0, description="progress", style=style,
                                             layout=wide)
-        self.status = widgets.HTML()
+        self.status = widgets.HTML(layout=_fluid())
         # a widget per setting a panel sets by name, from its declaration (backend/schedule.py); each is also an
         # attribute of its short name (panel.S, panel.reach, panel.symmetry)
         self.fields: dict[str, widgets.ValueWidget] = {p.name: _field(p, style, wide) for p in self.model.fields}
@@ -95,41 +103,53 @@ class Panel(widgets.VBox):
         self.features_box = widgets.VBox()
         self.metric: list[widgets.BoundedFloatText] = []
         group = BY_NAME["group"]
-        self.group = widgets.Dropdown(options=self.model.group_choices(), description=group.label, style=style,
-                                      layout=widgets.Layout(width="290px"), tooltip=group.help)
-        self.radius_of = widgets.Dropdown(description="control", style=style, layout=widgets.Layout(width="170px"),
+        self.group = widgets.Dropdown(options=self.model.group_choices(), description=group.label, style=own,
+                                      layout=_fluid("1 1 190px"), tooltip=group.help)
+        self.radius_of = widgets.Dropdown(description="control", style=own, layout=_fluid("0 1 125px"),
                                           tooltip="The control whose position, features and radius the fields show")
-        self.position = widgets.Text(placeholder="x, y, z", continuous_update=False,
-                                     layout=widgets.Layout(width="150px"),
+        self.position = widgets.Text(placeholder="x, y, z", continuous_update=False, layout=_fluid("1 1 110px"),
                                      tooltip="x, y, z: type a position and press Enter to move the control there")
-        self.features = widgets.Text(description="features", style=style, continuous_update=False,
-                                     layout=widgets.Layout(width="330px"))
-        self.radius = widgets.BoundedFloatText(min=0.0, max=1e6, step=0.05, description="", tooltip=RADIUS_HELP,
-                                               layout=widgets.Layout(width="110px"))
-        self.all_radii = widgets.Text(placeholder="all radii", continuous_update=False,
-                                      layout=widgets.Layout(width="80px"),
+        self.features = widgets.Text(description="features", style=own, continuous_update=False,
+                                     layout=_fluid("1 1 190px"))
+        self.radius = widgets.BoundedFloatText(min=0.0, max=1e6, step=0.05, description="radius", style=own,
+                                               tooltip=RADIUS_HELP, layout=_fluid("0 1 130px"))
+        self.all_radii = widgets.Text(placeholder="all radii", continuous_update=False, layout=_fluid("0 1 90px"),
                                       tooltip="Every control's radius of influence at once: type it and press Enter")
-        self.controls_html = widgets.HTML()
-        self.error = widgets.HTML()
+        self.controls_html = widgets.HTML(layout=_fluid())
+        self.error = widgets.HTML(layout=_fluid())
+        self.export_format = widgets.Dropdown(options=[(label, ext) for ext, label in EXPORT_CHOICES],
+                                              description="format", style=own, layout=_fluid("1 1 200px"),
+                                              tooltip="What the next tool reads: STL for 3-D printing, .3dm for "
+                                                      "Rhino, glTF / GLB for Blender and game engines")
+        self.export_button = widgets.Button(description="Export", icon="download", layout=_button(),
+                                            tooltip="Write the clay in the chosen format next to the notebook, "
+                                                    "named after the session and the day, and offer it as a "
+                                                    "download")
+        self.export_link = widgets.HTML(layout=_fluid())
         self.recovered = _banner(self.model.recovered_message())
+        self.notices = _banner(self.model.notice_message(), "#e0a030")  # saved sessions not read whole
         self.saving = widgets.HTML()  # the autosave's failure, until a save is on disk again
         self.variants = VariantsSection(self.model, self._intent)
 
         super().__init__([
-            self.recovered, self.saving, self.title,
-            widgets.HBox([self.preset, self.reload_button, self.refine_button]),
-            widgets.HBox([self.train_button, self.undo_button, self.redo_button, self.reset_button]),
+            self.recovered, self.notices, self.saving, self.title,
+            _row([self.preset, self.reload_button, self.refine_button]),
+            _row([self.train_button, self.undo_button, self.redo_button, self.reset_button]),
             self.progress, self.status, self.error,
             _heading("schedule"), *self._section("schedule"),
-            widgets.HBox([*self._section("symmetry"), self.group]),
+            _row([*self._section("symmetry"), self.group]),
             _heading("features"),
             self.features_box,
             widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(GAP_HELP)}">Controls</b> <small>(gap: distance to '
-                                       'the nearest node, original / mirror)</small>')),
-            self.controls_html, widgets.HBox([self.radius_of, self.position, self.radius]),
-            widgets.HBox([self.features, self.all_radii]),
+                                       'the nearest node, original / mirror)</small>'), layout=_fluid()),
+            self.controls_html, _row([self.radius_of, self.position, self.radius]),
+            _row([self.features, self.all_radii]),
+            widgets.HTML(_BLOCK.format("<b>Export</b> <small>(the file is named after the session and the day)"
+                                       "</small>"), layout=_fluid()),
+            _row([self.export_format, self.export_button]), self.export_link,
             self.variants,
-        ], layout=widgets.Layout(width="360px", min_width="360px", padding="4px"))
+        ], layout=widgets.Layout(flex="1 1 320px", width="auto", min_width="0", max_width="440px", padding="4px"))
+        self.add_class("somwidget-panel")
 
         for name, w in self.fields.items():
             w.observe(lambda change, name=name: self._intent(session.set_parameter, name, change["new"]),
@@ -151,6 +171,7 @@ class Panel(widgets.VBox):
         self.reload_button.on_click(lambda _b: self._reload_preset())
         self.refine_button.on_click(lambda _b: self._intent(self.model.refine) and self.refresh())
         self.redo_button.on_click(lambda _b: self._intent(session.redo))
+        self.export_button.on_click(lambda _b: self.export())
 
         self.refresh()
         session.add_listener(self._on_frame, replay=False)
@@ -166,7 +187,8 @@ class Panel(widgets.VBox):
             if p.section == section:
                 out.append(self.fields[p.name])
                 if p.widget == "slider":
-                    out.append(widgets.HTML(_BLOCK.format(f"<small>{_html.escape(p.help)}</small>")))
+                    out.append(widgets.HTML(_BLOCK.format(f"<small>{_html.escape(p.help)}</small>"),
+                                            layout=_fluid()))
         return out
 
     # -- widget -> session ------------------------------------------------------------------------------------
@@ -212,6 +234,25 @@ class Panel(widgets.VBox):
         """The current preset again, as it starts (one undo step)."""
         if self._intent(self.model.reload_preset):
             self.refresh()
+
+    def export(self, folder: str | Path = ".") -> Path | None:
+        """Write the clay in the chosen format (`export_format`) into `folder` (the notebook's, by default) under the
+        session's name and the day, and show a link that downloads it; None (the message in the panel) if refused."""
+        ext = self.export_format.value
+        written: list[Path] = []
+
+        def write():
+            data = self.model.export_bytes(ext)
+            path = Path(folder) / self.model.export_name(ext)
+            path.write_bytes(data)
+            written.append(path)
+            link = (f'<a download="{_html.escape(path.name)}" href="data:{EXPORT_MIME};base64,'
+                    f'{base64.b64encode(data).decode("ascii")}">download {_html.escape(path.name)}</a>'
+                    if len(data) <= MAX_LINK_BYTES else f"<b>{_html.escape(path.name)}</b>")
+            self.export_link.value = _BLOCK.format(f"{link} <small>({len(data) / 1024:,.0f} KB, also written to "
+                                                   f"{_html.escape(str(path.resolve().parent))})</small>")
+
+        return written[0] if self._intent(write) else None
 
     def set_metric_weight(self, dim: int, value) -> None:
         self._intent(self.session.settings.set_metric_weight, dim, value)
@@ -307,11 +348,11 @@ class Panel(widgets.VBox):
         for row in self.model.feature_rows():
             d = row["d"]
             w = widgets.BoundedFloatText(value=row["weight"], min=m.low, max=m.high, step=0.1, description=row["name"],
-                                         tooltip=m.help, style={"description_width": "70px"},
-                                         layout=widgets.Layout(width="170px"))
+                                         tooltip=m.help, style={"description_width": LABEL_WIDTH},
+                                         layout=_fluid("0 1 170px"))
             w.observe(lambda change, d=d: self.set_metric_weight(d, change["new"]), names="value")
             metric.append(w)
-            rows.append(widgets.HBox([w, widgets.HTML(f"<small>dim {d}: {row['role']}</small>")]))
+            rows.append(_row([w, widgets.HTML(f"<small>dim {d}: {row['role']}</small>", layout=_fluid("1 1 100px"))]))
         old_rows = self.features_box.children
         self.features_box.children = rows
         self.metric = metric
@@ -331,23 +372,46 @@ class Panel(widgets.VBox):
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(2.0)
         self.variants.close()
-        for w in [*self.children, *self.fields.values(), *self.metric, *self.features_box.children, self.group,
-                  self.radius_of, self.radius, self.position, self.features, self.all_radii, *self.recovered.children]:
-            w.close()
+        for w in self.children:  # every widget of the panel, rows and all: a widget left open stays registered
+            close_tree(w)  # with its comm, and its handlers would keep this panel and its session alive
         super().close()
+
+
+def close_tree(widget) -> None:
+    """Close a widget and every widget inside it."""
+    for child in getattr(widget, "children", ()):
+        close_tree(child)
+    widget.close()
+
+
+def _fluid(flex: str = "1 1 100%") -> widgets.Layout:
+    """A field's layout in a row that wraps: it grows and shrinks from `flex`'s basis, never wider than the panel."""
+    return widgets.Layout(flex=flex, width="auto", min_width="0", max_width="100%")
+
+
+def _button() -> widgets.Layout:
+    """A button as wide as its icon and words."""
+    return widgets.Layout(width="auto", min_width="fit-content", flex="0 0 auto")
+
+
+def _row(children) -> widgets.HBox:
+    """Fields side by side while they fit the panel's width, the next line where they do not."""
+    return widgets.HBox(children, layout=widgets.Layout(flex_flow="row wrap", align_items="center", width="100%"))
 
 
 def _heading(section: str) -> widgets.HTML:
     """A section's title and what it is about (backend/schedule.py, SECTIONS)."""
     title, about = SECTIONS[section]
-    return widgets.HTML(_BLOCK.format(f"<b>{_html.escape(title)}</b> <small>({_html.escape(about)})</small>"))
+    return widgets.HTML(_BLOCK.format(f"<b>{_html.escape(title)}</b> <small>({_html.escape(about)})</small>"),
+                        layout=_fluid())
 
 
 def _field(p: Setting, style: dict, layout) -> widgets.ValueWidget:
     """A setting's widget: a checkbox for a flag, else a slider over its declared range (its value may lie past it:
     `_show` widens the range)."""
     if p.kind == "bool":
-        return widgets.Checkbox(description=p.label, indent=False, tooltip=p.help)
+        return widgets.Checkbox(description=p.short or p.label, indent=False, tooltip=p.help,
+                                layout=widgets.Layout(width="auto", flex="0 0 auto"))
     low, high, step = p.slider
     kind, extra = (widgets.IntSlider, {}) if p.kind == "int" else (
         widgets.FloatSlider, {"readout_format": f".{slider_digits(p)}f"})
@@ -365,12 +429,13 @@ def _show(widget, p: Setting, value) -> None:
     _set(widget, value)
 
 
-def _banner(message: str) -> widgets.HBox:
-    """The recovered session's banner (hidden when there is none to say) with a button that dismisses it."""
+def _banner(message: str, colour: str = "#9c9") -> widgets.HBox:
+    """A banner (the recovered session's; the notices about saved sessions) hidden when there is nothing to say, with
+    a button that dismisses it."""
     dismiss = widgets.Button(icon="times", tooltip="Dismiss", layout=widgets.Layout(width="32px", min_width="32px"))
     banner = widgets.HBox([widgets.HTML(_BLOCK.format(f"<small>{_html.escape(message)}</small>"),
                                         layout=widgets.Layout(flex="1 1 auto")), dismiss],
-                          layout=widgets.Layout(display="flex" if message else "none", border="1px solid #9c9",
+                          layout=widgets.Layout(display="flex" if message else "none", border=f"1px solid {colour}",
                                                 padding="2px 4px", margin="0 0 4px 0", align_items="center"))
     banner.add_class("somwidget-recovered")
 

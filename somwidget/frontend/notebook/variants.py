@@ -12,7 +12,7 @@ from ..model.picture import png_bytes
 from ..model.variants import VARIANTS_HELP
 
 #: Text blocks: the notebook's default line height spreads small print apart.
-_BLOCK = '<div style="line-height:1.35">{}</div>'
+_BLOCK = '<div style="line-height:1.35; white-space:normal">{}</div>'
 
 
 class VariantsSection(widgets.VBox):
@@ -23,28 +23,32 @@ class VariantsSection(widgets.VBox):
     def __init__(self, model: PanelModel, intent):
         self.model = model
         self._intent = intent
-        style = {"description_width": "70px"}
+        style = {"description_width": "initial"}
+        fluid = dict(width="auto", min_width="0", max_width="100%")
         self.count = widgets.BoundedIntText(value=12, min=1, max=model.max_variants, description="how many",
-                                            style=style, layout=widgets.Layout(width="170px"))
+                                            style=style, layout=widgets.Layout(flex="1 1 140px", **fluid))
         self.jitter = widgets.BoundedFloatText(value=0.05, min=0.0, max=1.0, step=0.01, description="jitter",
-                                               style=style, layout=widgets.Layout(width="170px"),
+                                               style=style, layout=widgets.Layout(flex="1 1 120px", **fluid),
                                                tooltip="each control moves by up to this share of the model's size")
         self.vary = widgets.SelectMultiple(options=list(model.varied), value=(), description="vary",
-                                           rows=len(model.varied),
-                                           style=style, layout=widgets.Layout(width="250px"))
+                                           rows=len(model.varied), style=style,
+                                           layout=widgets.Layout(flex="1 1 100%", **fluid))
         self.sweep_button = widgets.Button(description="Sweep", icon="th", tooltip=VARIANTS_HELP,
-                                           layout=widgets.Layout(width="100px"))
-        self.progress = widgets.IntProgress(min=0, max=1, value=0, layout=widgets.Layout(width="220px"))
+                                           layout=widgets.Layout(width="auto", min_width="fit-content"))
+        self.progress = widgets.IntProgress(min=0, max=1, value=0, layout=widgets.Layout(flex="1 1 120px", **fluid))
         width = f"{model.thumbnail[0]}px"
-        self.gallery = widgets.GridBox(layout=widgets.Layout(grid_template_columns=f"repeat(2, {width})",
-                                                             grid_gap="4px"))
+        self.gallery = widgets.GridBox(layout=widgets.Layout(
+            grid_template_columns=f"repeat(auto-fill, minmax(min({width}, 100%), {width}))", grid_gap="4px",
+            width="100%"))
+        wrap = widgets.Layout(flex_flow="row wrap", align_items="center", width="100%")
         self.sweep_button.on_click(lambda _b: self.sweep())
         super().__init__([
             widgets.HTML(_BLOCK.format(f'<b title="{_html.escape(VARIANTS_HELP)}">Variants</b> <small>(many '
-                                       'designs at once; pick one to go on from it)</small>')),
-            widgets.HBox([self.count, self.jitter]), self.vary, widgets.HBox([self.sweep_button, self.progress]),
-            self.gallery,
-        ])
+                                       'designs at once; pick one to go on from it)</small>'),
+                         layout=widgets.Layout(**fluid)),
+            widgets.HBox([self.count, self.jitter], layout=wrap), self.vary,
+            widgets.HBox([self.sweep_button, self.progress], layout=wrap), self.gallery,
+        ], layout=widgets.Layout(width="100%"))
 
     @property
     def result(self):

@@ -33,7 +33,7 @@ from wslink.websocket import LinkProtocol
 from ...backend import presets as _presets
 from ..model import Session
 from ...backend.io import TooManyVertices
-from ..model.panel import REACH_HELP
+from ..model.panel import EXPORT_CHOICES, REACH_HELP
 from ..transport.limits import bound_messages
 from . import lan as _lan
 from . import uploads
@@ -127,6 +127,9 @@ class SomApp:
         s.recovered_message = self.panel.recovered_message()
         s.notice_message = " ".join(self.session.notices)  # saved sessions set aside: what and where
         s.save_error = ""  # the autosave's failure while saves fail (panel_state.py)
+        s.export_format = EXPORT_CHOICES[0][0]
+        s.export_items = [{"title": label, "value": ext} for ext, label in EXPORT_CHOICES]
+        s.export_mimes = dict(uploads.MIME)
         s.variants_n = 12
         s.variants_jitter = 0.05
         s.variants_vary = []
@@ -258,7 +261,7 @@ class SomApp:
     def export_mesh(self, fmt) -> bytes | None:
         fmt = str(fmt).lower()
         if fmt not in uploads.MIME:
-            self.panel_state.error(f"export: unknown format {fmt!r}; use obj, ply or glb")
+            self.panel_state.error(f"export: unknown format {fmt!r}; use one of {', '.join(uploads.MIME)}")
             return None
         return self._download(self.session.export_mesh, "." + fmt)
 

@@ -14,7 +14,6 @@ from ...backend.schedule import BY_NAME, SECTIONS, Setting
 from ..model.panel import GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
 from ..model.variants import VARIANTS_HELP
 from .state_guard import state_key
-from .uploads import MIME
 
 
 #: The page's keyboard shortcuts: Ctrl+Z undoes, Ctrl+Shift+Z or Ctrl+Y redoes (Cmd on a Mac), except while a text
@@ -280,15 +279,19 @@ def _panel(panel: PanelModel) -> None:
 
         # files out
         html.Div("Export and sessions", classes="text-subtitle-2 mt-2")
-        with html.Div(classes="d-flex flex-wrap ga-1 mb-2"):
-            for fmt in ("obj", "ply", "glb"):
-                v3.VBtn(fmt.upper(), size="small", variant="tonal", prepend_icon="mdi-download",
-                        id=f"export-{fmt}",
-                        click=f"utils.download('somwidget-mesh.{fmt}', trigger('export_mesh', ['{fmt}']), "
-                              f"'{MIME[fmt]}')")
+        with html.Div(classes="d-flex flex-wrap align-center ga-1 mb-2"):
+            # the format menu (model/panel.py, EXPORT_CHOICES); the file is named after the session and the day
+            v3.VSelect(v_model=("export_format",), items=("export_items",), label="Format", density="compact",
+                       hide_details=True, id="export-format", style="min-width: 190px; max-width: 240px",
+                       title="What the next tool reads: STL for 3-D printing, .3dm for Rhino, glTF / GLB for "
+                             "Blender and game engines (the controls as named nodes)")
+            v3.VBtn("Export", size="small", variant="tonal", prepend_icon="mdi-download", id="export-mesh",
+                    title="Download the clay in the chosen format",
+                    click="utils.download(export_stem + '.' + export_format, trigger('export_mesh', "
+                          "[export_format]), export_mimes[export_format])")
             v3.VBtn("Save session", size="small", variant="tonal", prepend_icon="mdi-content-save",
                     id="save-session",
-                    click="utils.download('somwidget-session.npz', trigger('save_session'), "
+                    click="utils.download(export_stem + '.npz', trigger('save_session'), "
                           "'application/octet-stream')")
         v3.VFileInput(v_model=("session_upload",), label="Load a session (.npz)", density="compact",
                       hide_details=True, prepend_icon="mdi-folder-open", accept=".npz", id="session-upload",

@@ -94,6 +94,7 @@ class PanelState:
         s.preset_name = sess.preset.name
         s.preset_title = sess.preset.title
         s.preset_description = sess.preset.description
+        s.export_stem = self.panel.export_name("x")[:-2]  # what downloads are called: "<session>-<day>"
         for f in self.panel.fields:
             if force or values[f.name] != last.get(f.name):
                 s[state_key(f.name)] = values[f.name]

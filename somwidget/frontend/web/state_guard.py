@@ -10,6 +10,7 @@ import logging
 import math
 
 from ...backend.schedule import SETTINGS
+from ..model.panel import EXPORT_CHOICES
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +69,7 @@ WRITABLE = {
     **{state_key(s.name): _BOUND[s.widget] for s in SETTINGS if s.widget in _BOUND},
     "variants_n": _number_or_text,
     "variants_jitter": _number_or_text,
+    "export_format": lambda value: value in dict(EXPORT_CHOICES),
     "variants_vary": lambda value: isinstance(value, list) and len(value) <= 5 and all(
         isinstance(v, str) and len(v) <= 16 for v in value),
     "error_message": _cleared,

@@ -21,7 +21,8 @@ MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 #: Longest file name shown back in messages and preset titles.
 MAX_SHOWN_NAME = 80
 #: What a download of each export format is sent as.
-MIME = {"obj": "text/plain", "ply": "application/octet-stream", "glb": "model/gltf-binary"}
+MIME = {"obj": "text/plain", "ply": "application/octet-stream", "stl": "model/stl", "glb": "model/gltf-binary",
+        "gltf": "model/gltf+json", "3dm": "application/octet-stream"}
 #: Uploads are written to tempfile's folder as somwidget-upload-<pid>-*.
 UPLOAD_PREFIX = "somwidget-upload-"
 

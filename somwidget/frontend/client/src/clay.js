@@ -13,6 +13,9 @@ const LIGHT_SEGMENTS = 4096; // synapses above which moving clay on a software r
 const WHITE = new THREE.Color(0xffffff);
 const HOVER_LIGHTEN = 0.35; // a hovered control's colour moves this far towards white
 const IDENTITY = [1, 0, 0, 0, 1, 0, 0, 0, 1];
+const GHOST_SIZE = 0.6; // a symmetric copy (a ghost) is drawn this many times a control's size ...
+const GHOST_OPACITY = 0.3; // ... and this faint
+export const DRAWN_PX = { control: 6, ghost: 4 }; // the smallest radius a control (a ghost) is drawn at, in pixels
 
 // A 3 x 3 map (row-major, 9 numbers) of a position p: M p, and its inverse (the transpose: the maps are orthogonal).
 export const applyMap = (M, p) => [M[0] * p[0] + M[1] * p[1] + M[2] * p[2], M[3] * p[0] + M[4] * p[1] + M[5] * p[2],
@@ -39,6 +42,14 @@ export function groupOf(msg) {
   return { name: typeof msg.group === 'string' ? msg.group : `mirror-${'xyz'[axis]}`, maps: [IDENTITY, mirror] };
 }
 
+// The box of the positions in `array` (x, y, z, x, ...; empty for none).
+export function boxOf(array) {
+  const box = new THREE.Box3();
+  const v = new THREE.Vector3();
+  for (let o = 0; o < array.length; o += 3) box.expandByPoint(v.set(array[o], array[o + 1], array[o + 2]));
+  return box;
+}
+
 export class Clay {
   // software: the page draws with a software rasteriser, which pays for every triangle (coarser control spheres)
   constructor({ software = false } = {}) {
@@ -61,6 +72,7 @@ export class Clay {
     this.pendingGroup = null; // a group a "controls" message announced, in effect from the next frame
     this.local = new Map(); // original index -> [x, y, z] model position while this client drags it
     this.held = new Set(); // original indices held by any client (server's grabs)
+    this.holders = new Map(); // original index -> its holder's colour ('#rrggbb'), for those other clients hold
     this.hover = new Set(); // effective indices hovered by an input
     this.radius = 1;
     this.controlRadius = 0.05;
@@ -75,6 +87,7 @@ export class Clay {
     this.controlIds = []; // each control's stable id, in index order (what intents name)
     this.radii = []; // each control's radius of influence (model units), from the topology and "controls" messages
     this.strokes = []; // the runs of controls that act as one (a stroke's samples)
+    this.pixelSize = null; // (world point) => world units a screen pixel spans there (null: no floor, a headset)
   }
 
   get ready() {
@@ -160,6 +173,12 @@ export class Clay {
   setRuns(msg) {
     if (Array.isArray(msg.radii)) this.radii = msg.radii.map(Number);
     if (Array.isArray(msg.strokes)) this.strokes = msg.strokes.map(Number);
+  }
+
+  // Whether effective control j carries a number: a control a person placed (not a ghost, a symmetric copy; of a
+  // stroke, its first sample).
+  numbered(j) {
+    return j < this.k && this.runOf(j)[0] === j;
   }
 
   // The indices of the controls that act as one with control i (a stroke's samples; i alone otherwise).
@@ -252,7 +271,8 @@ export class Clay {
   }
 
   // The control spheres: an anchor (Object3D) per effective control carries its place and size, and two instanced
-  // meshes draw them, the originals solid and the copies translucent (two draw calls whatever the count).
+  // meshes draw them, the originals solid and the copies (ghosts) smaller and faint (two draw calls whatever the
+  // count). A control is never drawn smaller than DRAWN_PX on screen (`pixelSize`).
   rebuildControls(kEff) {
     for (const m of this.controlAnchors) this.content.remove(m);
     for (const d of this.controlDraws) {
@@ -273,7 +293,7 @@ export class Clay {
     }
     const draw = (count, ghost) => {
       const d = new THREE.InstancedMesh(this.sphere, new THREE.MeshLambertMaterial({
-        transparent: ghost, opacity: ghost ? 0.55 : 1.0 }), Math.max(count, 1));
+        transparent: ghost, opacity: ghost ? GHOST_OPACITY : 1.0, depthWrite: !ghost }), Math.max(count, 1));
       d.count = count;
       d.name = ghost ? 'control-mirrors' : 'control-spheres';
       d.frustumCulled = false;
@@ -295,17 +315,6 @@ export class Clay {
     this.kEff = kEff;
   }
 
-  // What control j looks like as drawn: its colour and its radius over the control radius.
-  controlLook(j) {
-    if (j < 0 || j >= this.kEff) return null;
-    const [d, i] = j < this.k ? [this.controlDraws[0], j] : [this.controlDraws[1], j - this.k];
-    const c = new THREE.Color();
-    d.getColorAt(i, c);
-    const m = new THREE.Matrix4();
-    d.getMatrixAt(i, m);
-    return { colour: `#${c.getHexString()}`, scale: m.getMaxScaleOnAxis() / this.controlRadius };
-  }
-
   // Positions, colours and highlights of the control spheres (local drags win over the server's positions).
   refreshControls() {
     this.onChange?.();
@@ -317,10 +326,12 @@ export class Clay {
       if (p) m.position.set(p[0], p[1], p[2]);
       const held = this.held.has(i) || this.local.has(i);
       const hovered = this.hover.has(j);
-      const c = m.userData.colour.copy(held ? HELD : (m.userData.base || HELD));
+      const other = this.local.has(i) ? undefined : this.holders.get(i); // another hand's: drawn in its colour
+      const c = other ? m.userData.colour.set(other) : m.userData.colour.copy(held ? HELD : (m.userData.base || HELD));
       if (hovered && !held) c.lerp(WHITE, HOVER_LIGHTEN);
-      const grow = held ? (m.userData.mirror ? 1.35 : 1.6) : hovered ? 1.3 : 1.0;
-      m.scale.setScalar(this.controlRadius * grow);
+      const ghost = m.userData.mirror;
+      const grow = (held ? (ghost ? 1.35 : 1.6) : hovered ? 1.3 : 1.0) * (ghost ? GHOST_SIZE : 1.0);
+      m.scale.setScalar(Math.max(this.controlRadius * grow, this.floorAt(m, ghost ? DRAWN_PX.ghost : DRAWN_PX.control)));
       m.updateMatrix();
       const [d, at] = j < this.k ? [this.controlDraws[0], j] : [this.controlDraws[1], j - this.k];
       if (!d || at >= d.count) continue;
@@ -331,6 +342,13 @@ export class Clay {
       d.instanceMatrix.needsUpdate = true;
       if (d.instanceColor) d.instanceColor.needsUpdate = true;
     }
+  }
+
+  // The model radius that `px` screen pixels make at anchor m (0 without a camera to measure: a headset).
+  floorAt(m, px) {
+    if (!this.pixelSize) return 0;
+    const w = m.getWorldPosition(this.scratchWorld || (this.scratchWorld = new THREE.Vector3()));
+    return (px * this.pixelSize(w)) / this.scale;
   }
 
   setLocal(i, modelPos) {
@@ -364,10 +382,7 @@ export class Clay {
   // The world-space sphere around the drawn clay and every control (null before the first frame).
   worldBounds() {
     if (!this.lastFrame) return null;
-    const box = new THREE.Box3();
-    const a = this.positionAttr.array;
-    const v = new THREE.Vector3();
-    for (let o = 0; o < a.length; o += 3) box.expandByPoint(v.set(a[o], a[o + 1], a[o + 2]));
+    const box = boxOf(this.positionAttr.array);
     for (const m of this.controlAnchors) box.expandByPoint(m.position);
     if (box.isEmpty()) return null;
     const centre = box.getCenter(new THREE.Vector3());
@@ -381,18 +396,6 @@ export class Clay {
     if (!m) return null;
     this.stage.updateWorldMatrix(true, true);
     return m.getWorldPosition(target);
-  }
-
-  // The effective control nearest to a world point, within maxDistance (world units): {index, distance} or null.
-  nearest(worldPoint, maxDistance) {
-    let best = null;
-    const w = new THREE.Vector3();
-    for (let j = 0; j < this.kEff; j++) {
-      this.controlWorld(j, w);
-      const d = w.distanceTo(worldPoint);
-      if (d <= maxDistance && (!best || d < best.distance)) best = { index: j, distance: d };
-    }
-    return best;
   }
 
   // Where a ray first meets the clay (its surface; a point display's nearest node within `pointPad` x the control
@@ -410,23 +413,6 @@ export class Clay {
       if (normal.dot(raycaster.ray.direction) > 0) normal.negate();
     }
     return { point: h.point.clone(), distance: h.distance, normal };
-  }
-
-  // The effective control a ray hits first (spheres padded by `pad` x their radius): {index, point} or null.
-  hitByRay(raycaster, pad = 1.5) {
-    let best = null;
-    const w = new THREE.Vector3();
-    const sphere = new THREE.Sphere();
-    const hit = new THREE.Vector3();
-    for (let j = 0; j < this.kEff; j++) {
-      this.controlWorld(j, w);
-      sphere.set(w, this.worldControlRadius * pad);
-      if (raycaster.ray.intersectSphere(sphere, hit)) {
-        const d = hit.distanceTo(raycaster.ray.origin);
-        if (!best || d < best.distance) best = { index: j, distance: d, point: hit.clone() };
-      }
-    }
-    return best;
   }
 
   // Effective control j is control j mod k under the group's map floor(j / k): which control an effective index

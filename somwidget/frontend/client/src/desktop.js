@@ -1,27 +1,28 @@
 // Mouse, touch and keys on a flat screen. A press goes to what is visible under it: the selected control's handle
-// (handle.js), the Stroke tool while it is on (stroke.js), a control not hidden by the clay (drag it on the plane
-// facing the camera; with Shift along the model axis closest to the motion only), else the orbit (camera.js: drag to
-// orbit, right-drag to pan). A click on a control selects it (its handle shows), a double click on the clay adds a
-// control there, the wheel over a control sets its radius (radius.js) and elsewhere zooms towards the cursor.
-//
-// Keys while the pointer is over the view (or it has the focus): 1-6 the axis views, F fit, O orthographic, S the
-// Stroke tool, Delete (Backspace) removes the control under the pointer, Esc lets the selection (or a stroke) go.
+// (handle.js), the Stroke tool while it is on (stroke.js), a control (before the clay: a control lying on the
+// surface is taken even where the clay shows in front of part of it, and a small one within PICKED_PX of it; a
+// control the clay hides is not), else the orbit (camera.js: drag to orbit, right-drag to pan). A drag moves the
+// control on the plane facing the camera (with Shift along the model axis closest to the motion only). A click on
+// a control selects it (its handle shows), a double click on the clay adds a control there (the radius the disc
+// shows), the wheel over a control sets its radius (radius.js) and elsewhere zooms towards the cursor; Alt+wheel
+// sets the radius the disc under the cursor shows (the control's, or a new control's). The keys: keys.js.
 
 import * as THREE from 'three';
 import { VIEWS } from './camera.js';
+import { isTyping, viewAction } from './keys.js';
+import { controlsAlong, hidesControl } from './picking.js';
 import { intents } from './protocol.js';
 
 const PAD = 1.2; // a control is hit within this many times its drawn radius
 const CLICK_PX = 4; // a press and release closer than this is a click
-
-const editable = (el) => el && (el.tagName === 'INPUT' || el.tagName === 'TEXTAREA' || el.tagName === 'SELECT'
-  || el.isContentEditable);
+const KEY_NOTCH = 100; // [ and ] turn a radius as one wheel notch does
 
 export class Desktop {
   // rig: the CameraRig; handle: the Handle; radius: the RadiusBall; stroke: the StrokeDraw; act: the view's actions
   // for keys {fit(), look(name), orthographic(on), stroke(on)}; onDragStart / onDragEnd: a control drag begins / ends
-  constructor({ renderer, rig, clay, grabs, link, handle, radius, stroke, act, onDragStart, onDragEnd }) {
+  constructor({ renderer, rig, clay, grabs, link, handle, radius, disc, stroke, act, onDragStart, onDragEnd }) {
     this.renderer = renderer;
+    this.disc = disc; // the RadiusDisc: the radius under the cursor
     this.rig = rig;
     this.clay = clay;
     this.grabs = grabs;
@@ -33,11 +34,15 @@ export class Desktop {
     this.onDragStart = onDragStart;
     this.onDragEnd = onDragEnd;
     this.raycaster = new THREE.Raycaster();
+    this.sightRay = new THREE.Raycaster(); // from the eye to a control (is it hidden?)
     this.drag = null;
     this.press = null; // where the last left press went down (to tell a click)
     this.strokeTool = false;
     this.hovered = null; // the effective control under the pointer
-    this.stats = { drags: 0, moves: 0, adds: 0, removes: 0, strokes: 0, radii: 0, hiddenPresses: 0 };
+    this.pointer = null; // the last pointer event over the view (null: the pointer is elsewhere)
+    this.onEscape = null; // after Escape's own work (a notebook: the focus goes back to it, keys.js focusHost)
+    this.stats = { drags: 0, moves: 0, adds: 0, removes: 0, strokes: 0, radii: 0, hiddenPresses: 0, keys: 0,
+      undos: 0, redos: 0 };
     const el = renderer.domElement;
     el.tabIndex = 0; // keys go to the view that has the focus
     el.dataset.lmSuppressShortcuts = 'true'; // JupyterLab leaves its own keys to the view while it has the focus
@@ -46,12 +51,17 @@ export class Desktop {
     el.addEventListener('pointerup', (ev) => this.up(ev));
     el.addEventListener('pointercancel', (ev) => this.up(ev));
     el.addEventListener('pointerenter', () => {
-      if (!editable(document.activeElement)) el.focus({ preventScroll: true });
+      if (!isTyping(document.activeElement)) el.focus({ preventScroll: true });
     });
-    el.addEventListener('pointerleave', () => this.hover(null));
+    el.addEventListener('pointerleave', () => {
+      this.pointer = null;
+      this.hover(null);
+      this.disc?.hide();
+    });
     el.addEventListener('wheel', (ev) => this.wheel(ev), { capture: true, passive: false });
     el.addEventListener('dblclick', (ev) => this.doubleClick(ev));
-    el.addEventListener('keydown', (ev) => this.key(ev));
+    // every key in the view (its canvas, its bar, its Display menu) is the view's first
+    el.parentElement?.addEventListener('keydown', (ev) => this.key(ev), true);
   }
 
   get presenting() {
@@ -65,17 +75,22 @@ export class Desktop {
     return this.raycaster;
   }
 
-  // The control under the pointer that the person can see: a control behind the clay is taken only where no clay
-  // is in front of it. {index, distance, point} or null; `hidden` counts a press on a hidden one.
+  // The control under the pointer that the person can see, picked before the clay: of the controls the ray passes
+  // within their pick radius and the clay does not hide (picking.js: one lying on the surface shows, also where the
+  // clay covers part of its sphere), one whose drawn sphere the ray meets wins (the nearest), else the one it passes
+  // closest (for its size). {index, distance} or null; `hidden` counts a press that met only hidden controls.
   visibleControl(raycaster, hidden = null) {
-    const hit = this.clay.hitByRay(raycaster, PAD);
-    if (!hit) return null;
-    const surface = this.clay.surfaceHit(raycaster);
-    if (surface && surface.distance < hit.distance) {
+    const candidates = controlsAlong(this.clay, raycaster, PAD);
+    if (!candidates.length) return null;
+    const seen = candidates.filter((c) => !hidesControl(this.clay, c.index, this.rig.camera, this.sightRay));
+    if (!seen.length) {
       if (hidden) hidden.count += 1;
       return null;
     }
-    return hit;
+    const onSphere = seen.filter((c) => c.off <= c.drawn).sort((a, b) => a.along - b.along);
+    const best = onSphere[0] || seen.sort((a, b) => a.off / a.reach - b.off / b.reach
+      || Number(a.ghost) - Number(b.ghost))[0];
+    return { index: best.index, distance: best.along };
   }
 
   hover(j) {
@@ -83,6 +98,29 @@ export class Desktop {
     this.clay.setHover(j === null ? new Set() : new Set([j]));
     this.radius.show(j ?? this.handle.selected);
     this.renderer.domElement.style.cursor = this.strokeTool ? 'crosshair' : j !== null ? 'grab' : '';
+  }
+
+  // The radius under the cursor: the dragged control's, the hovered one's, else a new control's where the cursor is
+  // over the clay (or while the Stroke tool is on); hidden elsewhere, while orbiting and while the handle moves.
+  showDisc(ev, rc = this.ray(ev)) {
+    if (!this.disc) return;
+    if (!ev || this.handle.held || (ev.buttons && !this.drag && !this.stroke.drawing)) {
+      this.disc.hide();
+      return;
+    }
+    const r = this.renderer.domElement.getBoundingClientRect();
+    const at = [ev.clientX - r.left, ev.clientY - r.top];
+    const hit = this.clay.surfaceHit(rc);
+    const j = this.drag ? this.drag.j : this.hovered;
+    if (j !== null && j !== undefined) {
+      this.disc.show(j, { hit, centre: this.clay.controlWorld(j), facing: this.rig.camera.getWorldDirection(
+        new THREE.Vector3()), at });
+    } else if (hit || this.strokeTool) {
+      this.disc.show('new', { hit, centre: hit ? null : this.strokePoint(ev), facing:
+        this.rig.camera.getWorldDirection(new THREE.Vector3()), at });
+    } else {
+      this.disc.hide();
+    }
   }
 
   down(ev) {
@@ -129,16 +167,24 @@ export class Desktop {
 
   move(ev) {
     if (this.presenting) return;
+    this.pointer = ev;
     if (this.stroke.drawing) {
       this.stroke.add(this.strokePoint(ev));
+      this.showDisc(ev);
       return;
     }
     if (!this.drag) {
-      if (ev.buttons || this.handle.held) return; // orbiting, panning or moving by the handle
-      const hit = this.strokeTool ? null : this.visibleControl(this.ray(ev));
+      if (ev.buttons || this.handle.held) { // orbiting, panning or moving by the handle
+        this.showDisc(ev);
+        return;
+      }
+      const rc = this.ray(ev);
+      const hit = this.strokeTool ? null : this.visibleControl(rc);
       this.hover(hit ? hit.index : null);
+      this.showDisc(ev, rc);
       return;
     }
+    this.showDisc(ev);
     const p = this.ray(ev).ray.intersectPlane(this.drag.plane, new THREE.Vector3());
     if (!p) return;
     let model = this.clay.worldToModel(p.add(this.drag.offset));
@@ -158,7 +204,7 @@ export class Desktop {
     const click = press && ev.button === 0 && Math.hypot(ev.clientX - press.x, ev.clientY - press.y) < CLICK_PX;
     if (this.stroke.drawing) {
       this.renderer.domElement.releasePointerCapture?.(ev.pointerId);
-      if (this.stroke.end()) this.stats.strokes += 1;
+      if (this.stroke.end(this.radius.newRadius)) this.stats.strokes += 1;
       return;
     }
     if (this.drag) {
@@ -170,6 +216,15 @@ export class Desktop {
       this.onDragEnd?.();
     }
     if (click && !this.handle.held) this.handle.select(press.control); // a click on empty space lets go
+  }
+
+  // A new clay came mid-drag: the drag ends where the server has the control (nothing more is sent for it).
+  dropDrag() {
+    if (!this.drag) return;
+    this.grabs.drop(this.drag.i);
+    this.renderer.domElement.releasePointerCapture?.(this.drag.pointer);
+    this.drag = null;
+    this.onDragEnd?.();
   }
 
   // Where a stroke goes under the pointer: on the clay, else on the plane through the target facing the camera.
@@ -184,45 +239,76 @@ export class Desktop {
     ev.preventDefault();
     ev.stopImmediatePropagation();
     const j = this.drag ? this.drag.j : this.hovered;
-    if (j !== null && j !== undefined && !this.strokeTool) {
+    if (j !== null && j !== undefined && !this.strokeTool) { // over a control (Alt or not): its radius
       this.radius.show(j);
       this.radius.turn(j, ev.deltaY);
       this.stats.radii += 1;
+      this.showDisc(ev);
       return;
     }
     const rc = this.ray(ev);
     const surface = this.clay.surfaceHit(rc);
+    if (ev.altKey) { // over bare clay: the radius a new control gets
+      this.radius.turnNew(ev.deltaY);
+      this.stats.radii += 1;
+      this.showDisc(ev, rc);
+      return;
+    }
     this.rig.zoomAt(ev.deltaY, surface ? surface.point : this.rig.onTargetPlane(rc.ray));
+    this.showDisc(ev);
   }
 
-  // A double click on the clay (not on a control) adds a control at that point of its surface.
+  // A double click on the clay (not on a control) adds a control at that point of its surface, of the radius the
+  // disc showed there.
   doubleClick(ev) {
     if (this.presenting || this.strokeTool) return;
     const rc = this.ray(ev);
     if (this.visibleControl(rc)) return;
     const surface = this.clay.surfaceHit(rc);
     if (!surface) return;
-    if (this.link.send(intents.add(this.clay.worldToModel(surface.point).map((v) => Number(v.toPrecision(7)))))) {
-      this.stats.adds += 1;
-    }
+    const at = this.clay.worldToModel(surface.point).map((v) => Number(v.toPrecision(7)));
+    if (this.link.send(intents.add(at, this.radius.newRadius))) this.stats.adds += 1;
   }
 
+  // A key for the view (keys.js says which): done, and it goes no further (no field, menu or host shortcut sees it).
+  // A key typed into a field of the view's own (its Display menu) stays the field's.
   key(ev) {
-    if (ev.ctrlKey || ev.metaKey || ev.altKey || editable(ev.target) || this.presenting) return;
-    const k = ev.key.toLowerCase();
-    const view = Object.entries(VIEWS).find(([, v]) => v.key === k);
-    if (view) this.act.look(view[0]);
-    else if (k === 'f') this.act.fit();
-    else if (k === 'o') this.act.orthographic(!this.rig.orthographicOn);
-    else if (k === 's') this.act.stroke(!this.strokeTool);
-    else if (k === 'delete' || k === 'backspace') this.removeHovered();
-    else if (k === 'escape') {
+    if (this.presenting || isTyping(ev.composedPath?.()[0] || ev.target)) return;
+    const action = viewAction(ev);
+    if (!action) return;
+    if (action.startsWith('look:')) {
+      const view = Object.entries(VIEWS).find(([, v]) => v.key === action.slice(5));
+      this.act.look(view[0]);
+    } else if (action === 'fit') this.act.fit();
+    else if (action === 'ortho') this.act.orthographic(!this.rig.orthographicOn);
+    else if (action === 'stroke') this.act.stroke(!this.strokeTool);
+    else if (action === 'delete') this.removeHovered();
+    else if (action === 'undo' || action === 'redo') {
+      if (this.link.send(intents[action]())) this.stats[`${action}s`] += 1;
+    } else if (action === 'smaller' || action === 'larger') this.turnRadius(action === 'larger' ? -KEY_NOTCH : KEY_NOTCH);
+    else if (action === 'escape') {
       if (this.stroke.drawing) this.stroke.cancel();
       else if (this.strokeTool) this.act.stroke(false);
       else this.handle.select(null);
-    } else return;
+      this.onEscape?.();
+    }
+    this.stats.keys += 1;
     ev.preventDefault();
     ev.stopPropagation();
+  }
+
+  // [ or ]: the radius the disc shows (the dragged or hovered control's; with the pointer over the view, a new
+  // control's; with the pointer elsewhere, the selected control's, else a new control's).
+  turnRadius(deltaY) {
+    const j = this.drag ? this.drag.j : this.hovered ?? (this.pointer ? null : this.handle.selected);
+    if (j !== null && j !== undefined) {
+      this.radius.show(j);
+      this.radius.turn(j, deltaY);
+    } else {
+      this.radius.turnNew(deltaY);
+    }
+    this.stats.radii += 1;
+    if (this.pointer) this.showDisc(this.pointer);
   }
 
   removeHovered() {
@@ -233,6 +319,7 @@ export class Desktop {
       this.stats.removes += 1;
       if (this.handle.selected !== null && this.clay.originalOf(this.handle.selected) === i) this.handle.select(null);
       this.hover(null);
+      this.disc?.hide();
     }
   }
 }

@@ -1,4 +1,4 @@
-// Controls out of sight: a marker at the view's edge for each, pointing the way to it, with its label; a click on
+// Controls out of sight (the numbered ones): a marker at the view's edge for each, pointing the way to it, with its label; a click on
 // the marker centres the view on that control (the camera keeps its direction and distance) and selects it.
 
 import * as THREE from 'three';
@@ -34,6 +34,7 @@ export class Markers {
     const forward = camera.getWorldDirection(this.forward);
     const shown = [];
     for (let j = 0; j < clay.kEff; j++) {
+      if (!clay.numbered(j)) continue; // ghosts and a stroke's later samples: their control's marker says it
       clay.controlWorld(j, p);
       const behind = camera.isPerspectiveCamera && this.to.subVectors(p, camera.position).dot(forward) <= 0;
       p.project(camera);

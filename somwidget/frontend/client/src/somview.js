@@ -1,13 +1,15 @@
 // The clay view as one self-contained ES module (built to dist/somview.js): the web app's page mounts it with
 // `mountWebView`, and Jupyter loads it as an anywidget (the default export's `render`).
 
+import { focusHost, routePageKeys } from './keys.js';
 import { CommLink, Link, socketURL } from './link.js';
 import { intents } from './protocol.js';
 import { ClayView } from './view.js';
 
 export { ClayView };
 
-// The web app: a view in `element` fed by the websocket at `url` (default: /view/ws on this page's server).
+// The web app: a view in `element` fed by the websocket at `url` (default: /view/ws on this page's server); the
+// view's keys work from anywhere on the page but a field being typed in (keys.js).
 export function mountWebView(element, url) {
   if (element.somview) return element.somview;
   const ws = url || socketURL();
@@ -15,6 +17,7 @@ export function mountWebView(element, url) {
   const view = new ClayView(element, { send: (obj) => (link ? link.send(obj) : false) });
   link = new Link(ws, view.handlers);
   view.transport = link;
+  routePageKeys(view); // the page is the view's: its keys from anywhere but a field being typed in
   return view;
 }
 
@@ -80,6 +83,7 @@ function render({ model, el }) {
   const view = new ClayView(box, { send: (obj) => (link ? link.send(obj) : false) });
   link = new CommLink(model, view.handlers);
   view.transport = link;
+  view.desktop.onEscape = () => focusHost(view.renderer.domElement); // the notebook's keys are its own again
   const h = view.handlers;
   const onHeight = () => { box.style.height = `${model.get('height')}px`; };
   model.on('change:height', onHeight);

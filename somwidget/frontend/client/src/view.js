@@ -2,34 +2,33 @@
 // (protocol.js) from any transport (the websocket in the web app and the XR page, the kernel's comm in a notebook)
 // and sending intents back through `send`. The browser draws; every view keeps its own camera.
 //
-// On the canvas: the controls as spheres labelled with their index (a copy with primes: ′ ″ ‴, then ·g; a control
-// hidden by the clay drawn faintly through it), hover highlight, the held one red and enlarged, a marker at the
-// view's edge for each control out of sight; the camera (camera.js), the mouse and keys (desktop.js), the selected
-// control's handle (handle.js), radii (radius.js), strokes (stroke.js), the display settings (display.js) and the
-// view's bar (toolbar.js); a status line (iteration, frames/s drawn here, the server's cycle time).
+// On the canvas: the controls as spheres numbered by their stable ids (labels.js; symmetric copies as ghosts
+// without numbers; a control hidden by the clay drawn faintly through it), hover highlight, the held one red and
+// enlarged, a marker at the view's edge for each control out of sight; the camera (camera.js: nothing refits it, a
+// Refine neither), the mouse (desktop.js) and keys (keys.js), the selected control's handle (handle.js), radii
+// (radius.js: the ball, the disc under the cursor), strokes (stroke.js), the display settings (display.js) and the
+// view's bar (toolbar.js); a status line (iteration, frames/s drawn here, the server's cycle time); who else is
+// on the session (presence.js).
 
 import './colour.js';
 import * as THREE from 'three';
 import { CameraRig } from './camera.js';
-import { Clay } from './clay.js';
+import { Clay, boxOf } from './clay.js';
 import { Desktop } from './desktop.js';
 import { Display } from './display.js';
 import { Grabs } from './grabs.js';
 import { Handle } from './handle.js';
-import { MARKER_CSS, Markers } from './markers.js';
-import { RadiusBall } from './radius.js';
+import { ControlLabels, LABEL_CSS } from './labels.js';
+import { RadiusBall, RadiusDisc } from './radius.js';
+import { PRESENCE_CSS, Presence } from './presence.js';
 import { StrokeDraw } from './stroke.js';
 import { TOOLBAR_CSS, Toolbar } from './toolbar.js';
 
 const CSS = `
 .somview { position: relative; overflow: hidden; background: #eef0f4; font-family: system-ui, sans-serif; }
 .somview canvas { display: block; touch-action: none; outline: none; }
-.somview-labels { position: absolute; inset: 0; pointer-events: none; overflow: hidden; }
-.somview-label { position: absolute; left: 0; top: 0; font-size: 11px; line-height: 1;
-  padding: 1px 3px; border-radius: 3px; background: rgba(255,255,255,0.8); color: #222; white-space: nowrap; }
-.somview-label.mirror { opacity: 0.6; }
-.somview-label.held { background: #d32f2f; color: white; }
-.somview-label.behind { opacity: 0.4; pointer-events: auto; cursor: pointer; }
+.somview-radius { position: absolute; left: 0; top: 0; font-size: 11px; line-height: 1.2; padding: 1px 4px;
+  border-radius: 3px; background: rgba(29, 66, 138, 0.85); color: white; white-space: nowrap; pointer-events: none; }
 .somview-status { position: absolute; left: 6px; bottom: 4px; font-size: 11px; color: #445;
   background: rgba(255,255,255,0.7); padding: 1px 5px; border-radius: 3px; pointer-events: none; }
 .somview-status.offline { background: #fde2e2; color: #8a1010; font-weight: 600; }
@@ -37,7 +36,7 @@ const CSS = `
   background: #eef0f4; pointer-events: none; }
 .somview-error { position: absolute; left: 6px; top: 36px; right: 6px; font-size: 12px; padding: 3px 6px;
   background: #fde2e2; color: #8a1010; border-radius: 4px; pointer-events: none; }
-${MARKER_CSS}${TOOLBAR_CSS}`;
+${LABEL_CSS}${TOOLBAR_CSS}${PRESENCE_CSS}`;
 
 // The view's stylesheet, inside its own element (anywidget's way): it applies wherever the element lives, in a page
 // or in a shadow root (marimo renders widgets in one), and goes with it.
@@ -56,16 +55,9 @@ export function digestOf(positions) {
   return s;
 }
 
-const OCCLUSION_MS = 300; // labels of controls hidden by the clay are dimmed, checked this often at most
-const OCCLUSION_BUDGET = 400000; // ... while controls x triangles stays under this (one ray per control)
 const STATUS_MS = 250;
+const SAME_CLAY = 0.02; // a new topology whose clay's bounds moved less than this share of its size is the same clay
 const DRAG_REDRAW_MS = 50;
-const PRIMES = ['', '\u2032', '\u2033', '\u2034']; // ′ ″ ‴
-
-// The label of copy g of control i: "3" (the control), "3′", "3″", "3‴", then "3·4", "3·5", ...
-export function labelOf(i, g) {
-  return g < PRIMES.length ? `${i}${PRIMES[g]}` : `${i}\u00b7${g}`;
-}
 
 // A software rasteriser (SwiftShader, llvmpipe: a browser without a GPU) draws every pixel on the CPU that also
 // trains the clay: there the view skips multisampling and draws at one pixel per CSS pixel.
@@ -108,8 +100,12 @@ export class ClayView {
     sun.position.set(1.5, 3, 2);
     this.scene.add(sun);
     this.rig = new CameraRig(this.renderer.domElement);
-    this.rig.onChange = () => { this.dirty = true; };
+    this.rig.onChange = () => { // the camera moved: controls keep their smallest size on screen
+      this.dirty = true;
+      this.clay.refreshControls();
+    };
     this.clay = new Clay({ software });
+    this.clay.pixelSize = (w) => this.pixelSize(w);
     this.scene.add(this.clay.stage);
     this.grabs = new Grabs(this.link, this.clay);
     this.software = software;
@@ -132,8 +128,13 @@ export class ClayView {
     };
     const refreshBar = (f) => (...args) => { f(...args); this.toolbar.refresh(); };
     for (const name of Object.keys(act)) act[name] = refreshBar(act[name]);
+    this.radiusLabel = document.createElement('div');
+    this.radiusLabel.className = 'somview-radius';
+    this.radiusLabel.hidden = true;
+    this.disc = new RadiusDisc({ clay: this.clay, radius: this.radius, scene: this.scene, label: this.radiusLabel,
+      onChange: redraw });
     this.desktop = new Desktop({ renderer: this.renderer, rig: this.rig, clay: this.clay, grabs: this.grabs,
-      link: this.link, handle: this.handle, radius: this.radius, stroke: this.stroke, act,
+      link: this.link, handle: this.handle, radius: this.radius, disc: this.disc, stroke: this.stroke, act,
       onDragStart: () => this.clay.setMoving(true),
       onDragEnd: () => this.clay.setMoving(!!this.state.frame?.running) });
 
@@ -141,31 +142,27 @@ export class ClayView {
       const drag = this.desktop.drag;
       if (drag && this.grabs.current(drag.i) === i && j >= 0) drag.j = j + drag.copy * k;
     };
-    this.labels = document.createElement('div');
-    this.labels.className = 'somview-labels';
+    this.labels = new ControlLabels({ clay: this.clay, display: this.display, onPick: (j) => this.handle.select(j),
+      onMarker: (j) => { // centred and selected: its handle moves it
+        this.rig.centreOn(this.clay.controlWorld(j));
+        this.handle.select(j);
+      } });
     this.statusLine = document.createElement('div');
     this.statusLine.className = 'somview-status';
     this.statusLine.textContent = 'connecting';
     this.errorBox = document.createElement('div');
     this.errorBox.className = 'somview-error';
     this.errorBox.hidden = true;
-    container.append(this.labels, this.statusLine, this.errorBox);
+    container.append(this.labels.layer, this.radiusLabel, this.statusLine, this.errorBox);
+    this.presence = new Presence(container, this.clay);
     this.toolbar = new Toolbar(container, act, () => ({ orthographic: this.rig.orthographicOn,
       stroke: this.desktop.strokeTool, display: this.display.describe() }));
-    this.labelDivs = [];
-    this.markers = new Markers(this.labels, (j) => { // centred and selected: its handle moves it
-      this.rig.centreOn(this.clay.controlWorld(j));
-      this.handle.select(j);
-    });
-    this.occluded = new Set(); // effective controls the clay hides from the camera
-    this.occlusionRay = new THREE.Raycaster();
-    this.occlusionScratch = { eye: new THREE.Vector3(), c: new THREE.Vector3(), dir: new THREE.Vector3(),
-      back: new THREE.Vector3() };
-    this.lastOcclusion = 0;
+    this.pixelScratch = new THREE.Vector3();
+    this.pixelForward = new THREE.Vector3();
 
     this.state = { connected: false, topology: null, frame: null, frames: 0, fps: 0, fpsCount: 0,
       fpsStart: performance.now(), digest: 0, errors: [], lastError: null, cycleMs: null, serverFps: null,
-      painted: 0, paintedDigest: 0, rendered: 0, renderedAt: 0 };
+      painted: 0, paintedDigest: 0, rendered: 0, renderedAt: 0, kept: 0 };
     this.paints = []; // {digest, t}: when a changed mesh was first drawn (page clock, ms)
     this.hooks = []; // (time, xrFrame) => void, run before each render
     this.lastStatus = 0;
@@ -186,6 +183,7 @@ export class ClayView {
       onTopology: (t) => this.setTopology(t),
       onFrame: (f) => this.applyFrame(f),
       onGrabs: (list) => this.grabs.onGrabs(list),
+      onPresence: (hands) => this.presence.update(hands),
       onError: (e) => this.showError(e),
       onServerStatus: (s) => { this.state.cycleMs = s.cycle_ms; this.state.serverFps = s.fps; },
       onControls: (ids, msg) => {
@@ -193,13 +191,20 @@ export class ClayView {
         if (msg) this.clay.setRuns(msg); // the radii and strokes
         this.grabs.onControls(ids);
         this.radius.update();
+        this.presence.refresh();
       },
     };
   }
 
   setTopology(t) {
+    const clay = this.clay;
+    // the clay drawn now, and where: a new topology of the same clay (Refine, its Undo) stays where it is
+    this.state.before = clay.lastFrame && clay.positionAttr ? { box: boxOf(clay.positionAttr.array),
+      offset: clay.content.position.clone(), centre: clay.centre.clone() } : null;
     this.state.topology = t;
     this.handle.select(null);
+    this.desktop.dropDrag();
+    this.disc.hide();
     this.clay.setTopology(t);
     this.display.apply();
     this.state.needsFrame = true;
@@ -213,6 +218,37 @@ export class ClayView {
     this.clay.fit(1.0);
     this.rig.frame(this.clay.worldBounds());
     this.display.placeHelpers();
+  }
+
+  // The clay of a new topology where it was before (the camera untouched) when it is the same clay as drawn before
+  // (its bounds within SAME_CLAY of its size: Refine, the Undo of a Refine); returns whether it was.
+  keepPlace(before) {
+    if (!before) return false;
+    const box = boxOf(this.clay.positionAttr.array);
+    const size = before.box.getSize(new THREE.Vector3()).length();
+    const moved = Math.max(box.min.distanceTo(before.box.min), box.max.distanceTo(before.box.max));
+    if (!(moved <= SAME_CLAY * size)) return false;
+    this.clay.content.position.copy(before.offset);
+    this.clay.centre.copy(before.centre);
+    this.display.placeHelpers();
+    this.clay.refreshControls();
+    this.state.kept += 1;
+    return true;
+  }
+
+  // World units one screen pixel spans at world point w (0 in a headset: no floor on the controls' size there).
+  pixelSize(w) {
+    if (this.renderer.xr.isPresenting || !this.size) return 0;
+    const cam = this.rig.camera;
+    const h = this.size[1];
+    if (cam.isOrthographicCamera) return (cam.top - cam.bottom) / cam.zoom / h;
+    const depth = this.pixelScratch.subVectors(w, cam.position).dot(cam.getWorldDirection(this.pixelForward));
+    return (2 * Math.max(depth, cam.near) * Math.tan(THREE.MathUtils.degToRad(cam.fov) / 2)) / h;
+  }
+
+  // Keys to the view (its canvas takes the focus, without scrolling the page).
+  focus() {
+    this.renderer.domElement.focus({ preventScroll: true });
   }
 
   // The camera the view draws with: the rig's (perspective or orthographic), the perspective one in a headset.
@@ -232,9 +268,13 @@ export class ClayView {
     this.clay.setMoving(f.running || !!this.desktop.drag);
     this.handle.follow();
     this.radius.update();
-    if (s.needsFrame) { // the first frame of a model: frame the camera on it
+    if (s.needsFrame) { // the first frame of a model: frame the camera on it, unless it is the same clay
       s.needsFrame = false;
-      this.onFirstFrame ? this.onFirstFrame() : this.frame();
+      if (!this.keepPlace(s.before)) {
+        this.radius.chosen = null; // another clay: a new control's radius is its controls' again
+        this.onFirstFrame ? this.onFirstFrame() : this.frame();
+      }
+      s.before = null;
     }
     this.onFrame?.(f);
     return true;
@@ -279,12 +319,12 @@ export class ClayView {
         this.lastStatus = now;
         this.updateStatus();
       }
-      if (this.dirtyOcclusion && now - this.lastOcclusion >= OCCLUSION_MS) this.dirty = true;
+      if (this.labels.due(now)) this.dirty = true;
       if (!this.dirty) return;
       // a software rasteriser dragging: draw each answer to a move at once, the frames between at most every
       // DRAG_REDRAW_MS (each drawing holds the page's thread while the CPU draws; the next answer waits behind it)
       if (this.software && this.desktop.drag && !this.grabs.answered && now - this.lastRender < DRAG_REDRAW_MS) return;
-      this.updateLabels();
+      this.labels.update(this.camera, this.size);
     }
     this.dirty = false;
     this.renderer.render(this.scene, this.camera);
@@ -297,86 +337,6 @@ export class ClayView {
       s.painted += 1;
       this.paints.push({ digest: s.digest, t: now });
       if (this.paints.length > 400) this.paints.splice(0, 200);
-    }
-  }
-
-  updateLabels() {
-    const clay = this.clay;
-    while (this.labelDivs.length < clay.kEff) {
-      const d = document.createElement('div');
-      const j = this.labelDivs.length;
-      d.className = 'somview-label';
-      // the dimmed label of a control behind the clay takes a click: it selects the control, whose handle is drawn
-      // over the clay, so it can be moved without turning the view
-      d.addEventListener('pointerdown', (ev) => ev.stopPropagation());
-      d.addEventListener('click', (ev) => {
-        ev.stopPropagation();
-        this.handle.select(j);
-      });
-      this.labels.appendChild(d);
-      this.labelDivs.push(d);
-    }
-    const [w, h] = this.size; // kept by resize(): reading the layout here would force one every frame
-    const p = new THREE.Vector3();
-    this.camera.updateMatrixWorld();
-    this.updateOcclusion();
-    const shown = this.display.settings.labels;
-    for (let j = 0; j < this.labelDivs.length; j++) {
-      const d = this.labelDivs[j];
-      if (j >= clay.kEff || !shown) {
-        d.hidden = true;
-        continue;
-      }
-      const i = clay.originalOf(j);
-      const mirror = j >= clay.k; // a copy
-      const text = labelOf(i, clay.copyOf(j));
-      if (d.textContent !== text) d.textContent = text;
-      clay.controlWorld(j, p);
-      p.project(this.camera);
-      const out = p.z > 1 || Math.abs(p.x) > 1 || Math.abs(p.y) > 1; // out of sight: a marker instead
-      if (d.hidden !== out) d.hidden = out;
-      // a transform moves the label without a new layout of the page; only what changed is written
-      const place = `translate(${(((p.x + 1) / 2) * w).toFixed(1)}px, ${(((1 - p.y) / 2) * h).toFixed(1)}px) `
-        + 'translate(-50%, -130%)';
-      if (d.somPlace !== place) {
-        d.somPlace = place;
-        d.style.transform = place;
-      }
-      const held = clay.held.has(i) || clay.local.has(i);
-      if (d.classList.contains('mirror') !== mirror) d.classList.toggle('mirror', mirror);
-      if (d.classList.contains('held') !== held) d.classList.toggle('held', held);
-      const behind = this.occluded.has(j);
-      if (d.classList.contains('behind') !== behind) d.classList.toggle('behind', behind);
-    }
-    this.markers.update(clay, this.camera, this.size, (j) => labelOf(clay.originalOf(j), clay.copyOf(j)));
-  }
-
-  // Which controls the clay hides from the camera (their labels dimmed): one ray each, a few times a second, on a
-  // clay small enough for it.
-  updateOcclusion() {
-    const now = performance.now();
-    if (now - this.lastOcclusion < OCCLUSION_MS) {
-      this.dirtyOcclusion = true; // look again soon: what is drawn may have changed since
-      return;
-    }
-    this.lastOcclusion = now;
-    this.dirtyOcclusion = false;
-    const clay = this.clay;
-    const triangles = (clay.topology?.triangles.length ?? 0) / 3;
-    this.occluded = new Set();
-    if (!clay.surface || triangles * clay.kEff > OCCLUSION_BUDGET) return;
-    const rc = this.occlusionRay;
-    const { eye, c, dir, back } = this.occlusionScratch;
-    const ortho = this.camera.isOrthographicCamera;
-    if (ortho) this.camera.getWorldDirection(back).negate();
-    for (let j = 0; j < clay.kEff; j++) {
-      clay.controlWorld(j, c);
-      if (ortho) eye.copy(c).addScaledVector(back, 10 * this.rig.fitDistance);
-      else eye.copy(this.camera.position);
-      const far = eye.distanceTo(c);
-      rc.set(eye, dir.subVectors(c, eye).normalize());
-      const hit = clay.surfaceHit(rc);
-      if (hit && hit.distance < far - clay.worldControlRadius) this.occluded.add(j);
     }
   }
 
@@ -411,12 +371,15 @@ export class ClayView {
       desktop: { ...this.desktop.stats, ...this.rig.stats, handleMoves: this.handle.stats.moves,
         radiusTurns: this.radius.turns }, status: this.statusLine.textContent, software: this.software,
       synapsesShown: this.clay.segments ? this.clay.segments.visible : null,
-      labels: this.labelDivs.filter((d) => !d.hidden).map((d) => d.textContent),
-      behind: [...this.occluded], markers: this.markers.shown.map((j) => labelOf(clay.originalOf(j), clay.copyOf(j))),
+      ...this.labels.describe(), // labels, behind, markers
       ...this.rig.describe(), // camera, target, distance (to the target), fitDistance, projection, zoom
       display: this.display.describe(), selected: this.handle.selected, tool: this.desktop.strokeTool ? 'stroke' : null,
       radii: [...clay.radii], strokes: [...clay.strokes], controlIds: [...clay.controlIds],
       radiusBall: { of: this.radius.shownFor, shown: this.radius.ball.visible, radius: this.radius.ball.scale.x },
+      radiusDisc: { ...this.disc.describe(), px: this.disc.disc.visible
+        ? this.disc.disc.scale.x / this.pixelSize(this.disc.disc.position) : 0 }, newRadius: this.radius.newRadius, keptPlace: s.kept,
+      numbered: Array.from({ length: clay.kEff }, (_, j) => clay.numbered(j)),
+      presence: this.presence.describe(),
       size: [this.renderer.domElement.clientWidth, this.renderer.domElement.clientHeight],
     };
   }
@@ -458,8 +421,27 @@ export class ClayView {
     return m ? [m.position.x, m.position.y, m.position.z] : null;
   }
 
+  // What control j looks like as drawn: its colour, its radius over the control radius, whether it is a ghost (a
+  // symmetric copy) and how opaque.
   controlLook(j) {
-    return this.clay.controlLook(j);
+    const clay = this.clay;
+    if (j < 0 || j >= clay.kEff) return null;
+    const [d, i] = j < clay.k ? [clay.controlDraws[0], j] : [clay.controlDraws[1], j - clay.k];
+    const c = new THREE.Color();
+    d.getColorAt(i, c);
+    const m = new THREE.Matrix4();
+    d.getMatrixAt(i, m);
+    return { colour: `#${c.getHexString()}`, scale: m.getMaxScaleOnAxis() / clay.controlRadius, ghost: j >= clay.k,
+      opacity: d.material.opacity };
+  }
+
+  // How big effective control j is drawn on screen: its radius in page pixels (null when there is none).
+  controlScreenRadius(j) {
+    const w = this.clay.controlWorld(j);
+    const m = this.clay.controlAnchors[j];
+    if (!w || !m) return null;
+    const px = this.pixelSize(w);
+    return px > 0 ? (m.scale.x * this.clay.scale) / px : null;
   }
 
   // Move -> changed mesh on screen, per answered move: ms from the move's send to the first paint of the frame.

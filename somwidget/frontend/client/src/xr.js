@@ -8,6 +8,7 @@
 // Controllers and hands are drawn with our own simple geometry (nothing is loaded from a CDN).
 
 import * as THREE from 'three';
+import { firstControl, nearestControl } from './picking.js';
 
 const JOINTS = ['wrist', 'thumb-metacarpal', 'thumb-phalanx-proximal', 'thumb-phalanx-distal', 'thumb-tip',
   'index-finger-metacarpal', 'index-finger-phalanx-proximal', 'index-finger-phalanx-intermediate',
@@ -230,7 +231,7 @@ export class XRApp {
     const near = Math.max(GRAB_RADIUS, 2 * this.clay.worldControlRadius);
     for (const st of this.inputs.values()) {
       if (st.point && !st.grabs.select) {
-        const n = this.clay.nearest(st.point, near);
+        const n = nearestControl(this.clay, st.point, near);
         if (n) hover.add(n.index);
       }
       if (st.tip) this.menu.touch(st.source, st.tip);
@@ -319,11 +320,11 @@ export class XRApp {
         if (this.pressMenuByRay(st)) return;
         if (this.tools.start(st)) return;
       }
-      const near = this.clay.nearest(st.point, Math.max(GRAB_RADIUS, 2 * this.clay.worldControlRadius));
+      const near = nearestControl(this.clay, st.point, Math.max(GRAB_RADIUS, 2 * this.clay.worldControlRadius));
       if (near) return this.grabControl(st, near.index, st.point);
       if (st.rayOrigin) {
         if (this.pressMenuByRay(st)) return;
-        const hit = this.clay.hitByRay(this.raycaster);
+        const hit = firstControl(this.clay, this.raycaster);
         if (hit) return this.grabControl(st, hit.index, st.point);
       }
     }
