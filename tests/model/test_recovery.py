@@ -56,13 +56,16 @@ def drag(index: int, to) -> list:
 
 def settled(srv: Serve) -> dict:
     """The state once training has stopped and every intent is applied, after the autosave has written it: its
-    manifest names as many undo and redo steps, and its current step holds these controls and positions."""
+    manifest names as many undo and redo steps, no drag is open in it (a release trains nothing, so a save made
+    during the drag can hold the same numbers), and its current step holds these controls and positions."""
     st = srv.idle(60)
     folder, session = _folder(srv), st["session"]
 
     def saved() -> bool:
         manifest = _store.peek(folder)
         if manifest is None or [len(manifest["undo"]), len(manifest["redo"])] != session["history"]:
+            return False
+        if manifest.get("gesture", False):  # written while a drag was open: its release's save is on its way
             return False
         try:
             with np.load(folder / manifest["current"]["file"]) as z:

@@ -49,6 +49,7 @@ from .files import SessionFiles
 from .frames import Frame, FrameListener, FrameStream
 from .hands import Hand, Hands, redo_own, undo_own
 from .operations import Publish, Reset, Restart
+from . import revolving
 from .recovery import recover as recover_session
 from .refining import refined_preset
 from .settings import SessionSettings
@@ -364,6 +365,14 @@ class Session:
         .add_stroke`). Returns the index of its first sample."""
         return self.control_edits.add_stroke(points, radius)
 
+    def revolve(self, profile_points, axis="z", n: int = 16, radius: float | None = None) -> int:
+        """Lathe the clay: its nodes placed on the surface of revolution of the profile (m >= 2 points beside the axis
+        "x", "y" or "z" through the origin; each node keeps its angle about the axis and its place along the clay's
+        meridian), n-fold radial symmetry about the axis, and the profile's samples as a stroke control (radius:
+        None for the preset's) with its copies in place of the controls. One undo step; nothing trains until the
+        next intent. Returns the stroke's sample count (revolving.py)."""
+        return revolving.revolve(self, profile_points, axis, n, radius)
+
     def remove_control(self, index: int) -> None:
         self.control_edits.remove(index)
 
@@ -372,6 +381,13 @@ class Session:
         """Set one setting by name (backend/schedule.py: S or iterations, the schedule's, symmetry) or
         metric_weights. A schedule setting restarts the schedule locally from the latest weights."""
         self.settings.set(name, value)
+
+    def set_symmetry(self, group) -> str:
+        """The symmetry group: a Symmetry, its spec ("mirror-y", "radial-8-z"), True (the last group, else the
+        preset's), False or None (off). Off, every copy becomes a control of its own and nothing moves; on, no control
+        is merged into another's copy unless all of them pair up (the copies a group left when turned off). One undo
+        step; returns what happened to the controls, in words (`settings.set_symmetry`)."""
+        return self.settings.set_symmetry(group)
 
     def set_iterations(self, value) -> None:
         """S: cycles in a run."""

@@ -72,6 +72,7 @@ class Panel(widgets.VBox):
         self._generation = None
         self._preset_name = None
         self.refreshes = 0  # refreshes applied (for tests)
+        self._notices_seen = session.settings.notices
         self.last_frame_seq = -1
 
         style = {"description_width": LABEL_WIDTH}
@@ -295,18 +296,21 @@ class Panel(widgets.VBox):
             if list(self.group.options) != choices:
                 self.group.options = choices
             _set(self.group, p["group"])
-            k = frame.n_controls
-            if list(self.radius_of.options) != [(str(i), i) for i in range(k)]:
-                self.radius_of.options = [(str(i), i) for i in range(k)]
-            i = self.radius_of.value if self.radius_of.value is not None and self.radius_of.value < k else 0
+            rows = self.model.control_rows(frame)  # by the controls' ids, as the view numbers them; a stroke one row
+            options = [(f'{r["id"]}{" (stroke)" if r["samples"] > 1 else ""}', r["i"]) for r in rows]
+            if list(self.radius_of.options) != options:
+                self.radius_of.options = options
+            starts = [r["i"] for r in rows]
+            i = self.radius_of.value if self.radius_of.value in starts else starts[0] if starts else 0
             _set(self.radius_of, i)
             self.radius.max = max(2.0 * self.model.size, float(frame.radii.max(initial=0.0)))  # a few sizes at most
             if i < len(frame.radii):
                 _set(self.radius, round(float(frame.radii[i]), 4))
-            rows = self.model.control_rows(frame)
-            if i < len(rows):
-                _set(self.position, rows[i]["position"])
-                _set(self.features, rows[i]["features"])
+            row = next((r for r in rows if r["i"] == i), None)
+            if row is not None:
+                _set(self.position, row["position"])
+                _set(self.features, row["features"])
+            _set(self.all_radii, self.model.common_radius(frame))
             names = self.model.feature_names()
             self.features.layout.display = "" if names else "none"
             self.features.placeholder = names
@@ -328,6 +332,9 @@ class Panel(widgets.VBox):
             self.controls_html.value = _controls_table(rows)
             if session.error and not self.error.value:
                 self.error.value = f'<span style="color:#b00020">{_html.escape(session.error)}</span>'
+            if session.settings.notices != self._notices_seen:  # what a symmetry change did to the controls
+                self._notices_seen = session.settings.notices
+                self.error.value = f'<span style="color:#1d428a">{_html.escape(session.settings.notice)}</span>'
             failed = session.save_error
             _set(self.saving, _BLOCK.format(f'<b style="color:#b00020">{_html.escape(failed)}</b>') if failed else "")
             self.last_frame_seq = frame.seq
@@ -459,7 +466,8 @@ def _set(widget, value) -> None:
 
 def _controls_table(rows: list[dict]) -> str:
     """The panel model's control rows as a small HTML table."""
-    cells = [f'<tr><td>{r["i"]}</td><td><span style="display:inline-block;width:12px;height:12px;'
+    cells = [f'<tr><td title="{"a stroke: its samples act as one" if r["samples"] > 1 else ""}">{r["id"]}'
+             f'{"~" if r["samples"] > 1 else ""}</td><td><span style="display:inline-block;width:12px;height:12px;'
              f'background:{r["colour"]};border:1px solid #888"></span></td><td>{r["position"]}</td>'
              f'<td class="somwidget-gap">{r["gap"]}</td><td class="somwidget-radius">{r["radius"]:.3g}</td></tr>'
              for r in rows]
