@@ -25,12 +25,17 @@ ANNOUNCED = re.compile(r"somwidget serving .* at (http://127\.0\.0\.1:\d+)/")
 
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
+    """One wheel built from a fresh clone (the build builds the client), installed in a fresh venv."""
     if not (DIST / "somview.js").is_file():
         pytest.fail("the browser client is not built: run scripts/setup.sh")
     tmp = tmp_path_factory.mktemp("wheel")
-    out = subprocess.run([sys.executable, "-m", "build", "--wheel", "--outdir", str(tmp / "dist"), str(helpers.ROOT)],
+    clone = fresh_clone(tmp)
+    client = clone / "somwidget" / "frontend" / "client"
+    (client / "node_modules").symlink_to(DIST.parent / "node_modules")  # as `npm ci` leaves them (no network here)
+    out = subprocess.run([sys.executable, "-m", "build", "--wheel", "--outdir", str(tmp / "dist"), str(clone)],
                          capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+    assert out.returncode == 0, (out.stdout + out.stderr)[-3000:]
+    assert "somwidget: building the browser client: run build" in out.stdout
     wheel, = (tmp / "dist").glob("somwidget-*.whl")
     subprocess.run([sys.executable, "-m", "venv", str(tmp / "venv")], check=True, timeout=300)
     py = tmp / "venv" / "bin" / "python"
@@ -42,7 +47,7 @@ def installed(tmp_path_factory):
     return wheel, tmp / "venv", env, tmp
 
 
-def test_the_wheel_holds_the_built_client(installed):
+def test_a_build_from_a_clone_builds_the_client_into_the_wheel(installed):
     wheel, *_ = installed
     names = zipfile.ZipFile(wheel).namelist()
     assert "somwidget/frontend/client/dist/somview.js" in names
@@ -94,19 +99,6 @@ def test_a_build_from_a_fresh_clone_without_npm_stops_and_says_how(tmp_path):
     assert "the browser client is not built (its dist/ is missing) and npm is not on the PATH" in text, text[-3000:]
     assert "`npm ci && npm run build` in somwidget/frontend/client" in text
     assert not list((tmp_path / "dist").glob("*.whl"))
-
-
-def test_a_build_from_a_clone_builds_the_client_into_the_wheel(tmp_path):
-    clone = fresh_clone(tmp_path)
-    client = clone / "somwidget" / "frontend" / "client"
-    (client / "node_modules").symlink_to(DIST.parent / "node_modules")  # as `npm ci` leaves them (no network here)
-    out = subprocess.run([sys.executable, "-m", "build", "--wheel", "--outdir", str(tmp_path / "dist"), str(clone)],
-                         capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, (out.stdout + out.stderr)[-3000:]
-    assert "somwidget: building the browser client: run build" in out.stdout
-    wheel, = (tmp_path / "dist").glob("somwidget-*.whl")
-    names = zipfile.ZipFile(wheel).namelist()
-    assert "somwidget/frontend/client/dist/somview.js" in names and "somwidget/frontend/client/dist/index.html" in names
 
 
 def test_a_widget_without_its_client_raises_one_clear_error(tmp_path):
