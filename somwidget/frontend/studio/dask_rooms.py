@@ -121,6 +121,8 @@ class DaskRooms:
     async def close(self) -> None:
         if self._task is not None:
             self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
         if self.client is not None:
             with contextlib.suppress(Exception):
                 await self.client.close()

@@ -64,6 +64,9 @@ class StudioFront:
         self._task = asyncio.ensure_future(self._monitor())
 
     async def discover(self) -> None:
+        for place in self.alive():  # their loads, for placing rooms
+            with contextlib.suppress(PlaceDown):
+                await place.health()
         for place in self.alive():
             try:
                 for record in await place.known():
@@ -80,6 +83,8 @@ class StudioFront:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
+        for task in list(self._tasks):
+            task.cancel()
         for place in self.places:
             with contextlib.suppress(Exception):
                 await place.close()
@@ -95,9 +100,17 @@ class StudioFront:
         return [p for p in self.places if p.alive]
 
     def add_place(self, place) -> None:
-        """A worker that came (a Dask worker joining the cluster)."""
+        """A worker that came (a Dask worker joining the cluster, a worker process started again): rooms that were live
+        on a dead worker and found no place then come back now."""
         self.places.append(place)
         log.info("studio: a place for rooms came: %s", place.label)
+        for entry in [e for e in self.rooms.values() if e.place is None and e.info.get("live")]:
+            self._later(self._bring_back(entry, "a worker that went"))
+
+    def _later(self, coroutine) -> None:
+        task = asyncio.ensure_future(coroutine)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
 
     def choose(self, exclude=()) -> object:
         """The least loaded live place with room for one more; StudioFull when every one is full."""
@@ -123,9 +136,7 @@ class StudioFront:
         for entry in orphans:
             entry.place = None
         for entry in [e for e in orphans if e.info.get("live")]:  # in tasks of their own: a caller may hold a lock
-            task = asyncio.ensure_future(self._bring_back(entry, place.label))
-            self._tasks.add(task)
-            task.add_done_callback(self._tasks.discard)
+            self._later(self._bring_back(entry, place.label))
 
     async def _bring_back(self, entry: Entry, was: str) -> None:
         t0 = time.monotonic()
@@ -150,15 +161,7 @@ class StudioFront:
             if name in self.rooms:
                 raise ValueError(f"a room named {name!r} exists already; choose another name")
             token = lan.make_token()
-            tried = []
-            while True:
-                place = self.choose(exclude=tried)
-                try:
-                    info = await place.create(name, token, preset)
-                    break
-                except PlaceDown:
-                    await self.lost(place)
-                    tried.append(place)
+            place, info = await self._place(lambda p: p.create(name, token, preset))
             entry = self._entry(name, token, preset)
             entry.place, entry.info = place, info
         return entry
@@ -175,21 +178,40 @@ class StudioFront:
                     return entry
                 except PlaceDown:
                     await self.lost(place)
-            tried: list = []
-            deadline = time.monotonic() + BUSY_WAIT
-            while True:
+            entry.place, entry.info = await self._place(lambda p: p.open(entry.name))
+            return entry
+
+    async def _place(self, action) -> tuple[object, dict]:
+        """(place, what `action(place)` answered) on the least loaded place that takes it: a place that is down, or
+        refuses for its own limit, passes it on to the next; a room still held by a worker going down is tried again
+        for BUSY_WAIT seconds. StudioFull (the last place's own words) when none takes it."""
+        tried: list = []
+        refusal: StudioFull | None = None
+        deadline = time.monotonic() + BUSY_WAIT
+        fresh = False
+        while True:
+            try:
                 place = self.choose(exclude=tried)
-                try:
-                    entry.info = await place.open(entry.name)
-                    entry.place = place
-                    return entry
-                except PlaceDown:
-                    await self.lost(place)
-                    tried.append(place)
-                except RoomBusy:
-                    if time.monotonic() > deadline:
-                        raise
-                    await asyncio.sleep(0.25)
+            except StudioFull:
+                if refusal is not None:
+                    raise refusal from None
+                if fresh:
+                    raise
+                fresh = True  # the loads as the places say now (a room parked since their last report)
+                await asyncio.gather(*(p.health() for p in self.alive()), return_exceptions=True)
+                continue
+            try:
+                return place, await action(place)
+            except PlaceDown:
+                await self.lost(place)
+                tried.append(place)
+            except StudioFull as exc:
+                refusal = exc
+                tried.append(place)
+            except RoomBusy:
+                if time.monotonic() > deadline:
+                    raise
+                await asyncio.sleep(0.25)
 
     async def park(self, name: str, force: bool = False) -> bool:
         entry = self.rooms[room_name(name)]

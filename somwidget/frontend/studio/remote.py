@@ -59,7 +59,7 @@ def ssl_option(fingerprint: str | None, verify: bool):
         if len(digest) != 32:
             raise ValueError("fingerprint: expected the certificate's SHA-256, 32 bytes as hex (AB:CD:...)")
         return aiohttp.Fingerprint(digest)
-    return None if verify else False
+    return bool(verify)
 
 
 class RoomSession:

@@ -135,15 +135,9 @@ class StudioServer:
         if self.routes is not None:
             await self.routes.wall.close()
         if self.front is not None:
-            for place in self.front.alive():  # every room saved
-                try:
-                    await place.close()
-                except Exception:  # pragma: no cover - the others still close
-                    log.exception("studio: closing %s failed", place.label)
+            await self.front.close()  # no more looks at the places; this process's rooms saved
         if self.pool is not None:
-            await self.pool.close()
-        if self.front is not None:
-            await self.front.close()
+            await self.pool.close()  # the workers' rooms saved as they stop
         if self._runner is not None:
             await self._runner.cleanup()
 
