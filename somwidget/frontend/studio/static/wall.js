@@ -64,7 +64,8 @@
         span.append(dot, p.name);
         return span;
       }));
-      if (!info.people.length) who.textContent = info.watchers ? 'watched' : 'nobody';
+      if (!info.people.length) who.textContent = 'nobody';
+      if (info.watchers) who.append(` \u00b7 ${info.watchers} watching`);
       people += info.people.length;
       room.card.querySelector('.watch').href = info.watch;
       room.card.querySelector('.part').href = info.part;
@@ -95,7 +96,7 @@
     const d = [Math.cos(ELEVATION) * Math.cos(AZIMUTH), Math.cos(ELEVATION) * Math.sin(AZIMUTH), Math.sin(ELEVATION)];
     const right = [-Math.sin(AZIMUTH), Math.cos(AZIMUTH), 0];
     const up = [d[1] * right[2] - d[2] * right[1], d[2] * right[0] - d[0] * right[2], d[0] * right[1] - d[1] * right[0]];
-    return { centre, radius: radius * 1.15, d, right, up: up.map((v) => -v) };
+    return { centre, radius: radius * 1.15, d, right, up }; // d: from the clay towards the eye
   }
 
   function draw(room) {
@@ -126,8 +127,8 @@
     if (tris.length) {
       const order = [];
       for (let t = 0; t < tris.length; t += 3) order.push(t);
-      const far = (t) => depth[tris[t]] + depth[tris[t + 1]] + depth[tris[t + 2]];
-      order.sort((a, b) => far(b) - far(a));
+      const near = (t) => depth[tris[t]] + depth[tris[t + 1]] + depth[tris[t + 2]];
+      order.sort((a, b) => near(a) - near(b)); // far to near
       for (const t of order) {
         const [a, b, c] = [tris[t], tris[t + 1], tris[t + 2]];
         const ux = positions[3 * b] - positions[3 * a];
@@ -160,7 +161,7 @@
         ctx.stroke();
       }
     } else {
-      const order = Array.from({ length: n }, (_, i) => i).sort((a, b) => depth[b] - depth[a]);
+      const order = Array.from({ length: n }, (_, i) => i).sort((a, b) => depth[a] - depth[b]);
       for (const i of order) {
         ctx.fillStyle = colour(i, 1);
         ctx.fillRect(sx[i] - 1.5, sy[i] - 1.5, 3, 3);
