@@ -89,6 +89,16 @@ def device_free_bytes(device: str) -> int | None:
     return int(wp.get_device(device).free_memory)
 
 
+def device_used_bytes(device: str) -> int:
+    """Memory in use on a CUDA device (by every process on it; bytes), 0 on the CPU."""
+    if not str(device).startswith("cuda"):
+        return 0
+    import warp as wp
+
+    d = wp.get_device(device)
+    return int(d.total_memory - d.free_memory)
+
+
 def check_new_room(limits: StudioLimits, live: int, n_nodes: int, device: str, where: str) -> None:
     """StudioFull unless a room of `n_nodes` fits beside the `live` rooms of the worker `where` on `device`."""
     if live >= limits.rooms:

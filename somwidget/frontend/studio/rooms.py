@@ -28,11 +28,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from ...backend import presets as _presets
+from ...backend.device import resolve
 from ...backend.session_file import write_atomic
 from ..model import Session
 from ..model.store import SessionStore, Unreadable, set_aside
 from ..web.hub import ViewHub
-from .limits import StudioFull, StudioLimits, check_new_room, room_name
+from .limits import StudioFull, StudioLimits, check_new_room, device_used_bytes, resident_bytes, room_name
 from .thumbs import public_shape, shape_of, thumbnail
 
 log = logging.getLogger(__name__)
@@ -139,7 +140,7 @@ class Rooms:
                  frame_rate: float = FRAME_RATE, label: str | None = None):
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.device = device
+        self.device = resolve(device)  # "cpu" or "cuda:N": where every room of this worker trains
         self.limits = limits or StudioLimits()
         self.frame_rate = float(frame_rate)
         self.label = label or f"this worker ({device})"
@@ -232,7 +233,7 @@ class Rooms:
         room.session = session
         room._applied = session.frame.applied
         session.add_listener(room._on_frame, replay=False)
-        room.hub = ViewHub(session, max_fps=self.frame_rate)
+        room.hub = ViewHub(session)  # frames sent as they come (at most messages.MAX_FPS): none waits for a pace
         room.last_active = time.monotonic()
 
     def _bring_back(self, room: Room) -> None:
@@ -311,7 +312,8 @@ class Rooms:
         """How loaded this worker is: live rooms and their nodes."""
         live = self.live()
         return {"rooms": len(live), "nodes": sum(int(r.session.preset.n_vertices) for r in live if r.session),
-                "limit": self.limits.rooms}
+                "limit": self.limits.rooms, "rss_mb": resident_bytes() / 2**20,
+                "gpu_mb": device_used_bytes(self.device) / 2**20}
 
     def close(self) -> None:
         """Close every live room (each saved; the folders stay)."""

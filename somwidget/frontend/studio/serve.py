@@ -106,8 +106,8 @@ class StudioServer:
             self.pool = LocalWorkers(self.workers, self.rooms_dir, self.secret, self.device, self.limits,
                                      self.frame_rate)
             return await self.pool.start()
-        label = "this process (" + ("CPU" if self.device == "cpu" else self.device) + ")"
-        rooms = Rooms(self.rooms_dir, device=self.device, limits=self.limits, frame_rate=self.frame_rate, label=label)
+        rooms = Rooms(self.rooms_dir, device=self.device, limits=self.limits, frame_rate=self.frame_rate)
+        rooms.label = "this process (" + ("CPU" if rooms.device == "cpu" else rooms.device) + ")"
         return [LocalPlace(rooms)]
 
     async def start_async(self) -> None:
