@@ -202,6 +202,28 @@ def test_symmetry_off_and_on_moves_nothing(session):
     assert session.n_controls == 18 and session.frame.effective_controls.shape == (54, 5)
 
 
+def test_set_symmetry_none_turns_it_off_and_a_group_never_merges_controls_silently():
+    """`Session.set_symmetry(None)` is off (it was refused: "expected true or false"). On the torus, whose six
+    controls hold two mirror pairs, a mirror keeps all six with a copy each and says which are images; off, then the
+    same group on again: the copies pair up with their controls as before, and says so."""
+    s = Session("torus", device="cpu", autosave=False)
+    try:
+        said = s.set_symmetry("mirror-y")
+        assert s.n_controls == 6 and s.wait_applied(30) and len(s.frame.effective_controls) == 12
+        assert "6 controls kept" in said and "2 and 3" in said and "4 and 5" in said
+        assert s.settings.notice == said and s.settings.notices == 1
+        said = s.set_symmetry(None)
+        assert s.parameters["symmetry"] is False and s.parameters["group"] == "none" and s.n_controls == 12
+        assert said.startswith("symmetry off: 12 controls")
+        said = s.set_symmetry("mirror-y")
+        assert s.n_controls == 6 and "12 controls paired up again as 6" in said
+        steps = s.history[0]
+        s.set_symmetry(None)
+        assert s.undo() and s.parameters["group"] == "mirror-y" and s.history[0] == steps
+    finally:
+        s.close()
+
+
 def test_reset_restores_the_start_mesh(session):
     assert session.wait_idle(30)
     start = session.preset.weights

@@ -48,7 +48,8 @@ class SetControls(Operation):
     """New controls and their radii. In a drag, `anchor` is the Som that anchored the shape the drag began with: each
     frame of the drag restarts from it (Som.set_controls(from_anchor=True)), so a long drag ends as one move would.
     With `keep` (a control placed: it moves nothing until it is dragged) the weights and s stay and nothing trains;
-    `group` is then the symmetry group the Som keeps."""
+    `group` is then the symmetry group the Som keeps. With `rest` (weights: the shape before a control's last move),
+    the restart begins from that shape: a radius changed after a move re-does the move with the new radius."""
 
     controls: np.ndarray
     radii: np.ndarray
@@ -57,6 +58,7 @@ class SetControls(Operation):
     ids: tuple
     keep: bool = False
     group: object = None
+    rest: np.ndarray | None = None
     key = "controls"
 
     @property
@@ -73,6 +75,8 @@ class SetControls(Operation):
             som.regroup(self.controls, self.radii, *engine_symmetry(self.group), keep_shape=True,
                         strokes=self.strokes)
         else:
+            if self.rest is not None and self.anchor is not som:
+                som.restore(self.rest, som.iterations)
             som.set_controls(self.controls, self.radii, strokes=self.strokes, from_anchor=self.anchor is som)
 
     def applied(self, state) -> None:
