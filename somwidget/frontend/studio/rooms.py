@@ -24,14 +24,15 @@ import logging
 import shutil
 import threading
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from ...backend import presets as _presets
 from ...backend.device import resolve
 from ...backend.session_file import write_atomic
 from ..model import Session
-from ..model.store import SessionStore, Unreadable, set_aside
+from ..model.readback import read_folder
+from ..model.store import LOCK, SessionStore, set_aside
 from ..web.hub import ViewHub
 from .limits import StudioFull, StudioLimits, check_new_room, device_used_bytes, resident_bytes, room_name
 from .thumbs import public_shape, shape_of, thumbnail
@@ -237,34 +238,65 @@ class Rooms:
         room.last_active = time.monotonic()
 
     def _bring_back(self, room: Room) -> None:
-        """The room's session from its folder (caller holds room.lock)."""
+        """The room's session from its folder (caller holds room.lock), read and checked whole first (readback.py,
+        as a restart does): read whole, it goes on saving there, nothing written until its next step; anything
+        unreadable, the folder is set aside whole and what could be read comes back in a new one (a notice says)."""
         live = len(self.live())
         check_new_room(self.limits, live, 0, self.device, self.label)  # the count; its nodes were checked when made
         folder = room.folder / SESSION
-        store = None
         if (folder / "manifest.json").exists():
-            store = SessionStore.adopt(folder)
+            try:
+                store = SessionStore.adopt(folder)
+            except OSError as exc:
+                raise RoomBusy(f"room {room.name!r} cannot be opened: its folder's lock {folder / LOCK} cannot be "
+                               f"taken ({exc.strerror or exc})") from None
             if store is None:
                 raise RoomBusy(f"room {room.name!r} is open in another process (its folder {folder} is locked); "
                                "try again in a moment")
-            try:
-                saved = store.read(self.limits.nodes)
-            except Unreadable as exc:
-                aside = store.set_aside()
-                room.notices.append(f"the room's saved state cannot be read ({exc}); it is kept at {aside} and the "
-                                    f"room starts again from {room.record.preset}")
-                log.warning("studio: %s", room.notices[-1])
-                store = None
+            reading = read_folder(folder, self.limits.nodes)
+            if reading.whole:
+                if self._rebuild(room, reading, store, on_disk=True):
+                    return
             else:
-                session = Session(saved.current.preset, start=False, **self._options(store))
-                session.timeline.bring_back(saved.current, saved.undo, saved.redo)
-                session.start()
-                self._start(room, session)
-                log.info("studio: room %s brought back on %s (%d undo steps)", room.name, self.label, len(saved.undo))
-                return
+                aside = store.set_aside()
+                problems = "; ".join(dict.fromkeys(str(p) for p in reading.problems))
+                if reading.current is not None:
+                    _moved_to(reading, aside)
+                    room.notices.append(f"part of the room's saved state cannot be read ({problems}); what could be "
+                                        f"read is back, the folder as it was is kept at {aside}")
+                    log.warning("studio: room %s: %s", room.name, room.notices[-1])
+                    if self._rebuild(room, reading, SessionStore(folder, "studio", writable=False), on_disk=False):
+                        return
+                else:
+                    room.notices.append(f"the room's saved state cannot be read ({problems}); it is kept at {aside} "
+                                        f"and the room starts again from {room.record.preset}")
+                    log.warning("studio: %s", room.notices[-1])
         elif folder.exists() and any(folder.iterdir()):  # a folder without a manifest: kept, never deleted
             set_aside(folder)
         self._start(room, Session(room.record.preset, **self._options(SessionStore(folder, "studio"))))
+
+    def _rebuild(self, room: Room, reading, store: SessionStore, on_disk: bool) -> bool:
+        """Start the room's session from what `reading` brought back into `store`; False (the folder set aside, a
+        notice) when it cannot be rebuilt."""
+        session = None
+        try:
+            session = Session(reading.current.preset, start=False, **self._options(store))
+            session.timeline.bring_back(reading.current, reading.undo, reading.redo)
+            if on_disk:
+                store.take_over(reading.files, reading.presets, reading.current.key)
+            session.autosave.arm(on_disk=on_disk)
+        except Exception as exc:  # noqa: BLE001 - the room starts afresh; the folder is kept aside unchanged
+            if session is not None:
+                session.close(timeout=2.0)
+            kept = f"it is kept at {store.set_aside()} and " if on_disk else ""  # else set aside already
+            room.notices.append(f"the room's saved state could not be brought back ({type(exc).__name__}: {exc}); "
+                                f"{kept}the room starts again from {room.record.preset}")
+            log.warning("studio: %s", room.notices[-1])
+            return False
+        session.start()
+        self._start(room, session)
+        log.info("studio: room %s brought back on %s (%d undo steps)", room.name, self.label, len(reading.undo))
+        return True
 
     # -- parking ----------------------------------------------------------------------------------------------
     def park(self, name: str, force: bool = False) -> bool:
@@ -320,6 +352,15 @@ class Rooms:
         self._closed = True
         for room in self.live():
             self.park(room.name, force=True)
+
+
+def _moved_to(reading, aside: Path) -> None:
+    """The steps whose weights stay on disk read them from the folder's new name (it was set aside)."""
+    def moved(step):
+        return replace(step, weights=aside / step.weights.name) if isinstance(step.weights, Path) else step
+
+    reading.undo = [moved(s) for s in reading.undo]
+    reading.redo = [moved(s) for s in reading.redo]
 
 
 def release_memory() -> None:
