@@ -14,10 +14,13 @@ rooms (default)   A real studio (StudioServer: the front, and the rooms in its p
                   server's CPU (cores busy: the front and its workers), memory a room (the server processes' resident
                   memory and, on a GPU, the device memory in use, before and after the rooms were made, over R) and
                   whether p95 <= 50 ms. The largest R that passes is printed last.
-engine            The engine alone, as the rooms step it (no server): R car rooms, each round every room's control 0
-                  moved (a local restart), 10 cycles stepped and the weights read back; by their own Soms one after
-                  another, and batched (BatchSom: one launch for every room, controls uploaded and weights read back in
-                  one copy each). Round time median / p95 and whether R rooms keep 30 frames a second (p95 <= 33 ms).
+engine            The engine alone, as the rooms step it (no server; numpy and warp only): R car rooms' Soms, each
+                  round every room's control 0 moved (a local restart), 10 cycles stepped and its weights read back
+                  (its frame); `own`: each Som by itself, one after another (the rooms unbatched); `studio`: the
+                  studio's rounds (studio/batched.py: every room's state into one BatchSom, one launch, each room's
+                  weights back into its Som, its frame read from it); `kernels`: the batched kernels alone (the
+                  states kept in the batch: controls up, one launch, every weight back in one copy). Round time
+                  median / p95 and whether R rooms keep 30 frames a second (p95 <= 33 ms).
 dask              A LocalCluster of two workers (processes): R rooms on its workers reached (a) through the front
                   relaying to the workers' own room servers (what the studio does), (b) as Dask actors (a move is an
                   actor call, frames come back by long-polling calls); move -> frame as in `rooms`.
@@ -251,14 +254,21 @@ def run_rooms(count: int, presets: tuple[str, ...], seconds: float, device: str,
 
 # -- the engine alone -----------------------------------------------------------------------------------------------
 def run_engine(count: int, device: str, rounds: int) -> dict:
+    """R car rooms' Soms (as the studio's rooms hold them), each round every room's control 0 moved (its local
+    restart), 10 cycles stepped and its weights read back (its frame); three ways: each Som alone (`own`), the
+    studio's rounds (BatchedSteps: every room's state into one BatchSom, one launch, each room's weights back into its
+    Som, then its frame read from it: `studio`), and the batched kernels alone (the rooms' states kept in the batch:
+    one upload of the controls, one launch, one read-back of every weight: `kernels`)."""
+    import warp as wp
+
     from somwidget.backend import presets as _presets
     from somwidget.backend.batch import BatchSom
+    from somwidget.frontend.studio.batched import BatchedSteps
 
     preset = _presets.get_preset("car")
     som = preset.make_som(device=device)
     som.train()
     settled = som.weights
-    rng = np.random.default_rng(0)
     base = np.asarray(preset.controls, np.float32)
 
     def moved(r: int) -> np.ndarray:
@@ -267,42 +277,69 @@ def run_engine(count: int, device: str, rounds: int) -> dict:
                                         np.zeros(count)], axis=1).astype(np.float32)
         return c
 
-    own = []
-    for _ in range(count):
-        s = preset.make_som(device=device)
-        s.restore(settled, s.iterations)
-        own.append(s)
-    times_own = []
-    for r in range(rounds):
-        controls = moved(r)
-        t = time.perf_counter()
-        for b, s in enumerate(own):
+    def rooms() -> list:
+        made = []
+        for _ in range(count):
+            s = preset.make_som(device=device)  # one preset: its topology (and distance table) shared
+            s.restore(settled, s.iterations)
+            made.append(s)
+        return made
+
+    def timed(one_round) -> np.ndarray:
+        times = []
+        for r in range(rounds):
+            controls = moved(r)
+            t = time.perf_counter()
+            one_round(controls)
+            if device != "cpu":
+                wp.synchronize_device(device)
+            times.append(time.perf_counter() - t)
+        skip = min(2, rounds - 1)  # the first rounds compile and warm up
+        return np.array(times[skip:]) * 1e3
+
+    soms = rooms()
+
+    def own(controls):
+        for b, s in enumerate(soms):
             s.set_controls(controls[b])
             s.step(10)
             _ = s.weights
-        times_own.append(time.perf_counter() - t)
-    del own
+
+    own_ms = timed(own)
+    for s in soms:
+        s.restore(settled, s.iterations)
+    steps = BatchedSteps()
+
+    def studio(controls):
+        for b, s in enumerate(soms):
+            s.set_controls(controls[b])
+        steps.step_together(soms, [10] * count)
+        for s in soms:
+            _ = s.weights
+
+    studio_ms = timed(studio)
+    assert count == 1 or steps.batched == count * rounds, (steps.batched, steps.alone)  # all in each round's launch
+    soms.clear()  # their memory goes before the batch is made
     batch = BatchSom(preset.topology, settled, moved(0), iterations=preset.iterations, l_start=preset.l_start,
                      l_end=preset.l_end, smoothing=preset.smoothing, reach=preset.reach,
                      smooth_dims=preset.smooth_dims, metric_weights=preset.metric_weights, mirror=preset.mirror,
-                     device=device, radii=preset.control_radii(), origin=preset.weights)
-    times_batch = []
-    for r in range(rounds):
-        controls = moved(r)
-        t = time.perf_counter()
-        batch._controls = controls  # every room's drag moved its control (a probe of the kernels: no public setter)
-        batch._c.assign(batch._effective(controls))
+                     device=device)
+    state = {"w": np.repeat(settled[None], count, axis=0)}
+
+    def kernels(controls):
+        batch.load(state["w"], np.full(count, preset.iterations, np.int64), controls)
         batch.restart()
         batch.step(10)
-        _ = batch.weights
-        times_batch.append(time.perf_counter() - t)
-    skip = min(2, rounds - 1)  # the first rounds compile and warm up
-    own_ms, batch_ms = np.array(times_own[skip:]) * 1e3, np.array(times_batch[skip:]) * 1e3
-    del rng
-    return {"rooms": count, "own_median_ms": float(np.median(own_ms)), "own_p95_ms": float(np.percentile(own_ms, 95)),
-            "batch_median_ms": float(np.median(batch_ms)), "batch_p95_ms": float(np.percentile(batch_ms, 95)),
-            "own_30fps": float(np.percentile(own_ms, 95)) <= 1e3 / 30,
-            "batch_30fps": float(np.percentile(batch_ms, 95)) <= 1e3 / 30}
+        state["w"] = batch.weights
+
+    kernels_ms = timed(kernels)
+    frame = 1e3 / 30
+
+    def figures(name, ms):
+        return {f"{name}_median_ms": float(np.median(ms)), f"{name}_p95_ms": float(np.percentile(ms, 95)),
+                f"{name}_30fps": float(np.percentile(ms, 95)) <= frame}
+
+    return {"rooms": count, **figures("own", own_ms), **figures("studio", studio_ms), **figures("kernels", kernels_ms)}
 
 
 # -- Dask: actors against the workers' own servers ---------------------------------------------------------------------
@@ -430,7 +467,7 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=20, help="engine mode: rounds timed")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
-    heavy = check_imports()
+    heavy = check_imports() if args.mode != "engine" else []  # the engine alone needs numpy and warp only
     if heavy:
         print(f"# warning: the studio's imports pulled in {heavy}", flush=True)
     counts = [int(v) for v in args.rooms.split(",") if v.strip()]
@@ -455,14 +492,14 @@ def main(argv=None) -> int:
         print(f"# most rooms with p95 <= {TARGET_MS:g} ms: {max(passing) if passing else 'none'} "
               f"(of {', '.join(map(str, counts))}; presets {args.presets})", flush=True)
     elif args.mode == "engine":
-        print(f"{'rooms':>6} {'own median':>10} {'own p95':>8} {'batched median':>14} {'batched p95':>11} "
-              f"{'own 30/s':>8} {'batched 30/s':>12}", flush=True)
+        print(f"{'rooms':>6} " + " ".join(f"{w + ' median':>15} {w + ' p95':>12} {w + ' 30/s':>12}"
+                                           for w in ("own", "studio", "kernels")), flush=True)
         for count in counts:
             r = run_engine(count, args.device, args.rounds)
             results.append(r)
-            print(f"{r['rooms']:>6} {r['own_median_ms']:>10.2f} {r['own_p95_ms']:>8.2f} {r['batch_median_ms']:>14.2f} "
-                  f"{r['batch_p95_ms']:>11.2f} {'yes' if r['own_30fps'] else 'no':>8} "
-                  f"{'yes' if r['batch_30fps'] else 'no':>12}", flush=True)
+            print(f"{r['rooms']:>6} " + " ".join(
+                f"{r[w + '_median_ms']:>15.2f} {r[w + '_p95_ms']:>12.2f} {'yes' if r[w + '_30fps'] else 'no':>12}"
+                for w in ("own", "studio", "kernels")), flush=True)
     else:
         for count in counts:
             for r in run_dask(count, args.seconds):

@@ -34,6 +34,7 @@ from ..model import Session
 from ..model.readback import read_folder
 from ..model.store import LOCK, SessionStore, set_aside
 from ..web.hub import ViewHub
+from .batched import BatchedSteps
 from .limits import StudioFull, StudioLimits, check_new_room, device_used_bytes, resident_bytes, room_name
 from .thumbs import public_shape, shape_of, thumbnail
 
@@ -148,6 +149,7 @@ class Rooms:
         self._rooms: dict[str, Room] = {}
         self._lock = threading.Lock()
         self._closed = False
+        self.steps = BatchedSteps()  # alike rooms stepped in one launch (batched.py)
 
     # -- the rooms --------------------------------------------------------------------------------------------
     def known(self) -> list[RoomRecord]:
@@ -194,7 +196,8 @@ class Rooms:
             with self._lock:
                 self._rooms[name] = room
             try:
-                self._start(room, Session(preset, **self._options(SessionStore(folder / SESSION, "studio"))))
+                self._start(room, Session(preset, start=False,
+                                          **self._options(SessionStore(folder / SESSION, "studio"))))
             except BaseException:
                 with self._lock:
                     self._rooms.pop(name, None)
@@ -230,7 +233,9 @@ class Rooms:
                 "origin": "studio", "_store": store}
 
     def _start(self, room: Room, session: Session) -> None:
-        """Make `session` the room's (caller holds room.lock)."""
+        """Make `session` the room's and start it, stepped with the worker's alike rooms (caller holds room.lock)."""
+        session.trainer.stepper = self.steps.step
+        session.start()
         room.session = session
         room._applied = session.frame.applied
         session.add_listener(room._on_frame, replay=False)
@@ -273,7 +278,7 @@ class Rooms:
                     log.warning("studio: %s", room.notices[-1])
         elif folder.exists() and any(folder.iterdir()):  # a folder without a manifest: kept, never deleted
             set_aside(folder)
-        self._start(room, Session(room.record.preset, **self._options(SessionStore(folder, "studio"))))
+        self._start(room, Session(room.record.preset, start=False, **self._options(SessionStore(folder, "studio"))))
 
     def _rebuild(self, room: Room, reading, store: SessionStore, on_disk: bool) -> bool:
         """Start the room's session from what `reading` brought back into `store`; False (the folder set aside, a
@@ -293,7 +298,6 @@ class Rooms:
                                 f"{kept}the room starts again from {room.record.preset}")
             log.warning("studio: %s", room.notices[-1])
             return False
-        session.start()
         self._start(room, session)
         log.info("studio: room %s brought back on %s (%d undo steps)", room.name, self.label, len(reading.undo))
         return True
@@ -319,6 +323,8 @@ class Rooms:
         with contextlib.suppress(OSError):
             room.record.write(room.folder)
         del session, hub
+        if not self.live():
+            self.steps.forget()
         release_memory()
         log.info("studio: room %s parked on %s", name, self.label)
         return True
