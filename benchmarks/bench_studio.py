@@ -467,6 +467,8 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=20, help="engine mode: rounds timed")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
+    # the rooms' sessions keep their folders under the rooms folder; anything else goes to a folder of this run
+    os.environ.setdefault("SOMWIDGET_DATA_DIR", tempfile.mkdtemp(prefix="bench-studio-data-"))
     heavy = check_imports() if args.mode != "engine" else []  # the engine alone needs numpy and warp only
     if heavy:
         print(f"# warning: the studio's imports pulled in {heavy}", flush=True)
