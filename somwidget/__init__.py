@@ -49,6 +49,16 @@ def serve(preset: str | None = None, mesh=None, host: str | None = None, port: i
                       lan=lan, fresh=fresh)
 
 
+def join(url: str, timeout: float = 30.0, fingerprint: str | None = None, verify: bool = True):
+    """A room of a running studio (`somwidget serve --studio`) by its link (https://host:8080/r/<name>/?token=...):
+    a proxy of its session whose intents and frames go over the room's websocket; `.show()` draws it in a notebook.
+
+    See somwidget.frontend.studio.remote for the arguments."""
+    from .frontend.studio.remote import join as _join
+
+    return _join(url, timeout=timeout, fingerprint=fingerprint, verify=verify)
+
+
 def __getattr__(name: str):
     """`somwidget.Session`: the modelling session every view shares (imported on first use; no UI package)."""
     if name == "Session":
@@ -58,4 +68,4 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'somwidget' has no attribute {name!r}")
 
 
-__all__ = ["Som", "Topology", "Symmetry", "Session", "presets", "serve", "show", "render", "sweep"]
+__all__ = ["Som", "Topology", "Symmetry", "Session", "presets", "serve", "show", "render", "sweep", "join"]

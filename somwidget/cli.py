@@ -69,6 +69,27 @@ def _build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--fresh", action="store_true", help="start from --preset / --mesh (by default the app brings "
                        "back the session the last serve left, however it stopped, with its undo history; that "
                        "session stays saved for later)")
+    studio = serve.add_argument_group("studio", "many rooms, each a session of its own, and the wall of them all "
+                                      "(docs/studio.md)")
+    studio.add_argument("--studio", action="store_true", help="serve rooms: /r/<name> opens or makes one, /wall shows "
+                        "them all (the teacher's link); --preset is what a new room starts from")
+    studio.add_argument("--rooms", metavar="NAMES", default="", help="rooms to have at start, comma-separated (their "
+                        "links are printed)")
+    studio.add_argument("--rooms-dir", metavar="DIR", help="where the rooms are kept (default: the data directory's "
+                        "studio/); with --scheduler, a folder every worker reaches")
+    studio.add_argument("--workers", type=int, metavar="N", help="worker processes on this machine, rooms placed on "
+                        "the least loaded (default: one a GPU where there are two or more, else the rooms live in "
+                        "the server's process)")
+    studio.add_argument("--scheduler", metavar="ADDRESS", help="a Dask scheduler (tcp://host:8786) whose workers hold "
+                        "the rooms (pip install somwidget[dask])")
+    studio.add_argument("--rooms-per-worker", type=int, default=64, metavar="N", help="live rooms a worker (a GPU) "
+                        "holds; past it a new room is refused (default: %(default)s)")
+    studio.add_argument("--nodes-per-room", type=int, default=65536, metavar="N", help="a room's largest mesh "
+                        "(default: %(default)s)")
+    studio.add_argument("--memory-per-worker", type=float, metavar="MB", help="memory a worker's rooms may use; past "
+                        "it a new room is refused (default: the machine's and the GPU's own)")
+    studio.add_argument("--park-after", type=float, default=300.0, metavar="SECONDS", help="a room with no view is "
+                        "saved and its memory freed after this long (0: never; default: %(default)s)")
 
     bench = sub.add_parser(
         "bench",
@@ -201,7 +222,25 @@ def _sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _studio(args: argparse.Namespace) -> int:
+    from somwidget.frontend.studio.limits import StudioLimits
+    from somwidget.frontend.studio.serve import run_studio
+
+    if args.mesh or args.fresh:
+        raise ValueError("--studio: rooms start from a preset (--preset); --mesh and --fresh are for one session")
+    limits = StudioLimits(args.rooms_per_worker, args.nodes_per_room, args.memory_per_worker, args.park_after)
+    run_studio(host=args.host if args.host is not None else (None if args.lan else "127.0.0.1"), port=args.port,
+               device=args.device, lan_mode=args.lan, workers=args.workers, limits=limits,
+               preset=args.preset or "car", rooms_dir=args.rooms_dir,
+               rooms=[n for n in args.rooms.split(",") if n.strip()], scheduler=args.scheduler)
+    return 0
+
+
 def _serve(args: argparse.Namespace) -> int:
+    if args.studio:
+        return _studio(args)
+    if args.rooms or args.rooms_dir or args.workers is not None or args.scheduler:
+        raise ValueError("--rooms, --rooms-dir, --workers and --scheduler are the studio's: add --studio")
     from somwidget.frontend.web.serve import run_server
 
     run_server(

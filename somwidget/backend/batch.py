@@ -311,7 +311,46 @@ class BatchSom:
         self._s[:] = 0
         self._fresh[:] = True
 
+    @warp_exclusive
+    def load(self, weights: ArrayLike, iteration: ArrayLike, controls: ArrayLike) -> None:
+        """Put every variant's weights (B, N, n), cycle s (B,) and controls (B, k, n) in place, as `Som.restore` and
+        a `set_controls` without its restart would: the next step goes on from there. What lets B separate Soms be
+        stepped in one launch (the studio's rooms: their states in, `step_to`, `weights` back out). Point controls
+        only: with radii a run keeps rest positions that a load cannot set."""
+        if self._shaping:
+            raise ValueError("load: controls with a radius keep each run's rest positions, which a load cannot set; "
+                             "load works with point controls (radius 0) only")
+        B, N, n, k = self.n_variants, self.n_neurons, self.n_dims, self._controls.shape[1]
+        w = np.asarray(weights)
+        if w.shape != (B, N, n):
+            raise ValueError(f"weights: expected shape {(B, N, n)} (each variant's), got {w.shape}")
+        w = checks.finite_array("weights", w.reshape(B * N, n), 2)
+        s = np.asarray(iteration)
+        if s.shape != (B,) or not np.issubdtype(s.dtype, np.integer) or (s < 0).any() or (s > self._iterations).any():
+            raise ValueError(f"iteration: expected {B} whole numbers, each from 0 to its variant's S; got {s.tolist()}")
+        c = np.asarray(controls)
+        if c.shape != (B, k, n):
+            raise ValueError(f"controls: expected shape {(B, k, n)} (each variant's), got {c.shape}")
+        c = checks.finite_array("controls", c.reshape(B, k * n), 2).reshape(B, k, n)
+        self._w.assign(np.ascontiguousarray(w, np.float32).reshape(B, N, n))
+        self._controls = c.astype(np.float32)
+        self._c.assign(self._effective(self._controls))
+        self._s = s.astype(np.int64)
+        self._fresh[:] = True
+
     # -- training -----------------------------------------------------------------------------------------
+    def step_to(self, to: ArrayLike) -> int:
+        """Run variant b's cycles up to to[b] (none past its S, none back: to[b] below s[b] runs none); returns the
+        most cycles any variant ran."""
+        to = np.asarray(to)
+        if to.shape != (self.n_variants,) or not np.issubdtype(to.dtype, np.integer):
+            raise ValueError(f"to: expected {self.n_variants} whole numbers (each variant's last cycle), got {to!r}")
+        to = np.clip(to.astype(np.int64), self._s, self._iterations)
+        ran = int((to - self._s).max(initial=0))
+        if ran:
+            self._launch(to)
+        return ran
+
     def step(self, n: int = 1) -> int:
         """Run up to n cycles of every variant (none past its S); returns the most cycles any variant ran."""
         n = checks.integer("n", n, 0)

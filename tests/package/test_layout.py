@@ -17,6 +17,9 @@ ALLOWED = {
     "frontend.transport": {"backend", "frontend.model"},
     "frontend.web": {"backend", "frontend.model", "frontend.transport", "frontend.client"},
     "frontend.notebook": {"backend", "frontend.model", "frontend.transport", "frontend.client"},
+    # rooms sit above the model: a Session and a view hub each, a room's notebook view
+    "frontend.studio": {"backend", "frontend.model", "frontend.transport", "frontend.web", "frontend.client",
+                        "frontend.notebook"},
 }
 
 

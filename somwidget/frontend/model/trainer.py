@@ -71,6 +71,8 @@ class Trainer:
         self.calls: collections.deque = collections.deque()  # (call, Future): posted, run between two turns
         self.posted = 0  # calls posted so far
         self.ran = 0  # calls run so far
+        #: How the Som steps k cycles: alone, or (a studio's rooms) in one launch with other rooms' (studio/batched.py)
+        self.stepper: Callable[[object, int], int] = step_alone
 
     # -- lifetime ----------------------------------------------------------------------------------------------
     def start(self) -> None:
@@ -275,9 +277,7 @@ class Trainer:
                     k = max(1, k // 4)
                 k = max(1, min(k, som.iterations - som.iteration))
                 t = time.perf_counter()
-                cycles = som.step(k)
-                if hasattr(som, "synchronize"):
-                    som.synchronize()
+                cycles = self.stepper(som, k)
                 dt = time.perf_counter() - t
                 if cycles > 0:
                     pace.tune(dt / cycles, self.step_fraction / self.frame_rate)
@@ -347,6 +347,14 @@ class Trainer:
                     return False
                 wake.wait(min(left, 0.05))
         return True
+
+
+def step_alone(som, cycles: int) -> int:
+    """Step the Som `cycles` cycles by itself, waiting for the device; the cycles run."""
+    ran = som.step(cycles)
+    if hasattr(som, "synchronize"):
+        som.synchronize()
+    return ran
 
 
 def _run(call: Callable[[], object], future: Future) -> None:

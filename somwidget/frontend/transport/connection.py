@@ -77,10 +77,11 @@ class ViewConnection:
     its topology message carries (None over the notebook's comm); `name`: for the log."""
 
     def __init__(self, session, pipe: Pipe, client_id: int | None = None, name: str = "a view",
-                 kind: str = "desktop"):
+                 kind: str = "desktop", watch: bool = False):
         self.session = session
         self.pipe = pipe
         self.name = name
+        self.watch = watch  # a view that only watches (a studio's wall opens rooms so): WATCHING intents alone
         self.outbox = outbox_for(session)
         self.peer = Peer(id=client_id)
         self.intents = 0  # intents done
@@ -139,6 +140,10 @@ class ViewConnection:
             intent = parse_intent(message, self.session.n_controls)
         except IntentError as exc:
             self._refuse(exc, exc.intent)
+            return _done(False)
+        if self.watch and type(intent) not in WATCHING:
+            self._refuse(ValueError(f"{intent.type}: this view only watches the session; open it with its own link "
+                                    "to take part"), intent.type)
             return _done(False)
         if type(intent) in AT_ONCE or (isinstance(intent, PingIntent) and not self._waiting):
             return _done(self._handle(intent))
@@ -285,5 +290,7 @@ HANDLERS: dict[type[Intent], Callable[[ViewConnection, Intent], ServerMessage | 
 }
 #: Intents answered on the thread that receives them: they touch nothing of the clay.
 AT_ONCE = frozenset({HelloIntent, HandIntent})
+#: What a view that only watches may send.
+WATCHING = frozenset({HelloIntent, HandIntent, PingIntent})
 if set(HANDLERS) != set(INTENTS.values()):
     raise TypeError(f"intents without a handler in HANDLERS: {set(INTENTS.values()) - set(HANDLERS)}")

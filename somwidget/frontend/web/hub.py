@@ -273,6 +273,11 @@ class ViewHub:
 
     # -- websocket -----------------------------------------------------------------------------------------------
     async def _websocket(self, request):
+        return await self.open_socket(request)
+
+    async def open_socket(self, request, watch: bool = False):
+        """A view's websocket on this hub (its route's handler; a studio's room routes call it after their own
+        checks). `watch`: the view only watches (connection.py: WATCHING)."""
         if not self._allowed(request):
             log.info("refused a view websocket from %s: no valid token", request.remote)
             return lan.forbidden()
@@ -282,7 +287,8 @@ class ViewHub:
             self._loop = asyncio.get_running_loop()
         client = _Client(self._next_id, ws, request.remote)
         client.transport = request.transport
-        client.connection = ViewConnection(self.session, client, client_id=client.id, name=f"view client {client.id}")
+        client.connection = ViewConnection(self.session, client, client_id=client.id, name=f"view client {client.id}",
+                                           watch=watch)
         self._next_id += 1
         self.clients[client.id] = client
         log.info("view client %d connected from %s (%s)", client.id, request.remote, request.path)

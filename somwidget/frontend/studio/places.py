@@ -1,0 +1,217 @@
+"""Where a studio's rooms live, as the front sees them: a `LocalPlace` (rooms of the front's own process) or a
+`RemotePlace` (a worker's room server, host.py: another process on this machine, or a Dask worker). Both answer the
+same coroutines; the front routes each room to its place.
+
+A remote room's websocket is relayed: the browser's websocket ends at the front (its tokens, Host and Origin checked
+there), which opens one to the worker's room server for it and passes each message on, both ways, as it comes
+(frames are the latest state already: the worker's hub keeps one slot a view, so a slow browser skips frames). When the
+worker goes, the front closes the browser's websocket with 1012 (service restart): its link connects again, to the
+room's new place.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import logging
+
+import aiohttp
+from aiohttp import WSMsgType, web
+
+from .limits import StudioFull
+from .rooms import RoomBusy, Rooms
+
+log = logging.getLogger(__name__)
+
+#: Seconds a call to a worker may take before it counts as a failure.
+CALL_TIMEOUT = 10.0
+#: Seconds a health check may take.
+HEALTH_TIMEOUT = 2.0
+
+
+class PlaceDown(RuntimeError):
+    """A worker that does not answer."""
+
+
+class LocalPlace:
+    """The rooms of this process."""
+
+    def __init__(self, rooms: Rooms):
+        self.rooms = rooms
+        self.label = rooms.label
+        self.alive = True
+        self.failures = 0
+        self.load = rooms.load()
+
+    async def _run(self, call, *args):
+        return await asyncio.get_running_loop().run_in_executor(None, call, *args)
+
+    async def health(self) -> dict:
+        self.load = self.rooms.load()
+        return {"label": self.label, "load": self.load}
+
+    async def known(self) -> list[dict]:
+        return [vars(r) for r in await self._run(self.rooms.known)]
+
+    async def listing(self) -> list[dict]:
+        return self.rooms.listing()
+
+    async def create(self, name: str, token: str, preset: str) -> dict:
+        return (await self._run(self.rooms.create, name, token, preset)).info()
+
+    async def open(self, name: str) -> dict:
+        return (await self._run(self.rooms.open, name)).info()
+
+    async def park(self, name: str, force: bool = False) -> bool:
+        return await self._run(self.rooms.park, name, force)
+
+    async def park_idle(self) -> list[str]:
+        return await self._run(self.rooms.park_idle)
+
+    async def thumbs(self, seen: dict) -> list[dict]:
+        out = []
+        for room in self.rooms.rooms():
+            got = room.thumb(seen.get(room.name))
+            if got is not None:
+                out.append(dict(zip(("generation", "seq", "shape", "thumb"), got), name=room.name))
+        return out
+
+    async def socket(self, request, name: str, watch: bool):
+        room = await self._run(self.rooms.open, name)
+        return await room.hub.open_socket(request, watch=watch)
+
+    async def close(self) -> None:
+        await self._run(self.rooms.close)
+
+
+def _raise_refusal(status: int, body: dict) -> None:
+    message = body.get("error", f"status {status}")
+    kind = body.get("kind")
+    if kind == "full":
+        raise StudioFull(message)
+    if kind == "busy":
+        raise RoomBusy(message)
+    if kind == "missing":
+        raise KeyError(message)
+    raise ValueError(message)
+
+
+class RemotePlace:
+    """A worker's room server at `url` (http://host:port), called with the studio's worker `secret`."""
+
+    def __init__(self, url: str, secret: str, label: str | None = None):
+        self.url = url.rstrip("/")
+        self.secret = secret
+        self.label = label or self.url
+        self.index: int | None = None  # its number among a machine's worker processes (workers.py)
+        self.alive = True
+        self.failures = 0
+        self.load = {"rooms": 0, "nodes": 0, "limit": 1}
+        self._http: aiohttp.ClientSession | None = None
+
+    @property
+    def headers(self) -> dict:
+        return {"Authorization": f"Bearer {self.secret}"}
+
+    def _client(self) -> aiohttp.ClientSession:
+        if self._http is None or self._http.closed:
+            self._http = aiohttp.ClientSession(headers=self.headers)
+        return self._http
+
+    async def _call(self, method: str, path: str, body=None, timeout: float = CALL_TIMEOUT):
+        try:
+            async with self._client().request(method, self.url + path, json=body,
+                                              timeout=aiohttp.ClientTimeout(total=timeout)) as r:
+                data = await r.json(content_type=None)
+        except (aiohttp.ClientError, OSError, asyncio.TimeoutError, ValueError) as exc:
+            raise PlaceDown(f"the worker at {self.url} does not answer: {exc or type(exc).__name__}") from None
+        if r.status >= 400:
+            _raise_refusal(r.status, data if isinstance(data, dict) else {})
+        return data
+
+    async def health(self) -> dict:
+        data = await self._call("GET", "/studio/health", timeout=HEALTH_TIMEOUT)
+        self.load = data["load"]
+        return data
+
+    async def known(self) -> list[dict]:
+        return await self._call("GET", "/studio/known")
+
+    async def listing(self) -> list[dict]:
+        return await self._call("GET", "/studio/rooms")
+
+    async def create(self, name: str, token: str, preset: str) -> dict:
+        return await self._call("POST", "/studio/rooms", {"name": name, "token": token, "preset": preset})
+
+    async def open(self, name: str) -> dict:
+        return await self._call("POST", f"/studio/rooms/{name}/open")
+
+    async def park(self, name: str, force: bool = False) -> bool:
+        return (await self._call("POST", f"/studio/rooms/{name}/park" + ("?force=1" if force else "")))["parked"]
+
+    async def park_idle(self) -> list[str]:
+        return []  # the worker parks its own (host.py)
+
+    async def thumbs(self, seen: dict) -> list[dict]:
+        out = await self._call("POST", "/studio/thumbs", {"seen": seen})
+        for item in out:
+            item["thumb"] = base64.b64decode(item["thumb"])
+        return out
+
+    async def socket(self, request, name: str, watch: bool):
+        """The browser's websocket relayed to the room's on the worker (the module's docstring)."""
+        url = self.url + f"/studio/rooms/{name}/ws" + ("?watch=1" if watch else "")
+        try:
+            up = await self._client().ws_connect(url, max_msg_size=0, compress=0, heartbeat=20.0,
+                                                 timeout=aiohttp.ClientWSTimeout(ws_close=5.0))
+        except aiohttp.WSServerHandshakeError as exc:
+            return web.Response(status=exc.status, text=f"somwidget studio: the room's worker refused: {exc.message}\n")
+        except (aiohttp.ClientError, OSError, asyncio.TimeoutError) as exc:
+            raise PlaceDown(f"the worker at {self.url} does not answer: {exc}") from None
+        ws = web.WebSocketResponse(heartbeat=20.0, max_msg_size=64 * 1024, compress=False)
+        await ws.prepare(request)
+        await relay(ws, up)
+        return ws
+
+    async def close(self) -> None:
+        if self._http is not None:
+            await self._http.close()
+
+
+async def relay(browser: web.WebSocketResponse, up: aiohttp.ClientWebSocketResponse) -> None:
+    """Pass messages both ways until either side ends; a worker that went closes the browser's with 1012."""
+    async def down():
+        async for msg in up:
+            if msg.type == WSMsgType.TEXT:
+                await browser.send_str(msg.data)
+            elif msg.type == WSMsgType.BINARY:
+                await browser.send_bytes(msg.data)
+            else:
+                break
+        return "worker"
+
+    async def upward():
+        async for msg in browser:
+            if msg.type == WSMsgType.TEXT:
+                await up.send_str(msg.data)
+            elif msg.type == WSMsgType.BINARY:
+                await up.send_bytes(msg.data)  # refused there, as at any view websocket
+            else:
+                break
+        return "browser"
+
+    tasks = [asyncio.ensure_future(down()), asyncio.ensure_future(upward())]
+    try:
+        done, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for task in tasks:
+            task.cancel()
+    first = next(iter(done), None)
+    ended = first.result() if first is not None and not first.cancelled() and first.exception() is None else "worker"
+    if not up.closed:
+        await up.close()
+    if not browser.closed:
+        code, why = (1012, b"the room moves to another worker") if ended == "worker" else (1000, b"")
+        if up.close_code not in (None, 1000, 1006) and ended == "worker":
+            code, why = up.close_code, b"closed by the room"
+        await browser.close(code=code, message=why)

@@ -1,0 +1,102 @@
+"""The rooms of one worker (studio/rooms.py) with real Sessions on the CPU: each room its own clay, controls, settings,
+undo history and autosave folder; an idle room parked (saved, its session gone) and back on open within a second as it
+was; limits refusing a new room with a message that names the limit; room names checked."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from somwidget.frontend.studio.limits import StudioFull, StudioLimits, room_name
+from somwidget.frontend.studio.rooms import RoomRecord, Rooms
+
+
+@pytest.fixture
+def rooms(tmp_path):
+    r = Rooms(tmp_path / "rooms", device="cpu", limits=StudioLimits(rooms=3, nodes=1000, park_after=0.3))
+    yield r
+    r.close()
+
+
+def drag(session, index: int, by) -> np.ndarray:
+    """A drag of control `index` by `by` as Python makes one (one undo step); the position it ends at."""
+    to = session.controls[index][:3] + np.float32(by)
+    with session.gesture():
+        session.move_control(index, to)
+    assert session.wait_idle(120)
+    return to
+
+
+def test_each_room_is_its_own_session(rooms, tmp_path):
+    a = rooms.create("alice", "token-a", "car")
+    b = rooms.create("bob", "token-b", "car")
+    assert a.session is not b.session
+    assert a.session.wait_idle(120) and b.session.wait_idle(120)
+    b_before = b.session.frame.positions.copy()
+    to = drag(a.session, 0, [0.0, 0.0, 0.1])
+    a.session.set_parameter("smoothing", 0.3)
+    assert a.session.wait_idle(120)
+    np.testing.assert_array_equal(a.session.controls[0][:3], to)
+    assert a.session.history[0] == 2 and b.session.history[0] == 0
+    assert b.session.parameters["smoothing"] != 0.3
+    np.testing.assert_array_equal(b.session.frame.positions, b_before)  # bob's clay did not move
+    assert a.session.autosave.path == tmp_path / "rooms" / "alice" / "session"
+    assert b.session.autosave.path == tmp_path / "rooms" / "bob" / "session"
+    assert RoomRecord.read(tmp_path / "rooms" / "alice").token == "token-a"
+    with pytest.raises(ValueError, match="exists already"):
+        rooms.create("Alice", "t", "car")  # names fold to lower case
+
+
+def test_an_idle_room_is_parked_and_back_within_a_second(rooms):
+    room = rooms.create("alice", "t", "car")
+    session = room.session
+    assert session.wait_idle(120)
+    to = drag(session, 1, [0.05, 0.0, -0.08])
+    undo_steps = session.history[0]
+    shown = session.frame.positions.copy()
+    room.last_active = time.monotonic() - 1.0  # no view for a second, past park_after
+    assert rooms.park_idle() == ["alice"]
+    assert not room.live and session.closed
+    assert room.info()["live"] is False and room.thumb(None) is not None  # the wall keeps its picture
+    t0 = time.perf_counter()
+    again = rooms.open("alice")
+    took = time.perf_counter() - t0
+    assert took < 1.0, f"a parked room took {took:.2f} s to come back"
+    back = again.session
+    assert back is not session
+    np.testing.assert_array_equal(back.controls[1][:3], to)
+    np.testing.assert_array_equal(back.frame.positions, shown)
+    assert back.history[0] == undo_steps
+    assert back.undo() and back.wait_idle(60)
+    assert not np.array_equal(back.controls[1][:3], to)  # the drag's undo step came back with it
+
+
+def test_a_room_with_views_is_not_parked(rooms):
+    room = rooms.create("alice", "t", "car")
+    room.last_active = time.monotonic() - 10
+    room.views = lambda: ["a view"]
+    assert rooms.park_idle() == [] and room.live
+    assert rooms.park("alice") is False
+
+
+def test_limits_refuse_a_new_room_with_a_clear_message(rooms, tmp_path):
+    for name in ("a", "b", "c"):
+        rooms.create(name, "t", "car")
+    with pytest.raises(StudioFull, match=r"holds 3 rooms, its limit \(--rooms-per-worker 3\)"):
+        rooms.create("d", "t", "car")
+    assert not (tmp_path / "rooms" / "d").exists()
+    rooms.park("a", force=True)
+    with pytest.raises(StudioFull, match=r"4,096 nodes is past the studio's limit of 1,000 nodes"):
+        rooms.create("grid", "t", "space-grid")
+    small = Rooms(tmp_path / "other", device="cpu", limits=StudioLimits(memory_mb=1))
+    with pytest.raises(StudioFull, match=r"past its 1 MB \(--memory-per-worker\)"):
+        small.create("x", "t", "car")
+
+
+@pytest.mark.parametrize("bad", ["", "../bob", "a b", "x" * 41, "-lead", "room/1", "ü", None])
+def test_room_names(bad):
+    with pytest.raises(ValueError, match="room name"):
+        room_name(bad)
+    assert room_name(" Group-3_b ") == "group-3_b"

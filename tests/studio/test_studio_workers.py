@@ -1,0 +1,100 @@
+"""Rooms beyond the front's process, with real worker processes on the CPU standing in for GPUs: rooms placed on the
+least loaded worker, a worker's limit refusing a room with its message, rooms reached through the front's relay (a
+notebook's `somwidget.join`), and a worker killed (SIGKILL) with its rooms back on another worker within 10 s, nothing
+completed lost: worker processes of this machine (workers.py) and a Dask LocalCluster of two workers (dask_rooms.py)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+from helpers import wait_for
+
+import somwidget
+from somwidget.frontend.studio.limits import StudioFull, StudioLimits
+from somwidget.frontend.studio.serve import StudioServer
+
+#: How long a dead worker's rooms may take to be back (issue 37).
+BACK_WITHIN = 10.0
+
+
+def drag_and_wait_saved(studio, name: str) -> np.ndarray:
+    """A drag in room `name` through the front (a notebook's join); returns where the control is once the room's
+    autosave has it (the listing's save count went up)."""
+    with somwidget.join(studio.room_url(name)) as room:
+        saves = studio.front.rooms[name].info["saves"]
+        to = room.control_positions[0] + np.float32([0.0, 0.0, 0.1])
+        room.move_control(0, to)
+        np.testing.assert_allclose(room.control_positions[0], to, atol=1e-6)
+        wait_for(lambda: studio.front.rooms[name].info.get("saves", 0) > saves, 20, "the drag's save")
+        return to
+
+
+def back_elsewhere(studio, name: str, dead) -> float:
+    t0 = time.monotonic()
+    wait_for(lambda: (e := studio.front.rooms[name]).place is not None and e.place is not dead and e.place.alive
+             and e.info.get("live"), BACK_WITHIN + 5, f"room {name} back on another worker")
+    return time.monotonic() - t0
+
+
+def test_worker_processes_place_rooms_and_take_over_a_dead_ones(tmp_path):
+    limits = StudioLimits(rooms=2, park_after=0)
+    with StudioServer(tmp_path / "rooms", device="cpu", workers=2, limits=limits,
+                      rooms=["a", "b", "c"]) as studio:
+        places = studio.front.places
+        assert len(places) == 2 and {p.label for p in places} == {"CPU worker 0", "CPU worker 1"}
+        on = {name: e.place for name, e in studio.front.rooms.items()}
+        assert on["a"] is not on["b"], "the second room went to the busier worker"
+        assert sorted(len([n for n in on if on[n] is p]) for p in places) == [1, 2]
+        studio.call(studio.front.create("d"))  # 2 + 2: both full now
+        with pytest.raises(StudioFull, match=r"the studio is full: .*--rooms-per-worker"):
+            studio.call(studio.front.create("e"))
+
+        to = drag_and_wait_saved(studio, "a")
+        dead = studio.front.rooms["a"].place
+        pid = studio.pool.procs[dead].pid
+        moved_away = [n for n, e in studio.front.rooms.items() if e.place is dead]
+        studio.call(studio.front.park(next(n for n, e in studio.front.rooms.items()
+                                           if e.place is not dead), force=True))  # room for them elsewhere
+        os.kill(pid, signal.SIGKILL)
+        took = back_elsewhere(studio, "a", dead)
+        assert took < BACK_WITHIN, f"the dead worker's room took {took:.1f} s to come back"
+        with somwidget.join(studio.room_url("a")) as room:
+            np.testing.assert_allclose(room.control_positions[0], to, atol=1e-6)  # the completed drag is there
+            assert room.history == (True, False)
+        assert len(moved_away) == 2
+        wait_for(lambda: len(studio.front.alive()) == 2, 60, "a new worker in place of the dead one")
+
+
+@pytest.fixture
+def cluster():
+    distributed = pytest.importorskip("distributed", reason="Dask is not installed (pip install somwidget[dask])")
+    here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env = {"PYTHONPATH": here, "SOMWIDGET_DATA_DIR": os.environ["SOMWIDGET_DATA_DIR"]}
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                  env=env) as c:
+        yield c
+
+
+def test_dask_workers_hold_rooms_and_a_killed_one_s_come_back(tmp_path, cluster):
+    from distributed import Client
+
+    with StudioServer(tmp_path / "rooms", device="cpu", scheduler=cluster.scheduler_address,
+                      rooms=["alice", "bob", "carol", "dan"], limits=StudioLimits(park_after=0)) as studio:
+        places = {e.place for e in studio.front.rooms.values()}
+        assert len(places) == 2 and all(p.label.startswith("Dask worker") for p in places)
+        to = drag_and_wait_saved(studio, "alice")
+        dead = studio.front.rooms["alice"].place
+        with Client(cluster.scheduler_address) as client:
+            pids = client.run(os.getpid)
+        address = next(a for a, p in studio.pool.places.items() if p is dead)
+        orphans = [n for n, e in studio.front.rooms.items() if e.place is dead]
+        os.kill(pids[address], signal.SIGKILL)
+        took = max(back_elsewhere(studio, name, dead) for name in orphans)
+        assert took < BACK_WITHIN, f"the killed worker's rooms took {took:.1f} s to come back"
+        with somwidget.join(studio.room_url("alice")) as room:
+            np.testing.assert_allclose(room.control_positions[0], to, atol=1e-6)
+            assert room.history == (True, False)

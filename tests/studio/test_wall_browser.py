@@ -1,0 +1,185 @@
+"""The wall in Chromium (studio/static/wall.js) against a real studio on 127.0.0.1: three rooms modelled by three
+designers (each a notebook's `somwidget.join`, a hand of its own room) appear on the wall with their names and who is
+in them, and each thumbnail follows its room's changes (its pixels change when that room's clay does, the others'
+stay). The teacher then clicks a thumbnail: the room opens to watch, where a drag with the mouse is refused and moves
+nothing; "Take part" opens it to act, where the same drag moves the room's control, and the wall follows.
+
+Needs /usr/bin/chromium, Python Playwright and the built client (npm run build).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from helpers import CHROMIUM, CHROMIUM_ARGS, wait_for
+
+import somwidget
+from somwidget.frontend.client import DIST
+from somwidget.frontend.studio.limits import StudioLimits
+from somwidget.frontend.studio.serve import StudioServer
+
+pytestmark = pytest.mark.browser
+
+playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
+if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
+    pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
+if not (DIST / "index.html").is_file():  # pragma: no cover
+    pytest.skip("the client is not built (npm ci && npm run build in somwidget/frontend/client)",
+                allow_module_level=True)
+
+ROOMS = {"alice": "car", "bob": "sphere", "carol": "torus"}
+#: What the wall's person sees of a room: a digest of its thumbnail's pixels.
+PIXELS = """(name) => {
+  const canvas = document.querySelector(`section.room[data-name="${name}"] canvas`);
+  const data = canvas.getContext('2d').getImageData(0, 0, canvas.width, canvas.height).data;
+  let h = 2166136261, ink = 0;
+  for (let i = 0; i < data.length; i += 1) { h = Math.imul(h ^ data[i], 16777619) >>> 0; }
+  for (let i = 3; i < data.length; i += 4) { if (data[i] > 0) ink += 1; }
+  return [h, ink];
+}"""
+
+
+@pytest.fixture(scope="module")
+def studio(tmp_path_factory):
+    with StudioServer(tmp_path_factory.mktemp("rooms"), device="cpu", limits=StudioLimits(park_after=0)) as s:
+        for name, preset in ROOMS.items():
+            s.call(s.front.create(name, preset))
+        yield s
+
+
+def session_of(studio, name):
+    return studio.front.places[0].rooms.get(name).session
+
+
+def settle(studio) -> None:
+    for name in ROOMS:
+        assert session_of(studio, name).wait_idle(180), f"room {name} did not settle"
+
+
+@pytest.fixture(scope="module")
+def designers(studio):
+    joined = {name: somwidget.join(studio.room_url(name)) for name in ROOMS}
+    yield joined
+    for room in joined.values():
+        room.close()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with playwright_sync.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
+        yield b
+        b.close()
+
+
+def room_state(page, name) -> dict:
+    return next(r for r in page.evaluate("somwall.state().rooms") if r["name"] == name)
+
+
+def caption(page, name) -> str:
+    return page.inner_text(f'section.room[data-name="{name}"] .caption')
+
+
+def wait_drawn_at(page, studio, name, timeout=20.0):
+    """Until the wall drew room `name`'s latest frame; its pixels then."""
+    seq = session_of(studio, name).frame.seq
+    wait_for(lambda: room_state(page, name)["seq"] >= seq, timeout, f"the wall to draw {name}'s frame {seq}")
+    page.wait_for_timeout(50)
+    return page.evaluate(PIXELS, name)
+
+
+def test_three_rooms_on_the_wall_follow_their_designers(studio, designers, browser):
+    settle(studio)
+    page = browser.new_page(viewport={"width": 1100, "height": 700})
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(studio.wall_url)
+    page.wait_for_function("somwall.state().rooms.length === 3 && somwall.state().rooms.every((r) => r.drawn > 0)",
+                           timeout=30000)
+    assert page.inner_text("#summary") == "3 rooms, 3 people"
+    for name in ROOMS:  # its name and its designer, as the person reads them
+        text = caption(page, name)
+        assert name in text and "notebook 1" in text, text
+    shown = {name: wait_drawn_at(page, studio, name) for name in ROOMS}
+    assert all(ink > 2000 for _, ink in shown.values()), shown  # a clay drawn in each, not an empty canvas
+    assert len({h for h, _ in shown.values()}) == 3
+
+    for name, room in designers.items():  # one designer at a time changes their clay
+        before = {n: wait_drawn_at(page, studio, n) for n in ROOMS}
+        to = room.control_positions[0] + np.float32([0.0, 0.0, 0.25])
+        room.move_control(0, to)
+        assert room.wait_idle(180)
+        settle(studio)
+        after = {n: wait_drawn_at(page, studio, n) for n in ROOMS}
+        assert after[name][0] != before[name][0], f"{name}'s thumbnail did not follow its change"
+        for other in ROOMS:
+            if other != name:
+                assert after[other] == before[other], f"{other}'s thumbnail changed with {name}'s room"
+        page.wait_for_function(f"""document.querySelector('section.room[data-name="{name}"] .state')
+                                   .textContent.includes('changed just now')""", timeout=10000)
+    assert errors == [], errors
+    page.close()
+
+
+def press_on(page, index: int, k: int) -> tuple[float, float]:
+    """The mouse pressed on control `index` (or its mirrored copy where the clay hides it)."""
+    for j in (index, index + k):
+        x, y = page.evaluate(f"somxr.controlScreen({j})")
+        page.mouse.move(x, y)
+        try:
+            page.wait_for_function(f"somxr.state().hover.some((j) => j % {k} === {index})", timeout=3000)
+        except Exception:
+            continue
+        page.mouse.down()
+        return x, y
+    raise AssertionError(f"control {index} cannot be taken with the mouse")
+
+
+def drag(page, index: int, k: int) -> None:
+    x, y = press_on(page, index, k)
+    for s in range(1, 10):
+        page.mouse.move(x + 8 * s, y - 5 * s)
+        page.wait_for_timeout(40)
+    page.mouse.up()
+
+
+def test_the_teacher_watches_a_room_then_takes_part(studio, designers, browser):
+    settle(studio)
+    context = browser.new_context(viewport={"width": 900, "height": 640})
+    wall = context.new_page()
+    wall.goto(studio.wall_url)
+    wall.wait_for_function("somwall.state().rooms.length === 3 && somwall.state().rooms.every((r) => r.drawn > 0)",
+                           timeout=30000)
+    alice = session_of(studio, "alice")
+    k = alice.n_controls
+    before, steps = alice.controls.copy(), alice.history[0]
+
+    with context.expect_page() as opened:  # a click on the thumbnail: the room, to watch
+        wall.click('section.room[data-name="alice"] canvas')
+    watch = opened.value
+    watch.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=30000)
+    assert watch.title() == "somwidget: alice (watching)"
+    drag(watch, 3, k)
+    watch.wait_for_function("(somxr.state().lastError || '').includes('only watches')", timeout=10000)
+    assert alice.wait_idle(60)
+    np.testing.assert_array_equal(alice.controls, before)
+    wait_for(lambda: room_state(wall, "alice")["people"] == ["notebook 1"], 10, "the watcher not listed as a designer")
+    watch.close()
+
+    pixels = wait_drawn_at(wall, studio, "alice")
+    with context.expect_page() as opened:  # "Take part": the teacher's cookie lets them act
+        wall.click('section.room[data-name="alice"] a.part')
+    part = opened.value
+    part.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=30000)
+    assert part.title() == "somwidget: alice"
+    drag(part, 3, k)
+    wait_for(lambda: alice.history[0] == steps + 1, 30, "the teacher's drag as a step of alice's room")
+    assert np.linalg.norm(alice.controls[3, :3] - before[3, :3]) > 0.05
+    wall.wait_for_function("""document.querySelector('section.room[data-name="alice"] .people').innerText
+                              .includes('desktop')""", timeout=10000)
+    assert alice.wait_idle(180)
+    assert wait_drawn_at(wall, studio, "alice")[0] != pixels  # the wall follows the teacher's change too
+    part.close()
+    context.close()
