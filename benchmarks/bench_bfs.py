@@ -160,7 +160,8 @@ def sweep(topo: Topology):
         cells = []
         for blocks in (max(1, auto // 2), auto, min(n, 2 * auto)):
             t = fresh(topo)
-            secs, table = timed(lambda t=t, blocks=blocks: t._bfs_table(DEV, "block", threads=threads, blocks=blocks))
+            secs, table = timed(lambda t=t, blocks=blocks, threads=threads:
+                                t._bfs_table(DEV, "block", threads=threads, blocks=blocks))
             bad = mismatches(base, table)
             ok = ok and bad == 0
             cells.append(f"{blocks:5d} blocks {secs:7.3f}" + ("" if bad == 0 else f" ({bad} WRONG)"))

@@ -163,7 +163,7 @@ class ShapingPath:
                 wp.launch(kern.balls, dim=len(self.keys), device=dev,
                           inputs=[self.inv_two_sigma2, self.offsets, self.group_of, self.group_start, schedule.table,
                                   s, model.carry_floor, self.radius2])
-                self.cores.on_cores(kern.move_blocks, lambda sb_lo, sb_hi: [
+                self.cores.on_cores(kern.move_blocks, lambda sb_lo, sb_hi, moving=moving, reach=reach, boxes=boxes: [
                     *moving, self.radius2, *self._rest_boxes, *near, reach, rows, *boxes.arrays, boxes.moved,
                     boxes.super_moved, sb_lo, sb_hi], self.cores.super_ranges(boxes.n_super))
             else:
