@@ -21,9 +21,10 @@ import numpy as np
 import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
+from device_timing import device_timer  # noqa: E402 (beside this script)
+
 from somwidget import Topology  # noqa: E402
 from somwidget.backend import topology as topo_mod  # noqa: E402
-from device_timing import device_timer  # noqa: E402 (beside this script)
 
 DEV = os.environ.get("DEV", "cuda:0")
 print("warp", wp.__version__, wp.get_device(DEV).name, "SMs", wp.get_device(DEV).sm_count, flush=True)

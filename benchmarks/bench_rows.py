@@ -20,10 +20,11 @@ import numpy as np
 import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
+from device_timing import device_timer  # noqa: E402 (beside this script)
+
 from somwidget import Som, Topology  # noqa: E402
 from somwidget.backend import row_cache  # noqa: E402
 from somwidget.backend.topology import RowSearch  # noqa: E402
-from device_timing import device_timer  # noqa: E402 (beside this script)
 
 DEV = os.environ.get("DEV", "cuda:0")
 SIDE = int(os.environ.get("SIDE", "1000"))

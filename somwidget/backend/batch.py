@@ -26,11 +26,11 @@ from numpy.typing import ArrayLike
 from . import checks
 from .batch_kernels import GATHER, SEARCH, variants_kernel
 from .batch_shaping_kernels import shaping_variants_kernel
+from .cycle_kernels import MAX_CONTROLS
 from .device import resolve, usable_cores, warp_exclusive, warp_lock
 from .metrics import bounding_diagonal, median_edge
 from .schedule import BY_NAME, KEYS, SMOOTHING_RULES, learning_table
 from .shaping_kernels import CARRY_CUT
-from .cycle_kernels import MAX_CONTROLS
 from .shaping_path import SIGMA_OF_RADIUS
 from .smoothing_kernels import taubin_mu
 from .som_controls import check_radii

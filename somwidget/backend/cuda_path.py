@@ -16,8 +16,13 @@ from .som_controls import Controls
 from .som_model import SomModel
 from .som_schedule import SomSchedule
 from .som_state import KEY_NONE, Graphs, SomState
-from .spread_kernels import (SHARED_TABLE_WORDS, spread_cycle_inputs, spread_cycle_kernel,
-                             spread_smoothing_cycle_inputs, spread_smoothing_cycle_kernel)
+from .spread_kernels import (
+    SHARED_TABLE_WORDS,
+    spread_cycle_inputs,
+    spread_cycle_kernel,
+    spread_smoothing_cycle_inputs,
+    spread_smoothing_cycle_kernel,
+)
 
 #: Meshes up to this many neurons have latency-bound cycles on CUDA (a block per 32 neurons leaves most of the GPU
 #: idle). With at most 32 controls a block spreads the controls over up to eight warps (`spread_cycle_kernel`; with

@@ -13,9 +13,18 @@ from struct import error as struct_error
 import numpy as np
 
 from . import checks
+from .presets import (
+    DISPLAYS,
+    XYZ,
+    FeatureLayout,
+    Preset,
+    colours_of,
+    controls_on,
+    kept_shape,
+    line_display_mesh,
+    positions_of,
+)
 from .refine import coarsen
-from .presets import (DISPLAYS, XYZ, FeatureLayout, Preset, colours_of, controls_on, kept_shape,
-                      line_display_mesh, positions_of)
 from .topology import Topology
 
 #: The default vertex limit of `load_mesh`: the dense distance table's cap (2^16 neurons).

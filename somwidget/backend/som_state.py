@@ -17,8 +17,8 @@ try:  # Warp's internals, for `copy_array` (warp-lang is pinned to 1.19.x in pyp
 except ImportError:  # pragma: no cover - another Warp layout: wp.copy then
     _warp_context = None
 
-from .cycle_kernels import MAX_CONTROLS
 from .block_boxes import BlockBoxes
+from .cycle_kernels import MAX_CONTROLS
 from .som_controls import Controls
 from .som_model import SomModel
 from .som_schedule import SomSchedule

@@ -9,8 +9,8 @@ import numpy as np
 
 from .. import checks
 from ..metrics import bounding_diagonal
-from ..topology import Topology
 from ..symmetry import Symmetry
+from ..topology import Topology
 from .geometry import lattice, open_grid, surface_of_revolution, torus, uv_ellipsoid
 from .records import XYZ, Preset
 

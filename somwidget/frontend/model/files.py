@@ -11,9 +11,8 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from ...backend import checks, schedule
+from ...backend import checks, schedule, session_file
 from ...backend import io as mesh_io
-from ...backend import session_file
 from ...backend.presets import Preset
 from .state import ModellingState, held_settings
 from .timeline import Timeline

@@ -43,13 +43,13 @@ from ...backend import checks
 from ...backend import io as mesh_io
 from ...backend import presets as _presets
 from ...backend.presets import FeatureLayout, Preset
+from . import revolving
 from .autosave import SessionAutosave
 from .controls import ControlEdits
 from .files import SessionFiles
 from .frames import Frame, FrameListener, FrameStream
 from .hands import Hand, Hands, redo_own, undo_own
 from .operations import Publish, Reset, Restart
-from . import revolving
 from .recovery import recover as recover_session
 from .refining import refined_preset
 from .settings import SessionSettings

@@ -19,10 +19,10 @@ import dataclasses
 import time
 from collections.abc import Callable
 
-from .state import ModellingState
 from .gestures import PYTHON, Change, Gesture, OpenGestures, actor, change_since, one_step
 from .history import History, Shelf, Step
 from .operations import Publish
+from .state import ModellingState
 from .trainer import Trainer
 
 #: Setting the same parameter again within this many seconds joins the previous undo step (a slider's drag).

@@ -23,9 +23,9 @@ from collections.abc import Callable
 from concurrent.futures import Future
 
 from ...backend.schedule import MAX_ITERATIONS
-from .state import ModellingState
 from .frames import Frame, FrameStream
 from .operations import Operation, SetControls
+from .state import ModellingState
 
 log = logging.getLogger(__name__)
 

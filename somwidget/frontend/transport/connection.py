@@ -30,6 +30,7 @@ import numpy as np
 
 from .holders import holders_for
 from .messages import (
+    INTENTS,
     AddIntent,
     ControlIntent,
     ErrorMessage,
@@ -37,7 +38,6 @@ from .messages import (
     HandIntent,
     HelloIntent,
     Intent,
-    INTENTS,
     IntentError,
     MoveIntent,
     PauseIntent,

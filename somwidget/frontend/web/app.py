@@ -31,8 +31,8 @@ from trame.app import get_server
 from wslink.websocket import LinkProtocol
 
 from ...backend import presets as _presets
-from ..model import Session
 from ...backend.io import TooManyVertices
+from ..model import Session
 from ..model.panel import EXPORT_CHOICES, REACH_HELP
 from ..transport.limits import bound_messages
 from . import lan as _lan
