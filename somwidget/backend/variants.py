@@ -153,10 +153,10 @@ def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray,
     if plan.singles:
         weights = _run_singles(plan, device)
         return weights, figures(plan, weights)
-    som = BatchSom(topology_of(plan), plan.start, plan.controls, iterations=s["iterations"], l_start=s["l_start"],
-                   l_end=s["l_end"], smoothing=s["smoothing"], reach=s["reach"], smooth_dims=plan.smooth_dims,
+    som = BatchSom(topology_of(plan), plan.start, plan.controls, smooth_dims=plan.smooth_dims,
                    metric_weights=plan.metric_weights, mirror=plan.mirror, device=device,
-                   smoothing_rule=plan.smoothing_rule, radii=plan.radii, origin=plan.origin)
+                   smoothing_rule=plan.smoothing_rule, radii=plan.radii, origin=plan.origin,
+                   **{key: s[key] for key in KEYS})
     if plan.restart:
         som.restart()
     som.train()
