@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -54,7 +55,7 @@ class Setting:
     kind: str
     low: float = 0.0
     high: float = 1.0
-    default: float | bool | str = 0.0
+    default: Any = 0.0  # a number, a flag or a text, as `kind` says
     low_open: bool = False  # low itself is refused
     slider: tuple[float, float, float] | None = None  # a panel slider's (min, max, step)
     help: str = ""

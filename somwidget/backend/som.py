@@ -139,6 +139,7 @@ class Som:
         boxes = None if self._cores is None else BlockBoxes(self.n_neurons, self.n_dims, self._cores)
         self._state = SomState(self._model, boxes)
         self._schedule = SomSchedule(values, rule, self.device)
+        self._path: CpuPath | CudaPath | RowsPath | LocalPath
         if self._cores is not None:
             self._path = LocalPath(self._cores) if rows else CpuPath(self._cores)
         else:

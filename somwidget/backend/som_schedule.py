@@ -64,7 +64,10 @@ class SomSchedule:
 
     def host_table(self) -> np.ndarray:
         """L[s, d] (S, d_max + 1) float32 (a copy)."""
-        return self._host.copy() if self._host is not None else self.table.numpy()
+        if self._host is not None:
+            return self._host.copy()
+        assert self.table is not None  # made with the schedule
+        return self.table.numpy()
 
     def restart_iteration(self) -> int:
         return restart_iteration(self.values.reach, self.values.iterations)

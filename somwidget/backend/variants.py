@@ -258,7 +258,7 @@ def run_plan(plan: VariantPlan, device: str | None = None, client=None, batch_si
     n = plan.n_variants
     if client is None:
         device = resolve(device)
-    size = batch_size or (batch_size_for(plan, device) if client is None else _dask_batch(plan, client))
+    size = batch_size or (batch_size_for(plan, resolve(device)) if client is None else _dask_batch(plan, client))
     size = checks.integer("batch_size", size, 1)
     bounds = [(lo, min(n, lo + size)) for lo in range(0, n, size)]
     weights = np.empty((n, plan.n_vertices, plan.start.shape[1]), np.float32)

@@ -50,7 +50,7 @@ def _car_start() -> tuple[Topology, np.ndarray]:
 def car() -> Preset:
     """Case study 2: an ellipsoid car body with 5-D nodes (x, y, z, hue, saturation) and 9 mirrored controls."""
     topo, pts = _car_start()
-    start = np.concatenate([pts, np.tile(np.float32([0.0, 0.08]), (len(pts), 1))], axis=1)  # near-white
+    start = np.concatenate([pts, np.tile(np.array([0.0, 0.08], np.float32), (len(pts), 1))], axis=1)  # near-white
     #                    x     y      z     hue   sat
     controls = np.array([
         [1.30, 0.95, -0.75, 0.62, 0.85],  # front wheel (blue)

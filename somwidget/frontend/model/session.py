@@ -202,7 +202,9 @@ class Session:
     @property
     def frame(self) -> Frame:
         """The latest frame."""
-        return self.frames.latest
+        frame = self.frames.latest
+        assert frame is not None  # made with the session (__init__ installs the first)
+        return frame
 
     @property
     def frames_per_second(self) -> float:
