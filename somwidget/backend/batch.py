@@ -95,7 +95,7 @@ class BatchSom:
         radii: ArrayLike | None = None,
         origin: ArrayLike | None = None,
         **schedule: float | ArrayLike,
-    ):
+    ) -> None:
         unknown = sorted(set(schedule) - set(KEYS))
         if unknown:
             raise TypeError(f"BatchSom: unknown keyword(s) {unknown}; a schedule takes {list(KEYS)}")
@@ -351,7 +351,7 @@ class BatchSom:
             parts = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:]) if hi > lo]
             kernel = self._kernel(False, {"threads": 1})
 
-            def run(part):
+            def run(part) -> None:
                 lo, hi = part
                 wp.launch_tiled(kernel, dim=[hi - lo], block_dim=1, device=dev, inputs=inputs(lo))
 

@@ -50,7 +50,7 @@ def _spread_shape(controls: int, least_warps: int, paired: bool = False) -> tupl
 class _DeviceHalos:
     """BlockHalos (halos.py) on a device."""
 
-    def __init__(self, halos, device: str):
+    def __init__(self, halos, device: str) -> None:
         self.chunks, self.width = halos.chunks, halos.width
         self.neurons = wp.array(halos.neurons, dtype=wp.int32, device=device)
         self.local = wp.array(halos.local, dtype=wp.int32, device=device)
@@ -60,7 +60,7 @@ class CudaPath:
     """The CUDA cycle: `run` launches a captured graph of the run (`record` captures it), `winners` finds the winners
     of the current weights. rows_path.RowsPath drives it in distance rows mode."""
 
-    def __init__(self, model: SomModel):
+    def __init__(self, model: SomModel) -> None:
         self.graphs = Graphs(model.device)
         self.halos = self._block_halos(model)
 
@@ -139,7 +139,7 @@ class CudaPath:
         after_kernel = False
         records = []
 
-        def launch(kernel, inputs, threads=threads):
+        def launch(kernel, inputs, threads=threads) -> None:
             nonlocal after_kernel
             if dependent and after_kernel:
                 records.append(dependent_launch.launch_tiled_after_kernel(kernel, blocks, threads, inputs, dev))

@@ -81,7 +81,7 @@ def _reader_reason(exc: Exception) -> str:
 class TooManyVertices(ValueError):
     """A mesh with more vertices than a session takes: `n` of them, `limit` at most (load it with decimate=True)."""
 
-    def __init__(self, message: str, n: int, limit: int):
+    def __init__(self, message: str, n: int, limit: int) -> None:
         super().__init__(message)
         self.n, self.limit = n, limit
 

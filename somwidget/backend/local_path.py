@@ -43,7 +43,7 @@ class LocalPath:
     reach), the move of the blocks within reach (all of them with smoothing, which moves every neuron), smoothing,
     and the next winners. Controls whose winners outnumber the cache move in parts."""
 
-    def __init__(self, cores: CpuCores):
+    def __init__(self, cores: CpuCores) -> None:
         self.cores = cores
 
     def forget(self) -> None:

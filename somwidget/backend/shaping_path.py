@@ -39,7 +39,7 @@ class ShapingPath:
     gives bit for bit). It keeps the controls grouped on the device (made again when the Controls change), their
     winners, and the rest positions the falloffs measure from (the weights where the latest restart began)."""
 
-    def __init__(self, cores: CpuCores | None):
+    def __init__(self, cores: CpuCores | None) -> None:
         self.cores = cores
         self._for: Controls | None = None  # the controls the device groups were made for
         self.keys: wp.array | None = None  # each effective control's winner key (and a search's hint)

@@ -117,7 +117,7 @@ class Som:
         cpu_cores: int | None = None,
         distances: str | None = None,
         cache_rows: int | None = None,
-    ):
+    ) -> None:
         if not isinstance(topology, Topology):
             raise ValueError(f"topology: expected a Topology, got {type(topology).__name__}")
         self.device = resolve(device)

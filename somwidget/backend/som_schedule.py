@@ -27,7 +27,7 @@ class SomSchedule:
     device, (S, d_max + 1) float32, made by `rebuild` (version counts the tables made); table_max: its largest rate;
     reach_hops (CPU): the farthest hop count with a non-zero rate at each cycle, as a list and as `reach_dev`."""
 
-    def __init__(self, values: Schedule, rule: str, device: str):
+    def __init__(self, values: Schedule, rule: str, device: str) -> None:
         self.values = values
         self.rule = rule
         self.device = device

@@ -38,7 +38,7 @@ class SomState:
     boxes: the CPU's block boxes of the weights (block_boxes.BlockBoxes), None on CUDA.
     """
 
-    def __init__(self, model: SomModel, boxes: BlockBoxes | None):
+    def __init__(self, model: SomModel, boxes: BlockBoxes | None) -> None:
         dev, vec = model.device, model.vec
         self.device = dev
         self.boxes = boxes
@@ -187,7 +187,7 @@ class Graphs:
     """Captured graphs of runs of cycles by key (with the packed arguments of their dependent launches, which must
     live as long as they do), all dropped when what they hold changes (`valid_for`), or by `clear()`."""
 
-    def __init__(self, device: str):
+    def __init__(self, device: str) -> None:
         self.device = device
         self._held: dict[tuple, tuple] = {}
         self._setup: tuple | None = None

@@ -50,7 +50,7 @@ _CENTRE_TRIES = 3
 class Topology:
     """The neurons (vertices) and synapses (edges) of the map. Build with `from_faces` or `from_edges`."""
 
-    def __init__(self, n_vertices: int, edges: np.ndarray, faces: Sequence[np.ndarray] | None = None):
+    def __init__(self, n_vertices: int, edges: np.ndarray, faces: Sequence[np.ndarray] | None = None) -> None:
         self.n_vertices = int(n_vertices)
         self.edges = edges
         self.faces = faces
@@ -209,7 +209,7 @@ class RowSearch:
     for graphs whose levels are too wide for one SM, the rows of a batch go level by level (a captured graph of
     `levels` launches), or one thread per row where those launches would cost more (see `method`)."""
 
-    def __init__(self, topology: Topology, device: str):
+    def __init__(self, topology: Topology, device: str) -> None:
         self.device = device
         self.n = n = topology.n_vertices
         self._cost = len(topology.neighbors) + n
@@ -477,7 +477,7 @@ class Faces(Sequence):
     """Faces of one size held as an (F, k) int64 array (`array`), seen as the sequence of its rows: what
     `Topology.faces` is for an array given to `from_faces`."""
 
-    def __init__(self, array: np.ndarray):
+    def __init__(self, array: np.ndarray) -> None:
         self.array = array
 
     def __len__(self) -> int:

@@ -81,7 +81,7 @@ class SessionFiles:
     records the undo step)."""
 
     def __init__(self, state: ModellingState, timeline: Timeline, build: Callable, install: Callable,
-                 max_vertices: int):
+                 max_vertices: int) -> None:
         self.state = state
         self.timeline = timeline
         self.build = build

@@ -108,7 +108,7 @@ class Shelf(Protocol):
 class TemporaryShelf:
     """Steps' weights in a temporary folder of their own (made when first needed), deleted with it."""
 
-    def __init__(self, parent: str | os.PathLike | None = None):
+    def __init__(self, parent: str | os.PathLike | None = None) -> None:
         self.parent = parent
         self.folder: Path | None = None
         self._files: dict[int, Path] = {}
@@ -146,7 +146,7 @@ class History:
     steps go on disk (default: a TemporaryShelf under `spill_dir`)."""
 
     def __init__(self, max_steps: int = MAX_STEPS, memory_bytes: int = MEMORY_BYTES, disk_bytes: int = DISK_BYTES,
-                 spill_dir: str | os.PathLike | None = None, shelf: Shelf | None = None):
+                 spill_dir: str | os.PathLike | None = None, shelf: Shelf | None = None) -> None:
         self.max_steps = max_steps
         self.memory_bytes = memory_bytes
         self.disk_bytes = disk_bytes

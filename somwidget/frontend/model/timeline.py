@@ -39,7 +39,7 @@ class Timeline:
     frame of the state put back; shelf: where the history's steps go on disk (None: a temporary folder)."""
 
     def __init__(self, state: ModellingState, trainer: Trainer, rebuild: Callable[[Preset], None],
-                 install_frame: Callable[[], None], shelf: Shelf | None = None):
+                 install_frame: Callable[[], None], shelf: Shelf | None = None) -> None:
         self.state = state
         self.trainer = trainer
         self.rebuild = rebuild

@@ -34,7 +34,7 @@ class SomWidget(widgets.HBox):
     read; the widget state, where the notebook saves it, keeps that picture too (ClayWidget.picture), which the view
     shows until frames come again."""
 
-    def __init__(self, session: Session, panel, view: ClayWidget | None = None, owns_session: bool = False):
+    def __init__(self, session: Session, panel, view: ClayWidget | None = None, owns_session: bool = False) -> None:
         self.session = session
         self.panel = panel
         self.view = view

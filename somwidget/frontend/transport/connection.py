@@ -77,7 +77,7 @@ class ViewConnection:
     its topology message carries (None over the notebook's comm); `name`: for the log."""
 
     def __init__(self, session, pipe: Pipe, client_id: int | None = None, name: str = "a view",
-                 kind: str = "desktop"):
+                 kind: str = "desktop") -> None:
         self.session = session
         self.pipe = pipe
         self.name = name
