@@ -21,9 +21,10 @@ import numpy as np
 import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
+from device_timing import device_timer  # noqa: E402 (beside this script)
+
 from somwidget import Topology  # noqa: E402
 from somwidget.backend import topology as topo_mod  # noqa: E402
-from device_timing import device_timer  # noqa: E402 (beside this script)
 
 DEV = os.environ.get("DEV", "cuda:0")
 print("warp", wp.__version__, wp.get_device(DEV).name, "SMs", wp.get_device(DEV).sm_count, flush=True)
@@ -160,7 +161,8 @@ def sweep(topo: Topology):
         cells = []
         for blocks in (max(1, auto // 2), auto, min(n, 2 * auto)):
             t = fresh(topo)
-            secs, table = timed(lambda t=t, blocks=blocks: t._bfs_table(DEV, "block", threads=threads, blocks=blocks))
+            secs, table = timed(lambda t=t, blocks=blocks, threads=threads:
+                                t._bfs_table(DEV, "block", threads=threads, blocks=blocks))
             bad = mismatches(base, table)
             ok = ok and bad == 0
             cells.append(f"{blocks:5d} blocks {secs:7.3f}" + ("" if bad == 0 else f" ({bad} WRONG)"))

@@ -32,9 +32,10 @@ import numpy as np
 
 from somwidget.backend.presets import XYZ, Preset, controls_on, open_grid
 from somwidget.backend.topology import Topology
-from somwidget.frontend.transport import display as wire_display, frames as wire_frames
-from somwidget.frontend.transport.outbox import Peer, outbox_for
 from somwidget.frontend.model import Session
+from somwidget.frontend.transport import display as wire_display
+from somwidget.frontend.transport import frames as wire_frames
+from somwidget.frontend.transport.outbox import Peer, outbox_for
 
 
 def grid(side: int) -> Preset:

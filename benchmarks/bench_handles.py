@@ -58,6 +58,7 @@ from reference_handles import HandleSom, Rule  # noqa: E402
 
 from somwidget.backend import metrics, presets  # noqa: E402
 from somwidget.backend.refine import subdivide  # noqa: E402
+from somwidget.backend.schedule import TABLE_KEYS  # noqa: E402
 from somwidget.backend.symmetry import Symmetry  # noqa: E402
 
 RADIAL = Symmetry.radial(16, 2).maps(3)
@@ -102,7 +103,7 @@ def torus():
 def trained_car():
     c = presets.car()
     som = HandleSom(c.weights, c.controls, faces=c.topology.faces, maps=Symmetry.mirror(1).on((0, 1, 2)).maps(5),
-                    iterations=c.iterations, l_start=c.l_start, l_end=c.l_end, smoothing_rule="laplacian")
+                    **{key: getattr(c, key) for key in TABLE_KEYS}, smoothing_rule="laplacian")
     som.train_from_start()
     return [tuple(int(i) for i in f) for f in c.topology.faces], som.W
 

@@ -76,7 +76,8 @@ if __name__ == "__main__":
     print(f"{wp.get_device(DEVICE).name}: us per graph node")
     print(f"  empty kernel, 4096 threads: {per_node_us(lambda: wp.launch(empty, dim=4096, inputs=[a])):.2f}")
     for threads in (32, 128):
-        us = per_node_us(lambda: wp.launch_tiled(one_reduction, dim=[128], block_dim=threads, inputs=[a]))
+        us = per_node_us(lambda threads=threads:
+                         wp.launch_tiled(one_reduction, dim=[128], block_dim=threads, inputs=[a]))
         print(f"  tiled kernel, 128 blocks of {threads}, one tile_sum: {us:.2f}")
     print("us per block reduction inside one kernel (one block):")
     for threads in (256, 1024):

@@ -86,7 +86,7 @@ def s_change(root: Path, folder: Path) -> None:
             srv.idle()
             before = reset_peak(srv.proc.pid)
 
-            async def send():
+            async def send(srv=srv, S=S):
                 import aiohttp
 
                 url = srv.base.replace("http", "ws") + "/view/ws"

@@ -20,10 +20,11 @@ import numpy as np
 import warp as wp
 
 wp.config.log_level = wp.LOG_WARNING
+from device_timing import device_timer  # noqa: E402 (beside this script)
+
 from somwidget import Som, Topology  # noqa: E402
 from somwidget.backend import row_cache  # noqa: E402
 from somwidget.backend.topology import RowSearch  # noqa: E402
-from device_timing import device_timer  # noqa: E402 (beside this script)
 
 DEV = os.environ.get("DEV", "cuda:0")
 SIDE = int(os.environ.get("SIDE", "1000"))
@@ -117,7 +118,8 @@ def bfs():
             sync()
             for k in ((1, 18, 128) if label in ("shared", "block") else (1, 18)):
                 src = [[int(v)] for v in rng.integers(0, topo.n_vertices, k)]
-                dt, _ = timed(lambda src=src: search.run(src, list(range(len(src))), rows, d_max))
+                dt, _ = timed(lambda src=src, search=search, rows=rows, d_max=d_max:
+                              search.run(src, list(range(len(src))), rows, d_max))
                 print(f"  {label}: {k} rows {dt * 1e3:.2f} ms", flush=True)
         search.method = chosen
         # check one row against the Manhattan distance
@@ -157,7 +159,7 @@ def big():
         for _ in range(30):
             t = time.perf_counter()
             som.step(10)
-            som.weights
+            _ = som.weights  # the view's read back
             each.append(time.perf_counter() - t)
 
     dt, _ = timed(frames)
@@ -193,7 +195,7 @@ def big():
     # one miss: rows for neurons not cached
     fresh = [v for v in rng.integers(0, topo.n_vertices, 64).tolist() if v not in cache._lru]
     for k in (1, 4, 18):
-        dt, _ = timed(lambda k=k: cache.fetch(fresh[:k], d_max))
+        dt, _ = timed(lambda k=k, fresh=fresh: cache.fetch(fresh[:k], d_max))
         fresh = fresh[k:]
         print(f"  miss cost: {k} new rows (and rows around them, {cache.prefetched} so far) {dt * 1e3:.2f} ms",
               flush=True)

@@ -29,7 +29,7 @@ the offsets C - W_u are those before the cycle. Two more, found while measuring 
 
 Scenarios (start from the preset's weights as they are; the car, a shape the app grows, first trained by its whole
 schedule with the paper's rule; the preset's controls set, then one moved and the run restarted at
-s0 = floor((1 - reach) S) up to S; S, l_start, l_end from the preset: 1000, 0.25, 0.03):
+s0 = floor((1 - reach) S) up to S; the schedule's S and learning rates from the preset: 1000, 0.25, 0.03):
 
   sphere-out   control 0 (near +z) moved out along its node's normal by 30% of the size; radius 1/4 of the size
   sphere-in    the same moved in by 15%
@@ -65,9 +65,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from somwidget.backend import metrics, presets
-from somwidget.backend.schedule import sigma_of
 from somwidget.backend.som_schedule import restart_iteration
 from somwidget.backend.topology import Topology
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests"))
+from reference import schedule_table  # noqa: E402  (the float64 learning table)
 
 UNREACHABLE = 65535
 REACHES = (0.1, 0.2, 0.3, 0.5)
@@ -78,17 +80,6 @@ MAX_DIHEDRAL, MIN_VOLUME, MAX_FAR, MAX_GAP = 30.0, 0.95, 0.02, 0.01
 # --------------------------------------------------------------------------------------------------------------
 # The rules
 # --------------------------------------------------------------------------------------------------------------
-def table64(iterations: int, d_max: int, l_start: float, l_end: float) -> np.ndarray:
-    """L[s, d] = alpha(s) theta(d, s) in float64, s = 0 .. S - 1 (schedule.learning_table's formula)."""
-    s = np.arange(iterations, dtype=np.float64)[:, None]
-    d = np.arange(d_max + 1, dtype=np.float64)[None, :]
-    alpha = l_start * l_end / (l_end + (l_start - l_end) * s / iterations)
-    c = sigma_of(d_max) * (1.0 - s / iterations)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        theta = np.exp(-(d**2) / (2.0 * c**2))
-    theta[:, 0] = 1.0
-    return alpha * np.where(np.isfinite(theta), theta, 0.0)
-
 
 @dataclass(frozen=True)
 class Rule:
@@ -142,10 +133,10 @@ class Probe:
         self.topology = preset.topology
         self.pos = list(preset.layout.position)
         self.mirror = list(preset.mirror)
-        self.S, self.l_start, self.l_end = preset.iterations, preset.l_start, preset.l_end
+        self.S = preset.iterations
         self.D = self.topology.grid_distances().astype(np.int64)
         self.d_max = int(self.D[self.D != UNREACHABLE].max())
-        self.L = table64(self.S, self.d_max, self.l_start, self.l_end)
+        self.L = schedule_table(preset, self.d_max)  # L[s, d] in float64 (tests/reference.py)
         self.alpha = self.L[:, 0]
         e = np.asarray(self.topology.edges, np.int64)
         p = np.asarray(preset.weights, np.float64)[:, self.pos]

@@ -106,12 +106,12 @@ def frame_ms(device: str, point: bool, frames: int) -> float:
         som.set_controls(c, radii=np.zeros(len(c), np.float32))
     som.anchor()
     times = []
-    for i in range(frames + 3):
+    for _ in range(frames + 3):
         c[0, 2] += 0.002
         t = time.perf_counter()
         som.set_controls(c, from_anchor=True)
         som.step(10)
-        som.weights  # the view's read back
+        _ = som.weights  # the view's read back
         times.append(time.perf_counter() - t)
     return float(np.median(times[3:])) * 1e3
 

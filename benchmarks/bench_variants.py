@@ -23,6 +23,7 @@ import warp as wp  # noqa: E402
 
 from somwidget.backend import batch, presets  # noqa: E402
 from somwidget.backend.device import resolve  # noqa: E402
+from somwidget.backend.schedule import Schedule  # noqa: E402
 from somwidget.backend.som import Som  # noqa: E402
 from somwidget.backend.variants import plan_variants  # noqa: E402
 
@@ -34,8 +35,7 @@ def plan_for(name: str, n: int, seed: int = 0, radii: bool = False):
     """n variants of a preset, as `somwidget sweep` draws them; with `radii` its controls' radii and smoothing rule
     (a general shape's), else point controls (the batched kernel of the paper's rule)."""
     p = presets.get_preset(name)
-    base = {"iterations": p.iterations, "l_start": p.l_start, "l_end": p.l_end, "smoothing": p.smoothing,
-            "reach": p.reach}
+    base = Schedule.of(p).as_dict()
     shaping = {"radii": p.control_radii(), "smoothing_rule": p.smoothing_rule} if radii else {}
     return p, plan_variants(p.topology, p.weights, p.controls, base, n, jitter=0.05, seed=seed, mirror=p.mirror,
                             smooth_dims=p.smooth_dims, metric_weights=p.metric_weights,
@@ -44,10 +44,9 @@ def plan_for(name: str, n: int, seed: int = 0, radii: bool = False):
 
 def make_batch(p, plan, device):
     s = plan.schedules
-    return batch.BatchSom(p.topology, plan.start, plan.controls, iterations=s["iterations"], l_start=s["l_start"],
-                          l_end=s["l_end"], smoothing=s["smoothing"], reach=s["reach"], smooth_dims=plan.smooth_dims,
+    return batch.BatchSom(p.topology, plan.start, plan.controls, smooth_dims=plan.smooth_dims,
                           metric_weights=plan.metric_weights, mirror=plan.mirror, device=device,
-                          smoothing_rule=plan.smoothing_rule, radii=plan.radii)
+                          smoothing_rule=plan.smoothing_rule, radii=plan.radii, **s)
 
 
 def bench_shaping(name: str, n: int, device: str, singles: int) -> None:
@@ -138,9 +137,8 @@ def bench(name: str, n: int, device: str, singles: int, configs: list[tuple]) ->
     print(f"  batched, all in (set-up, upload, training, weights back; {best[0]}): {whole * 1e3:.2f} ms")
 
     count = min(singles, n)
-    single = Som(p.topology, p.weights, plan.controls[0], iterations=p.iterations, l_start=p.l_start, l_end=p.l_end,
-                 smoothing=p.smoothing, smooth_dims=p.smooth_dims, metric_weights=p.metric_weights, mirror=p.mirror,
-                 device=device, reach=p.reach)
+    single = Som(p.topology, p.weights, plan.controls[0], smooth_dims=p.smooth_dims, metric_weights=p.metric_weights,
+                 mirror=p.mirror, device=device, **Schedule.of(p).as_dict())
     single.train()  # compile and capture
     diff = 0.0
     sync()

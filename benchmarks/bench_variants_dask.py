@@ -61,7 +61,7 @@ def main(argv=None) -> None:
         try:
             client.wait_for_workers(workers, timeout=120)
             device = None if gpus else "cpu"
-            for name, plan in plans.items():  # compile on every worker
+            for plan in plans.values():  # compile on every worker
                 client.run(run_batch, plan.part(0, 2), device)
             for name, plan in plans.items():
                 t0 = time.perf_counter()

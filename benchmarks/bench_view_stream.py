@@ -31,8 +31,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from somwidget.backend.presets import open_grid  # noqa: E402
-from somwidget.frontend.transport import messages as wire, display as wire_display, frames as wire_frames  # noqa: E402
 from somwidget.frontend.client import DIST  # noqa: E402
+from somwidget.frontend.transport import display as wire_display  # noqa: E402
+from somwidget.frontend.transport import frames as wire_frames  # noqa: E402
+from somwidget.frontend.transport import messages as wire  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

@@ -37,9 +37,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from somwidget.frontend.client import DIST  # noqa: E402
 from somwidget.frontend.model import Session  # noqa: E402
 from somwidget.frontend.transport import frames as wire_frames  # noqa: E402
-from somwidget.frontend.client import DIST  # noqa: E402
 from somwidget.frontend.web.standalone import XRServer  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"

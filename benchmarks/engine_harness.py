@@ -13,7 +13,8 @@ as the app calls it (`step(10)` between frames), the numpy baseline's time per c
 compile, graph capture) is timed and reported apart. Then the engine and each baseline run cycle by cycle from the
 start and their winners and weights are compared, so the figures are known to come from the same cycles.
 
-Imports only numpy, warp and somwidget.backend: it runs on a GPU machine with nothing else installed. somwidget/cli.py
+Imports only numpy, warp, somwidget.backend and tests/reference.py (the float64 learning table, numpy only): it runs
+on a GPU machine with nothing else installed. somwidget/cli.py
 parses the arguments (`somwidget bench`, or bench_engine.py without an install) and calls `run`.
 """
 
@@ -25,6 +26,7 @@ import math
 import os
 import platform
 import statistics
+import sys
 import time
 from dataclasses import asdict, dataclass, field
 
@@ -35,6 +37,9 @@ from somwidget.backend.device import resolve
 from somwidget.backend.presets import get_preset
 from somwidget.backend.som import Som
 from somwidget.backend.topology import Topology
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests"))
+from reference import schedule_table  # noqa: E402  (the float64 learning table)
 
 CASES = ("space-grid", "space-grid-smooth", "car", "big")
 CPU_DEFAULT_CASES = ("space-grid", "space-grid-smooth", "car")
@@ -50,20 +55,6 @@ NEAR_TIE = 1e-5  # relative distance gap under which float32 rounding may pick e
 # ----------------------------------------------------------------------------------------------------------------
 # The numpy baseline
 # ----------------------------------------------------------------------------------------------------------------
-def learning_table(iterations: int, d_max: int, l_start: float, l_end: float) -> np.ndarray:
-    """L[s, d] = alpha(s) theta(d, s) (som.py, The cycle), written here from the formulas, float64 then float32."""
-    s = np.arange(iterations, dtype=np.float64)
-    alpha = l_start * l_end / (l_end + (l_start - l_end) * s / iterations)
-    sigma = d_max / math.sqrt(2.0 * math.log(2.0))
-    width = sigma - sigma * s / iterations
-    d = np.arange(d_max + 1, dtype=np.float64)
-    theta = np.zeros((iterations, d_max + 1))
-    live = width > 0
-    theta[live] = np.exp(-(d[None, :] ** 2) / (2.0 * width[live, None] ** 2))
-    theta[:, 0] = 1.0
-    return (alpha[:, None] * theta).astype(np.float32)
-
-
 class NumpySom:
     """The SOM cycle (som.py, The cycle) in vectorised numpy, float32, with preallocated buffers and in-place ops.
 
@@ -383,7 +374,7 @@ def _time_numpy(som: Som, topo: Topology, start: np.ndarray, res: CaseResult, re
                 cycles: int) -> dict[str, NumpySom]:
     """Both updates of the baseline, timed in turn; numpy_us is the faster (the baseline at its best)."""
     table = som.learning_table()
-    own = learning_table(som.iterations, topo.d_max, som.l_start, som.l_end)
+    own = schedule_table(som, topo.d_max).astype(np.float32)  # from the formulas (tests/reference.py)
     res.table_max_diff = float(np.abs(own - table).max()) if own.shape == table.shape else math.inf
     distances = topo.grid_distances()
     variants = {}

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Set up (scripts/setup.sh), lint (ruff, ESLint), then run the test suite (pytest). Arguments go to pytest:
+# Set up (scripts/setup.sh), lint (ruff, mypy, ESLint), then run the test suite (pytest). Arguments go to pytest:
 #   bash scripts/test.sh -k cli -x
 set -euo pipefail
 
@@ -13,6 +13,9 @@ fi
 
 echo "[test] ruff check ."
 .venv/bin/python -m ruff check .
+
+echo "[test] mypy (the public API: pyproject.toml's [tool.mypy] files)"
+.venv/bin/python -m mypy
 
 echo "[test] eslint (the browser client)"
 (cd somwidget/frontend/client && npm run --silent lint)

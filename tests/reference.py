@@ -127,6 +127,13 @@ def learning_table(S: int, d_max: int, l_start: float = 0.25, l_end: float = 0.0
     return alpha(s, S, l_start, l_end) * np.where(t >= cut, t, 0.0)
 
 
+def schedule_table(schedule, d_max: int, cut: float = 0.0) -> np.ndarray:
+    """`learning_table` of a schedule given as a mapping or an object of iterations (S), l_start and l_end (somwidget's
+    Schedule, a Preset, a Som)."""
+    get = schedule.__getitem__ if hasattr(schedule, "__getitem__") else lambda key: getattr(schedule, key)
+    return learning_table(get("iterations"), d_max, get("l_start"), get("l_end"), cut)
+
+
 def restart_iteration(reach: float, S: int) -> int:
     """s0 = floor((1 - reach) S), clamped to S - 1: where a local restart begins."""
     return min(int(np.floor((1.0 - reach) * S)), S - 1)

@@ -63,8 +63,18 @@ import heapq
 from dataclasses import dataclass, replace
 
 import numpy as np
-from reference import (UNREACHABLE, adjacency, bfs_distances, d_max_of, edges_from_edges, edges_from_faces,
-                       learning_table, restart_iteration, winner_margins, winners)
+from reference import (
+    UNREACHABLE,
+    adjacency,
+    bfs_distances,
+    d_max_of,
+    edges_from_edges,
+    edges_from_faces,
+    learning_table,
+    restart_iteration,
+    winner_margins,
+    winners,
+)
 
 #: Taubin's pass band (the engine's shaping_path.PASS_BAND).
 PASS_BAND = 0.015

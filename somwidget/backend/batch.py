@@ -1,10 +1,10 @@
 """B variants of one mesh trained together: the same algorithm as `Som` (som.py), B runs in the same launches.
 
-Each variant has its own weights, controls and schedule (S, l_start, l_end, smoothing, reach); the topology, the
+Each variant has its own weights, controls and schedule (a value of each of schedule.KEYS); the topology, the
 feature count, the mirror, the controls' radii, smooth_dims and the metric weights are shared. Variant b equals the
-single run `Som(topology, weights[b], controls[b], S[b], l_start[b], l_end[b], smoothing[b], ..., reach=reach[b],
-radii=radii)` driven the same way: `train()` after construction is a whole run from the given weights; `restart()`
-first makes it the local restart a move of the controls would be (from s0 = floor((1 - reach) S)).
+single run `Som(topology, weights[b], controls[b], ..., radii=radii, **schedule of b)` driven the same way:
+`train()` after construction is a whole run from the given weights; `restart()` first makes it the local restart a
+move of the controls would be (from s0 = floor((1 - reach) S)).
 
 On CUDA a block of threads runs one variant's whole schedule (batch_kernels.py): a cycle of a mesh of a few
 thousand neurons is too short to fill a GPU, B of them side by side do. On the CPU the variants are shared among
@@ -26,11 +26,11 @@ from numpy.typing import ArrayLike
 from . import checks
 from .batch_kernels import GATHER, SEARCH, variants_kernel
 from .batch_shaping_kernels import shaping_variants_kernel
+from .cycle_kernels import MAX_CONTROLS
 from .device import resolve, usable_cores, warp_exclusive, warp_lock
 from .metrics import bounding_diagonal, median_edge
-from .schedule import BY_NAME, KEYS, SMOOTHING_RULES, learning_table
+from .schedule import BY_NAME, KEYS, SMOOTHING_RULES, TABLE_KEYS, learning_table
 from .shaping_kernels import CARRY_CUT
-from .cycle_kernels import MAX_CONTROLS
 from .shaping_path import SIGMA_OF_RADIUS
 from .smoothing_kernels import taubin_mu
 from .som_controls import check_radii
@@ -68,7 +68,8 @@ class BatchSom:
     """B variants of one mesh (see the module's docstring).
 
     weights: (N, n) shared start weights, or (B, N, n); controls: (B, k, n), the same k for every variant.
-    iterations, l_start, l_end, smoothing, reach: one value for all or one per variant. device: "cpu", "cuda:N" or
+    **schedule: each of schedule.KEYS (S, the learning rates, smoothing, reach) one value for all or one per variant
+    (a key left out: its default). device: "cpu", "cuda:N" or
     None (the GPU when there is one). cpu_cores: cores the CPU shares the variants among (None: those this process
     may use, at most 8 and at most OMP_NUM_THREADS where that is set). smoothing_rule: "laplacian" (the paper's
     step) or "taubin" (the volume-keeping pair, as Som's). radii (k,): each control's radius of influence, the same
@@ -84,11 +85,6 @@ class BatchSom:
         topology: Topology,
         weights: ArrayLike,
         controls: ArrayLike,
-        iterations: int | ArrayLike = BY_NAME["iterations"].default,
-        l_start: float | ArrayLike = BY_NAME["l_start"].default,
-        l_end: float | ArrayLike = BY_NAME["l_end"].default,
-        smoothing: float | ArrayLike = BY_NAME["smoothing"].default,
-        reach: float | ArrayLike = BY_NAME["reach"].default,
         smooth_dims: Sequence[int] | None = None,
         metric_weights: ArrayLike | None = None,
         mirror: Sequence[int] = (),
@@ -98,7 +94,11 @@ class BatchSom:
         smoothing_rule: str = "laplacian",
         radii: ArrayLike | None = None,
         origin: ArrayLike | None = None,
-    ):
+        **schedule: float | ArrayLike,
+    ) -> None:
+        unknown = sorted(set(schedule) - set(KEYS))
+        if unknown:
+            raise TypeError(f"BatchSom: unknown keyword(s) {unknown}; a schedule takes {list(KEYS)}")
         if not isinstance(topology, Topology):
             raise ValueError(f"topology: expected a Topology, got {type(topology).__name__}")
         if topology.n_vertices > MAX_BATCH_NEURONS:
@@ -142,11 +142,12 @@ class BatchSom:
                 raise ValueError(f"origin: expected shape {(self.n_neurons, n)} (the start mesh), got {origin.shape}")
         self._shaping = bool(self._radii.any())
         B = self.n_variants
-        self._iterations = _per_variant("iterations", iterations, B).astype(np.int64)
-        self._l_start = _per_variant("l_start", l_start, B)
-        self._l_end = _per_variant("l_end", l_end, B)
-        self._smoothing = _per_variant("smoothing", smoothing, B)
-        self._reach = _per_variant("reach", reach, B)
+        # each variant's schedule: a column of B values per key (iterations as integers)
+        self._columns = {key: _per_variant(key, schedule.get(key, BY_NAME[key].default), B) for key in KEYS}
+        self._columns["iterations"] = self._columns["iterations"].astype(np.int64)
+        self._iterations = self._columns["iterations"]
+        self._smoothing = self._columns["smoothing"]
+        self._reach = self._columns["reach"]
         checks.choice("smoothing_rule", smoothing_rule, SMOOTHING_RULES)
         self.smoothing_rule = smoothing_rule
         self._taubin = smoothing_rule == "taubin" and bool((self._smoothing > 0).any())
@@ -223,14 +224,14 @@ class BatchSom:
         return np.ascontiguousarray(np.stack([controls, copies], axis=2).reshape(B, 2 * k, n), np.float32)
 
     def _build_tables(self) -> tuple[wp.array, np.ndarray]:
-        """One learning table per distinct (S, l_start, l_end), stacked; each variant's first row in it."""
+        """One learning table per distinct schedule.TABLE_KEYS, stacked; each variant's first row in it."""
         d_max = self.topology.d_max
         distinct: dict[tuple, int] = {}
         first = np.empty(self.n_variants, np.int64)
         order = []
         total = 0
         for b in range(self.n_variants):
-            key = (int(self._iterations[b]), float(self._l_start[b]), float(self._l_end[b]))
+            key = tuple(self._columns[name][b].item() for name in TABLE_KEYS)  # (S, the learning rates)
             if key not in distinct:
                 distinct[key] = total
                 order.append(key)
@@ -239,13 +240,13 @@ class BatchSom:
         if total * (d_max + 1) > MAX_TABLE_ENTRIES:
             raise ValueError(f"iterations: the variants' {len(order)} distinct schedules need {total:,} table rows of "
                              f"{d_max + 1} entries, past the batch's {MAX_TABLE_ENTRIES:,}; run fewer variants at "
-                             f"once or vary l_start, l_end and iterations over fewer values")
+                             f"once or vary {', '.join(TABLE_KEYS)} over fewer values")
         if total >= 2**31:
             raise ValueError(f"iterations: {total:,} table rows in all, past 2^31")
         table = np.empty((total, d_max + 1), np.float32)
         for key in order:
-            S, l_start, l_end = key
-            table[distinct[key]: distinct[key] + S] = learning_table(S, d_max, l_start, l_end)
+            S = key[0]
+            table[distinct[key]: distinct[key] + S] = learning_table(d_max=d_max, **dict(zip(TABLE_KEYS, key)))
         return wp.array(table, dtype=wp.float32, device=self.device), first.astype(np.int32)
 
     def _plan_cores(self, cpu_cores: int | None) -> int:
@@ -287,7 +288,7 @@ class BatchSom:
     @property
     def params(self) -> list[dict]:
         """Each variant's schedule: a value of each of schedule.KEYS, as Som keeps it (iterations an int)."""
-        columns = {key: getattr(self, f"_{key}") for key in KEYS}
+        columns = self._columns
         return [{key: BY_NAME[key].check(values[b], key) for key, values in columns.items()}
                 for b in range(self.n_variants)]
 
@@ -389,7 +390,7 @@ class BatchSom:
             parts = [(int(lo), int(hi)) for lo, hi in zip(bounds[:-1], bounds[1:]) if hi > lo]
             kernel = self._kernel(False, {"threads": 1})
 
-            def run(part):
+            def run(part) -> None:
                 lo, hi = part
                 wp.launch_tiled(kernel, dim=[hi - lo], block_dim=1, device=dev, inputs=inputs(lo))
 

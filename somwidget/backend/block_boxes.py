@@ -18,7 +18,7 @@ class BlockBoxes:
     weights were replaced (`invalidate`, then `ensure`); moved and super_moved mark the blocks moved since the anchor,
     `region` counts those the last run moved."""
 
-    def __init__(self, n_neurons: int, n_dims: int, cores: CpuCores):
+    def __init__(self, n_neurons: int, n_dims: int, cores: CpuCores) -> None:
         self._kernels = local_kernels(n_dims)
         vec = self._kernels.vec
         n_blocks, n_super = block_count(n_neurons), super_count(n_neurons)

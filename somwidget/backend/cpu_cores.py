@@ -32,7 +32,7 @@ class CpuCores:
     ranges: the plan for the current controls (`plan`); busy: the cores a local run shares its blocks between
     (`share`)."""
 
-    def __init__(self, requested: int | None):
+    def __init__(self, requested: int | None) -> None:
         self.requested = requested
         self.count = 1
         self.busy = 1

@@ -20,7 +20,7 @@ class CpuPath:
     the current weights. It also runs distance rows on the CPU when rows_path.RowsPath drives it (the full
     computation the local cycle must equal)."""
 
-    def __init__(self, cores: CpuCores):
+    def __init__(self, cores: CpuCores) -> None:
         self.cores = cores
         self.graphs = Graphs("cpu")
 

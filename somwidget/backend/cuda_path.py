@@ -16,8 +16,13 @@ from .som_controls import Controls
 from .som_model import SomModel
 from .som_schedule import SomSchedule
 from .som_state import KEY_NONE, Graphs, SomState
-from .spread_kernels import (SHARED_TABLE_WORDS, spread_cycle_inputs, spread_cycle_kernel,
-                             spread_smoothing_cycle_inputs, spread_smoothing_cycle_kernel)
+from .spread_kernels import (
+    SHARED_TABLE_WORDS,
+    spread_cycle_inputs,
+    spread_cycle_kernel,
+    spread_smoothing_cycle_inputs,
+    spread_smoothing_cycle_kernel,
+)
 
 #: Meshes up to this many neurons have latency-bound cycles on CUDA (a block per 32 neurons leaves most of the GPU
 #: idle). With at most 32 controls a block spreads the controls over up to eight warps (`spread_cycle_kernel`; with
@@ -45,7 +50,7 @@ def _spread_shape(controls: int, least_warps: int, paired: bool = False) -> tupl
 class _DeviceHalos:
     """BlockHalos (halos.py) on a device."""
 
-    def __init__(self, halos, device: str):
+    def __init__(self, halos, device: str) -> None:
         self.chunks, self.width = halos.chunks, halos.width
         self.neurons = wp.array(halos.neurons, dtype=wp.int32, device=device)
         self.local = wp.array(halos.local, dtype=wp.int32, device=device)
@@ -55,7 +60,7 @@ class CudaPath:
     """The CUDA cycle: `run` launches a captured graph of the run (`record` captures it), `winners` finds the winners
     of the current weights. rows_path.RowsPath drives it in distance rows mode."""
 
-    def __init__(self, model: SomModel):
+    def __init__(self, model: SomModel) -> None:
         self.graphs = Graphs(model.device)
         self.halos = self._block_halos(model)
 
@@ -134,7 +139,7 @@ class CudaPath:
         after_kernel = False
         records = []
 
-        def launch(kernel, inputs, threads=threads):
+        def launch(kernel, inputs, threads=threads) -> None:
             nonlocal after_kernel
             if dependent and after_kernel:
                 records.append(dependent_launch.launch_tiled_after_kernel(kernel, blocks, threads, inputs, dev))

@@ -23,7 +23,6 @@ import warp as wp
 from .primitives import FLOAT_MAX, INDEX_MASK, KEY_NONE, UNREACHABLE, wait_for_previous_grid, winner_key
 from .smoothing_kernels import smoothed
 
-
 #: Effective controls a cycle takes (originals plus mirrored copies): the winner keys' buffers hold this many.
 MAX_CONTROLS = 256
 #: Cycles in the longest captured graph; runs are split into powers of two.

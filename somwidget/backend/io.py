@@ -13,9 +13,18 @@ from struct import error as struct_error
 import numpy as np
 
 from . import checks
+from .presets import (
+    DISPLAYS,
+    XYZ,
+    FeatureLayout,
+    Preset,
+    colours_of,
+    controls_on,
+    kept_shape,
+    line_display_mesh,
+    positions_of,
+)
 from .refine import coarsen
-from .presets import (DISPLAYS, XYZ, FeatureLayout, Preset, colours_of, controls_on, kept_shape,
-                      line_display_mesh, positions_of)
 from .topology import Topology
 
 #: The default vertex limit of `load_mesh`: the dense distance table's cap (2^16 neurons).
@@ -72,7 +81,7 @@ def _reader_reason(exc: Exception) -> str:
 class TooManyVertices(ValueError):
     """A mesh with more vertices than a session takes: `n` of them, `limit` at most (load it with decimate=True)."""
 
-    def __init__(self, message: str, n: int, limit: int):
+    def __init__(self, message: str, n: int, limit: int) -> None:
         super().__init__(message)
         self.n, self.limit = n, limit
 

@@ -43,7 +43,7 @@ class LocalPath:
     reach), the move of the blocks within reach (all of them with smoothing, which moves every neuron), smoothing,
     and the next winners. Controls whose winners outnumber the cache move in parts."""
 
-    def __init__(self, cores: CpuCores):
+    def __init__(self, cores: CpuCores) -> None:
         self.cores = cores
 
     def forget(self) -> None:
@@ -72,7 +72,7 @@ class LocalPath:
             winners = (state.keys_host[s % 3, : state.n_slots] & np.uint64(0xFFFFFFFF)).astype(np.int64)
             for lo, hi in control_parts(winners, cache.size, 2 if controls.mirror else 1):
                 cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), int(schedule.reach_hops[s]))
-                cores.on_cores(kern.move, lambda sb_lo, sb_hi, lo=lo, hi=hi: [
+                cores.on_cores(kern.move, lambda sb_lo, sb_hi, lo=lo, hi=hi, s=s, at=at: [
                     state.w, state.c, lo, hi, schedule.table, s, schedule.reach_dev, model.distances, model.slot_of,
                     cache.near, cache.super_near, keys, at, *boxes.arrays, boxes.moved, boxes.super_moved, sb_lo,
                     sb_hi, int(smoothing)], cores.super_ranges(boxes.n_super))

@@ -54,7 +54,7 @@ def wait_for_cores(counter: wp.array(dtype=wp.int64), parties: wp.int64, yield_a
 @wp.kernel(enable_backward=False)
 def barrier(
     counter: wp.array(dtype=wp.int64), parties: wp.int64, yield_address: wp.uint64, failed: wp.array(dtype=wp.int32)
-):
+) -> None:
     """All CPU cores of a run meet here between the phases of a cycle. Real atomics (Warp's CPU ones are plain);
     after a short spin a waiting core calls yield_address (libc's sched_yield) so a busy machine is not starved.
     Once a core has given up waiting, every later meeting is skipped, so the run ends and the host reports it."""
@@ -75,14 +75,14 @@ def sched_yield_address() -> int:
 # A barrier of the threads of a block: __syncthreads() on CUDA; on the CPU nothing (a block is one thread) or, with
 # wp.config.enable_cpu_blocks, a switch between the block's cooperative fibers.
 @wp.func_native("WP_TILE_SYNC();")
-def sync_block(): ...
+def sync_block() -> None: ...
 
 
 # Programmatic dependent launch (see dependent_launch.py): a kernel so launched may start before the one before it
 # ends; it waits here before reading what that kernel writes. A no-op for an ordinary launch, and on the CPU.
 @wp.func_native("#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900\n"
                 'asm volatile("griddepcontrol.wait;" ::: "memory");\n#endif\n')
-def wait_for_previous_grid(): ...
+def wait_for_previous_grid() -> None: ...
 
 
 # -- a row search with its visited set and frontier in shared memory (CUDA) -------------------------------------
@@ -107,11 +107,11 @@ def shared_get(word: int) -> int: ...
 
 
 @wp.func_native("#if defined(__CUDA_ARCH__)\n" + _SHARED + "((int*)dynamic_smem_base)[word] = value;\n#endif\n")
-def shared_set(word: int, value: int): ...
+def shared_set(word: int, value: int) -> None: ...
 
 
 @wp.func_native("#if defined(__CUDA_ARCH__)\n" + _SHARED + "((float*)dynamic_smem_base)[word] = value;\n#endif\n")
-def shared_set_float(word: int, value: wp.float32): ...
+def shared_set_float(word: int, value: wp.float32) -> None: ...
 
 
 @wp.func_native("#if defined(__CUDA_ARCH__)\n" + _SHARED
@@ -156,4 +156,4 @@ def warp_shuffle(value: int, lane: int) -> int:
 # it still waits in wait_for_previous_grid until this one has ended and its writes are visible.
 @wp.func_native("#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900\n"
                 'asm volatile("griddepcontrol.launch_dependents;" ::: "memory");\n#endif\n')
-def let_next_grid_launch(): ...
+def let_next_grid_launch() -> None: ...

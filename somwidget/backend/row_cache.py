@@ -29,7 +29,7 @@ class RowCache:
     """Distance rows (int32 hops, -1 = unreachable) from recent winners, kept on the Som's device; the least
     recently used row makes way for a new one. slot_of[v] is the row of neuron v, -1 when it has none."""
 
-    def __init__(self, topology: Topology, device: str, size: int | None):
+    def __init__(self, topology: Topology, device: str, size: int | None) -> None:
         n = topology.n_vertices
         if size is None:
             budget = _CACHE_BYTES["cpu"] if device == "cpu" else min(_CACHE_BYTES["cuda"],

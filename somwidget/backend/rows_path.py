@@ -22,7 +22,7 @@ from .som_state import SomState
 class RowsPath:
     """Distance rows mode, driving `inner` (CudaPath on a GPU, CpuPath on the CPU), whose graphs it replays."""
 
-    def __init__(self, inner: CpuPath | CudaPath):
+    def __init__(self, inner: CpuPath | CudaPath) -> None:
         self.inner = inner
 
     def forget(self) -> None:

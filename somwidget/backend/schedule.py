@@ -6,7 +6,8 @@ From it are built the session's settings (frontend/model/settings.py: values, ch
 the topology message declares to the views), both panels (web/layout.py, notebook/panel.py), session files
 (session_file.py: one member per setting, the default for a member an older file lacks) and the autosave's
 manifests (frontend/model/store.py: likewise). A new setting is one line here plus its use in the engine (a
-keyword and attribute of `Som`, `BatchSom` and `Preset` of its name, for a setting of scope "engine").
+keyword and attribute of `Som` and a field of `Preset` of its name, for a setting of scope "engine": `BatchSom`
+takes each of KEYS as it comes).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -53,7 +55,7 @@ class Setting:
     kind: str
     low: float = 0.0
     high: float = 1.0
-    default: float | bool | str = 0.0
+    default: Any = 0.0  # a number, a flag or a text, as `kind` says
     low_open: bool = False  # low itself is refused
     slider: tuple[float, float, float] | None = None  # a panel slider's (min, max, step)
     help: str = ""
@@ -159,6 +161,8 @@ SETTINGS: tuple[Setting, ...] = (
 BY_NAME: dict[str, Setting] = {s.name: s for s in SETTINGS}
 #: The engine's schedule: the settings of one value that Som, BatchSom and Preset take by name, in declaration order.
 KEYS: tuple[str, ...] = tuple(s.name for s in SETTINGS if s.scope == "engine" and not s.per)
+#: The settings the learning table is made of (`learning_table`'s keywords): S and the learning rates.
+TABLE_KEYS: tuple[str, ...] = ("iterations", "l_start", "l_end")
 
 
 @dataclass(frozen=True)
@@ -184,6 +188,10 @@ class Schedule:
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in KEYS}
+
+    def learning_table(self, d_max: int, cut: float = 0.0) -> np.ndarray:
+        """This schedule's L[s, d] for hop distances up to d_max (`learning_table`)."""
+        return learning_table(d_max=d_max, cut=cut, **{k: getattr(self, k) for k in TABLE_KEYS})
 
 
 def sigma_of(d_max: int) -> float:

@@ -39,7 +39,7 @@ class ShapingPath:
     gives bit for bit). It keeps the controls grouped on the device (made again when the Controls change), their
     winners, and the rest positions the falloffs measure from (the weights where the latest restart began)."""
 
-    def __init__(self, cores: CpuCores | None):
+    def __init__(self, cores: CpuCores | None) -> None:
         self.cores = cores
         self._for: Controls | None = None  # the controls the device groups were made for
         self.keys: wp.array | None = None  # each effective control's winner key (and a search's hint)
@@ -163,7 +163,7 @@ class ShapingPath:
                 wp.launch(kern.balls, dim=len(self.keys), device=dev,
                           inputs=[self.inv_two_sigma2, self.offsets, self.group_of, self.group_start, schedule.table,
                                   s, model.carry_floor, self.radius2])
-                self.cores.on_cores(kern.move_blocks, lambda sb_lo, sb_hi: [
+                self.cores.on_cores(kern.move_blocks, lambda sb_lo, sb_hi, moving=moving, reach=reach, boxes=boxes: [
                     *moving, self.radius2, *self._rest_boxes, *near, reach, rows, *boxes.arrays, boxes.moved,
                     boxes.super_moved, sb_lo, sb_hi], self.cores.super_ranges(boxes.n_super))
             else:

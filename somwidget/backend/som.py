@@ -117,7 +117,7 @@ class Som:
         cpu_cores: int | None = None,
         distances: str | None = None,
         cache_rows: int | None = None,
-    ):
+    ) -> None:
         if not isinstance(topology, Topology):
             raise ValueError(f"topology: expected a Topology, got {type(topology).__name__}")
         self.device = resolve(device)
@@ -139,6 +139,7 @@ class Som:
         boxes = None if self._cores is None else BlockBoxes(self.n_neurons, self.n_dims, self._cores)
         self._state = SomState(self._model, boxes)
         self._schedule = SomSchedule(values, rule, self.device)
+        self._path: CpuPath | CudaPath | RowsPath | LocalPath
         if self._cores is not None:
             self._path = LocalPath(self._cores) if rows else CpuPath(self._cores)
         else:

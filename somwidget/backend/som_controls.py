@@ -42,7 +42,7 @@ def check_group(symmetry, mirror, n_dims: int) -> tuple[Symmetry | None, tuple[i
         raise ValueError("give either symmetry or mirror, not both (mirror is the shorthand for a mirror group)")
     symmetry.maps(n_dims)  # ValueError when its dims do not fit the weights
     if symmetry.kind == "mirror":
-        return None, mirror_dims_of(symmetry)
+        return None, mirror_dims_of(symmetry) or ()
     return symmetry, ()
 
 

@@ -81,7 +81,7 @@ class SomModel:
     `set_smooth_dims`); the rest is fixed."""
 
     def __init__(self, topology: Topology, start: np.ndarray, device: str, smooth_dims: tuple[int, ...],
-                 metric: np.ndarray, rows: bool, cache_rows: int | None):
+                 metric: np.ndarray, rows: bool, cache_rows: int | None) -> None:
         self.topology = topology
         self.device = device
         self.start = start

@@ -10,7 +10,7 @@ from collections.abc import Callable
 import numpy as np
 import warp as wp
 
-from .schedule import NEIGHBOURHOOD_CUT, Schedule, learning_table, reach_hops
+from .schedule import NEIGHBOURHOOD_CUT, Schedule, reach_hops
 from .smoothing_kernels import smoothing_steps
 
 #: Learning table entries (S x (d_max + 1) float32) a Som may hold: 2 GiB.
@@ -23,11 +23,11 @@ def restart_iteration(reach: float, iterations: int) -> int:
 
 
 class SomSchedule:
-    """values: the Schedule (S, l_start, l_end, smoothing, reach); rule: "laplacian" or "taubin"; table: L on the
+    """values: the Schedule (a value of each of schedule.KEYS); rule: "laplacian" or "taubin"; table: L on the
     device, (S, d_max + 1) float32, made by `rebuild` (version counts the tables made); table_max: its largest rate;
     reach_hops (CPU): the farthest hop count with a non-zero rate at each cycle, as a list and as `reach_dev`."""
 
-    def __init__(self, values: Schedule, rule: str, device: str):
+    def __init__(self, values: Schedule, rule: str, device: str) -> None:
         self.values = values
         self.rule = rule
         self.device = device
@@ -50,7 +50,7 @@ class SomSchedule:
         drop()
         self.table = self._host = None
         self.values = values
-        host = learning_table(values.iterations, d_max, values.l_start, values.l_end, NEIGHBOURHOOD_CUT if cut else 0.0)
+        host = values.learning_table(d_max, NEIGHBOURHOOD_CUT if cut else 0.0)
         self.table_max = float(host.max())
         self.d_max = d_max
         self._host = host
@@ -64,7 +64,10 @@ class SomSchedule:
 
     def host_table(self) -> np.ndarray:
         """L[s, d] (S, d_max + 1) float32 (a copy)."""
-        return self._host.copy() if self._host is not None else self.table.numpy()
+        if self._host is not None:
+            return self._host.copy()
+        assert self.table is not None  # made with the schedule
+        return self.table.numpy()
 
     def restart_iteration(self) -> int:
         return restart_iteration(self.values.reach, self.values.iterations)

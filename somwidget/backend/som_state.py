@@ -17,8 +17,8 @@ try:  # Warp's internals, for `copy_array` (warp-lang is pinned to 1.19.x in pyp
 except ImportError:  # pragma: no cover - another Warp layout: wp.copy then
     _warp_context = None
 
-from .cycle_kernels import MAX_CONTROLS
 from .block_boxes import BlockBoxes
+from .cycle_kernels import MAX_CONTROLS
 from .som_controls import Controls
 from .som_model import SomModel
 from .som_schedule import SomSchedule
@@ -38,7 +38,7 @@ class SomState:
     boxes: the CPU's block boxes of the weights (block_boxes.BlockBoxes), None on CUDA.
     """
 
-    def __init__(self, model: SomModel, boxes: BlockBoxes | None):
+    def __init__(self, model: SomModel, boxes: BlockBoxes | None) -> None:
         dev, vec = model.device, model.vec
         self.device = dev
         self.boxes = boxes
@@ -187,7 +187,7 @@ class Graphs:
     """Captured graphs of runs of cycles by key (with the packed arguments of their dependent launches, which must
     live as long as they do), all dropped when what they hold changes (`valid_for`), or by `clear()`."""
 
-    def __init__(self, device: str):
+    def __init__(self, device: str) -> None:
         self.device = device
         self._held: dict[tuple, tuple] = {}
         self._setup: tuple | None = None

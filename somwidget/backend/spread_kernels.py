@@ -10,11 +10,21 @@ from types import SimpleNamespace
 import warp as wp
 
 from .cycle_kernels import SINGLES, cycle_kernels, row_missing
-from .primitives import (INDEX_MASK, KEY_NONE, UNREACHABLE, float_bits, let_next_grid_launch, shared_get_float,
-                         shared_set_float, sync_block, sync_block_any, wait_for_previous_grid, warp_least_key,
-                         warp_shuffle)
+from .primitives import (
+    INDEX_MASK,
+    KEY_NONE,
+    UNREACHABLE,
+    float_bits,
+    let_next_grid_launch,
+    shared_get_float,
+    shared_set_float,
+    sync_block,
+    sync_block_any,
+    wait_for_previous_grid,
+    warp_least_key,
+    warp_shuffle,
+)
 from .smoothing_kernels import laplacian_step
-
 
 #: Words of the learning table's row s that a spread cycle kernel copies into shared memory (tables with longer rows
 #: are read from global memory instead).

@@ -50,7 +50,7 @@ _CENTRE_TRIES = 3
 class Topology:
     """The neurons (vertices) and synapses (edges) of the map. Build with `from_faces` or `from_edges`."""
 
-    def __init__(self, n_vertices: int, edges: np.ndarray, faces: list[np.ndarray] | None = None):
+    def __init__(self, n_vertices: int, edges: np.ndarray, faces: Sequence[np.ndarray] | None = None) -> None:
         self.n_vertices = int(n_vertices)
         self.edges = edges
         self.faces = faces
@@ -114,6 +114,7 @@ class Topology:
             if self.n_vertices > MAX_DENSE_NEURONS:
                 return self.diameter()
             self.distance_table(None)
+        assert self._d_max is not None  # the table sets it
         return self._d_max
 
     @warp_exclusive
@@ -208,7 +209,7 @@ class RowSearch:
     for graphs whose levels are too wide for one SM, the rows of a batch go level by level (a captured graph of
     `levels` launches), or one thread per row where those launches would cost more (see `method`)."""
 
-    def __init__(self, topology: Topology, device: str):
+    def __init__(self, topology: Topology, device: str) -> None:
         self.device = device
         self.n = n = topology.n_vertices
         self._cost = len(topology.neighbors) + n
@@ -247,10 +248,9 @@ class RowSearch:
     def run(self, sources, slots, rows: wp.array, levels: int, far: bool = False) -> np.ndarray | None:
         """rows[slots[i]] = hops to the nearest of sources[i] (a sequence of vertices), -1 where none is reachable.
         levels bounds the depth of every search (d_max will do). far=True returns each row's largest distance."""
-        out = []
-        for lo in range(0, len(sources), self.batch):
-            out.append(self._run_batch(sources[lo : lo + self.batch], slots[lo : lo + self.batch], rows, levels, far))
-        return np.concatenate(out) if far else None
+        out = [self._run_batch(sources[lo : lo + self.batch], slots[lo : lo + self.batch], rows, levels, far)
+               for lo in range(0, len(sources), self.batch)]
+        return np.concatenate([o for o in out if o is not None]) if far else None
 
     def _run_batch(self, sources, slots, rows: wp.array, levels: int, far: bool) -> np.ndarray | None:
         count = len(sources)
@@ -262,6 +262,7 @@ class RowSearch:
         b["slots"][:count].assign(np.asarray(slots, dtype=np.int32))
         method = self.method(levels)
         if method == "shared":
+            assert self._shared is not None  # method() picks "shared" only where it fits
             words, cap = self._shared
             kernel = distance_kernels.shared_row_search(words, cap, _SHARED_THREADS)
             wp.launch_tiled(kernel, dim=[count], block_dim=_SHARED_THREADS, device=self.device,
@@ -287,7 +288,7 @@ class RowSearch:
         return b["far"].numpy()[:count] if far else None
 
     def _record_levels(self, rows: wp.array, levels: int) -> None:
-        b, dev = self._buffers, self.device
+        b, dev = self._buffer(), self.device
         wp.launch(distance_kernels.bfs_clear, dim=self.n, device=dev, inputs=[rows, b["slots"], b["count"]])
         wp.launch(distance_kernels.bfs_seed, dim=self.batch, device=dev,
                   inputs=[b["sources"], b["first"], b["slots"], b["count"], rows, b["queue"], b["base"], b["size"],
@@ -396,7 +397,7 @@ def _diameter(topology: Topology, device: str) -> int:
         du = sweep(u)
         far, ecc = pick(du, True)
         lower = max(lower, int(ecc.max()))
-        if centre_hops is None:
+        if centre_hops is None or centre_ecc is None:
             centre_hops, centre_ecc = du, ecc
         else:
             better = ecc < centre_ecc
@@ -406,6 +407,7 @@ def _diameter(topology: Topology, device: str) -> int:
             break
         swept.append(sweep(far))
         lower = max(lower, int(swept[-1].max()))
+    assert centre_hops is not None and centre_ecc is not None  # set by the first try
     key = np.lexsort((-centre_hops, labels))  # by component, then by falling distance from its centre
     level = centre_hops[key]
     pos, end = starts.copy(), starts + sizes
@@ -475,7 +477,7 @@ class Faces(Sequence):
     """Faces of one size held as an (F, k) int64 array (`array`), seen as the sequence of its rows: what
     `Topology.faces` is for an array given to `from_faces`."""
 
-    def __init__(self, array: np.ndarray):
+    def __init__(self, array: np.ndarray) -> None:
         self.array = array
 
     def __len__(self) -> int:

@@ -153,10 +153,10 @@ def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray,
     if plan.singles:
         weights = _run_singles(plan, device)
         return weights, figures(plan, weights)
-    som = BatchSom(topology_of(plan), plan.start, plan.controls, iterations=s["iterations"], l_start=s["l_start"],
-                   l_end=s["l_end"], smoothing=s["smoothing"], reach=s["reach"], smooth_dims=plan.smooth_dims,
+    som = BatchSom(topology_of(plan), plan.start, plan.controls, smooth_dims=plan.smooth_dims,
                    metric_weights=plan.metric_weights, mirror=plan.mirror, device=device,
-                   smoothing_rule=plan.smoothing_rule, radii=plan.radii, origin=plan.origin)
+                   smoothing_rule=plan.smoothing_rule, radii=plan.radii, origin=plan.origin,
+                   **{key: s[key] for key in KEYS})
     if plan.restart:
         som.restart()
     som.train()
@@ -258,7 +258,7 @@ def run_plan(plan: VariantPlan, device: str | None = None, client=None, batch_si
     n = plan.n_variants
     if client is None:
         device = resolve(device)
-    size = batch_size or (batch_size_for(plan, device) if client is None else _dask_batch(plan, client))
+    size = batch_size or (batch_size_for(plan, resolve(device)) if client is None else _dask_batch(plan, client))
     size = checks.integer("batch_size", size, 1)
     bounds = [(lo, min(n, lo + size)) for lo in range(0, n, size)]
     weights = np.empty((n, plan.n_vertices, plan.start.shape[1]), np.float32)

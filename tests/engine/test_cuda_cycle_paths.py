@@ -15,8 +15,7 @@ from conftest import HAS_CUDA
 from reference import lattice_edges
 
 from somwidget import Som, Topology
-from somwidget.backend import dependent_launch
-from somwidget.backend import cuda_path
+from somwidget.backend import cuda_path, dependent_launch
 from somwidget.backend.spread_kernels import SHARED_TABLE_WORDS
 
 pytestmark = [pytest.mark.gpu, pytest.mark.skipif(not HAS_CUDA, reason="warp reports no CUDA device on this machine")]

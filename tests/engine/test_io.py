@@ -10,8 +10,15 @@ import pytest
 import trimesh
 
 from somwidget.backend import io, session_file
-from somwidget.backend.presets import (KEPT_SHAPE_REACH, XYZ, FeatureLayout, Preset, colours_of, get_preset,
-                                       line_display_mesh)
+from somwidget.backend.presets import (
+    KEPT_SHAPE_REACH,
+    XYZ,
+    FeatureLayout,
+    Preset,
+    colours_of,
+    get_preset,
+    line_display_mesh,
+)
 from somwidget.backend.topology import Topology
 
 LOAD_FORMATS = ["obj", "ply", "stl", "off", "glb"]

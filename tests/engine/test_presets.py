@@ -7,7 +7,7 @@ import colorsys
 import numpy as np
 import pytest
 
-from somwidget.backend import presets as P
+from somwidget.backend import presets as P  # noqa: N812 (the module's constants read P.NAME)
 from somwidget.backend.presets import (
     PRESETS,
     FeatureLayout,

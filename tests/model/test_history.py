@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 
-from somwidget.frontend.model.history import History, Step
 from somwidget.frontend.model import Session
+from somwidget.frontend.model.history import History, Step
 
 
 def state_of(session: Session) -> dict:

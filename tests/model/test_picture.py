@@ -14,8 +14,8 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 import somwidget  # noqa: E402
 from somwidget import Som, Topology, presets  # noqa: E402
-from somwidget.frontend.model.picture import BACKGROUND, picture_of  # noqa: E402
 from somwidget.frontend.model import Session  # noqa: E402
+from somwidget.frontend.model.picture import BACKGROUND, picture_of  # noqa: E402
 
 SIZE = (320, 240)
 BG = np.round(np.asarray(BACKGROUND) * 255).astype(int)

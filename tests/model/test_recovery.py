@@ -160,7 +160,7 @@ def test_sigkill_mid_drag_brings_back_what_the_message_says(tmp_path):
             send(srv, [{"type": "set", "name": "reach", "value": 0.12}])
             pre = settled(srv)
 
-            async def kill_while_held():
+            async def kill_while_held(hold=hold, srv=srv):
                 await asyncio.sleep(hold)
                 os.kill(srv.proc.pid, signal.SIGKILL)  # the drag is still held: its websocket is open
                 srv.proc.wait(10)

@@ -48,7 +48,7 @@ class SmallDisk:
                     f.flush()
             assert os.statvfs(self.path).f_bavail == 0
         else:
-            for folder, dirs, _ in os.walk(self.path):
+            for folder, _dirs, _ in os.walk(self.path):
                 os.chmod(folder, 0o555)
 
     def free(self) -> None:
@@ -56,7 +56,7 @@ class SmallDisk:
             for filler in self.path.glob("filler-*"):
                 filler.unlink()
         else:
-            for folder, dirs, _ in os.walk(self.path):
+            for folder, _dirs, _ in os.walk(self.path):
                 os.chmod(folder, 0o755)
 
     def close(self) -> None:

@@ -15,11 +15,11 @@ import pytest
 
 from somwidget.backend import presets
 from somwidget.backend.presets import parse_hex_colour, rgb_to_colour_dims
+from somwidget.backend.schedule import MAX_ITERATIONS
 from somwidget.backend.som import Som
 from somwidget.backend.topology import Topology
-from somwidget.frontend.model import session as session_module
-from somwidget.backend.schedule import MAX_ITERATIONS
 from somwidget.frontend.model import Frame, Session
+from somwidget.frontend.model import session as session_module
 from somwidget.frontend.model.settings import MAX_TABLE_ENTRIES
 
 

@@ -17,8 +17,8 @@ import json
 import os
 import re
 import subprocess
-import time
 import sys
+import time
 import urllib.request
 
 import helpers
@@ -30,8 +30,8 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 pytest.importorskip("ipywidgets")
 
-from somwidget.frontend.notebook import Panel, SomWidget, show  # noqa: E402
 from somwidget.frontend.model import Session  # noqa: E402
+from somwidget.frontend.notebook import Panel, SomWidget, show  # noqa: E402
 
 pytestmark = pytest.mark.browser
 

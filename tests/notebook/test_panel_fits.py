@@ -36,7 +36,7 @@ FIND = """(selector) => { const out = []; const walk = (root) => { for (const e 
 #: What is wrong with the first panel of the page at this width: fields out of the page's width, not on screen once
 #: scrolled to, or under another element; labels cut. [] when it fits.
 CHECK = """async () => {
-  const find = %s;
+  const find = """ + FIND + """;
   const panel = find('.somwidget-panel')[0];
   if (!panel) return ['no panel'];
   const shown = (e) => { const r = e.getBoundingClientRect(); return r.width > 0 && r.height > 0
@@ -69,7 +69,7 @@ CHECK = """async () => {
     if (l.scrollWidth > l.clientWidth + 1) problems.push(`cut: ${name(l)} (${l.scrollWidth} > ${l.clientWidth})`);
   }
   return problems.length ? problems : (fields.length > 20 ? [] : [`only ${fields.length} fields`]);
-}""" % FIND
+}"""
 
 
 def make_room(page) -> None:

@@ -179,7 +179,7 @@ def test_numpy_baseline_matches_reference(shape, update):
     metric = np.array([1.0, 1.0, 0.5, 2.0], np.float32)
     dims = (0, 1, 3)  # not contiguous
     cycles = 6
-    table = harness.learning_table(cycles, topo.d_max, 0.3, 0.03)
+    table = harness.schedule_table({"iterations": cycles, "l_start": 0.3, "l_end": 0.03}, topo.d_max).astype(np.float32)
     distances = topo.grid_distances()
     base = harness.NumpySom(distances, topo.offsets, topo.neighbors, weights, controls, table, metric_weights=metric,
                     smoothing=0.3, smooth_dims=dims, update=update)

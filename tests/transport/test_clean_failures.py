@@ -25,8 +25,8 @@ INTERNALS = re.compile(r"IndexError|KeyError|TypeError|allow_pickle|pickle|Trace
 def app(tmp_path, monkeypatch):
     from trame.app import get_server
 
-    from somwidget.frontend.web.app import build_app
     from somwidget.frontend.model import Session
+    from somwidget.frontend.web.app import build_app
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     session = Session("car", device="cpu", start=False, autosave=False)
@@ -90,8 +90,8 @@ def test_the_size_limit_in_messages_is_the_readme_s():
 def test_upload_folders_of_a_killed_server_are_removed_at_the_next_start(tmp_path, monkeypatch):
     from trame.app import get_server
 
-    from somwidget.frontend.web.app import build_app
     from somwidget.frontend.model import Session
+    from somwidget.frontend.web.app import build_app
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     dead = subprocess.Popen([sys.executable, "-c", "pass"])

@@ -17,7 +17,9 @@ import aiohttp
 import numpy as np
 import pytest
 
-from somwidget.frontend.transport import messages as wire, display as wire_display, frames as wire_frames
+from somwidget.frontend.transport import display as wire_display
+from somwidget.frontend.transport import frames as wire_frames
+from somwidget.frontend.transport import messages as wire
 from somwidget.frontend.web import hub as xr_server
 from somwidget.frontend.web.standalone import XRServer
 

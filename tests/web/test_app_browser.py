@@ -16,9 +16,9 @@ import os
 import tempfile
 import time
 
+import helpers
 import numpy as np
 import pytest
-import helpers
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, wave_mesh
 
 pytestmark = pytest.mark.browser
@@ -715,8 +715,8 @@ def local_app(tmp_path, monkeypatch):
     temporary files go to tmp_path/"tmp" so the test sees what is left behind."""
     from trame.app import get_server
 
-    from somwidget.frontend.web.app import build_app
     from somwidget.frontend.model import Session
+    from somwidget.frontend.web.app import build_app
 
     (tmp_path / "tmp").mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))

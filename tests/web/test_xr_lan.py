@@ -13,8 +13,8 @@ import aiohttp
 import numpy as np
 import pytest
 
-from somwidget.frontend.web import lan
 from somwidget.frontend.transport import frames as wire_frames
+from somwidget.frontend.web import lan
 from somwidget.frontend.web.standalone import XRServer
 
 

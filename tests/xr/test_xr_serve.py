@@ -15,12 +15,11 @@ import time
 
 import aiohttp
 import numpy as np
-
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, insecure_context
 
-from somwidget.frontend.transport import frames as wire_frames
 from somwidget.frontend.client import DIST
+from somwidget.frontend.transport import frames as wire_frames
 
 pytestmark = pytest.mark.browser
 

@@ -11,13 +11,41 @@ from collections.abc import Callable
 
 from ..cycle_kernels import MAX_CONTROLS
 from .case_studies import CAR_LON, CAR_RADII, CAR_RINGS, SPACE_GRID_SMOOTHING, car, lines, space_grid
-from .colours import (CONTROL_PALETTE, NEUTRAL_GREY, colours_of, hex_colour, hsv_to_rgb, palette_colours,
-                      parse_hex_colour, rgb_to_colour_dims)
-from .geometry import (ellipsoid_normals, lattice, line_display_mesh, open_grid, surface_of_revolution, torus,
-                       uv_ellipsoid)
+from .colours import (
+    CONTROL_PALETTE,
+    NEUTRAL_GREY,
+    colours_of,
+    hex_colour,
+    hsv_to_rgb,
+    palette_colours,
+    parse_hex_colour,
+    rgb_to_colour_dims,
+)
+from .geometry import (
+    ellipsoid_normals,
+    lattice,
+    line_display_mesh,
+    open_grid,
+    surface_of_revolution,
+    torus,
+    uv_ellipsoid,
+)
 from .records import COLOUR_SPACES, DISPLAYS, XYZ, FeatureLayout, Preset, effective_controls, positions_of
-from .shapes import (KEPT_SHAPE_RADIUS, KEPT_SHAPE_REACH, bowl_preset, cone_preset, controls_on, disc_preset,
-                     farthest_points, grid_preset, kept_shape, lattice_preset, sphere_preset, torus_preset, tube_preset)
+from .shapes import (
+    KEPT_SHAPE_RADIUS,
+    KEPT_SHAPE_REACH,
+    bowl_preset,
+    cone_preset,
+    controls_on,
+    disc_preset,
+    farthest_points,
+    grid_preset,
+    kept_shape,
+    lattice_preset,
+    sphere_preset,
+    torus_preset,
+    tube_preset,
+)
 
 PRESETS: dict[str, Callable[[], Preset]] = {
     "space-grid": space_grid,

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..topology import Topology
 from .geometry import ellipsoid_normals, lattice, uv_ellipsoid
-from .records import XYZ, FeatureLayout, Preset
+from .records import LATTICE_RATES, XYZ, FeatureLayout, Preset
 
 #: The car body: an ellipsoid 4 long (x), 1.7 wide (y), 1.2 high (z); 25 x 24 + 2 = 602 vertices.
 CAR_RADII = (2.0, 0.85, 0.6)
@@ -39,7 +39,7 @@ def space_grid() -> Preset:
         description="Case study 1 of Felbrich et al. 2018: a 16 x 16 x 16 lattice of neurons joined to their six "
                     "neighbours, shaped by 8 controls, with one Laplacian smoothing step per cycle.",
         topology=Topology.from_edges(edges, len(pts)), weights=pts, controls=controls, layout=XYZ,
-        iterations=1000, l_start=0.3, l_end=0.03, smoothing=SPACE_GRID_SMOOTHING, display="points", grow=True)
+        iterations=1000, **LATTICE_RATES, smoothing=SPACE_GRID_SMOOTHING, display="points", grow=True)
 
 
 def _car_start() -> tuple[Topology, np.ndarray]:
@@ -50,7 +50,7 @@ def _car_start() -> tuple[Topology, np.ndarray]:
 def car() -> Preset:
     """Case study 2: an ellipsoid car body with 5-D nodes (x, y, z, hue, saturation) and 9 mirrored controls."""
     topo, pts = _car_start()
-    start = np.concatenate([pts, np.tile(np.float32([0.0, 0.08]), (len(pts), 1))], axis=1)  # near-white
+    start = np.concatenate([pts, np.tile(np.array([0.0, 0.08], np.float32), (len(pts), 1))], axis=1)  # near-white
     #                    x     y      z     hue   sat
     controls = np.array([
         [1.30, 0.95, -0.75, 0.62, 0.85],  # front wheel (blue)

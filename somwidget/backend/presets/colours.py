@@ -79,9 +79,9 @@ def rgb_to_colour_dims(rgb, layout: FeatureLayout) -> np.ndarray:
         raise ValueError("colour: this preset's features have no colour dimensions")
     h, s, _v = colorsys.rgb_to_hsv(*rgb)
     if space == "hue":
-        return np.float32([h])
+        return np.array([h], np.float32)
     if space == "hs":
-        return np.float32([h, s])
+        return np.array([h, s], np.float32)
     return rgb.astype(np.float32)  # "rgb"
 
 
@@ -92,7 +92,7 @@ def parse_hex_colour(text: str) -> np.ndarray:
     t = text.strip().lstrip("#")
     if len(t) not in (6, 8) or any(c not in "0123456789abcdefABCDEF" for c in t):
         raise ValueError(f"colour: expected '#rrggbb', got {text!r}")
-    return np.float32([int(t[i:i + 2], 16) / 255.0 for i in (0, 2, 4)])
+    return np.array([int(t[i:i + 2], 16) / 255.0 for i in (0, 2, 4)], np.float32)
 
 
 def hex_colour(rgb) -> str:

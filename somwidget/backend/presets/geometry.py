@@ -115,7 +115,8 @@ def surface_of_revolution(radii, heights, n_lon: int) -> tuple[list[tuple[int, .
                          "ends on the axis")
     phi = 2 * np.pi * np.arange(n_lon) / n_lon
     pole = [r[0] == 0, r[-1] == 0]
-    rows, index, first = [], [], 0
+    rows: list = []  # a pole's one node, or a ring of n_lon
+    index, first = [], 0
     for i in range(len(r)):
         if (i == 0 and pole[0]) or (i == len(r) - 1 and pole[1]):
             rows.append([[0.0, 0.0, h[i]]])

@@ -5,6 +5,7 @@ with its layout, controls and training settings; `make_som()` turns it into a `S
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -93,6 +94,9 @@ def _ordered_dims(name: str, value, n: int) -> tuple[int, ...]:
 
 
 XYZ = FeatureLayout(names=("x", "y", "z"), position=(0, 1, 2), colour=(), colour_space="none")
+#: The learning rates of the lattices of points: the space grid's (case study 1 of Felbrich et al. 2018), also the
+#: lattice shape's.
+LATTICE_RATES: dict[str, Any] = {"l_start": 0.3, "l_end": 0.03}
 
 
 @dataclass

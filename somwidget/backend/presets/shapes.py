@@ -9,10 +9,10 @@ import numpy as np
 
 from .. import checks
 from ..metrics import bounding_diagonal
-from ..topology import Topology
 from ..symmetry import Symmetry
+from ..topology import Topology
 from .geometry import lattice, open_grid, surface_of_revolution, torus, uv_ellipsoid
-from .records import XYZ, Preset
+from .records import LATTICE_RATES, XYZ, Preset
 
 
 def farthest_points(points, k: int) -> np.ndarray:
@@ -62,7 +62,7 @@ def lattice_preset() -> Preset:
         name="lattice", title="Lattice", description="An 8 x 8 x 8 lattice (6-neighbour synapses) with 6 controls "
                                                      "on its nodes: drag one to pull the lattice.",
         topology=Topology.from_edges(edges, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
-        l_start=0.3, display="points", **kept_shape(pts))
+        **LATTICE_RATES, display="points", **kept_shape(pts))
 
 
 def grid_preset() -> Preset:

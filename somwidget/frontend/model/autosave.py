@@ -41,7 +41,7 @@ class Autosave:
     the newest (older ones not yet written are skipped), and keeps trying a save that failed. `on_status()` is called
     (on that thread) whenever `error` changes."""
 
-    def __init__(self, store: SessionStore, on_status: Callable[[], None] = lambda: None):
+    def __init__(self, store: SessionStore, on_status: Callable[[], None] = lambda: None) -> None:
         self.store = store
         self.on_status = on_status
         self.error: str | None = None  # why the latest save failed; None once one is on disk
@@ -125,7 +125,7 @@ class SessionAutosave:
     """When a session's state is written (the module's docstring): its modelling state with the undo history of its
     timeline, between the training thread's turns."""
 
-    def __init__(self, state: ModellingState, store: SessionStore, timeline: Timeline, trainer: Trainer):
+    def __init__(self, state: ModellingState, store: SessionStore, timeline: Timeline, trainer: Trainer) -> None:
         self.state = state
         self.timeline = timeline
         self.trainer = trainer

@@ -13,10 +13,10 @@ from ...backend import presets as _presets
 from ...backend.metrics import median_edge
 from ...backend.presets import parse_hex_colour, rgb_to_colour_dims
 from ...backend.som_controls import check_radii
-from .state import ModellingState
 from .frames import FrameStream
 from .hands import Hands
 from .operations import SetControls
+from .state import ModellingState
 from .timeline import Timeline
 from .trainer import Trainer
 

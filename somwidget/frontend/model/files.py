@@ -11,9 +11,8 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from ...backend import checks, schedule
+from ...backend import checks, schedule, session_file
 from ...backend import io as mesh_io
-from ...backend import session_file
 from ...backend.presets import Preset
 from .state import ModellingState, held_settings
 from .timeline import Timeline
@@ -82,7 +81,7 @@ class SessionFiles:
     records the undo step)."""
 
     def __init__(self, state: ModellingState, timeline: Timeline, build: Callable, install: Callable,
-                 max_vertices: int):
+                 max_vertices: int) -> None:
         self.state = state
         self.timeline = timeline
         self.build = build

@@ -157,7 +157,7 @@ class FrameStream:
     """Numbers, keeps and publishes a session's frames: `make` one from the Som (quiescent: under the Som's lock, or
     before training starts), `publish` it to every listener, `latest`, and the rate frames go out at."""
 
-    def __init__(self, lock: threading.Condition):
+    def __init__(self, lock: threading.Condition) -> None:
         self._lock = lock  # the session's condition: waiters wake when a frame is published
         self._listeners: list[FrameListener] = []
         self._latest: Frame | None = None

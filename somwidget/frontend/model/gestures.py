@@ -121,7 +121,7 @@ class OpenGestures:
     ids, None until the first change), the Som anchored there (a drag's frames restart from it), and the `Change` of
     each step in the history by its key (caller holds clay.lock for all of it)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.open: dict[tuple[int, int | None], Gesture] = {}
         self.boundary: Step | None = None
         self.boundary_ids: tuple = ()

@@ -42,7 +42,7 @@ class Hand:
 
     __slots__ = ("id", "kind", "colour")
 
-    def __init__(self, id: int, kind: str, colour: str):
+    def __init__(self, id: int, kind: str, colour: str) -> None:
         self.id, self.kind, self.colour = id, kind, colour
 
     @property
@@ -72,7 +72,7 @@ class Hands:
     """The hands of one session and what each holds (see the module's docstring). `clay`: the session's shared state
     (its control ids); `timeline`: where each grab's gesture opens and completes."""
 
-    def __init__(self, state, timeline):
+    def __init__(self, state, timeline) -> None:
         self.state = state
         self.timeline = timeline
         self.python = Hand(PYTHON, "python", PYTHON_COLOUR)

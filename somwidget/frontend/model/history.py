@@ -17,11 +17,15 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from ...backend import checks
+
+if TYPE_CHECKING:
+    from ...backend.presets import Preset
+    from ...backend.symmetry import Symmetry
 
 log = logging.getLogger(__name__)
 
@@ -40,13 +44,13 @@ class Step:
     """One state of a session. `weights` is an (N, n) float32 array, or the Path of a step file (`load_weights`).
     `key` names the step while the process lives (a copy with its weights elsewhere keeps it)."""
 
-    preset: object
+    preset: Preset
     controls: np.ndarray
     parameters: dict
     weights: np.ndarray | Path
     iteration: int
     radii: np.ndarray | None = None  # each control's radius (None: all 0)
-    symmetry: object = None  # the Symmetry group in effect, or None
+    symmetry: Symmetry | None = None  # the Symmetry group in effect, or None
     strokes: tuple | None = None  # the lengths of the runs of controls that act as one (None: each alone)
     control_ids: tuple | None = None  # the controls' stable ids (None: new ones when put back)
     key: int = field(default_factory=lambda: next(_KEYS), compare=False)
@@ -104,7 +108,7 @@ class Shelf(Protocol):
 class TemporaryShelf:
     """Steps' weights in a temporary folder of their own (made when first needed), deleted with it."""
 
-    def __init__(self, parent: str | os.PathLike | None = None):
+    def __init__(self, parent: str | os.PathLike | None = None) -> None:
         self.parent = parent
         self.folder: Path | None = None
         self._files: dict[int, Path] = {}
@@ -142,7 +146,7 @@ class History:
     steps go on disk (default: a TemporaryShelf under `spill_dir`)."""
 
     def __init__(self, max_steps: int = MAX_STEPS, memory_bytes: int = MEMORY_BYTES, disk_bytes: int = DISK_BYTES,
-                 spill_dir: str | os.PathLike | None = None, shelf: Shelf | None = None):
+                 spill_dir: str | os.PathLike | None = None, shelf: Shelf | None = None) -> None:
         self.max_steps = max_steps
         self.memory_bytes = memory_bytes
         self.disk_bytes = disk_bytes

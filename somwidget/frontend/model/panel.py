@@ -118,7 +118,7 @@ class PanelModel:
     thumbnail = THUMBNAIL  # a gallery thumbnail's size on screen (CSS pixels)
     varied = tuple(VARIED)
 
-    def __init__(self, session: Session):
+    def __init__(self, session: Session) -> None:
         self.session = session
         self.variants = None  # the latest sweep's Variants
 
@@ -243,7 +243,7 @@ class PanelModel:
     def set_position(self, index, text) -> str | None:
         """Control `index` moved to a typed position: "x, y, z" (commas or spaces between the numbers); where it is
         already (Enter, then the field's change event), nothing happens."""
-        def edit():
+        def edit() -> None:
             controls = self.session.controls
             i = check_index("control", index, len(controls))
             position = numbers(text, 3, f"control {index} position")
@@ -254,7 +254,7 @@ class PanelModel:
 
     def set_features(self, index, text) -> str | None:
         """Control `index`'s other features (`other_dims`, in order) set from typed values, as one step."""
-        def edit():
+        def edit() -> None:
             controls = self.session.controls
             i = check_index("control", index, len(controls))
             layout = self.session.layout

@@ -87,7 +87,7 @@ class Reading:
 class _Damaged(Exception):
     """One part cannot be read (`problem` says which and why)."""
 
-    def __init__(self, path: Path, part: str, reason: str):
+    def __init__(self, path: Path, part: str, reason: str) -> None:
         reason = reason if len(reason) <= 240 else reason[:237] + "..."
         super().__init__(reason)
         self.problem = Problem(path, part, reason)
@@ -143,7 +143,7 @@ def read_folder(folder: Path, max_vertices: int) -> Reading:
 
 
 class _Reader:
-    def __init__(self, folder: Path, max_vertices: int):
+    def __init__(self, folder: Path, max_vertices: int) -> None:
         self.folder = folder
         self.manifest_path = folder / MANIFEST
         self.max_vertices = max_vertices

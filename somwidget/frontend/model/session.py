@@ -43,13 +43,13 @@ from ...backend import checks
 from ...backend import io as mesh_io
 from ...backend import presets as _presets
 from ...backend.presets import FeatureLayout, Preset
+from . import revolving
 from .autosave import SessionAutosave
 from .controls import ControlEdits
 from .files import SessionFiles
 from .frames import Frame, FrameListener, FrameStream
 from .hands import Hand, Hands, redo_own, undo_own
 from .operations import Publish, Reset, Restart
-from . import revolving
 from .recovery import recover as recover_session
 from .refining import refined_preset
 from .settings import SessionSettings
@@ -184,7 +184,7 @@ class Session:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc) -> None:
         self.close()
 
     @property
@@ -202,7 +202,9 @@ class Session:
     @property
     def frame(self) -> Frame:
         """The latest frame."""
-        return self.frames.latest
+        frame = self.frames.latest
+        assert frame is not None  # made with the session (__init__ installs the first)
+        return frame
 
     @property
     def frames_per_second(self) -> float:

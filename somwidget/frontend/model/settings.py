@@ -57,7 +57,7 @@ class SessionSettings:
     """The settings of one session (see the module's docstring): `session.settings["reach"]`,
     `session.settings.set("reach", 0.2)`, `session.settings.update(smoothing=0.1, reach=0.2)`."""
 
-    def __init__(self, state: ModellingState, timeline: Timeline, trainer: Trainer):
+    def __init__(self, state: ModellingState, timeline: Timeline, trainer: Trainer) -> None:
         self.state = state
         self.timeline = timeline
         self.trainer = trainer

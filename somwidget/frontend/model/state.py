@@ -119,7 +119,7 @@ def build(preset: str | Preset | None, device: str | None, max_vertices: int) ->
 class ModellingState:
     """The shared state of one session (see the module's docstring)."""
 
-    def __init__(self, preset: Preset, som, paused: bool = False):
+    def __init__(self, preset: Preset, som, paused: bool = False) -> None:
         self.lock = threading.RLock()
         self.wake = threading.Condition(self.lock)
         self.som_lock = threading.RLock()

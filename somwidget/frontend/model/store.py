@@ -298,7 +298,7 @@ class SessionStore:
     `writable`: a store taken over from a stopped session (or made for one being brought back) writes nothing until
     the rebuilt session is whole (`allow_writes`): a start that fails half way leaves the folder as it found it."""
 
-    def __init__(self, folder: Path, origin: str, handle=None, writable: bool = True):
+    def __init__(self, folder: Path, origin: str, handle=None, writable: bool = True) -> None:
         self.folder = Path(folder)
         self.origin = origin
         self.writable = writable

@@ -19,10 +19,11 @@ import dataclasses
 import time
 from collections.abc import Callable
 
-from .state import ModellingState
+from ...backend.presets import Preset
 from .gestures import PYTHON, Change, Gesture, OpenGestures, actor, change_since, one_step
 from .history import History, Shelf, Step
 from .operations import Publish
+from .state import ModellingState
 from .trainer import Trainer
 
 #: Setting the same parameter again within this many seconds joins the previous undo step (a slider's drag).
@@ -37,8 +38,8 @@ class Timeline:
     rebuild(preset): install another preset's Som (a step of an earlier preset); install_frame(): make and keep a
     frame of the state put back; shelf: where the history's steps go on disk (None: a temporary folder)."""
 
-    def __init__(self, state: ModellingState, trainer: Trainer, rebuild: Callable[[object], None],
-                 install_frame: Callable[[], None], shelf: Shelf | None = None):
+    def __init__(self, state: ModellingState, trainer: Trainer, rebuild: Callable[[Preset], None],
+                 install_frame: Callable[[], None], shelf: Shelf | None = None) -> None:
         self.state = state
         self.trainer = trainer
         self.rebuild = rebuild

@@ -23,9 +23,9 @@ from collections.abc import Callable
 from concurrent.futures import Future
 
 from ...backend.schedule import MAX_ITERATIONS
-from .state import ModellingState
 from .frames import Frame, FrameStream
 from .operations import Operation, SetControls
+from .state import ModellingState
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +33,7 @@ log = logging.getLogger(__name__)
 class Pace:
     """Cycles a step, sized to a step's time budget from the time a cycle took (a moving average)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.cycle_time = 0.0
         self.cycles = 1
 
@@ -51,7 +51,7 @@ class Trainer:
     make_frame(cycles): a frame of the Som now; after_turn(): called after each turn (the autosave's chance)."""
 
     def __init__(self, state: ModellingState, frames: FrameStream, make_frame: Callable[[int], Frame],
-                 after_turn: Callable[[], None], frame_rate: float, step_fraction: float):
+                 after_turn: Callable[[], None], frame_rate: float, step_fraction: float) -> None:
         self.state = state
         self.frames = frames
         self.make_frame = make_frame

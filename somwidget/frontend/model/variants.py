@@ -53,7 +53,7 @@ class Variants:
     metrics (each of gap, spike, symmetry, size: an (n,) array; see backend.variants.figures), preset (the
     mesh they share), source (the Session they were swept from, or None)."""
 
-    def __init__(self, plan: VariantPlan, weights: np.ndarray, figures: dict, preset: Preset, source=None):
+    def __init__(self, plan: VariantPlan, weights: np.ndarray, figures: dict, preset: Preset, source=None) -> None:
         self.plan = plan
         self.controls = plan.controls
         self.weights = weights

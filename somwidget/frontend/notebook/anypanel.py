@@ -56,7 +56,7 @@ class PanelWidget(anywidget.AnyWidget):
     exports = traitlets.List().tag(sync=True)
     error = traitlets.Unicode("").tag(sync=True)
 
-    def __init__(self, session: Session, refresh_hz: float = PANEL_HZ, auto_refresh: bool = True):
+    def __init__(self, session: Session, refresh_hz: float = PANEL_HZ, auto_refresh: bool = True) -> None:
         self.session = session
         self.model = PanelModel(session)
         super().__init__(_esm=ESM.read_text(encoding="utf-8"), fields=declared_fields(self.model),

@@ -60,7 +60,7 @@ class Panel(widgets.VBox):
     called). Parameters changed elsewhere (the web app in a browser tab, a script) show up here too.
     """
 
-    def __init__(self, session: Session, refresh_hz: float = PANEL_HZ, auto_refresh: bool = True):
+    def __init__(self, session: Session, refresh_hz: float = PANEL_HZ, auto_refresh: bool = True) -> None:
         self.session = session
         self.model = PanelModel(session)
         self.refresh_hz = float(refresh_hz)
@@ -242,7 +242,7 @@ class Panel(widgets.VBox):
         ext = self.export_format.value
         written: list[Path] = []
 
-        def write():
+        def write() -> None:
             data = self.model.export_bytes(ext)
             path = Path(folder) / self.model.export_name(ext)
             path.write_bytes(data)

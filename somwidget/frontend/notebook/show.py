@@ -34,7 +34,7 @@ class SomWidget(widgets.HBox):
     read; the widget state, where the notebook saves it, keeps that picture too (ClayWidget.picture), which the view
     shows until frames come again."""
 
-    def __init__(self, session: Session, panel, view: ClayWidget | None = None, owns_session: bool = False):
+    def __init__(self, session: Session, panel, view: ClayWidget | None = None, owns_session: bool = False) -> None:
         self.session = session
         self.panel = panel
         self.view = view
@@ -70,7 +70,8 @@ class SomWidget(widgets.HBox):
     def _still_once_settled(self) -> None:
         """Replace the stills by the settled clay, rendered off screen, unless a view's picture came first."""
         seen = self.stills.updates
-        if self.session.wait_idle(STILL_WAIT_S) and self.stills.updates == seen and self.view.comm is not None:
+        if self.session.wait_idle(STILL_WAIT_S) and self.stills.updates == seen and self.view is not None \
+                and self.view.comm is not None:
             self.stills.update(self.still_png())
 
     def _display_(self):
@@ -82,6 +83,8 @@ class SomWidget(widgets.HBox):
 
     def still_png(self) -> bytes | None:
         """The picture a new still shows: the view's latest, else one rendered off screen (None where neither)."""
+        if self.view is None:  # (shown with a view only)
+            return None
         try:
             return self.view.picture_png() or picture_png(self.session)
         except Exception:  # no off-screen rendering here: the view's first picture fills the still in
@@ -97,7 +100,7 @@ class SomWidget(widgets.HBox):
         super().close()
         if self.owns_session and self.session is not None:
             self.session.close()
-            self.session = None  # the arrays go with the last reference
+            self.session = None  # type: ignore[assignment]  # closed: the arrays go with the last reference
             give_back_memory()
 
 

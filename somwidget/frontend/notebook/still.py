@@ -89,7 +89,7 @@ class Stills:
     """The stills of one widget's outputs: `show(png)` leaves a new one (IPython's display, with an id of its own),
     `update(png)` replaces every one shown with the new picture."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.handles = []
         self.updates = 0  # stills replaced (for tests)
 

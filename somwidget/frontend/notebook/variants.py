@@ -20,7 +20,7 @@ class VariantsSection(widgets.VBox):
     from the session's current shape (somwidget.sweep) and shows a gallery; a thumbnail's Use button makes that
     variant the session's state (one undo step, through `intent`)."""
 
-    def __init__(self, model: PanelModel, intent):
+    def __init__(self, model: PanelModel, intent) -> None:
         self.model = model
         self._intent = intent
         style = {"description_width": "initial"}
@@ -57,7 +57,7 @@ class VariantsSection(widgets.VBox):
 
     def sweep(self) -> bool:
         """Train the variants (in this thread) and show them; False (the message in the panel) if refused."""
-        def run():
+        def run() -> None:
             self.progress.max, self.progress.value = int(self.count.value), 0
             variants, thumbs = self.model.sweep(self.count.value, float(self.jitter.value), list(self.vary.value),
                                                 progress=lambda done, total: setattr(self.progress, "value", done))

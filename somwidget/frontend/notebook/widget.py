@@ -58,7 +58,7 @@ class ClayWidget(anywidget.AnyWidget):
         """The PNG of `picture`, or None before a view has taken one."""
         return base64.b64decode(self.picture[len(PICTURE_PREFIX):]) if self.picture else None
 
-    def __init__(self, session, height: int = 520, max_fps: float = messages.MAX_FPS, **kwargs):
+    def __init__(self, session, height: int = 520, max_fps: float = messages.MAX_FPS, **kwargs) -> None:
         super().__init__(_esm=view_module(), height=int(height), **kwargs)
         self.session = session
         self.max_fps = float(max_fps)

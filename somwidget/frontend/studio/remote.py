@@ -22,6 +22,7 @@ import contextlib
 import json
 import threading
 import time
+from typing import Any
 from urllib.parse import parse_qs, urlencode, urlsplit, urlunsplit
 
 import numpy as np
@@ -70,8 +71,8 @@ class RoomSession:
         self.url, self.name, self.watch = socket_url(url)
         self.link = url
         self._ssl = ssl_option(fingerprint, verify)
-        self.topology: dict | None = None
-        self.frame: dict | None = None
+        self.topology: Any = None  # the latest topology message, None until the first comes
+        self.frame: Any = None  # the latest frame (a dict of arrays), None until the first comes
         self.presence: list = []
         self.grabs: list = []
         self.errors: list[dict] = []
@@ -80,7 +81,7 @@ class RoomSession:
         self._pongs: dict[float, float] = {}
         self._t = 0.0
         self._loop = asyncio.new_event_loop()
-        self._ws = None
+        self._ws: Any = None  # aiohttp's websocket once connected
         self._thread = threading.Thread(target=self._loop.run_forever, name="somwidget-room", daemon=True)
         self._thread.start()
         try:
@@ -261,18 +262,18 @@ class RoomSession:
         self._intent({"type": "grab", "id": cid}, timeout)
         self._send({"type": "move", "id": cid, "position": p})
         self._intent({"type": "release", "id": cid}, timeout)
-        at = np.float32(p)
+        at = np.asarray(p, dtype=np.float32)
         self._wait(lambda: cid in self.control_ids and np.allclose(
             self.frame["control_positions"][self.control_ids.index(cid)], at, atol=1e-5), timeout)
 
     def add_control(self, position, radius: float | None = None) -> None:
-        message = {"type": "add", "position": [float(v) for v in position]}
+        message: dict[str, Any] = {"type": "add", "position": [float(v) for v in position]}
         if radius is not None:
             message["radius"] = float(radius)
         self._intent(message)
 
     def add_stroke(self, points, radius: float | None = None) -> None:
-        message = {"type": "stroke", "points": [[float(v) for v in p] for p in points]}
+        message: dict[str, Any] = {"type": "stroke", "points": [[float(v) for v in p] for p in points]}
         if radius is not None:
             message["radius"] = float(radius)
         self._intent(message)

@@ -9,6 +9,7 @@ import asyncio
 import json
 import logging
 import threading
+from typing import Any
 
 import anywidget
 
@@ -27,7 +28,7 @@ class RoomWidget(ClayWidget):
         self.url, self.room, _ = socket_url(link)
         self.frames_sent = 0
         self._ssl = ssl
-        self._ws = None
+        self._ws: Any = None  # aiohttp's websocket once connected
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name="somwidget-room-view", daemon=True)
         self._thread.start()

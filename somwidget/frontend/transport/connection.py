@@ -30,6 +30,7 @@ import numpy as np
 
 from .holders import holders_for
 from .messages import (
+    INTENTS,
     AddIntent,
     ControlIntent,
     ErrorMessage,
@@ -37,7 +38,6 @@ from .messages import (
     HandIntent,
     HelloIntent,
     Intent,
-    INTENTS,
     IntentError,
     MoveIntent,
     PauseIntent,
@@ -77,7 +77,7 @@ class ViewConnection:
     its topology message carries (None over the notebook's comm); `name`: for the log."""
 
     def __init__(self, session, pipe: Pipe, client_id: int | None = None, name: str = "a view",
-                 kind: str = "desktop", watch: bool = False):
+                 kind: str = "desktop", watch: bool = False) -> None:
         self.session = session
         self.pipe = pipe
         self.name = name

@@ -22,7 +22,7 @@ MAX_CONTROL_ID = 2**31
 class IntentError(ValueError):
     """A refused client message; `intent` is its type when that much was readable."""
 
-    def __init__(self, message: str, intent: str | None = None):
+    def __init__(self, message: str, intent: str | None = None) -> None:
         super().__init__(message)
         self.intent = intent
 

@@ -41,7 +41,7 @@ def holders_for(session) -> HolderRegistry:
 class HolderRegistry:
     """The views of one Session and their hands (see the module's docstring)."""
 
-    def __init__(self, session):
+    def __init__(self, session) -> None:
         self._session = weakref.ref(session)  # the registry above is keyed by the session: no strong way back
         self.hands = session.hands
         self._lock = threading.Lock()

@@ -40,7 +40,7 @@ class Refused(Exception):
 class PendingBudget:
     """The bytes all clients of one server have received in unfinished messages, bounded by `limit`."""
 
-    def __init__(self, limit: int = MAX_TOTAL_PENDING_BYTES):
+    def __init__(self, limit: int = MAX_TOTAL_PENDING_BYTES) -> None:
         self.limit = int(limit)
         self.used = 0
 
@@ -59,7 +59,7 @@ class BoundedUnChunker:
     release_pending_messages). `close(reason)` ends the client's connection when it is refused."""
 
     def __init__(self, budget: PendingBudget | None = None, close: Callable[[str], None] | None = None,
-                 name: str = "a client", max_bytes: int = MAX_MESSAGE_BYTES):
+                 name: str = "a client", max_bytes: int = MAX_MESSAGE_BYTES) -> None:
         self.max_bytes = int(max_bytes)
         self.budget = budget if budget is not None else PendingBudget()
         self.close = close or (lambda reason: None)
@@ -139,7 +139,7 @@ class _BoundedTable(dict):
     """The server protocol's table of un-chunkers: whatever wslink puts in for a new client, it gets a bounded one
     sharing the server's budget; a client that goes releases its share."""
 
-    def __init__(self, handler, budget: PendingBudget):
+    def __init__(self, handler, budget: PendingBudget) -> None:
         super().__init__()
         self.handler = handler
         self.budget = budget

@@ -50,7 +50,7 @@ class Peer:
 class Outbox:
     """The frames and messages of one session for all its views (see the module's docstring)."""
 
-    def __init__(self, session: Session):
+    def __init__(self, session: Session) -> None:
         self._session = weakref.ref(session)  # the registry below is keyed by the session: no strong way back
         self._lock = threading.Lock()
         self._latest: Frame | None = None

@@ -31,8 +31,8 @@ from trame.app import get_server
 from wslink.websocket import LinkProtocol
 
 from ...backend import presets as _presets
-from ..model import Session
 from ...backend.io import TooManyVertices
+from ..model import Session
 from ..model.panel import EXPORT_CHOICES, REACH_HELP
 from ..transport.limits import bound_messages
 from . import lan as _lan
@@ -53,21 +53,21 @@ TRIGGERS = ("set_param", "set_metric", "set_colour", "set_radius", "set_position
 class _ClientWatch(LinkProtocol):
     """Counts the page's websocket clients (for /api/state)."""
 
-    def __init__(self, app: SomApp):
+    def __init__(self, app: SomApp) -> None:
         super().__init__()
         self._app = app
 
-    def onConnect(self, request, client_id):  # noqa: N802 (wslink's name)
+    def onConnect(self, request, client_id) -> None:  # noqa: N802 (wslink's name)
         self._app.clients.add(str(client_id))
 
-    def onClose(self, client_id):  # noqa: N802
+    def onClose(self, client_id) -> None:  # noqa: N802
         self._app.clients.discard(str(client_id))
 
 class SomApp:
     """The trame app around one Session: the page, the panel's state and triggers, the clay view's hub and the
     panel pump."""
 
-    def __init__(self, session: Session, server=None, title: str = "somwidget", fresh=None):
+    def __init__(self, session: Session, server=None, title: str = "somwidget", fresh=None) -> None:
         self.session = session
         self.fresh = fresh if fresh is not None else session.preset  # what "Start fresh" loads after a recovery
         self.xr_token: str | None = None  # the LAN access token, when served beyond loopback
@@ -282,26 +282,26 @@ class SomApp:
             server.trigger(name)(getattr(self.panel_state if hasattr(self.panel_state, name) else self, name))
 
         @state.change("preset_name")
-        async def _preset_changed(preset_name, **_):
+        async def _preset_changed(preset_name, **_) -> None:
             await self.choose_preset(preset_name)
 
         @state.change("mesh_upload")
-        async def _mesh_uploaded(mesh_upload, **_):
+        async def _mesh_uploaded(mesh_upload, **_) -> None:
             if mesh_upload:
                 await self.upload_mesh(mesh_upload)
 
         @state.change("session_upload")
-        async def _session_uploaded(session_upload, **_):
+        async def _session_uploaded(session_upload, **_) -> None:
             if session_upload:
                 await self.upload_session(session_upload)
 
         @state.change("param_symmetry")
-        def _symmetry(param_symmetry, **_):
+        def _symmetry(param_symmetry, **_) -> None:
             if bool(param_symmetry) != self.session.parameters["symmetry"]:
                 self.panel_state.set_param("symmetry", bool(param_symmetry))
 
         @state.change("param_group")
-        def _group(param_group, **_):
+        def _group(param_group, **_) -> None:
             if isinstance(param_group, str) and param_group != self.session.parameters["group"]:
                 self.panel_state.set_group(param_group)
 
@@ -309,7 +309,7 @@ class SomApp:
         ctrl.on_server_ready.add(self._on_ready)
         server.add_protocol_to_configure(lambda protocol: protocol.registerLinkProtocol(_ClientWatch(self)))
 
-    def _on_ready(self, **_):
+    def _on_ready(self, **_) -> None:
         if self._pump_task is None:
             self._pump_task = asyncio.get_event_loop().create_task(self.panel_state.pump())
 

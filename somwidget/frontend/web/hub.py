@@ -56,7 +56,7 @@ class _Client:
     """One websocket client: the pipe of its ViewConnection (a queue of JSON texts, sent first, and a slot for the
     latest frame; from another thread both are handed to the loop) and its counters."""
 
-    def __init__(self, cid: int, ws: web.WebSocketResponse, remote: str | None):
+    def __init__(self, cid: int, ws: web.WebSocketResponse, remote: str | None) -> None:
         self.id = cid
         self.ws = ws
         self.remote = remote
@@ -335,7 +335,7 @@ class ViewHub:
         if len(client.errors) > MAX_ERRORS:
             client.drop(b"too many refused messages")
 
-    async def close(self, *_):
+    async def close(self, *_) -> None:
         for c in list(self.clients.values()):
             await c.ws.close(code=1001, message=b"server shutdown")
 

@@ -406,7 +406,7 @@ class LanConfig:
     token: str
     bind: str = ""
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not self.bind:
             object.__setattr__(self, "bind", self.host)
 

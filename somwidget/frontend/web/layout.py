@@ -15,7 +15,6 @@ from ..model.panel import GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
 from ..model.variants import VARIANTS_HELP
 from .state_guard import state_key
 
-
 #: The page's keyboard shortcuts: Ctrl+Z undoes, Ctrl+Shift+Z or Ctrl+Y redoes (Cmd on a Mac), except while a text
 #: field has the focus (its own undo).
 SHORTCUTS_JS = """

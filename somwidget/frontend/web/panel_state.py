@@ -27,7 +27,7 @@ PANEL_HZ = 8
 class PanelState:
     """One session's panel model in one trame server's state (see the module's docstring)."""
 
-    def __init__(self, session: Session, state):
+    def __init__(self, session: Session, state) -> None:
         self.session = session
         self.panel = PanelModel(session)
         self.state = state
@@ -237,7 +237,7 @@ class PanelState:
         vary = [name for name in (s.variants_vary or []) if name in self.panel.varied]
         loop = asyncio.get_running_loop()
 
-        def progress(done, total):
+        def progress(done, total) -> None:
             loop.call_soon_threadsafe(self._set_variants_progress, 100.0 * done / max(1, total))
 
         def run():

@@ -61,7 +61,7 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
         app.ctrl.on_server_bind.add(lambda wslink_server: _lan.apply_lan(wslink_server, lan_cfg))
     session.start()
 
-    def announce(**_):
+    def announce(**_) -> None:
         bound = app.server.port
         if lan_cfg is not None:
             print(_lan.announcement(lan_cfg, bound), flush=True)

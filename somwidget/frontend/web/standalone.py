@@ -25,7 +25,7 @@ class XRServer:
     names are answered."""
 
     def __init__(self, session, host: str = "127.0.0.1", port: int = 0, token: str | None = None, ssl_context=None,
-                 dist=None):
+                 dist=None) -> None:
         from . import lan
 
         host = lan.normalise_host(host) or "127.0.0.1"
@@ -101,7 +101,7 @@ class XRServer:
         if loop is None or self._thread is None:
             return
         if loop.is_running():
-            async def shutdown():
+            async def shutdown() -> None:
                 await self.hub.close()
                 loop.stop()
             asyncio.run_coroutine_threadsafe(shutdown(), loop)
