@@ -144,6 +144,22 @@ def test_winners_are_the_nodes_the_bindings_took(device):
     assert som.winners()[0] == 40  # the node it grabbed, though the clay moved under it
 
 
+def test_distance_rows_give_the_dense_table_s_weights(device):
+    """A drag of a handle beside a point control under 4-fold symmetry, in distance rows mode (the point members'
+    rows fetched each cycle, cycles launched one by one) and with the dense table (captured runs): the same weights
+    but for the rows' cut of rates below 2^-24."""
+    faces, p = sphere()
+    size = metrics.bounding_diagonal(p)
+    soms = [kept(faces, p, p[[72, 250]], [0.23 * size, 0.0], device, Symmetry.radial(4, 2), distances=distances,
+                 smoothing=0.2, smoothing_rule="taubin") for distances in ("rows", "dense")]
+    for som in soms:
+        drag(som, 0, p[72] * 1.3, frames=3, settle=False)
+        som.step(40)
+    rows, dense = (som.weights.astype(np.float64) for som in soms)
+    assert np.abs(rows - dense).max() < 1e-5 * size
+    assert np.abs(dense - p).max() > 0.05 * size
+
+
 # ------------------------------------------------------------------------------------------- bounded
 @pytest.mark.parametrize("group", ["mirror", "radial-16", "radial-8-mirror"])
 @pytest.mark.parametrize("smoothing", [0.0, 0.3])
