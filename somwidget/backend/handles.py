@@ -28,7 +28,7 @@ import numpy as np
 import warp as wp
 
 from .metrics import bounding_diagonal
-from .shaping_kernels import FIND_STRETCH, shaping_kernels
+from .shaping_kernels import FIND_STRETCH, clear_flag, shaping_kernels
 from .som_controls import Controls
 from .som_model import SomModel
 from .som_state import KEY_NONE, SomState
@@ -79,6 +79,9 @@ class Handles:
     def _layout(self, controls: Controls) -> None:
         """The slot arrays for the controls' structure (count, group order, which have a radius); made again, and
         every binding ended, when it changes."""
+        last = self.controls
+        if last is not None and controls.radii is last.radii and controls.order == last.order:
+            return  # (a move keeps the radii array: the same structure, found without a look)
         structure = (len(controls.values), controls.order, tuple((controls.radii > 0).tolist()))
         if structure == self._structure:
             return
@@ -122,6 +125,8 @@ class Handles:
 
     def adopt(self, controls: Controls) -> None:
         """The Som's controls are now `controls` (their members and radii go up with the next run)."""
+        if controls is self.controls:
+            return
         self._layout(controls)
         self.controls = controls
         if controls.radii.any() or controls.symmetry is not None:
@@ -248,7 +253,7 @@ class Handles:
         wp.launch(kern.seed, dim=rows, device=dev, inputs=[self.rebind, self.slot_of_row, self.winners, self.patch])
 
         def round_():
-            self.changed.zero_()
+            wp.launch(clear_flag, dim=1, device=dev, inputs=[self.changed])
             wp.launch(kern.flood, dim=rows, device=dev,
                       inputs=[state.w, self.rebind, self.slot_of_row, self.winners, self.radius, self.position,
                               model.offsets, model.neighbors, self.patch, self.changed])

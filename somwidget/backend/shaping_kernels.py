@@ -73,6 +73,12 @@ def corner(w: Any) -> wp.vec3d:
     return wp.vec3d(wp.float64(w[0]), wp.float64(w[1]), wp.float64(w[2]))
 
 
+@wp.kernel(enable_backward=False)
+def clear_flag(flag: wp.array(dtype=wp.int32)):
+    """flag[0] = 0, as a kernel: a conditional node's body holds kernels (a memset there needs a newer CUDA)."""
+    flag[0] = 0
+
+
 @functools.cache
 def shaping_kernels(n_dims: int) -> SimpleNamespace:
     """The shaping cycle's kernels for weights of n_dims features (compiled once per device on first use)."""
@@ -131,10 +137,10 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def advance(slot_of_row: wp.array(dtype=wp.int32), live: wp.array(dtype=wp.int32),
                 members: wp.array(dtype=vec), radius: wp.array(dtype=wp.float32), position: vec,
-                places: wp.array(dtype=vec), rebind: wp.array(dtype=wp.int32), moved: wp.array(dtype=wp.int32),
+                places: wp.array(dtype=vec), rebind: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32),
                 changed: wp.array(dtype=wp.int32)):
         """Step 3 (a) for handle row r: a live binding whose place differs from its member steps towards it by at
-        most STEP r and is marked for binding again (rebind[r]; moved and changed set, cleared before)."""
+        most STEP r and is marked for binding again (rebind[r]; stepped and changed set, both 0 before)."""
         r = wp.tid()
         j = slot_of_row[r]
         rebind[r] = 0
@@ -154,7 +160,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                     p = p + (m - p) * (most / gap)
                 places[j] = p
                 rebind[r] = 1
-                moved[0] = 1
+                stepped[0] = 1
                 changed[0] = 1
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
@@ -217,9 +223,13 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def carry(slot_of_row: wp.array(dtype=wp.int32), live: wp.array(dtype=wp.int32),
               patch: wp.array2d(dtype=wp.float32), places: wp.array(dtype=vec), winner_anchors: wp.array(dtype=vec),
-              anchors: wp.array(dtype=vec), weights: wp.array(dtype=vec), held: wp.array(dtype=wp.int32)):
-        """Step 3 (b) for node v: onto its target when a live binding holds it (held[v] = 1), else left (0)."""
+              anchors: wp.array(dtype=vec), weights: wp.array(dtype=vec), held: wp.array(dtype=wp.int32),
+              stepped: wp.array(dtype=wp.int32)):
+        """Step 3 (b) for node v: onto its target when a live binding holds it (held[v] = 1), else left (0); thread 0
+        clears `stepped` for the next cycle's `advance` (read by then)."""
         v = wp.tid()
+        if v == 0:
+            stepped[0] = 0
         num = vec()
         den = wp.float32(0.0)
         miss = wp.float32(1.0)

@@ -122,14 +122,13 @@ class ShapingPath:
                           inputs=[state.w, h.members, h.keys, h.point_controls, h.order, schedule.table, self.counter,
                                   (parity + i) % 2, model.distances, model.slot_of])
             if live:
-                h.stepped.zero_()
                 wp.launch(kern.advance, dim=h.n_rows, device=dev,
                           inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.rebind,
                                   h.stepped, h.changed])
                 wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
                 wp.launch(kern.carry, dim=n, device=dev,
                           inputs=[h.slot_of_row, h.live_dev, h.patch, h.places, h.winner_anchors, h.anchors, state.w,
-                                  h.held_nodes])
+                                  h.held_nodes, h.stepped])
             if steps:
                 self._smooth(model, state, pulls, parts if volume else None, taubin)
 
