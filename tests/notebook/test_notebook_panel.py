@@ -291,8 +291,8 @@ def test_clay_widget_protocol_over_the_comm(shown):
     view._on_message(view, {"type": "move", "index": 99, "position": [0, 0, 0]}, [])
     assert "out of range" in rec.of("error")[-1][0]["message"]
     # a parameter by the declaration's name, checked against its bounds
-    view._on_message(view, {"type": "set", "name": "reach", "value": 0.2}, [])
-    assert session.parameters["reach"] == 0.2
+    view._on_message(view, {"type": "set", "name": "reach", "value": 0.2}, [])  # taken on the training thread
+    wait_for(lambda: session.parameters["reach"] == 0.2, what="the reach set")
     view._on_message(view, {"type": "set", "name": "reach", "value": 1.5}, [])
     assert "reach" in rec.of("error")[-1][0]["message"] and session.parameters["reach"] == 0.2
     # frames keep coming from the sender thread as the session publishes them

@@ -105,7 +105,7 @@ console.log(JSON.stringify({ out, refused }));
 
 #: Arguments for each wire type's field, as a view would pass them.
 SAMPLES = {"id": 3, "position": [0.5, -0.25, 1.0], "radius": 0.3, "t": 12.5, "name": "reach", "value": 0.2,
-           "points": [[0.0, 0.0, 0.0], [1.0, 0.5, 0.25]]}
+           "points": [[0.0, 0.0, 0.0], [1.0, 0.5, 0.25]], "kind": "headset"}
 
 
 @needs_node
@@ -140,7 +140,7 @@ console.log(JSON.stringify(out));
 HANDED = {"topology": ("onTopology", lambda j: [j]), "grabs": ("onGrabs", lambda j: [j["grabs"]]),
           "controls": ("onControls", lambda j: [j["ids"], j]), "error": ("onError", lambda j: [j]),
           "pong": ("onPong", lambda j: [j]), "status": ("onServerStatus", lambda j: [j]),
-          "autosave": ("onAutosave", lambda j: [j])}
+          "autosave": ("onAutosave", lambda j: [j]), "presence": ("onPresence", lambda j: [j["hands"]])}
 
 
 @needs_node
@@ -149,7 +149,10 @@ def test_link_hands_every_server_message_to_a_view_handler(tmp_path):
                                         n_nodes=3, triangles=[0, 1, 2], segments=[0, 1], points=False,
                                         bounds={"min": [0, 0, 0], "max": [1, 1, 1]}, control_radius=0.1,
                                         colour_space="hs", feature_names=["x", "y", "z"]),
-               messages.GrabsMessage(grabs=[messages.HeldControl(index=0, id=4, own=True)]),
+               messages.GrabsMessage(grabs=[messages.HeldControl(index=0, id=4, own=True, hand=2, holder="headset 2",
+                                                                 colour="#2e8b3e")]),
+               messages.PresenceMessage(hands=[messages.PresentHand(id=2, kind="headset", name="headset 2",
+                                                                    colour="#2e8b3e", holds=[4], you=True)]),
                messages.ControlsMessage(ids=[4], radii=[0.0], strokes=[1]),
                messages.ErrorMessage(message="no", intent="grab"), messages.PongMessage(t=1.5),
                messages.StatusMessage.of(0.002, 30.0), messages.AutosaveMessage.of("disk full")]

@@ -86,6 +86,14 @@ class Client:
         return await self.until(lambda m: isinstance(m, dict) and m.get("type") == "error")
 
 
+def grabs_are(m, *expected) -> bool:
+    """A grabs message listing exactly the (index, id, own) of `expected`, each with its holder's name and colour."""
+    if not (isinstance(m, dict) and m.get("type") == "grabs"):
+        return False
+    return ([(g["index"], g["id"], g["own"]) for g in m["grabs"]] == list(expected)
+            and all(g["holder"] and g["colour"].startswith("#") for g in m["grabs"]))
+
+
 async def connect(cs, srv, **kw) -> Client:
     ws = await cs.ws_connect(srv.base + "/view/ws", **kw)
     c = Client(ws)
@@ -336,12 +344,13 @@ def test_two_clients_share_the_session_and_grabs(srv, session):
             a = await connect(cs, srv)
             b = await connect(cs, srv)
             await a.send({"type": "grab", "index": 3})
-            await b.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [
-                {"index": 3, "id": 3, "own": False}])
+            m = await b.until(lambda m: grabs_are(m, (3, 3, False)))
+            holder = m["grabs"][0]["holder"]
+            assert holder.startswith("desktop ")
             err = await b.error_for({"type": "grab", "index": 3})
-            assert "held by another client" in err["message"]
+            assert f"control 3 is held by {holder}" in err["message"]
             err = await b.error_for({"type": "move", "index": 3, "position": [0, 0, 0]})
-            assert "not held by this client" in err["message"]
+            assert f"move: control 3 is held by {holder}" in err["message"]
             target = [-2.0, 0.5, 0.4]
             await a.send({"type": "move", "index": 3, "position": target})
             f = await b.until(lambda m: isinstance(m, dict) and "control_positions" in m
@@ -350,8 +359,7 @@ def test_two_clients_share_the_session_and_grabs(srv, session):
             await a.ws.close()  # goes away holding control 3
             await b.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [])
             await b.send({"type": "grab", "index": 3})
-            await b.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [
-                {"index": 3, "id": 3, "own": True}])
+            await b.until(lambda m: grabs_are(m, (3, 3, True)))
             await b.send({"type": "release", "index": 3})
             await b.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [])
             await b.ws.close()
@@ -372,10 +380,9 @@ def test_the_old_route_xr_ws_is_the_same_views_socket(srv, session):
             await old.until(lambda m: isinstance(m, dict) and "positions" in m)
             assert old.topology["n_vertices"] == a.topology["n_vertices"] == 602
             await a.send({"type": "grab", "index": 5})
-            await old.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [
-                {"index": 5, "id": session.control_ids[5], "own": False}])
+            m = await old.until(lambda m: grabs_are(m, (5, session.control_ids[5], False)))
             err = await old.error_for({"type": "grab", "index": 5})
-            assert "held by another client" in err["message"]
+            assert f"control 5 is held by {m['grabs'][0]['holder']}" in err["message"]
             await a.send({"type": "release", "index": 5})
             await old.until(lambda m: isinstance(m, dict) and m.get("type") == "grabs" and m["grabs"] == [])
             await a.ws.close()
@@ -528,7 +535,8 @@ def test_a_clay_past_the_streaming_limit_streams_a_decimated_mesh_on_its_trained
 def test_a_control_removed_elsewhere_does_not_redirect_a_held_drag(srv, session):
     """The attack of issue 17 (item 4): a headset holds control 3 (by its id, as the clients send it); the desktop
     removes control 0. The headset's next move moves the same control (now at index 2), never the one that slid
-    into index 3; when the desktop then removes the held control itself, the grab ends with a message."""
+    into index 3; the held control itself is refused to the desktop; when the controls are replaced, the grab ends
+    with a message."""
     async def main():
         async with aiohttp.ClientSession() as cs:
             a = await connect(cs, srv)
@@ -550,7 +558,9 @@ def test_a_control_removed_elsewhere_does_not_redirect_a_held_drag(srv, session)
             # an old client naming the place instead of the id is refused, not redirected
             err = await a.error_for({"type": "move", "index": 3, "position": [0, 0, 0]})
             assert "not held by this client" in err["message"]
-            session.remove_control(2)  # the held control itself goes
+            with pytest.raises(ValueError, match="control 2 is held by desktop"):
+                session.remove_control(2)  # the held control itself: refused to every other hand
+            session.set_controls(np.delete(session.controls, 2, axis=0))  # the controls replaced: it goes
             m = await a.until(lambda m: m.get("type") == "error" and "was removed while you held" in m["message"])
             assert str(held_id) in m["message"]
             assert {"type": "grabs", "grabs": []} in a.messages  # and every client saw the grab end

@@ -595,7 +595,7 @@ def test_another_tab_closing_leaves_the_drag_alone(browser, server):
 def test_a_drag_goes_on_with_its_control_when_another_tab_removes_one_before_it(browser, server):
     """Interaction in two tabs: tab A holds a control with the mouse; tab B removes control 0 from its panel. A's
     mouse keeps moving the same control (now one place earlier), never the one that slid into its place, and A's
-    release lets it go."""
+    release lets it go. The removal and the drag are two undo steps, in the order they completed."""
     a = open_page(browser, server)
     b = open_page(browser, server)
     try:
@@ -620,7 +620,12 @@ def test_a_drag_goes_on_with_its_control_when_another_tab_removes_one_before_it(
         after = np.array(st["session"]["controls"])
         assert np.linalg.norm(after[i - 1, :3] - before[i, :3]) > 0.1, "A's control stopped following the mouse"
         np.testing.assert_array_equal(after[i], before[i + 1])  # the control that slid into A's place: untouched
-        # what happened during the drag is one step (the gesture's): one undo brings the car back
+        # the removal (completed first) and the drag are a step each: the first undo takes back the drag, and
+        # keeps the removal; the second brings the car back
+        steps = st["session"]["history"][0]
+        a.locator("#undo-button").click()
+        st = server.wait(lambda s: s["session"]["history"][0] == steps - 1, what="the drag taken back")
+        assert len(st["session"]["controls"]) == 8
         a.locator("#undo-button").click()
         server.wait(lambda s: len(s["session"]["controls"]) == 9, what="the removed control back")
         server.idle()

@@ -138,7 +138,7 @@ class SessionAutosave:
 
     def snapshot(self) -> Saving:
         """What a save writes now (caller holds the Som's lock and the state lock, no intent queued)."""
-        undo, redo = self.timeline.history.steps()
+        undo, redo = self.timeline.steps()  # open gestures that changed something: their state before, the newest
         return Saving(self.state.capture(), undo, redo, gesture=self.timeline.gesture_recorded)
 
     def quiet(self) -> bool:

@@ -15,6 +15,7 @@ from ...backend.presets import parse_hex_colour, rgb_to_colour_dims
 from ...backend.som_controls import check_radii
 from .state import ModellingState
 from .frames import FrameStream
+from .hands import Hands
 from .operations import SetControls
 from .timeline import Timeline
 from .trainer import Trainer
@@ -54,11 +55,12 @@ def check_radius(name: str, value) -> float:
 class ControlEdits:
     """The controls of one session and their intents (see the module's docstring)."""
 
-    def __init__(self, state: ModellingState, timeline: Timeline, trainer: Trainer, frames: FrameStream):
+    def __init__(self, state: ModellingState, timeline: Timeline, trainer: Trainer, frames: FrameStream, hands: Hands):
         self.state = state
         self.timeline = timeline
         self.trainer = trainer
         self.frames = frames
+        self.hands = hands  # a control another hand holds is refused (hands.py)
 
     def _queue(self, controls: np.ndarray, keep: bool = False) -> None:
         """The new controls (and the radii and strokes the clay holds) to the Som (caller holds state.lock); inside a
@@ -93,6 +95,7 @@ class ControlEdits:
         """One control's values changed by `edit(i, values) -> values` (its checks inside), as one step; the other
         samples of its stroke change by as much."""
         state = self.state
+        self.hands.claim(index, control_id)
         with self.timeline.step(step), state.lock:
             i = (check_index("control", index, state.controls.shape[0]) if control_id is None
                  else self.index_of(control_id))
@@ -138,6 +141,8 @@ class ControlEdits:
     def set_radius(self, index, radius) -> None:
         state = self.state
         r = check_radius("every control's radius" if index is None else f"control {index} radius", radius)
+        if index is not None:
+            self.hands.claim(index)
         with self.timeline.step(f"parameter:radius:{'all' if index is None else index}"), state.lock:
             radii = state.radii.copy()
             if index is None:
@@ -236,6 +241,7 @@ class ControlEdits:
 
     def remove(self, index) -> None:
         state = self.state
+        self.hands.claim(index)
         with self.timeline.step("remove"), state.lock:
             i = check_index("control", index, state.controls.shape[0])
             run = state.run_of(i)  # a stroke goes whole

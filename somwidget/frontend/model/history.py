@@ -174,6 +174,11 @@ class History:
         if self._undo and self._undo[-1] is step:
             self._discard([self._undo.pop()])
 
+    def drop_redo(self) -> None:
+        """Forget the newest redo step (a view's redo of its own undo took that undo back: nothing is left to redo)."""
+        if self._redo:
+            self._discard([self._redo.pop()])
+
     def undo(self, current: Step) -> Step | None:
         """The state before the latest step (None if there is none); `current` becomes the next redo."""
         return self._travel(self._undo, self._redo, current)

@@ -48,6 +48,7 @@ from .autosave import recover as recover_session
 from .controls import ControlEdits
 from .files import SessionFiles
 from .frames import Frame, FrameListener, FrameStream
+from .hands import Hand, Hands, redo_own, undo_own
 from .operations import Publish, Reset, Restart
 from .refining import refined_preset
 from .settings import SessionSettings
@@ -104,7 +105,8 @@ class Session:
                                step_fraction)
         store = _store if _store is not None or not autosave else _store_for(origin, self.notices)
         self.timeline = Timeline(self.modelling, self.trainer, self._rebuild, self._install_frame, shelf=store)
-        self.control_edits = ControlEdits(self.modelling, self.timeline, self.trainer, self.frames)
+        self.hands = Hands(self.modelling, self.timeline)  # who is on the session and what each holds (hands.py)
+        self.control_edits = ControlEdits(self.modelling, self.timeline, self.trainer, self.frames, self.hands)
         self.settings = SessionSettings(self.modelling, self.timeline, self.trainer)
         self.files = SessionFiles(self.modelling, self.timeline, self._build, self._install, self.max_vertices)
         self.frames.install(self._make_frame(0))
@@ -133,6 +135,7 @@ class Session:
         self.frames.install(self._make_frame(0))
 
     def _after_turn(self) -> None:
+        self.hands.prune()  # grabs of controls that are gone end
         if self.autosave is not None and not self.trainer.closed:
             self.autosave.if_due()
 
@@ -296,12 +299,14 @@ class Session:
         return SessionHistory(self.timeline)
 
     def begin_gesture(self) -> None:
-        """A gesture starts (a drag's press): the intents until `end_gesture()` make one undo step."""
-        self.timeline.begin_gesture()
+        """Python's gesture starts: its intents until `end_gesture()` make one undo step, whatever the views do
+        meanwhile (each view's drag is a gesture of its own: hands.py), and the controls it changes are held by
+        Python until it ends. A gesture left open ends at the next one."""
+        self.hands.begin_script()
 
     def end_gesture(self) -> None:
-        """The gesture ends (a drag's release): the step is complete and goes to the autosave."""
-        self.timeline.end_gesture()
+        """Python's gesture ends: the step is complete and goes to the autosave."""
+        self.hands.end_script()
 
     @contextlib.contextmanager
     def gesture(self):
@@ -312,13 +317,20 @@ class Session:
         finally:
             self.end_gesture()
 
-    def undo(self) -> bool:
-        """Go back one step, exactly; False if there is no step to undo."""
-        return self.timeline.undo()
+    def undo(self, hand: Hand | None = None) -> bool:
+        """Go back one step: controls, parameters, weights and s exactly as before it, nothing trains. False if
+        there is no step to undo. `hand` (a view's, hands.py): that person's own latest step first."""
+        return self.timeline.undo() if hand is None else undo_own(self, hand)
 
-    def redo(self) -> bool:
-        """Go forward again after an undo, exactly; False if there is nothing to redo."""
-        return self.timeline.redo()
+    def redo(self, hand: Hand | None = None) -> bool:
+        """Go forward again after an undo, exactly; False if there is nothing to redo. `hand`: after that person's
+        undo of an older step, that undo is taken back."""
+        return self.timeline.redo() if hand is None else redo_own(self, hand)
+
+    def submit(self, call):
+        """Run `call()` on the training thread between two steps (a server's event loop never waits for the Som's
+        lock); returns a concurrent.futures.Future of its result."""
+        return self.trainer.post(call)
 
     # -- intents: controls (session.control_edits) ----------------------------------------------------------------
     def move_control(self, index: int | None, position, *, control_id: int | None = None) -> None:

@@ -4,16 +4,23 @@
 
 Between two steps the thread applies every queued operation to the Som in order (several control moves that arrive
 within one frame collapse into one `set_controls`), then steps k cycles, k sized so that a step takes about
-`step_fraction / frame_rate` seconds, and publishes a frame. Once s reaches S (or while paused or held) it sleeps
+`step_fraction / frame_rate` seconds, and publishes a frame. A cycle early in the schedule (after a restart: a drag's
+frames, a setting) costs far more than one late in a long run, so the steps after a restart are sized apart
+(`Pace`): a drag's first frame stays within a frame's time. Once s reaches S (or while paused or held) it sleeps
 until the next operation. The caller of an intent never waits for a training step.
+
+A caller that must not wait even for the Som's lock (a server's event loop) posts its intents instead (`post`): the
+thread runs them in order between two turns, where nothing else holds the lock.
 """
 
 from __future__ import annotations
 
+import collections
 import logging
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import Future
 
 from ...backend.schedule import MAX_ITERATIONS
 from .state import ModellingState
@@ -21,6 +28,21 @@ from .frames import Frame, FrameStream
 from .operations import Operation, SetControls
 
 log = logging.getLogger(__name__)
+
+
+class Pace:
+    """Cycles a step, sized to a step's time budget from the time a cycle took (a moving average)."""
+
+    def __init__(self):
+        self.cycle_time = 0.0
+        self.cycles = 1
+
+    def tune(self, per_cycle: float, budget: float) -> None:
+        per_cycle = max(per_cycle, 1e-7)
+        self.cycle_time = per_cycle if self.cycle_time == 0.0 else 0.7 * self.cycle_time + 0.3 * per_cycle
+        target = int(budget / self.cycle_time)
+        # grow at most x2 a frame so one slow first call does not overshoot
+        self.cycles = max(1, min(target, 2 * self.cycles, MAX_ITERATIONS))
 
 
 class Trainer:
@@ -43,8 +65,12 @@ class Trainer:
         self.thread_error: str | None = None  # why the thread stopped, if it ever did on an error
         self.closed = False
         self.busy = False  # applying operations or stepping
-        self.cycle_time = 0.0
-        self.cycles_per_step = 1
+        self.pace = Pace()  # steps that go on with the schedule
+        self.restart_pace = Pace()  # steps right after a restart took the schedule back
+        self._stepped_to = 0  # the iteration the last step reached
+        self.calls: collections.deque = collections.deque()  # (call, Future): posted, run between two turns
+        self.posted = 0  # calls posted so far
+        self.ran = 0  # calls run so far
 
     # -- lifetime ----------------------------------------------------------------------------------------------
     def start(self) -> None:
@@ -67,14 +93,59 @@ class Trainer:
             t.join(timeout)
         return not already
 
+    def post(self, call: Callable[[], object]) -> Future:
+        """Run `call()` on the training thread between two turns, after the calls posted before it; returns its Future
+        (its result, or the exception it raised). Without a running thread (never started) it runs here and now; on a
+        closed session (or a thread stopped on an error) the Future holds a RuntimeError."""
+        future: Future = Future()
+        with self.state.wake:
+            if self.closed or self.thread_error is not None:
+                future.set_exception(RuntimeError(self.thread_error or "session is closed"))
+                return future
+            if self.thread is not None and self.thread.is_alive():
+                self.calls.append((call, future))
+                self.posted += 1
+                self.state.wake.notify_all()
+                return future
+        _run(call, future)
+        return future
+
+    def _run_calls(self) -> None:
+        """The posted calls, in order (on the training thread, holding no lock); then a moment for the threads that
+        wait on them (their replies go out before the next step)."""
+        ran = False
+        while True:
+            with self.state.wake:
+                if not self.calls:
+                    if ran:
+                        time.sleep(0)
+                    return
+                call, future = self.calls.popleft()
+            ran = True
+            _run(call, future)
+            with self.state.wake:
+                self.ran += 1
+                self.state.wake.notify_all()
+
+    def _fail_calls(self, why: str) -> None:
+        with self.state.wake:
+            calls, self.calls = list(self.calls), collections.deque()
+            self.ran += len(calls)
+        for _, future in calls:
+            future.set_exception(RuntimeError(why))
+
     def stopped(self) -> bool:
         """No more intents will be handled: closed, never started, or stopped on an error."""
         t = self.thread
         return self.closed or t is None or self.thread_error is not None or not t.is_alive()
 
     def reset_pace(self) -> None:
-        self.cycle_time = 0.0
-        self.cycles_per_step = 1
+        self.pace, self.restart_pace = Pace(), Pace()
+
+    @property
+    def cycle_time(self) -> float:
+        """Seconds per cycle as the schedule goes on (moving average; 0 before any step)."""
+        return self.pace.cycle_time
 
     # -- the queue ---------------------------------------------------------------------------------------------
     def enqueue(self, op: Operation, intent: bool = True) -> None:
@@ -147,28 +218,34 @@ class Trainer:
                 state.paused = True
                 self.busy = False
                 state.wake.notify_all()
+            self._fail_calls(self.thread_error)
 
     def _loop(self) -> None:
         wake = self.state.wake
         while True:
             with wake:
-                while not self.closed and not self.ops and not self.should_step():
+                while not self.closed and not self.calls and not self.ops and not self.should_step():
                     self.busy = False
                     wake.notify_all()
                     wake.wait()
                 if self.closed:
                     self.busy = False
                     wake.notify_all()
-                    return
+                    break
                 self.busy = True
+            self._run_calls()
+            with wake:
+                if not self.ops and not self.should_step():
+                    continue
             t0 = time.monotonic()
             self._turn()
             self.after_turn()
             with wake:  # pace: a frame every 1 / frame_rate seconds while training; wake early for a new intent
-                if self.should_step() and not self.ops and not self.closed:
+                if self.should_step() and not self.ops and not self.calls and not self.closed:
                     rest = 1.0 / self.frame_rate - (time.monotonic() - t0)
                     if rest > 0:
                         wake.wait(rest)
+        self._fail_calls("session is closed")
 
     def _turn(self) -> None:
         """Apply the queued operations, step, publish a frame. Never raises."""
@@ -190,7 +267,8 @@ class Trainer:
                 stepping = self.should_step()
                 dragging = state.gesture
             if stepping:
-                k = self.cycles_per_step
+                pace = self.restart_pace if som.iteration < self._stepped_to else self.pace
+                k = pace.cycles
                 if drained and not dragging:  # a fresh intent: a short first step gets the change out sooner
                     k = max(1, k // 4)
                 k = max(1, min(k, som.iterations - som.iteration))
@@ -200,17 +278,10 @@ class Trainer:
                     som.synchronize()
                 dt = time.perf_counter() - t
                 if cycles > 0:
-                    self._tune(dt / cycles)
+                    pace.tune(dt / cycles, self.step_fraction / self.frame_rate)
                     state.unsaved = True
+            self._stepped_to = som.iteration
             return self.make_frame(cycles)
-
-    def _tune(self, per_cycle: float) -> None:
-        per_cycle = max(per_cycle, 1e-7)
-        self.cycle_time = per_cycle if self.cycle_time == 0.0 else 0.7 * self.cycle_time + 0.3 * per_cycle
-        budget = self.step_fraction / self.frame_rate
-        target = int(budget / self.cycle_time)
-        # grow at most x2 a frame so one slow first call does not overshoot
-        self.cycles_per_step = max(1, min(target, 2 * self.cycles_per_step, MAX_ITERATIONS))
 
     def _error_frame(self, message: str) -> Frame | None:
         """After a failed step: pause, show `message`, and return a frame to publish. Never raises."""
@@ -242,7 +313,7 @@ class Trainer:
                 t = self.thread
                 if self.thread_error is not None or (t is not None and not self.closed and not t.is_alive()):
                     return False
-                if not (self.ops or self.busy or (t is not None and self.should_step())):
+                if not (self.calls or self.ops or self.busy or (t is not None and self.should_step())):
                     return True
                 if t is None or self.closed:
                     return not self.ops
@@ -257,6 +328,14 @@ class Trainer:
         deadline = time.monotonic() + timeout
         wake = self.state.wake
         with wake:
+            posted = self.posted  # the calls posted so far first: the intents they queue count too
+            while self.ran < posted:
+                if self.stopped():
+                    return False
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                wake.wait(min(left, 0.05))
             target = self.enqueued
             while self.frames.latest.applied < target:
                 if self.stopped():
@@ -266,3 +345,13 @@ class Trainer:
                     return False
                 wake.wait(min(left, 0.05))
         return True
+
+
+def _run(call: Callable[[], object], future: Future) -> None:
+    """`call()` into `future` (never raises)."""
+    if not future.set_running_or_notify_cancel():
+        return
+    try:
+        future.set_result(call())
+    except BaseException as exc:  # the caller's to see
+        future.set_exception(exc)

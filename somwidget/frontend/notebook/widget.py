@@ -10,7 +10,8 @@ The widget is the pipe and the lifecycle of one `ViewConnection` (transport/conn
 of the web hub is: a JSON message is a custom message, a frame a custom message {"type": "frame"} with the frame as
 its one buffer. Threads: the session's outbox (transport/outbox.py) wakes the widget on the training thread; a sender
 thread of the widget hands the connection the latest frame, at most `max_fps` a second (a slow kernel link skips
-frames, never queues them). Intents arrive on the kernel's thread (`_on_message`).
+frames, never queues them). Intents arrive on the kernel's thread (`_on_message`) and run on the session's training
+thread; its replies, and news of the session's other hands (holders.py), come from there.
 """
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ import traitlets
 from ..client import view_module
 from ..transport import messages
 from ..transport.connection import ViewConnection
-from ..transport.holders import HolderRegistry
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +63,7 @@ class ClayWidget(anywidget.AnyWidget):
         self.session = session
         self.max_fps = float(max_fps)
         self.frames_sent = 0
-        self.connection = ViewConnection(session, HolderRegistry(session), self, name="the notebook view")
+        self.connection = ViewConnection(session, self, name="the notebook view", kind="notebook")
         self.outbox = self.connection.outbox
         self._fresh = True  # a frame came that is not sent yet
         self._wake = threading.Condition()

@@ -4,11 +4,18 @@ the notebook widget (notebook/widget.py) each make one per view and only adapt t
 A `ViewConnection` sends its view what the session's outbox made for it (`send_latest`: the topology when its
 generation is new, the controls when they changed, the frame, the autosave's state, a status line), takes the view's
 messages (`receive`: parsed against messages.py, then handed to the intent's handler in HANDLERS, the one dispatch
-table), replies (a pong, an error naming what was refused) and holds controls through a `HolderRegistry`.
+table), replies (a pong, an error naming what was refused) and is one hand of the session (model/hands.py) in the
+session's one `HolderRegistry` (holders.py): who is there, who holds what.
+
+Intents run on the session's training thread (`Session.submit`), in the order they came, so the thread that
+receives them (a server's event loop) never waits for the Som; a view's moves of one control still waiting there
+collapse into the latest. A ping is answered there too while intents of its view wait there (a view that has its
+pong knows the intents before it were taken), else at once, as are a hello and a hand (they touch nothing of the
+clay): a view that only watches is never held up by another's intents.
 
 The pipe is the host's: `send_json(dict)` for a JSON message and `send_frame(bytes)` for a binary frame, both
-returning at once (the hub queues; the widget's comm sends). Threads: `send_latest` may run on a sender thread while
-`receive` runs on another (the widget's kernel thread); a lock keeps each view's packets in order.
+returning at once and callable from any thread (the hub queues on its loop; the widget's comm sends). A lock keeps
+each view's packets in order.
 """
 
 from __future__ import annotations
@@ -16,14 +23,18 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
+from concurrent.futures import Future
 from typing import Protocol
 
-from .holders import HolderRegistry
+import numpy as np
+
+from .holders import holders_for
 from .messages import (
     AddIntent,
     ControlIntent,
     ErrorMessage,
     GrabIntent,
+    HandIntent,
     HelloIntent,
     Intent,
     INTENTS,
@@ -61,13 +72,12 @@ class Pipe(Protocol):
 
 
 class ViewConnection:
-    """One view of `session` through `pipe`, holding controls in `holders` (see the module's docstring).
-    `client_id`: the id its topology message carries (None over the notebook's comm); `name`: for the log."""
+    """One view of `session` through `pipe`, a hand of kind `kind` (see the module's docstring). `client_id`: the id
+    its topology message carries (None over the notebook's comm); `name`: for the log."""
 
-    def __init__(self, session, holders: HolderRegistry, pipe: Pipe, client_id: int | None = None,
-                 name: str = "a view"):
+    def __init__(self, session, pipe: Pipe, client_id: int | None = None, name: str = "a view",
+                 kind: str = "desktop"):
         self.session = session
-        self.holders = holders
         self.pipe = pipe
         self.name = name
         self.outbox = outbox_for(session)
@@ -75,20 +85,27 @@ class ViewConnection:
         self.intents = 0  # intents done
         self.refused = 0  # messages refused
         self._lock = threading.Lock()
-        holders.join(self)
+        self._moves: dict = {}  # control -> its latest move still waiting for the training thread
+        self._moves_lock = threading.Lock()
+        self._waiting = 0  # intents posted to the training thread and not done yet
+        self.holders = holders_for(session)
+        self.hand = self.holders.join(self, kind)
 
     @property
     def client_id(self) -> int | None:
         return self.peer.id
 
     def open(self) -> None:
-        """A view came: the topology and the latest frame, then who holds what."""
+        """A view came: the topology and the latest frame, then who holds what and who is there."""
         self.send_latest()
-        self.send(self.holders.message_for(self))
+        self.holders.tell(self)
 
-    def close(self) -> None:
-        """The view went: what it held is let go (each drag a completed step)."""
-        self.holders.leave(self)
+    def close(self) -> Future:
+        """The view went: it is sent nothing more, and what it held is let go (each drag a completed step) on the
+        training thread."""
+        hand = self.holders.leave(self)
+        hands = self.holders.hands
+        return self.session.submit(lambda: hands.leave(hand) if hand is not None else None)
 
     # -- session -> view ----------------------------------------------------------------------------------------
     def send(self, message: ServerMessage) -> None:
@@ -96,8 +113,8 @@ class ViewConnection:
 
     def send_latest(self, frame=None, again: bool = False) -> bool:
         """Hand the pipe what the outbox made for `frame` (default: the latest) unless this view had it already;
-        `again`: the topology and the frame again whatever it had (a new output of the view). Grabs of controls
-        the frame no longer has end here. False when there was nothing new."""
+        `again`: the topology and the frame again whatever it had (a new output of the view). False when there was
+        nothing new."""
         with self._lock:
             frame = self.outbox.latest if frame is None else frame
             if again:
@@ -109,20 +126,57 @@ class ViewConnection:
                     self.pipe.send_frame(packet)
                 else:
                     self.send(packet)
-        self.holders.prune(frame.control_ids)
         return True
 
     # -- view -> session ----------------------------------------------------------------------------------------
-    def receive(self, message) -> bool:
-        """Take one message of the view (JSON text; bytes are refused): do what it asks and reply, or send back an
-        ErrorMessage saying why it was refused. False when refused."""
+    def receive(self, message) -> Future:
+        """Take one message of the view (JSON text; bytes are refused): its intent runs on the training thread (a
+        hello, a hand here and now), with a reply, or an ErrorMessage saying why it was refused. Returns a
+        Future of True (done) or False (refused)."""
+        self.holders.hands.heard(self.hand)
         try:
             intent = parse_intent(message, self.session.n_controls)
         except IntentError as exc:
             self._refuse(exc, exc.intent)
-            return False
+            return _done(False)
+        if type(intent) in AT_ONCE or (isinstance(intent, PingIntent) and not self._waiting):
+            return _done(self._handle(intent))
+        if isinstance(intent, MoveIntent):
+            key = (intent.id, intent.index)
+            with self._moves_lock:
+                waiting = key in self._moves
+                self._moves[key] = intent
+            if waiting:  # the move waiting there takes this position
+                self.intents += 1
+                return _done(True)
+            return self._submit(lambda: self._handle(self._latest_move(key)))
+        return self._submit(lambda: self._handle(intent))
+
+    def _latest_move(self, key) -> MoveIntent:
+        with self._moves_lock:
+            return self._moves.pop(key)
+
+    def _submit(self, call: Callable[[], bool]) -> Future:
+        done: Future = Future()
+        with self._moves_lock:
+            self._waiting += 1
+
+        def finish(future: Future) -> None:
+            with self._moves_lock:
+                self._waiting -= 1
+            if future.exception() is None:
+                done.set_result(future.result())
+            else:  # a closed session
+                self._refuse(future.exception(), None)
+                done.set_result(False)
+
+        self.session.submit(call).add_done_callback(finish)
+        return done
+
+    def _handle(self, intent: Intent) -> bool:
         try:
-            reply = HANDLERS[type(intent)](self, intent)
+            with self.holders.hands.acting(self.hand):
+                reply = HANDLERS[type(intent)](self, intent)
         except (ValueError, RuntimeError, TypeError) as exc:  # the session's own checks (or a closed session)
             self._refuse(exc, intent.type)
             return False
@@ -148,39 +202,63 @@ class ViewConnection:
         return ids[intent.index]
 
 
+def _done(value) -> Future:
+    future: Future = Future()
+    future.set_result(value)
+    return future
+
+
 # -- the intents' handlers: (connection, intent) -> a ServerMessage to that view alone (anything else: no reply) ---
 def _hello(c: ViewConnection, _: HelloIntent) -> None:
     c.send_latest(again=True)  # the topology again, then the latest frame
-    c.send(c.holders.message_for(c))
+    c.holders.tell(c)
+
+
+def _hand(c: ViewConnection, intent: HandIntent) -> None:
+    c.holders.set_kind(c, intent.kind)
 
 
 def _grab(c: ViewConnection, intent: GrabIntent) -> None:
-    c.holders.grab(c, c.control_of(intent))
+    c.holders.hands.grab(c.hand, c.control_of(intent))
 
 
 def _move(c: ViewConnection, intent: MoveIntent | ReleaseIntent) -> None:
+    """A move of a held control; a release lets go (after its position, where it differs from the last move)."""
+    hands = c.holders.hands
     cid = intent.id if intent.id is not None else c.control_of(intent)
-    c.holders.check(c, cid, intent.type)
+    hands.check_holds(c.hand, cid, intent.type)
     try:
-        if intent.position is not None:
-            c.session.move_control_id(cid, list(intent.position))
+        if intent.position is not None and (isinstance(intent, MoveIntent) or _moved(c.session, cid, intent.position)):
+            with hands.acting(c.hand, cid):
+                c.session.move_control_id(cid, list(intent.position))
     finally:
         if isinstance(intent, ReleaseIntent):
-            c.holders.release(c, cid)
+            hands.release(c.hand, cid)
+
+
+def _moved(session, control_id: int, position) -> bool:
+    """A release's position differs from where the control is (its last move)."""
+    at = session.controls[session.index_of_control(control_id)][list(session.layout.position)]
+    return not np.array_equal(at, np.asarray(position, np.float32))
 
 
 def _remove(c: ViewConnection, intent: RemoveIntent) -> None:
-    c.session.remove_control(c.session.index_of_control(c.control_of(intent)))
+    cid = c.control_of(intent)
+    with c.holders.hands.acting(c.hand, cid):
+        c.session.remove_control(c.session.index_of_control(cid))
 
 
 def _radius(c: ViewConnection, intent: RadiusIntent) -> None:
-    c.session.set_control_radius(c.session.index_of_control(c.control_of(intent)), intent.radius)
+    cid = c.control_of(intent)
+    with c.holders.hands.acting(c.hand, cid):  # the radius of a control it drags joins the drag
+        c.session.set_control_radius(c.session.index_of_control(cid), intent.radius)
 
 
-#: The one dispatch table: each intent's class -> what it does.
+#: The one dispatch table: each intent's class -> what it does (on the training thread, but for AT_ONCE).
 HANDLERS: dict[type[Intent], Callable[[ViewConnection, Intent], ServerMessage | None]] = {
     HelloIntent: _hello,
     PingIntent: lambda c, intent: PongMessage(t=intent.t),
+    HandIntent: _hand,
     GrabIntent: _grab,
     MoveIntent: _move,
     ReleaseIntent: _move,
@@ -189,11 +267,13 @@ HANDLERS: dict[type[Intent], Callable[[ViewConnection, Intent], ServerMessage | 
     AddIntent: lambda c, intent: c.session.add_control(list(intent.position), intent.radius),
     StrokeIntent: lambda c, intent: c.session.add_stroke([list(p) for p in intent.points], intent.radius),
     SetIntent: lambda c, intent: c.session.set_parameter(intent.name, intent.value),
-    UndoIntent: lambda c, _: c.session.undo(),
-    RedoIntent: lambda c, _: c.session.redo(),
+    UndoIntent: lambda c, _: c.session.undo(c.hand),
+    RedoIntent: lambda c, _: c.session.redo(c.hand),
     ResetIntent: lambda c, _: c.session.reset(),
     TrainIntent: lambda c, _: c.session.train(),
     PauseIntent: lambda c, _: c.session.pause(),
 }
+#: Intents answered on the thread that receives them: they touch nothing of the clay.
+AT_ONCE = frozenset({HelloIntent, HandIntent})
 if set(HANDLERS) != set(INTENTS.values()):
     raise TypeError(f"intents without a handler in HANDLERS: {set(INTENTS.values()) - set(HANDLERS)}")

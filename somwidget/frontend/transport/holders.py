@@ -1,110 +1,137 @@
-"""Who holds which control of a session, for the views that share one registry (connection.py's `ViewConnection`s).
+"""Who is on a session and who holds which control, for its views: one `HolderRegistry` per session (`holders_for`),
+shared by every view of it (the web hub's websocket clients, each notebook widget: connection.py's
+`ViewConnection`s) and built on the session's hands (model/hands.py), which Python shares too.
 
-Controls are held by their stable id (`Session.control_ids`), not by their place: a control removed elsewhere
-cannot turn a drag into a drag of another control. A grab begins a gesture (one undo step) and its release ends it;
-a control is held by one view at a time; a view that goes away mid-grab ends its gestures; a held control that
-disappears ends its grab, and its holder is told (`prune`). Every view of the registry is sent a `GrabsMessage`
-whenever who holds what changes.
-
-A view here is anything with `send(ServerMessage)` (a ViewConnection). The web hub keeps one registry for all its
-websocket clients, each notebook widget one of its own.
+Each view is a hand of its own. Every view is sent who is there (a `PresenceMessage`) and who holds what (a
+`GrabsMessage`) whenever that changes, from whichever thread changed it (a view's pipe takes messages from any
+thread). A view whose grab ended without its release (the control removed, the view silent for SILENT_SECONDS) is
+told why. While the session has views, a watcher thread lets go of the grabs of silent hands once a second.
 """
 
 from __future__ import annotations
 
 import threading
+import weakref
 from typing import Protocol
 
-from .messages import ErrorMessage, GrabsMessage, HeldControl, ServerMessage
+from ..model.hands import SILENT_SECONDS, Hand, Lost
+from .messages import ErrorMessage, GrabsMessage, HeldControl, PresenceMessage, PresentHand, ServerMessage
+
+#: Seconds between two looks for silent hands.
+WATCH_PERIOD = 1.0
 
 
 class View(Protocol):
     def send(self, message: ServerMessage) -> None: ...
 
 
+_REGISTRIES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_REGISTRIES_LOCK = threading.Lock()
+
+
+def holders_for(session) -> HolderRegistry:
+    """The session's one registry of holders (made with its first view)."""
+    with _REGISTRIES_LOCK:
+        registry = _REGISTRIES.get(session)
+        if registry is None:
+            registry = _REGISTRIES[session] = HolderRegistry(session)
+        return registry
+
+
 class HolderRegistry:
-    """The grabs of the views of one Session (see the module's docstring)."""
+    """The views of one Session and their hands (see the module's docstring)."""
 
     def __init__(self, session):
-        self.session = session
+        self._session = weakref.ref(session)  # the registry above is keyed by the session: no strong way back
+        self.hands = session.hands
         self._lock = threading.Lock()
-        self._views: list[View] = []
-        self._holders: dict[int, View] = {}  # control id -> the view holding it
+        self._views: dict[View, Hand] = {}
+        self._watcher: threading.Thread | None = None
+        self.hands.subscribe(self._changed)
 
     # -- views ----------------------------------------------------------------------------------------------------
-    def join(self, view: View) -> None:
+    def join(self, view: View, kind: str) -> Hand:
+        """A view came: its hand (the other views are told; it is told when it opens: `tell`)."""
+        hand = self.hands.join(kind)
         with self._lock:
-            self._views.append(view)
+            self._views[view] = hand
+        self._watch()
+        return hand
 
-    def leave(self, view: View) -> None:
-        """`view` went away: its grabs end, each drag a completed step."""
+    def leave(self, view: View) -> Hand | None:
+        """A view went: it is sent nothing more. Its hand is returned for the caller to let go (`Hands.leave`, which
+        may wait for the trainer: a server posts it)."""
         with self._lock:
-            if view in self._views:
-                self._views.remove(view)
-            released = [cid for cid, who in self._holders.items() if who is view]
-            for cid in released:
-                del self._holders[cid]
-        if released:
-            self._changed()
-            self.session.end_gesture()
+            return self._views.pop(view, None)
 
-    # -- grabs ----------------------------------------------------------------------------------------------------
-    def grab(self, view: View, control_id: int) -> None:
-        """`view` holds the control; ValueError while another view holds it."""
+    def hand_of(self, view: View) -> Hand | None:
         with self._lock:
-            holder = self._holders.get(control_id)
-            if holder is not None and holder is not view:
-                raise ValueError(f"grab: control {control_id} is held by another client")
-            self._holders[control_id] = view
-        if holder is None:
-            self.session.begin_gesture()  # grab to release: one undo step
-        self._changed()
+            return self._views.get(view)
 
-    def check(self, view: View, control_id: int, kind: str) -> None:
-        """ValueError unless `view` holds the control (a move or a release)."""
-        if self._holders.get(control_id) is not view:
-            raise ValueError(f"{kind}: control {control_id} is not held by this client; send grab first")
-
-    def release(self, view: View, control_id: int) -> None:
-        with self._lock:
-            if self._holders.get(control_id) is not view:
-                return
-            del self._holders[control_id]
-        self._changed()
-        self.session.end_gesture()
-
-    def prune(self, control_ids) -> None:
-        """Grabs of controls that are gone (removed, or the controls replaced) end; each holder is told."""
-        present = set(control_ids)
-        with self._lock:
-            gone = [(cid, who) for cid, who in self._holders.items() if cid not in present]
-            for cid, _ in gone:
-                del self._holders[cid]
-        if not gone:
-            return
-        self._changed()
-        self.session.end_gesture()
-        for cid, who in gone:
-            who.send(ErrorMessage(message=f"control {cid} was removed while you held it: the drag ended",
-                                  intent="grab"))
+    def set_kind(self, view: View, kind: str) -> None:
+        hand = self.hand_of(view)
+        if hand is not None:
+            self.hands.set_kind(hand, kind)
 
     # -- what views are told ------------------------------------------------------------------------------------
-    def held(self) -> dict[int, View]:
-        """Control index (now) -> the view holding it."""
-        ids = self.session.control_ids
+    def held(self) -> dict[int, View | None]:
+        """Control index (now) -> the view holding it (None: Python)."""
+        ids = self._ids()
         with self._lock:
-            return {ids.index(cid): who for cid, who in self._holders.items() if cid in ids}
+            views = {hand: view for view, hand in self._views.items()}
+        return {ids.index(cid): views.get(hand) for cid, hand in self.hands.held().items() if cid in ids}
 
     def message_for(self, view: View) -> GrabsMessage:
         """The controls held now as `view` sees them (own: held by it), with each control's index now."""
-        ids = self.session.control_ids
-        with self._lock:
-            holders = sorted(self._holders.items(), key=lambda item: item[0])
-        return GrabsMessage(grabs=[HeldControl(index=ids.index(cid), id=cid, own=who is view)
-                                   for cid, who in holders if cid in ids])
+        ids = self._ids()
+        mine = self.hand_of(view)
+        return GrabsMessage(grabs=[HeldControl(index=ids.index(cid), id=cid, own=hand is mine, hand=hand.id,
+                                               holder=hand.name, colour=hand.colour)
+                                   for cid, hand in sorted(self.hands.held().items()) if cid in ids])
 
-    def _changed(self) -> None:
+    def presence_for(self, view: View) -> PresenceMessage:
+        """Who is on the session, as `view` sees it (you: itself)."""
+        mine = self.hand_of(view)
+        return PresenceMessage(hands=[PresentHand(id=h.id, kind=h.kind, name=h.name, colour=h.colour,
+                                                  holds=list(holds), you=h is mine)
+                                      for h, holds in self.hands.present()])
+
+    def tell(self, view: View) -> None:
+        """Send `view` who holds what and who is there."""
+        view.send(self.message_for(view))
+        view.send(self.presence_for(view))
+
+    def _ids(self) -> tuple:
+        session = self._session()
+        return session.control_ids if session is not None else ()
+
+    def _changed(self, lost: list[Lost]) -> None:
+        """The hands changed (any thread): every view is told; a view that lost a grab is told why."""
         with self._lock:
-            views = list(self._views)
+            views = dict(self._views)
         for view in views:
-            view.send(self.message_for(view))
+            self.tell(view)
+        for gone in lost:
+            for view, hand in views.items():
+                if hand is gone.hand:
+                    view.send(ErrorMessage(message=gone.why, intent="grab"))
+
+    # -- silent hands ---------------------------------------------------------------------------------------------
+    def _watch(self) -> None:
+        """Start the watcher unless it runs."""
+        with self._lock:
+            if self._watcher is not None and self._watcher.is_alive():
+                return
+            self._watcher = threading.Thread(target=self._watch_loop, name="somwidget-holders", daemon=True)
+            self._watcher.start()
+
+    def _watch_loop(self) -> None:
+        stop = threading.Event()
+        while not stop.wait(WATCH_PERIOD):
+            session = self._session()
+            with self._lock:
+                if session is None or session.closed or not self._views:
+                    self._watcher = None
+                    return
+            del session
+            self.hands.quiet(SILENT_SECONDS)

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, ClassVar, Literal
 
 from ..model import settings as _settings
+from ..model.hands import KINDS as HAND_KINDS
 from .fields import (
     MAX_COORDINATE,
     MAX_STROKE_POINTS,
@@ -68,6 +69,8 @@ def setting_names() -> tuple[str, ...]:
 
 #: A "set" intent's name: a declared setting.
 SettingName = Annotated[str, OneOf(setting_names, "parameter")]
+#: A "hand" intent's kind: what a view is, as the others see it.
+HandKind = Annotated[str, OneOf(lambda: HAND_KINDS, "kind of view")]
 
 
 def check_setting(name: str, value):
@@ -220,11 +223,15 @@ class ControlsMessage(ServerMessage):
 
 @dataclass(frozen=True)
 class HeldControl:
-    """A control held now: its index now, its id, and whether the view it is sent to holds it."""
+    """A control held now: its index now, its id, whether the view it is sent to holds it, and who does (the
+    holder's hand id, name and colour, as a `PresenceMessage` lists them)."""
 
     index: int
     id: int
     own: bool
+    hand: int
+    holder: str
+    colour: str
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -233,6 +240,28 @@ class GrabsMessage(ServerMessage):
 
     type: ClassVar[str] = "grabs"
     grabs: list[HeldControl]
+
+
+@dataclass(frozen=True)
+class PresentHand:
+    """One hand on the session: a view ("desktop", "notebook", "headset") or "python" (while it holds something),
+    its name and colour, the ids of the controls it holds, and whether it is the view this is sent to."""
+
+    id: int
+    kind: str
+    name: str
+    colour: str
+    holds: list[int]
+    you: bool
+
+
+@dataclass(frozen=True, kw_only=True)
+class PresenceMessage(ServerMessage):
+    """Who is on the session now, in the order they came: sent to every view whenever someone comes, goes, grabs or
+    lets go."""
+
+    type: ClassVar[str] = "presence"
+    hands: list[PresentHand]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -290,8 +319,8 @@ class FrameMessage(ServerMessage):
 
 #: Server -> client JSON messages by their "type" (the frame's envelope aside: the view's pipe opens it).
 SERVER_MESSAGES: dict[str, type[ServerMessage]] = {
-    m.type: m for m in (TopologyMessage, GrabsMessage, ControlsMessage, ErrorMessage, PongMessage, StatusMessage,
-                        AutosaveMessage)
+    m.type: m for m in (TopologyMessage, GrabsMessage, PresenceMessage, ControlsMessage, ErrorMessage, PongMessage,
+                        StatusMessage, AutosaveMessage)
 }
 
 
@@ -349,8 +378,9 @@ class MoveIntent(ControlIntent):
 
 @dataclass(frozen=True, kw_only=True)
 class ReleaseIntent(ControlIntent):
-    """Let go of a held control (optionally at a last `position`). A held control removed elsewhere ends the grab,
-    with an error message to the view that held it."""
+    """Let go of a held control: the drag ends, nothing more. A last `position` (older clients) moves it first only
+    where it differs from the last move. A held control removed elsewhere ends the grab, with an error message to the
+    view that held it."""
 
     type: ClassVar[str] = "release"
     position: Point | None = None
@@ -424,6 +454,15 @@ class HelloIntent(Intent):
 
 
 @dataclass(frozen=True, kw_only=True)
+class HandIntent(Intent):
+    """What this view is, as the others see it (a `PresenceMessage`): "desktop" (a view's connection starts as one;
+    a notebook's as "notebook"), or "headset" while the page is in its immersive session."""
+
+    type: ClassVar[str] = "hand"
+    kind: HandKind
+
+
+@dataclass(frozen=True, kw_only=True)
 class ResetIntent(Intent):
     """Train the whole schedule again from the start mesh."""
 
@@ -446,14 +485,14 @@ class PauseIntent(Intent):
 
 @dataclass(frozen=True, kw_only=True)
 class UndoIntent(Intent):
-    """Take back the last step."""
+    """Take back this view's own latest step (others' steps after it stay), else the last step."""
 
     type: ClassVar[str] = "undo"
 
 
 @dataclass(frozen=True, kw_only=True)
 class RedoIntent(Intent):
-    """Bring back the step last undone."""
+    """Bring back the step last undone (after this view's undo of an older step of its own: that step)."""
 
     type: ClassVar[str] = "redo"
 
@@ -462,7 +501,7 @@ class RedoIntent(Intent):
 INTENTS: dict[str, type[Intent]] = {
     i.type: i for i in (GrabIntent, MoveIntent, ReleaseIntent, ResetIntent, TrainIntent, PauseIntent, UndoIntent,
                         RedoIntent, PingIntent, HelloIntent, SetIntent, AddIntent, RemoveIntent, RadiusIntent,
-                        StrokeIntent)
+                        StrokeIntent, HandIntent)
 }
 
 
@@ -546,6 +585,7 @@ def parse_intent(message, n_controls: int) -> Intent:
 __all__ = ["PROTOCOL_VERSION", "MAGIC", "MAX_FPS", "STATUS_PERIOD", "MAX_MESSAGE_BYTES", "MAX_COORDINATE",
            "MAX_STROKE_POINTS", "FLAGS", "HEADER_FORMAT", "HEADER_SIZE", "FrameHeader", "FrameArray", "FRAME_ARRAYS",
            "frame_size", "ServerMessage", "TopologyMessage", "ControlsMessage", "HeldControl", "GrabsMessage",
+           "PresentHand", "PresenceMessage", "HandIntent",
            "ErrorMessage", "PongMessage", "StatusMessage", "AutosaveMessage", "FrameMessage", "SERVER_MESSAGES",
            "Intent", "ControlIntent", "INTENTS", "IntentError", "parse_intent", "declared_fields", "settings_schema",
            "check_setting"]

@@ -4,15 +4,16 @@ at /xr/ and the view's module at /xr/somview.js.
 
 `attach(server, session, token=None)` adds the routes to a running trame/wslink server (call it from
 `ctrl.on_server_bind`, whose argument is the wslink server) or to any aiohttp `web.Application`. One `ViewHub` per
-app holds the connected clients, each a `ViewConnection` (transport/connection.py) over its websocket, and one
-`HolderRegistry` for all of them; every client shares the one `Session`, so a desktop tab, the trame panel and a
-headset all see each other's moves.
+app holds the connected clients, each a `ViewConnection` (transport/connection.py) over its websocket and a hand in
+the session's one registry of holders (transport/holders.py, shared with its notebook widgets and Python); every
+client shares the one `Session`, so a desktop tab, the trame panel and a headset all see each other's moves.
 
 Threads: the session's outbox (transport/outbox.py) calls `ViewHub._on_frame` on the training thread; that only
-wakes the event loop. Everything else (encoding, sending, intents) happens on the event loop's thread. Each client
-has a slot for the latest frame and a bounded queue of JSON messages, sent first: a slow client gets the latest
-frame, never a backlog, and its replies never wait behind frames. A client whose queue overflows, or that stops
-reading (a send that does not finish within SEND_TIMEOUT), is dropped.
+wakes the event loop. Encoding and sending happen on the event loop's thread; intents run on the session's training
+thread (the loop never waits for the Som), whose replies and news come back through the client's pipe, which hands
+them to the loop. Each client has a slot for the latest frame and a bounded queue of JSON messages, sent first: a
+slow client gets the latest frame, never a backlog, and its replies never wait behind frames. A client whose queue
+overflows, or that stops reading (a send that does not finish within SEND_TIMEOUT), is dropped.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from aiohttp import WSMsgType, web
 from ..client import BUILD_HINT, DIST
 from ..transport import messages
 from ..transport.connection import ViewConnection
-from ..transport.holders import HolderRegistry
+from ..transport.holders import holders_for
 from ..transport.outbox import outbox_for
 from . import lan
 
@@ -53,12 +54,14 @@ NOT_BUILT = ('<!doctype html><meta charset="utf-8"><title>somwidget: the client 
 
 class _Client:
     """One websocket client: the pipe of its ViewConnection (a queue of JSON texts, sent first, and a slot for the
-    latest frame) and its counters."""
+    latest frame; from another thread both are handed to the loop) and its counters."""
 
     def __init__(self, cid: int, ws: web.WebSocketResponse, remote: str | None):
         self.id = cid
         self.ws = ws
         self.remote = remote
+        self.loop = asyncio.get_running_loop()
+        self.thread = threading.get_ident()
         self.texts: collections.deque = collections.deque()  # JSON messages, sent before any frame
         self.frame: bytes | None = None  # the latest frame not yet sent (a newer one replaces it)
         self.wake = asyncio.Event()
@@ -75,17 +78,33 @@ class _Client:
         return self.connection.refused if self.connection is not None else 0
 
     def send_json(self, message: dict) -> None:
+        if not self.closed:
+            self._on_loop(self._push, json.dumps(message))
+
+    def _push(self, text: str) -> None:
         if self.closed:
             return
         if len(self.texts) >= MAX_TEXTS:  # it does not read what it asked for: drop it, keep no more
             self.drop(b"too slow")
             return
-        self.texts.append(json.dumps(message))
+        self.texts.append(text)
         self.wake.set()
 
     def send_frame(self, data: bytes) -> None:
+        self._on_loop(self._take_frame, data)
+
+    def _take_frame(self, data: bytes) -> None:
         self.frame = data  # not sent yet: the newer frame replaces it
         self.wake.set()
+
+    def _on_loop(self, call, arg) -> None:
+        """`call(arg)` on the loop's thread, in the order handed, whichever thread hands it (a reply made on the
+        training thread stays before a pong answered later on the loop)."""
+        with contextlib.suppress(RuntimeError):  # the loop is closed: the server is going down
+            if threading.get_ident() == self.thread:
+                self.loop.call_soon(call, arg)
+            else:
+                self.loop.call_soon_threadsafe(call, arg)
 
     def drop(self, reason: bytes) -> None:
         self.closed = True
@@ -104,7 +123,7 @@ class ViewHub:
         self.dist = Path(dist) if dist is not None else DIST
         self.max_fps = float(max_fps)
         self.clients: dict[int, _Client] = {}
-        self.holders = HolderRegistry(session)
+        self.holders = holders_for(session)
         self.outbox = outbox_for(session)
         self.refused_total = 0
         self.intents_total = 0
@@ -209,9 +228,9 @@ class ViewHub:
             self._send_frame(client, frame)
 
     @property
-    def grabs(self) -> dict[int, int]:
-        """Control index (now) -> the id of the client holding it."""
-        return {index: view.client_id for index, view in self.holders.held().items()}
+    def grabs(self) -> dict[int, int | None]:
+        """Control index (now) -> the id of the client holding it (None: another view, or Python)."""
+        return {index: getattr(view, "client_id", None) for index, view in self.holders.held().items()}
 
     async def _sender(self, client: _Client) -> None:
         """Sends the client's JSON messages first, then its latest frame at most max_fps a second; a send that
@@ -263,8 +282,7 @@ class ViewHub:
             self._loop = asyncio.get_running_loop()
         client = _Client(self._next_id, ws, request.remote)
         client.transport = request.transport
-        client.connection = ViewConnection(self.session, self.holders, client, client_id=client.id,
-                                           name=f"view client {client.id}")
+        client.connection = ViewConnection(self.session, client, client_id=client.id, name=f"view client {client.id}")
         self._next_id += 1
         self.clients[client.id] = client
         log.info("view client %d connected from %s (%s)", client.id, request.remote, request.path)
@@ -290,9 +308,17 @@ class ViewHub:
         return ws
 
     def _receive(self, client: _Client, data) -> None:
-        """One message of a client to its connection; a client refused more than MAX_ERRORS times within
-        ERROR_WINDOW seconds is dropped."""
-        if client.connection.receive(data):
+        """One message of a client to its connection (its intent runs on the training thread, then is counted
+        here)."""
+        done = client.connection.receive(data)
+        if done.done():
+            self._counted(client, done.result())
+        else:
+            done.add_done_callback(lambda f: client._on_loop(lambda ok: self._counted(client, ok), f.result()))
+
+    def _counted(self, client: _Client, ok: bool) -> None:
+        """A client refused more than MAX_ERRORS times within ERROR_WINDOW seconds is dropped."""
+        if ok:
             self.intents_total += 1
             return
         self.refused_total += 1

@@ -72,6 +72,7 @@ export class Clay {
     this.pendingGroup = null; // a group a "controls" message announced, in effect from the next frame
     this.local = new Map(); // original index -> [x, y, z] model position while this client drags it
     this.held = new Set(); // original indices held by any client (server's grabs)
+    this.holders = new Map(); // original index -> its holder's colour ('#rrggbb'), for those other clients hold
     this.hover = new Set(); // effective indices hovered by an input
     this.radius = 1;
     this.controlRadius = 0.05;
@@ -325,7 +326,8 @@ export class Clay {
       if (p) m.position.set(p[0], p[1], p[2]);
       const held = this.held.has(i) || this.local.has(i);
       const hovered = this.hover.has(j);
-      const c = m.userData.colour.copy(held ? HELD : (m.userData.base || HELD));
+      const other = this.local.has(i) ? undefined : this.holders.get(i); // another hand's: drawn in its colour
+      const c = other ? m.userData.colour.set(other) : m.userData.colour.copy(held ? HELD : (m.userData.base || HELD));
       if (hovered && !held) c.lerp(WHITE, HOVER_LIGHTEN);
       const ghost = m.userData.mirror;
       const grow = (held ? (ghost ? 1.35 : 1.6) : hovered ? 1.3 : 1.0) * (ghost ? GHOST_SIZE : 1.0);

@@ -1,12 +1,15 @@
 // Holding controls: grab / move / release intents, the local preview while dragging, and the move -> mesh latency.
 //
 // While this client drags control i, its sphere (and each copy of it) follows the hand at once (a local
-// override); the server's frames bring the clay. Moves go out at most every MOVE_INTERVAL ms, the last one always.
+// override); the server's frames bring the clay. Moves go out at most every MOVE_INTERVAL ms, the last one always;
+// the release is bare (it ends the drag, nothing more). While it holds something and sends nothing (a hand held
+// still) the view pings every KEEPALIVE_MS: the server lets go of a silent view's controls.
 
 import { intents } from './protocol.js';
 
 const MOVE_INTERVAL = 22; // ms: about 45 moves a second at most
 const SETTLE_MS = 1000; // keep the local position after a release until a frame shows it (or this long)
+const KEEPALIVE_MS = 2000; // while holding, a ping when nothing else was sent for this long
 
 const round6 = (v) => Math.round(v * 1e6) / 1e6;
 
@@ -24,6 +27,7 @@ export class Grabs {
     this.answered = false; // a frame arrived that answers one of our moves and is not drawn yet
     this.lastDigest = 0;
     this.renamed = new Map(); // index a drag began at -> its control's index now
+    this.lastSent = 0; // when this view last sent a grab or a move (page clock, ms)
   }
 
   // A drag begun at index i whose control has since moved to another index (a control removed elsewhere): the
@@ -38,14 +42,19 @@ export class Grabs {
 
   begin(i) {
     if (this.active.has(i)) return false;
+    const id = this.clay.controlIds[i] ?? i;
+    if (this.clay.holders.has(i)) { // another hand holds it: the server says who (an error), nothing moves here
+      this.link.send(intents.grab(id));
+      return false;
+    }
     this.renamed.delete(i);
     const m = this.clay.controlAnchors[i];
     const p = m ? [m.position.x, m.position.y, m.position.z] : [0, 0, 0];
-    const id = this.clay.controlIds[i] ?? i;
     this.active.set(i, { id, began: i, pos: p, lastSent: 0, pending: null, sentPos: p.map(round6), moved: false });
     this.settling.delete(i);
     this.clay.setLocal(i, p);
     this.link.send(intents.grab(id));
+    this.lastSent = performance.now();
     return true;
   }
 
@@ -69,6 +78,7 @@ export class Grabs {
     const p = g.pending;
     g.pending = null;
     g.lastSent = now;
+    this.lastSent = now;
     g.sentPos = p;
     if (this.link.send(intents.move(g.id, p))) {
       this.moves += 1;
@@ -80,6 +90,9 @@ export class Grabs {
   flush() {
     const now = performance.now();
     for (const [i, g] of this.active) this.flushOne(i, g, now);
+    if (this.active.size && now - this.lastSent >= KEEPALIVE_MS && this.link.send(intents.ping(now))) {
+      this.lastSent = now;
+    }
     for (const [i, s] of this.settling) {
       if (now > s.until) {
         this.settling.delete(i);
@@ -95,17 +108,24 @@ export class Grabs {
     const g = this.active.get(i);
     if (!g) return;
     this.active.delete(i);
-    const p = g.pos.map(round6);
     const now = performance.now();
-    if (!g.moved) { // a click (a selection): let go where it was, nothing restarts
-      this.link.send(intents.release(g.id));
+    if (g.pending) { // the last move, not sent yet: now, whatever the interval
+      g.lastSent = -Infinity;
+      this.flushOne(i, g, now);
+    }
+    this.link.send(intents.release(g.id)); // bare: the drag ends where the last move put it, nothing restarts
+    if (!g.moved) { // a click (a selection): nothing moved
       this.clay.clearLocal(i);
       return;
     }
-    if (this.link.send(intents.release(g.id, p))) {
-      this.pendingMoves.push({ t: now, index: i, pos: p.map(Math.fround), digest: this.lastDigest });
+    const pos = g.sentPos.map(Math.fround); // where the server has it (a hand within a hair of it sent nothing more)
+    const shown = this.clay.controlAnchors[i]?.userData.server;
+    if (shown && pos.every((v, a) => v === shown[a])) { // a frame shows it there already: nothing to wait for
+      this.clay.clearLocal(i);
+      return;
     }
-    this.settling.set(i, { pos: p.map(Math.fround), until: now + SETTLE_MS });
+    this.clay.setLocal(i, g.sentPos);
+    this.settling.set(i, { pos, until: now + SETTLE_MS });
   }
 
   // Let go of control i at once, where the server has it (a new clay came mid-drag: its ids name other controls).
@@ -143,7 +163,8 @@ export class Grabs {
     this.clay.refreshControls();
   }
 
-  // The server says who holds what: a control we drag that another client holds is not ours.
+  // The server says who holds what: a control we drag that another client holds is not ours; the controls others
+  // hold are drawn in their holder's colour.
   onGrabs(list) {
     const held = new Set();
     for (const g of list) {
@@ -151,6 +172,7 @@ export class Grabs {
       if (!g.own && this.active.has(g.index)) this.cancel(g.index);
     }
     this.clay.held = held;
+    this.clay.holders = new Map(list.filter((g) => !g.own && g.colour).map((g) => [g.index, g.colour]));
     this.clay.refreshControls();
   }
 

@@ -77,6 +77,11 @@ export class ControlLabels {
       }
       const held = clay.held.has(i) || clay.local.has(i);
       if (d.classList.contains('held') !== held) d.classList.toggle('held', held);
+      const holder = clay.local.has(i) ? '' : clay.holders.get(i) || ''; // another hand's: in its colour (presence.js)
+      if (d.somHolder !== holder) {
+        d.somHolder = holder;
+        d.style.background = holder;
+      }
       const behind = this.occluded.has(j);
       if (d.classList.contains('behind') !== behind) d.classList.toggle('behind', behind);
     }

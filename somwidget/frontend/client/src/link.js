@@ -11,6 +11,7 @@ import { FRAME_MESSAGE, parseFrame } from './protocol.js';
 export const HANDLERS = {
   topology: (h, msg) => h.onTopology?.(msg),
   grabs: (h, msg) => h.onGrabs?.(msg.grabs),
+  presence: (h, msg) => h.onPresence?.(msg.hands), // who else is on the session, and what each holds
   controls: (h, msg) => h.onControls?.(msg.ids, msg), // the whole message: its group too
   error: (h, msg) => h.onError?.(msg),
   pong: (h, msg) => h.onPong?.(msg),

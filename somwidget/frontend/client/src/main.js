@@ -49,6 +49,7 @@ link = new Link(socketURL(), {
   ...handlers,
   onStatus: (s) => {
     handlers.onStatus(s);
+    if (s === 'connected' && state.mode) link.send(intents.hand('headset')); // a new connection starts as a desktop
     showStatus();
   },
   onError: (e) => {
@@ -115,6 +116,7 @@ const xr = new XRApp({
   renderer, scene, clay, grabs, menu, tools, radius: view.radius,
   onMode: (mode) => {
     state.mode = mode;
+    link.send(intents.hand(mode ? 'headset' : 'desktop')); // what the others see this view as
     if (!mode) {
       scene.background = view.background;
       if (state.frame) view.frame();
@@ -159,8 +161,10 @@ function showStatus() {
   ui.undo.disabled = !(f && f.canUndo);
   ui.redo.disabled = !(f && f.canRedo);
   menu.setLabel('train', trainLabel(f));
+  const others = view.presence.summary(); // who else is on the session, in the headset's menu
   menu.setStatus(state.autosave ? 'NOT SAVED: autosave failed, trying again' : f ? `${t ? t.title : ''}  ${
-    f.iteration}/${f.iterations}  ${f.running ? 'training' : f.paused ? 'paused' : 'converged'}` : text);
+    f.iteration}/${f.iterations}  ${f.running ? 'training' : f.paused ? 'paused' : 'converged'}${
+    others ? `  ${others}` : ''}` : text);
 }
 
 let lastStatus = 0;
@@ -190,7 +194,7 @@ window.somxr = {
     menuStatus: menu.statusText, link: { ...link.stats }, moves: grabs.moves, latencies: [...grabs.latencies],
     controlLatencies: [...grabs.controlLatencies], xr: { ...xr.stats }, pressed: [...menu.pressed], desktop: { ...desktop.stats },
     scale: clay.scale, stage: clay.stage.position.toArray(), inputs: xr.describeInputs(), tools: tools.describe(),
-    radii: [...clay.radii], strokes: [...clay.strokes],
+    radii: [...clay.radii], strokes: [...clay.strokes], presence: view.presence.describe(),
   }),
   controlWorld: (j) => clay.controlWorld(j)?.toArray() ?? null,
   controlScreen: (j) => {

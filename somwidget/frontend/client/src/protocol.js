@@ -80,7 +80,7 @@ export function parseFrame(buffer) {
 }
 
 // Server -> client JSON messages, by their type (a view's link hands each to its handler).
-export const SERVER_MESSAGES = ['topology', 'grabs', 'controls', 'error', 'pong', 'status', 'autosave'];
+export const SERVER_MESSAGES = ['topology', 'grabs', 'presence', 'controls', 'error', 'pong', 'status', 'autosave'];
 // Over the notebook's comm, a frame comes as this message with the frame as its one buffer.
 export const FRAME_MESSAGE = 'frame';
 
@@ -128,7 +128,15 @@ export const FRAME_MESSAGE = 'frame';
  * The controls held now, as the view it is sent to sees them.
  * @typedef {object} GrabsMessage
  * @property {'grabs'} type
- * @property {{index: number, id: number, own: boolean}[]} grabs
+ * @property {{index: number, id: number, own: boolean, hand: number, holder: string, colour: string}[]} grabs
+ */
+
+/**
+ * Who is on the session now, in the order they came: sent to every view whenever someone comes, goes, grabs or
+ * lets go.
+ * @typedef {object} PresenceMessage
+ * @property {'presence'} type
+ * @property {{id: number, kind: string, name: string, colour: string, holds: number[], you: boolean}[]} hands
  */
 
 /**
@@ -190,8 +198,9 @@ export const intents = {
   // Move a held control to `position` (model units).
   // (id: number, position: number[])
   move: (id, position) => ({ type: 'move', id, position }),
-  // Let go of a held control (optionally at a last `position`). A held control removed elsewhere ends the
-  // grab, with an error message to the view that held it.
+  // Let go of a held control: the drag ends, nothing more. A last `position` (older clients) moves it first
+  // only where it differs from the last move. A held control removed elsewhere ends the grab, with an error
+  // message to the view that held it.
   // (id: number, position: number[] (optional))
   release: (id, position) => compact({ type: 'release', id, position }),
   // Train the whole schedule again from the start mesh.
@@ -200,9 +209,9 @@ export const intents = {
   train: () => ({ type: 'train' }),
   // Pause training.
   pause: () => ({ type: 'pause' }),
-  // Take back the last step.
+  // Take back this view's own latest step (others' steps after it stay), else the last step.
   undo: () => ({ type: 'undo' }),
-  // Bring back the step last undone.
+  // Bring back the step last undone (after this view's undo of an older step of its own: that step).
   redo: () => ({ type: 'redo' }),
   // Answered at once with a `PongMessage` carrying the same `t`.
   // (t: number)
@@ -226,4 +235,8 @@ export const intents = {
   // A polyline of 2 to MAX_STROKE_POINTS points as one control (its samples act as one); radius optional.
   // (points: number[][], radius: number (optional))
   stroke: (points, radius) => compact({ type: 'stroke', points, radius }),
+  // What this view is, as the others see it (a `PresenceMessage`): "desktop" (a view's connection starts as
+  // one; a notebook's as "notebook"), or "headset" while the page is in its immersive session.
+  // (kind: string)
+  hand: (kind) => ({ type: 'hand', kind }),
 };

@@ -7,7 +7,8 @@
 // enlarged, a marker at the view's edge for each control out of sight; the camera (camera.js: nothing refits it, a
 // Refine neither), the mouse (desktop.js) and keys (keys.js), the selected control's handle (handle.js), radii
 // (radius.js: the ball, the disc under the cursor), strokes (stroke.js), the display settings (display.js) and the
-// view's bar (toolbar.js); a status line (iteration, frames/s drawn here, the server's cycle time).
+// view's bar (toolbar.js); a status line (iteration, frames/s drawn here, the server's cycle time); who else is
+// on the session (presence.js).
 
 import './colour.js';
 import * as THREE from 'three';
@@ -19,6 +20,7 @@ import { Grabs } from './grabs.js';
 import { Handle } from './handle.js';
 import { ControlLabels, LABEL_CSS } from './labels.js';
 import { RadiusBall, RadiusDisc } from './radius.js';
+import { PRESENCE_CSS, Presence } from './presence.js';
 import { StrokeDraw } from './stroke.js';
 import { TOOLBAR_CSS, Toolbar } from './toolbar.js';
 
@@ -34,7 +36,7 @@ const CSS = `
   background: #eef0f4; pointer-events: none; }
 .somview-error { position: absolute; left: 6px; top: 36px; right: 6px; font-size: 12px; padding: 3px 6px;
   background: #fde2e2; color: #8a1010; border-radius: 4px; pointer-events: none; }
-${LABEL_CSS}${TOOLBAR_CSS}`;
+${LABEL_CSS}${TOOLBAR_CSS}${PRESENCE_CSS}`;
 
 // The view's stylesheet, inside its own element (anywidget's way): it applies wherever the element lives, in a page
 // or in a shadow root (marimo renders widgets in one), and goes with it.
@@ -152,6 +154,7 @@ export class ClayView {
     this.errorBox.className = 'somview-error';
     this.errorBox.hidden = true;
     container.append(this.labels.layer, this.radiusLabel, this.statusLine, this.errorBox);
+    this.presence = new Presence(container, this.clay);
     this.toolbar = new Toolbar(container, act, () => ({ orthographic: this.rig.orthographicOn,
       stroke: this.desktop.strokeTool, display: this.display.describe() }));
     this.pixelScratch = new THREE.Vector3();
@@ -180,6 +183,7 @@ export class ClayView {
       onTopology: (t) => this.setTopology(t),
       onFrame: (f) => this.applyFrame(f),
       onGrabs: (list) => this.grabs.onGrabs(list),
+      onPresence: (hands) => this.presence.update(hands),
       onError: (e) => this.showError(e),
       onServerStatus: (s) => { this.state.cycleMs = s.cycle_ms; this.state.serverFps = s.fps; },
       onControls: (ids, msg) => {
@@ -187,6 +191,7 @@ export class ClayView {
         if (msg) this.clay.setRuns(msg); // the radii and strokes
         this.grabs.onControls(ids);
         this.radius.update();
+        this.presence.refresh();
       },
     };
   }
@@ -374,6 +379,7 @@ export class ClayView {
       radiusDisc: { ...this.disc.describe(), px: this.disc.disc.visible
         ? this.disc.disc.scale.x / this.pixelSize(this.disc.disc.position) : 0 }, newRadius: this.radius.newRadius, keptPlace: s.kept,
       numbered: Array.from({ length: clay.kEff }, (_, j) => clay.numbered(j)),
+      presence: this.presence.describe(),
       size: [this.renderer.domElement.clientWidth, this.renderer.domElement.clientHeight],
     };
   }
