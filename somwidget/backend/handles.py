@@ -80,9 +80,10 @@ class Handles:
         """The slot arrays for the controls' structure (count, group order, which have a radius); made again, and
         every binding ended, when it changes."""
         last = self.controls
-        if last is not None and controls.radii is last.radii and controls.order == last.order:
+        if last is not None and controls.radii is last.radii and controls.order == last.order and (
+                controls.strokes is last.strokes):
             return  # (a move keeps the radii array: the same structure, found without a look)
-        structure = (len(controls.values), controls.order, tuple((controls.radii > 0).tolist()))
+        structure = (len(controls.values), controls.order, tuple((controls.radii > 0).tolist()), controls.strokes)
         if structure == self._structure:
             return
         self._structure = structure
@@ -91,11 +92,17 @@ class Handles:
         k, order = len(controls.values), controls.order
         slots = k * order
         copies = np.arange(order)
-        handle = np.flatnonzero(controls.radii > 0)
         point = np.flatnonzero(controls.radii == 0)
         self.order = order
-        self.n_rows = len(handle) * order
-        self.rows = (handle[:, None] * order + copies).ravel().astype(np.int32)  # the slot of each handle row
+        rows, starts, first = [], [0], 0  # the handle rows by group: a stroke's samples (or one control), one copy
+        for length in controls.strokes:
+            run = [c for c in range(first, first + length) if controls.radii[c] > 0]
+            first += length
+            for g in range(order if run else 0):
+                rows += [c * order + g for c in run]
+                starts.append(len(rows))
+        self.n_rows = len(rows)
+        self.rows = np.array(rows, np.int32)  # the slot of each handle row
         self.row_of = np.full(slots, -1, np.int64)
         self.row_of[self.rows] = np.arange(self.n_rows)
         self.point_slots = (point[:, None] * order + copies).ravel().astype(np.int32)
@@ -109,6 +116,7 @@ class Handles:
             return wp.array(values if len(values) else np.zeros(1, np.int32), dtype=wp.int32, device=dev)
 
         self.slot_of_row = ints(self.rows)
+        self.group_start = ints(starts)
         self.point_controls = wp.array(point.astype(np.int32), dtype=wp.int32, device=dev)
         self.point_slot_list = ints(self.point_slots)
         self.members = wp.zeros(slots, dtype=vec, device=dev)

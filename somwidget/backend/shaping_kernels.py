@@ -221,26 +221,39 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 winner_anchors[i] = weights[winners[i]]
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
-    def carry(slot_of_row: wp.array(dtype=wp.int32), live: wp.array(dtype=wp.int32),
-              patch: wp.array2d(dtype=wp.float32), places: wp.array(dtype=vec), winner_anchors: wp.array(dtype=vec),
-              anchors: wp.array(dtype=vec), weights: wp.array(dtype=vec), held: wp.array(dtype=wp.int32),
-              stepped: wp.array(dtype=wp.int32)):
-        """Step 3 (b) for node v: onto its target when a live binding holds it (held[v] = 1), else left (0); thread 0
-        clears `stepped` for the next cycle's `advance` (read by then)."""
+    def carry(slot_of_row: wp.array(dtype=wp.int32), group_start: wp.array(dtype=wp.int32),
+              live: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32), places: wp.array(dtype=vec),
+              winner_anchors: wp.array(dtype=vec), anchors: wp.array(dtype=vec), weights: wp.array(dtype=vec),
+              held: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32)):
+        """Step 3 (b) for node v: onto its target when a live binding holds it (held[v] = 1), else left (0); a group
+        of rows (a stroke's samples, one copy) counts as one binding, its weight their largest, its displacement their
+        weighted mean. Thread 0 clears `stepped` for the next cycle's `advance` (read by then)."""
         v = wp.tid()
         if v == 0:
             stepped[0] = 0
         num = vec()
         den = wp.float32(0.0)
         miss = wp.float32(1.0)
-        for r in range(patch.shape[0]):
-            j = slot_of_row[r]
-            if live[j] != 0:
-                w = patch[r, v]
-                if w > wp.float32(0.0):
-                    num += w * (places[j] - winner_anchors[j])
-                    den += w
-                    miss *= wp.float32(1.0) - w
+        for group in range(group_start.shape[0] - 1):
+            lo = group_start[group]
+            hi = group_start[group + 1]
+            most = wp.float32(0.0)
+            gnum = vec()
+            gden = wp.float32(0.0)
+            for r in range(lo, hi):
+                j = slot_of_row[r]
+                if live[j] != 0:
+                    w = patch[r, v]
+                    if w > wp.float32(0.0):
+                        most = wp.max(most, w)
+                        gnum += w * (places[j] - winner_anchors[j])
+                        gden += w
+            if gden > wp.float32(0.0):
+                if hi - lo > 1:
+                    gnum = gnum * (most / gden)
+                num += gnum
+                den += most
+                miss *= wp.float32(1.0) - most
         if den > wp.float32(0.0):
             weights[v] = anchors[v] + num * ((wp.float32(1.0) - miss) / den)
             held[v] = 1

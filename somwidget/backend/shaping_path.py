@@ -127,8 +127,8 @@ class ShapingPath:
                                   h.stepped, h.changed])
                 wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
                 wp.launch(kern.carry, dim=n, device=dev,
-                          inputs=[h.slot_of_row, h.live_dev, h.patch, h.places, h.winner_anchors, h.anchors, state.w,
-                                  h.held_nodes, h.stepped])
+                          inputs=[h.slot_of_row, h.group_start, h.live_dev, h.patch, h.places, h.winner_anchors,
+                                  h.anchors, state.w, h.held_nodes, h.stepped])
             if steps:
                 self._smooth(model, state, pulls, parts if volume else None, taubin)
 

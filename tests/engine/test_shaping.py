@@ -333,7 +333,7 @@ def test_a_stroke_matches_the_float64_reference(device):
     controls = np.concatenate([pts[[3]], pts[[30, 31, 32]] * 1.15, pts[[70]]]).astype(np.float32)
     radii = [0.0, 0.4, 0.4, 0.4, 0.5]
     som = Som(topo, pts, start, device=device, iterations=200, reach=0.3, radii=radii, strokes=[1, 3, 1])
-    ref = _reference(faces, pts, start, radii, iterations=200, reach=0.3)
+    ref = _reference(faces, pts, start, radii, iterations=200, reach=0.3, strokes=[1, 3, 1])
     som.restore(pts, 200)
     som.grab(2)
     for c in (1, 2, 3):
