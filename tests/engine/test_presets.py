@@ -107,12 +107,14 @@ def test_every_preset_makes_a_som_that_trains(name):
     assert som.iterations == p.iterations and som.mirror == p.mirror
     assert som.smoothing == pytest.approx(p.smoothing)
     np.testing.assert_allclose(som.radii, p.radius)
-    if p.radius:  # controls with a radius carry their winners: on the clay's own nodes they pull nothing
-        som.step(3)
+    if p.radius:  # handles: nothing bound moves the clay; a typed move carries it
+        assert som.step(3) == 3
         np.testing.assert_array_equal(som.weights, p.weights)
         som.set_controls(p.controls * 1.1)
-        som.reset()
-    assert som.step(3) == 3 and som.iteration == 3
+        start = som.iteration
+        assert start < som.iterations and som.step(3) == 3 and som.iteration == start + 3
+    else:
+        assert som.step(3) == 3 and som.iteration == 3
     assert np.isfinite(som.weights).all() and not np.array_equal(som.weights, p.weights)
 
 
