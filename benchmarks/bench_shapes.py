@@ -282,7 +282,10 @@ class Action:
     count: int = 1  # person-sized actions it stands for
 
     def apply(self, session) -> None:
-        getattr(session, self.call)(*self.args, **self.kwargs)
+        target = session
+        for name in self.call.split("."):  # "settings.set_symmetry": a method of a part of the session
+            target = getattr(target, name)
+        target(*self.args, **self.kwargs)
 
     @property
     def code(self) -> str:
@@ -294,7 +297,7 @@ class Action:
 
 
 def symmetry(spec: str, text: str) -> Action:
-    return Action(text, "set_symmetry", (spec,))
+    return Action(text, "settings.set_symmetry", (spec,))
 
 
 def radius(index: int, r: float, text: str) -> Action:
@@ -366,8 +369,9 @@ BRIEFS = [
           ]),
     Brief("bowl", "A bowl pressed into the open grid", "grid", bowl,
           camera=view((0.0, 0.0, -0.3), 3.0, (0.55, -1.0, 0.75)), actions=[
-              drag(0, (0.0, 0.0, -BOWL_DEPTH), "drag the middle control (control 0) down to the bowl's bottom, z -0.9 "
-                   "(its falloff widens for so long a pull: sigma 0.43 where the radius alone gives 0.28)"),
+              radius(0, 1.0, "set the middle control's radius to 1, the bowl's own (control 0)"),
+              drag(0, (0.0, 0.0, -BOWL_DEPTH), "drag the middle control down to the bowl's bottom, z -0.9: the clay "
+                   "it holds goes with it"),
           ]),
     Brief("chair", "A chair shell from the open grid: seat and back in one sheet", "grid", chair,
           camera=view((0.0, 0.0, 0.35), 3.1, (-0.6, -1.0, 0.6)), actions=[
@@ -398,6 +402,8 @@ BRIEFS = [
     Brief("canopy", "A saddle canopy (hyperbolic paraboloid) from the open grid", "grid", saddle,
           camera=view((0.0, 0.0, -0.2), 4.0), actions=[
               symmetry("radial-2-z", "half-turn symmetry about z (opposite corners pair up)"),
+              every_radius(2.0, "set every control's radius to 2 (the panel's 'all radii'): a corner holds the sheet"
+                           " up to the far edge's middle"),
               drag(1, (1.0, 1.0, SADDLE_RISE), "drag the corner pair (1, 1) / (-1, -1) (control 1) up by 1"),
               drag(2, (1.0, -1.0, -SADDLE_RISE), "drag the corner pair (1, -1) / (-1, 1) (control 2) down by 1"),
           ]),
