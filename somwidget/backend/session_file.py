@@ -12,6 +12,7 @@ the file's path and says what is wrong.
 
 from __future__ import annotations
 
+import math
 import os
 import uuid
 from pathlib import Path
@@ -20,7 +21,7 @@ import numpy as np
 
 from . import checks, schedule
 from .io import MAX_VERTICES
-from .presets import DISPLAYS, FeatureLayout, Preset
+from .presets import DISPLAYS, MAX_CONTROLS, FeatureLayout, Preset
 from .schedule import SMOOTHING_RULES
 from .symmetry import Symmetry
 from .topology import Topology
@@ -84,7 +85,7 @@ def save_session(path, state: dict) -> None:
     for key in SESSION_REQUIRED:
         if key not in full:
             raise ValueError(f"{label}: session state lacks the key {key!r}")
-    clean = _check_state(full, label)
+    clean = check_state(full, label)
     topo, layout = clean["topology"], clean["layout"]
     arrays: dict[str, np.ndarray] = {
         "format_version": np.int64(SESSION_FORMAT_VERSION),
@@ -139,9 +140,28 @@ def write_atomic(path: Path, write) -> None:
         raise
 
 
+def npy_header(stream) -> tuple[tuple[int, ...], np.dtype]:
+    """(shape, dtype) of the .npy array `stream` starts with, read from its header alone (no data is read, nothing
+    is allocated); ValueError when it is not the header of a plain array (a version this reads, no Python objects)."""
+    try:
+        version = np.lib.format.read_magic(stream)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(stream)
+        elif version == (2, 0):
+            shape, _, dtype = np.lib.format.read_array_header_2_0(stream)
+        else:
+            raise ValueError(f"array format {version}")
+    except Exception as exc:  # numpy's words for a header it cannot parse: ours are given instead
+        raise ValueError("not an array") from exc
+    if dtype.hasobject or not all(isinstance(n, int) and n >= 0 for n in shape):
+        raise ValueError("not an array of numbers or text")
+    return tuple(shape), dtype
+
+
 def _check_archive_sizes(p: Path, label: str, max_vertices: int) -> None:
     """Refuse an archive whose members would unpack beyond what a session of `max_vertices` vertices needs: each
-    member, and all of them together, are bounded, and a member the format does not define is refused unread."""
+    member, and all of them together, are bounded, a member the format does not define is refused unread, and each
+    array's header must declare no more data than its member holds (so nothing larger is ever allocated)."""
     import zipfile
 
     # the largest member: (N, 32) weights at 8 bytes a value (256 B a vertex), or face indices (~100 B a vertex);
@@ -163,6 +183,17 @@ def _check_archive_sizes(p: Path, label: str, max_vertices: int) -> None:
                 if total > total_limit:
                     raise ValueError(f"{label}: the archive unpacks to more than {total_limit:,} bytes, more than a "
                                      f"session of at most {max_vertices:,} vertices holds")
+                try:
+                    with archive.open(info) as member:
+                        shape, dtype = npy_header(member)
+                except ValueError:
+                    raise ValueError(f"{label}: not a readable somwidget session: the archive is damaged "
+                                     f"(member {info.filename!r} is not an array)") from None
+                except Exception:  # a damaged archive: zipfile's and zlib's own errors
+                    raise ValueError(f"{label}: not a readable somwidget session: the archive is damaged") from None
+                if math.prod(shape) * dtype.itemsize > info.file_size:
+                    raise ValueError(f"{label}: not a readable somwidget session: member {info.filename!r} is cut "
+                                     f"short (its header declares more values than it holds)")
     except zipfile.BadZipFile:
         return  # not a zip: np.load below reports what it is
 
@@ -272,14 +303,18 @@ def load_session(path, *, max_vertices: int = MAX_VERTICES, max_iterations: int 
         "symmetry": scalar("symmetry", "s") if "symmetry" in data else "none",
         "smoothing_rule": scalar("smoothing_rule", "s") if "smoothing_rule" in data else "laplacian",
     }
-    clean = _check_state(state, label)
+    clean = check_state(state, label)
     clean["format_version"] = version
     clean["n_vertices"] = topology.n_vertices
     return clean
 
 
-def _check_state(state: dict, label: str) -> dict:
-    """Types, shapes and ranges of a session state; returns a cleaned copy (float32 arrays, tuples, ints)."""
+def check_state(state: dict, label: str) -> dict:
+    """Types, shapes and ranges of a session state (`save_session`'s keys), as the engine will take them: arrays of
+    finite float32 values with |x| <= checks.MAX_MAGNITUDE, each setting within its declared range (schedule.SETTINGS),
+    s within 0..S, controls within the engine's limit counting their symmetric copies; returns a cleaned copy (float32
+    arrays, tuples, ints). ValueError whose message starts with `label` and names the key. The autosave's reader
+    (frontend/model/readback.py) checks each saved step with it too."""
     out = dict(state)
     topo, layout = state["topology"], state["layout"]
     if not isinstance(topo, Topology):
@@ -318,11 +353,17 @@ def _check_state(state: dict, label: str) -> dict:
         if mw.shape != (n,) or (mw < 0).any():
             raise ValueError(f"{label}: key 'metric_weights': expected {n} values >= 0, got {mw}")
         out["metric_weights"] = mw
+        high = schedule.BY_NAME["metric_weights"].high
+        if (mw > high).any() or not (mw > 0).any():
+            raise ValueError(f"{label}: key 'metric_weights': expected values in [0, {high:g}], at least one of them "
+                             f"above 0, got {mw.tolist()}")
     k = len(controls)
     radii = np.zeros(k, np.float32) if state.get("radii") is None else np.asarray(state["radii"])
     radii = checks.finite_array(f"{label}: key 'radii'", radii.reshape(-1) if radii.size == k else radii, 1)
-    if radii.shape != (k,) or (radii < 0).any():
-        raise ValueError(f"{label}: key 'radii': expected {k} values >= 0 (one per control), got {radii.tolist()}")
+    high = schedule.BY_NAME["radius"].high
+    if radii.shape != (k,) or (radii < 0).any() or (radii > high).any():
+        raise ValueError(f"{label}: key 'radii': expected {k} values in [0, {high:g}] (one per control), got "
+                         f"{radii.tolist()[:8]}")
     out["radii"] = radii
     out["strokes"] = (1,) * k if state.get("strokes") is None else \
         checks.runs(f"{label}: key 'strokes'", tuple(state["strokes"]), k)
@@ -334,6 +375,10 @@ def _check_state(state: dict, label: str) -> dict:
         raise ValueError(f"{label}: key 'symmetry': a file keeps a mirror in 'mirror' and a radial group here, got "
                          f"{state['symmetry']!r} with mirror {out['mirror']}")
     out["symmetry"] = "none" if group is None else group.spec
+    order = group.order if group is not None else 2 if out["mirror"] else 1
+    if not 1 <= k * order <= MAX_CONTROLS:
+        raise ValueError(f"{label}: key 'controls': expected 1 to {MAX_CONTROLS} controls counting their symmetric "
+                         f"copies, got {k} ({k * order} with their copies)")
     out["smoothing_rule"] = checks.choice(f"{label}: key 'smoothing_rule'", state.get("smoothing_rule", "laplacian"),
                                           SMOOTHING_RULES)
     return out

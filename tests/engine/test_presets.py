@@ -123,7 +123,8 @@ def test_get_preset_unknown_name_lists_the_known_ones():
         get_preset("teapot")
     for name in PRESETS:
         assert name in str(info.value)
-    assert set(PRESETS) == {"space-grid", "car", "lines", "lattice", "grid", "sphere", "torus"}
+    assert set(PRESETS) == {"space-grid", "car", "lines", "lattice", "grid", "sphere", "torus", "tube", "cone", "disc",
+                            "bowl"}
 
 
 # ----------------------------------------------------------------------------------- case study 1: space grid
@@ -291,6 +292,107 @@ def test_torus_preset():
     assert p.topology.d_max == 24 + 8
     assert signed_volume(p.weights, p.topology.faces) == pytest.approx(2 * np.pi**2 * 1.0 * 0.35**2, rel=0.03)
     assert mirror_symmetric(p.weights, (1,))
+
+
+# ------------------------------------------------------------------------------------ the open shapes (issue 34)
+def face_normals(points, faces) -> tuple[np.ndarray, np.ndarray]:
+    """(centroids, unit normals) of faces (Newell's normal: any polygon, wound counter-clockwise from its front)."""
+    pts = np.asarray(points, np.float64)
+    centres, normals = [], []
+    for f in faces:
+        p = pts[list(f)]
+        q = np.roll(p, -1, axis=0)
+        n = np.array([((p[:, a] - q[:, a]) * (p[:, b] + q[:, b])).sum() for a, b in ((1, 2), (2, 0), (0, 1))])
+        centres.append(p.mean(axis=0))
+        normals.append(n / np.linalg.norm(n))
+    return np.array(centres), np.array(normals)
+
+
+def rims(faces) -> int:
+    """The edges on the border (one face each)."""
+    return sum(n == 1 for n in edge_face_counts(faces).values())
+
+
+def copies_on_nodes(p) -> float:
+    """The largest distance from any control or symmetric copy to its nearest node."""
+    eff = p.effective_controls()[:, :3].astype(np.float64)
+    return float(np.sqrt(((eff[:, None, :] - p.weights[None, :, :3]) ** 2).sum(-1)).min(axis=1).max())
+
+
+@pytest.mark.parametrize("name", ["tube", "cone", "disc", "bowl"])
+def test_the_open_shapes_are_open_with_their_controls_and_copies_on_nodes(name):
+    p = get_preset(name)
+    assert not p.grow and p.display == "surface" and p.layout.n_dims == 3
+    assert p.radius == pytest.approx(P.KEPT_SHAPE_RADIUS * np.linalg.norm(np.ptp(p.weights, axis=0)))
+    counts = edge_face_counts(p.topology.faces)
+    assert set(counts.values()) == {1, 2}  # a manifold with a border
+    assert rims(p.topology.faces) == {"tube": 64, "cone": 64, "disc": 32, "bowl": 32}[name]
+    assert mirror_symmetric(p.weights, (1,))
+    assert copies_on_nodes(p) < 1e-6  # every copy of every control sits on a node: nothing pulls before the person
+    group = p.symmetry.spec if p.symmetry is not None else ("mirror-y" if p.mirror == (1,) else "none")
+    assert group == {"tube": "radial-8-z", "cone": "radial-16-z", "disc": "mirror-y", "bowl": "radial-16-z"}[name]
+
+
+def test_tube_is_an_open_cylinder_facing_out_with_a_control_on_five_rings():
+    p = get_preset("tube")
+    w = p.weights.astype(np.float64)
+    np.testing.assert_allclose(np.hypot(w[:, 0], w[:, 1]), 0.5, atol=1e-6)
+    np.testing.assert_allclose([w[:, 2].min(), w[:, 2].max()], [-1.0, 1.0])
+    assert p.topology.n_vertices == 25 * 32 and all(len(f) == 4 for f in p.topology.faces)
+    centres, normals = face_normals(w, p.topology.faces)
+    outward = (normals[:, :2] * centres[:, :2]).sum(1) / np.hypot(centres[:, 0], centres[:, 1])
+    assert outward.min() > 0.99
+    np.testing.assert_allclose(p.controls[:, 2], [-1.0, -0.5, 0.0, 0.5, 1.0], atol=1e-6)  # bottom rim .. top rim
+    np.testing.assert_allclose(p.controls[:, :2], [[0.5, 0.0]] * 5, atol=1e-7)
+
+
+def test_cone_is_open_at_both_ends_and_faces_out():
+    p = get_preset("cone")
+    w = p.weights.astype(np.float64)
+    r = np.hypot(w[:, 0], w[:, 1])
+    np.testing.assert_allclose(r, 1.0 - 0.7 * (w[:, 2] + 0.8) / 1.6, atol=1e-6)  # straight from 1 at the base to 0.3
+    centres, normals = face_normals(w, p.topology.faces)
+    slant = np.array([1.6, 0.7]) / np.hypot(1.6, 0.7)  # the outward normal in (r, z)
+    radial = centres[:, :2] / np.hypot(centres[:, 0], centres[:, 1])[:, None]
+    np.testing.assert_allclose((normals[:, :2] * radial).sum(1), slant[0], atol=0.01)
+    np.testing.assert_allclose(normals[:, 2], slant[1], atol=0.01)
+    np.testing.assert_allclose(np.hypot(p.controls[:, 0], p.controls[:, 1]), [1.0, 0.65, 0.3], atol=1e-6)
+
+
+def test_disc_is_flat_facing_up_with_its_centre_and_rim_controls():
+    p = get_preset("disc")
+    w = p.weights.astype(np.float64)
+    assert np.all(w[:, 2] == 0) and np.hypot(w[:, 0], w[:, 1]).max() == pytest.approx(1.0)
+    _, normals = face_normals(w, p.topology.faces)
+    assert normals[:, 2].min() > 0.999  # every face faces +z, the centre's fan of triangles too
+    assert sum(len(f) == 3 for f in p.topology.faces) == 32
+    np.testing.assert_allclose(p.controls, [[0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0]], atol=1e-6)
+    assert p.mirror == (1,)
+
+
+def test_bowl_is_a_half_sphere_open_at_the_top_facing_out():
+    p = get_preset("bowl")
+    w = p.weights.astype(np.float64)
+    rim = w[:, 2].max()
+    centre = np.array([0.0, 0.0, rim])  # the sphere's centre lies in the rim's plane
+    np.testing.assert_allclose(np.linalg.norm(w - centre, axis=1), 1.0, atol=1e-6)
+    assert w[:, 2].min() == pytest.approx(rim - 1.0)
+    centres, normals = face_normals(w, p.topology.faces)
+    away = ((centres - centre) * normals).sum(1) / np.linalg.norm(centres - centre, axis=1)
+    assert away.min() > 0.99
+    np.testing.assert_allclose(p.controls[[0, 2], 2], [rim - 1.0, rim], atol=1e-6)  # bottom, rim
+
+
+def test_surface_of_revolution_poles_winding_and_errors():
+    faces, pts = P.surface_of_revolution([0.0, 1.0, 1.0, 0.0], [-1.0, -0.5, 0.5, 1.0], 8)
+    assert pts.shape == (2 * 8 + 2, 3) and pts.dtype == np.float32
+    np.testing.assert_array_equal(pts[0], [0, 0, -1]) and np.testing.assert_array_equal(pts[-1], [0, 0, 1])
+    assert sum(len(f) == 3 for f in faces) == 16 and len(faces) == 24
+    assert all(n == 2 for n in edge_face_counts(faces).values())  # both ends closed by their poles
+    assert signed_volume(pts, faces) > 0  # wound counter-clockwise from outside
+    for radii, heights in (([1.0], [0.0]), ([1.0, 0.0, 1.0], [0, 1, 2]), ([1.0, -1.0], [0, 1]), ([1, 1], [0])):
+        with pytest.raises(ValueError, match="surface_of_revolution"):
+            P.surface_of_revolution(radii, heights, 8)
 
 
 def test_uv_ellipsoid_layout():

@@ -227,7 +227,7 @@ def test_a_session_s_controls_carry_their_radii_through_edits_undo_and_files(tmp
         s.settings.set_symmetry("radial-4-z")
         assert s.wait_applied(30) and s.wait_idle(60)
         assert s.parameters["group"] == "radial-4-z" and len(s.frame.effective_controls) == 4 * s.n_controls
-        assert s.n_controls < 7  # the four controls around the equator are one control and its copies now
+        assert s.n_controls == 7  # a group turned on keeps every control (each with its own copies): nothing merges
         s.save(tmp_path / "s.npz")
         radii = s.control_edits.radii
         assert s.undo() and s.parameters["group"] == "none"

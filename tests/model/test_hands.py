@@ -113,7 +113,7 @@ def test_a_silent_hand_and_a_removed_control_let_go(session):
     assert hands.holder(ids[0]) is None and hands.holder(ids[5]) is b
     assert [(x.hand, x.control_id) for x in lost] == [(a, ids[0])] and "sent nothing for 10 s" in lost[0].why
     assert session.history[0] == steps  # its drag: a completed step (it was counted while open)
-    session.set_controls(np.delete(session.controls, 5, axis=0))  # the controls replaced: B's goes
+    session.control_edits.replace(np.delete(session.controls, 5, axis=0))  # the controls replaced: B's goes
     assert session.wait_applied(30)
     session.hands.prune()
     assert hands.holder(ids[5]) is None and lost[-1].hand is b and "was removed while you held it" in lost[-1].why

@@ -18,7 +18,7 @@ import time
 import numpy as np
 from helpers import ROOT, Serve, wait_for
 
-from somwidget.frontend.model import Session, autosave, storage
+from somwidget.frontend.model import Session, autosave, recovery, storage
 from somwidget.frontend.model import store as _store
 
 
@@ -56,13 +56,16 @@ def drag(index: int, to) -> list:
 
 def settled(srv: Serve) -> dict:
     """The state once training has stopped and every intent is applied, after the autosave has written it: its
-    manifest names as many undo and redo steps, and its current step holds these controls and positions."""
+    manifest names as many undo and redo steps, no drag is open in it (a release trains nothing, so a save made
+    during the drag can hold the same numbers), and its current step holds these controls and positions."""
     st = srv.idle(60)
     folder, session = _folder(srv), st["session"]
 
     def saved() -> bool:
         manifest = _store.peek(folder)
         if manifest is None or [len(manifest["undo"]), len(manifest["redo"])] != session["history"]:
+            return False
+        if manifest.get("gesture", False):  # written while a drag was open: its release's save is on its way
             return False
         try:
             with np.load(folder / manifest["current"]["file"]) as z:
@@ -313,8 +316,9 @@ def _listing(path):
 
 
 def test_serve_starts_past_unreadable_saved_sessions_and_keeps_them_aside(tmp_path, monkeypatch):
-    """A folder where the manifest should be, a manifest cut short, a step file cut short: the server starts anew,
-    says what is wrong and where (printed, and in the panel's notices), and each is renamed aside, whole."""
+    """A folder where the manifest should be, a manifest cut short, every step file cut short (nothing of the session
+    can be read; one step that can be read comes back: test_recovery_partial.py): the server starts anew, says what
+    is wrong and where (printed, and in the panel's notices), and each is renamed aside, whole."""
     data = tmp_path / "data"
     monkeypatch.setenv("SOMWIDGET_DATA_DIR", str(data))
     s = Session("torus", device="cpu", start=False, origin="serve")
@@ -323,7 +327,7 @@ def test_serve_starts_past_unreadable_saved_sessions_and_keeps_them_aside(tmp_pa
     s.close()
     good = s.autosave.path
     damaged = {}
-    for i, damage in enumerate(["manifest is a folder", "manifest cut short", "step file cut short"]):
+    for i, damage in enumerate(["manifest is a folder", "manifest cut short", "step files cut short"]):
         folder = good.with_name(f"damaged-{i}")
         shutil.copytree(good, folder)
         manifest = folder / _store.MANIFEST
@@ -335,8 +339,10 @@ def test_serve_starts_past_unreadable_saved_sessions_and_keeps_them_aside(tmp_pa
             manifest.write_bytes(manifest.read_bytes()[:40])
             where = manifest
         else:
-            where = folder / json.loads(manifest.read_text())["current"]["file"]
-            where.write_bytes(where.read_bytes()[:300])
+            records = json.loads(manifest.read_text())
+            for record in [records["current"], *records["undo"]]:
+                (folder / record["file"]).write_bytes((folder / record["file"]).read_bytes()[:300])
+            where = folder / records["current"]["file"]
         damaged[folder] = (str(where), _listing(folder))
     shutil.rmtree(good)
     srv = Serve(env={"SOMWIDGET_DATA_DIR": str(data)})
@@ -409,6 +415,6 @@ def test_an_earlier_versions_autosave_is_brought_back_once(tmp_path, monkeypatch
         assert live.exists()  # a live session's file is not taken
     finally:
         srv.stop()
-    assert autosave.legacy_stopped() == []  # the live one's lock is still held; the other was renamed
+    assert recovery.legacy_stopped() == []  # the live one's lock is still held; the other was renamed
     held.close()
-    assert autosave.legacy_stopped() == [live]  # its process gone, it would be next
+    assert recovery.legacy_stopped() == [live]  # its process gone, it would be next

@@ -202,6 +202,28 @@ def test_symmetry_off_and_on_moves_nothing(session):
     assert session.n_controls == 18 and session.frame.effective_controls.shape == (54, 5)
 
 
+def test_set_symmetry_none_turns_it_off_and_a_group_never_merges_controls_silently():
+    """`Session.set_symmetry(None)` is off (it was refused: "expected true or false"). On the torus, whose six
+    controls hold two mirror pairs, a mirror keeps all six with a copy each and says which are images; off, then the
+    same group on again: the copies pair up with their controls as before, and says so."""
+    s = Session("torus", device="cpu", autosave=False)
+    try:
+        said = s.set_symmetry("mirror-y")
+        assert s.n_controls == 6 and s.wait_applied(30) and len(s.frame.effective_controls) == 12
+        assert "6 controls kept" in said and "2 and 3" in said and "4 and 5" in said
+        assert s.settings.notice == said and s.settings.notices == 1
+        said = s.set_symmetry(None)
+        assert s.parameters["symmetry"] is False and s.parameters["group"] == "none" and s.n_controls == 12
+        assert said.startswith("symmetry off: 12 controls")
+        said = s.set_symmetry("mirror-y")
+        assert s.n_controls == 6 and "12 controls paired up again as 6" in said
+        steps = s.history[0]
+        s.set_symmetry(None)
+        assert s.undo() and s.parameters["group"] == "mirror-y" and s.history[0] == steps
+    finally:
+        s.close()
+
+
 def test_reset_restores_the_start_mesh(session):
     assert session.wait_idle(30)
     start = session.preset.weights
@@ -656,5 +678,29 @@ def test_a_control_keeps_its_id_and_colour_while_others_come_and_go():
         s.load_preset("torus")
         assert s.wait_applied(60)
         assert s.frame.control_ids == tuple(range(s.frame.n_controls))
+    finally:
+        s.close()
+
+
+def test_a_typed_radius_after_a_move_makes_the_move_again_with_the_handle():
+    """A control with a radius moved by a typed position, then given a larger radius: the move is made again from
+    the shape before it (a handle binds at the old place), so the bump widens and still reaches the control (the
+    shape before the move alone would leave the clay round, 0.3 short of it)."""
+    s = Session("sphere", device="cpu", autosave=False)
+    try:
+        assert s.wait_idle(120)
+        start = s.frame.positions.copy()
+        c0 = s.controls[0][:3].copy()
+        assert s.control_edits.radii[0] > 0
+        s.move_control(0, 1.3 * c0)
+        assert s.wait_idle(120)
+        pulled = s.frame.positions.copy()
+        s.set_control_radius(0, 1.5)
+        assert s.wait_idle(120)
+        wider = s.frame.positions.copy()
+        moved = lambda w: int((np.linalg.norm(w - start, axis=1) > 0.01).sum())  # noqa: E731
+        assert moved(wider) > moved(pulled) + 30, (moved(pulled), moved(wider))
+        assert _nearest(wider, 1.3 * c0) < 0.01 * np.linalg.norm(start.max(0) - start.min(0))
+        np.testing.assert_allclose(s.controls[0][:3], 1.3 * c0, rtol=1e-6)
     finally:
         s.close()

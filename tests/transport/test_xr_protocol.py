@@ -560,7 +560,7 @@ def test_a_control_removed_elsewhere_does_not_redirect_a_held_drag(srv, session)
             assert "not held by this client" in err["message"]
             with pytest.raises(ValueError, match="control 2 is held by desktop"):
                 session.remove_control(2)  # the held control itself: refused to every other hand
-            session.set_controls(np.delete(session.controls, 2, axis=0))  # the controls replaced: it goes
+            session.control_edits.replace(np.delete(session.controls, 2, axis=0))  # the controls replaced: it goes
             m = await a.until(lambda m: m.get("type") == "error" and "was removed while you held" in m["message"])
             assert str(held_id) in m["message"]
             assert {"type": "grabs", "grabs": []} in a.messages  # and every client saw the grab end

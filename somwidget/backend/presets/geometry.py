@@ -1,5 +1,5 @@
-"""Geometry builders: the start meshes of the presets (a lattice, an open grid, a UV ellipsoid, a torus), as
-(faces or edges, points (N, 3) float32), and the lines display of case study 3.
+"""Geometry builders: the start meshes of the presets (a lattice, an open grid, a UV ellipsoid, a torus, a surface
+of revolution), as (faces or edges, points (N, 3) float32), and the lines display of case study 3.
 """
 
 from __future__ import annotations
@@ -96,6 +96,45 @@ def torus(n_major: int, n_minor: int, R: float = 1.0, r: float = 0.35) -> tuple[
     i1, j1 = (i + 1) % n_major, (j + 1) % n_minor
     faces = np.stack([i * n_minor + j, i1 * n_minor + j, i1 * n_minor + j1, i * n_minor + j1], axis=-1)
     return faces.reshape(-1, 4).astype(np.int64), pts.astype(np.float32)
+
+
+def surface_of_revolution(radii, heights, n_lon: int) -> tuple[list[tuple[int, ...]], np.ndarray]:
+    """A surface of revolution about the z-axis: the profile (radii[i], heights[i]), i = 0..m-1, turned through
+    `n_lon` longitudes (from +x towards +y, so the point set is symmetric under y -> -y).
+
+    Returns (faces, points (float32)). Profile point i at longitude j has index i * n_lon + j, except that an end of
+    the profile with radius 0 is one pole vertex (a fan of triangles) in its ring's place. Faces: quads between
+    neighbouring rings, wound so that their normal is (the longitude's direction) x (the profile's direction): facing
+    outwards from the axis where the profile runs up (+z), downwards where it runs outwards from the axis.
+    """
+    checks.integer("n_lon", n_lon, 3)
+    r = np.asarray(radii, np.float64)
+    h = np.asarray(heights, np.float64)
+    if r.ndim != 1 or r.shape != h.shape or len(r) < 2 or (r < 0).any() or (r[1:-1] == 0).any():
+        raise ValueError("surface_of_revolution: expected 2 or more (radius, height) pairs, radii >= 0 and only the "
+                         "ends on the axis")
+    phi = 2 * np.pi * np.arange(n_lon) / n_lon
+    pole = [r[0] == 0, r[-1] == 0]
+    rows, index, first = [], [], 0
+    for i in range(len(r)):
+        if (i == 0 and pole[0]) or (i == len(r) - 1 and pole[1]):
+            rows.append([[0.0, 0.0, h[i]]])
+            index.append(np.full(n_lon, first))
+            first += 1
+        else:
+            rows.append(np.stack([r[i] * np.cos(phi), r[i] * np.sin(phi), np.full(n_lon, h[i])], axis=-1))
+            index.append(first + np.arange(n_lon))
+            first += n_lon
+    pts = np.concatenate(rows)
+    pts[np.abs(pts) < 1e-12] = 0.0  # exact zeros keep the mirror symmetry exact
+    faces: list[tuple[int, ...]] = []
+    for i in range(len(r) - 1):
+        a, b = index[i], index[i + 1]
+        for j in range(n_lon):
+            k = (j + 1) % n_lon
+            quad = (int(a[j]), int(a[k]), int(b[k]), int(b[j]))
+            faces.append(tuple(v for n, v in enumerate(quad) if v not in quad[:n]))  # a pole's quad: a triangle
+    return faces, pts.astype(np.float32)
 
 
 def ellipsoid_normals(points, radii) -> np.ndarray:

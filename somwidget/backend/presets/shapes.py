@@ -1,5 +1,6 @@
-"""The general start shapes, kept as they are (a lattice, a grid, a sphere, a torus): each shown as built, with
-controls spread over its own nodes, shaped by controls with a radius of influence (som.py).
+"""The general start shapes, kept as they are (a lattice, a grid, a sphere, a torus; the open shapes: a tube, a cone,
+a disc, a bowl): each shown as built, with controls on its own nodes (spread over it, or where a designer pulls an
+open shape), shaped by controls with a radius of influence (som.py).
 """
 
 from __future__ import annotations
@@ -9,7 +10,8 @@ import numpy as np
 from .. import checks
 from ..metrics import bounding_diagonal
 from ..topology import Topology
-from .geometry import lattice, open_grid, torus, uv_ellipsoid
+from ..symmetry import Symmetry
+from .geometry import lattice, open_grid, surface_of_revolution, torus, uv_ellipsoid
 from .records import XYZ, Preset
 
 
@@ -91,3 +93,73 @@ def torus_preset() -> Preset:
                                                  "drag one to reshape the ring.",
         topology=Topology.from_faces(faces, len(pts)), weights=pts, controls=controls_on(pts), layout=XYZ,
         **kept_shape(pts))
+
+
+# The open shapes: surfaces of revolution about the z-axis to start a vase, a lamp shade, a plate or a chair from. Their
+# controls sit where a designer pulls (a ring's control with its copies about the axis, a rim, the centre), on their
+# own nodes; 32 longitudes put every copy of a 16-fold group on a node.
+OPEN_LONGITUDES = 32
+
+
+def _revolved(name: str, title: str, description: str, radii, heights, at, **fields) -> Preset:
+    """A preset of the surface of revolution of the profile (radii, heights), its controls on the profile's points
+    `at` (at longitude 0: on the xz-plane, x >= 0) or on (profile point, longitude) pairs, centred on its centroid."""
+    faces, pts = surface_of_revolution(radii, heights, OPEN_LONGITUDES)
+    middle = pts[:, 2].astype(np.float64).mean()
+    if abs(middle) > 1e-6:
+        pts[:, 2] -= np.float32(middle)
+    pole = int(radii[0] == 0)
+
+    def node(i: int, j: int = 0) -> int:  # profile point i at longitude j (a pole: its one vertex)
+        return 0 if i == 0 and pole else (i - pole) * OPEN_LONGITUDES + pole + j * (radii[i] > 0)
+
+    controls = pts[[node(*a) if isinstance(a, tuple) else node(a) for a in at]].copy()
+    return Preset(name=name, title=title, description=description, topology=Topology.from_faces(faces, len(pts)),
+                  weights=pts, controls=controls, layout=XYZ, **kept_shape(pts), **fields)
+
+
+def tube_preset() -> Preset:
+    """An open tube (no caps): radius 0.5, z -1 .. 1, 25 rings of 32; a control on 5 rings, 8-fold about z (16-fold
+    copies, each carrying the clay by a radius past their spacing, blew the tube up under the `carry` rule:
+    tests/engine/test_clay.py, needles)."""
+    rings = 25
+    return _revolved(
+        "tube", "Tube", "An open tube (no caps) standing on the z-axis, with a control on five of its rings and "
+                        "8-fold symmetry about the axis: pull a ring to swell or pinch the tube; draw a profile "
+                        "with Revolve (R) to lathe a vase.",
+        np.full(rings, 0.5), np.linspace(-1.0, 1.0, rings), at=(0, 6, 12, 18, 24), symmetry=Symmetry.radial(8, 2))
+
+
+def cone_preset() -> Preset:
+    """An open cone, its tip cut off (no caps): radius 1 at z -0.8 to 0.3 at z 0.8, 25 rings of 32; a control on
+    3 rings, 16-fold about z."""
+    rings = 25
+    return _revolved(
+        "cone", "Cone", "An open cone (no base, its tip cut off) standing on the z-axis, with a control on its "
+                        "base rim, its middle and its top rim, and 16-fold symmetry about the axis: a lamp shade to "
+                        "pull into shape.",
+        np.linspace(1.0, 0.3, rings), np.linspace(-0.8, 0.8, rings), at=(0, 12, 24), symmetry=Symmetry.radial(16, 2))
+
+
+def disc_preset() -> Preset:
+    """A flat disc of radius 1 in the xy-plane (a centre node and 16 rings of 32), facing +z; controls on its centre,
+    front, back and side rims, mirrored across the xz-plane."""
+    rings = 16
+    radii = np.linspace(1.0, 0.0, rings + 1)  # from the rim in to the centre: the faces face +z
+    at = (rings, 0, (0, OPEN_LONGITUDES // 2), (0, OPEN_LONGITUDES // 4))  # centre, front (+x), back (-x), side (+y)
+    return _revolved(
+        "disc", "Disc", "A flat open disc in the xy-plane, with controls on its centre and on its rim at the front, "
+                        "the back and the side (mirrored across the xz-plane): lift the back for a chair, press the "
+                        "centre for a dish.",
+        radii, np.zeros(rings + 1), at=at, mirror=(1,))
+
+
+def bowl_preset() -> Preset:
+    """A half sphere of radius 1, open at the top (a bottom node and 16 rings of 32); a control on its bottom, its
+    middle ring and its rim, 16-fold about z."""
+    rings = 16
+    polar = 0.5 * np.pi * np.arange(rings + 1) / rings  # from the bottom pole up to the rim
+    return _revolved(
+        "bowl", "Bowl", "A half sphere open at the top, with a control on its bottom, its middle ring and its rim, "
+                        "and 16-fold symmetry about the z-axis: flare the rim, flatten the bottom.",
+        np.sin(polar), -np.cos(polar), at=(0, rings // 2, rings), symmetry=Symmetry.radial(16, 2))

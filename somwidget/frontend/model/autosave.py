@@ -1,5 +1,5 @@
-"""Work is never lost: each step a session completes goes to its folder on disk (store.py) with its undo history, and
-`recover` brings back a stopped session, however it stopped.
+"""Work is never lost: each step a session completes goes to its folder on disk (store.py) with its undo history, so
+that recovery.py can bring back a stopped session, however it stopped.
 
 When a session writes (`SessionAutosave`): at once when a step completes (a drag released, a control added, a
 setting, a reset, an undo...), and while training goes on or a drag is held, when training settles or every
@@ -10,23 +10,20 @@ A save that fails (a full disk, a folder that cannot be written) is kept and tri
 state taking its place, until one is on disk; meanwhile `Autosave.error` says what is wrong and where, and the
 session's views show it. Nothing is called saved before its manifest is on disk.
 
-An autosave of an earlier version (one session file per session, `<id>.npz` beside `<id>.lock`) is brought back by
-`recover` when no saved session of this version is waiting, then renamed so that it is taken once.
+A session brought back (recovery.py) saves nothing until it is whole (`SessionAutosave.arm`): a store it took over
+stays as it was if the start fails, and a session that never finished starting is not saved at exit.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 
-from .files import preset_of, read
 from .operations import Publish
-from .state import ModellingState, max_vertices_for
-from .store import Saving, SessionStore, Unreadable, autosave_dir, lock, peek, set_aside, stopped
+from .state import ModellingState
+from .store import Saving, SessionStore
 from .timeline import Timeline
 from .trainer import Trainer
 
@@ -174,10 +171,28 @@ class SessionAutosave:
             return True
         return state.unsaved and (self.settled() or time.monotonic() - self._saved_at >= AUTOSAVE_SECONDS)
 
+    @property
+    def armed(self) -> bool:
+        """The session is whole: its saves go to its store (`arm`)."""
+        return self.writer.store.writable
+
+    def arm(self, on_disk: bool) -> None:
+        """The session brought back is whole: from now on it saves. `on_disk`: its folder holds exactly this state
+        (it came back from there whole), so nothing is written until it changes."""
+        state = self.state
+        with state.lock:
+            if on_disk:
+                state.unsaved = False
+                self._completed = state.completed
+                self._saved_at = time.monotonic()
+            self.writer.store.allow_writes()
+
     def if_due(self) -> None:
         """Training thread, after each turn: write the state if a step completed since the last save, or if it
         changed and training has settled (or AUTOSAVE_SECONDS have passed)."""
         state = self.state
+        if not self.armed:
+            return
         with state.lock:
             if not self._due():
                 return
@@ -197,8 +212,10 @@ class SessionAutosave:
 
     def flush(self, timeout: float = 10.0) -> bool:
         """Write the current state now (the queued intents applied first) and wait until it is on disk; False at the
-        timeout or while saves fail."""
+        timeout or while saves fail (or before the session is armed)."""
         state = self.state
+        if not self.armed:
+            return False
         with state.som_lock:
             self.drain()
             with state.lock:
@@ -207,10 +224,11 @@ class SessionAutosave:
         return self.writer.flush(timeout)
 
     def close(self, timeout: float) -> bool:
-        """Write what changed since the last save and let go of the folder; False when it could not be written."""
+        """Write what changed since the last save and let go of the folder; False when it could not be written. A
+        session that never finished starting (never armed) writes nothing."""
         state = self.state
         with state.lock:
-            due = state.unsaved or state.completed != self._completed
+            due = self.armed and (state.unsaved or state.completed != self._completed)
         try:
             if due:
                 with state.som_lock:
@@ -224,131 +242,3 @@ class SessionAutosave:
         if not ok:
             log.error("somwidget: the session's last steps could not be saved to %s: %s", self.path, self.error)
         return ok
-
-
-def recovered_message(saved_at: float, preset: str, gesture: bool, undo_steps: int) -> str:
-    """What a view says about a session brought back: when it was saved, and which state it is."""
-    when = time.strftime("%Y-%m-%d %H:%M", time.localtime(saved_at))
-    if gesture:
-        return (f"Brought back your session of {when} ({preset}) as it was during a drag that was not released: "
-                "the drag is kept as a step of its own, which Undo removes.")
-    steps = f"; Undo reaches the {undo_steps} step{'s' if undo_steps != 1 else ''} before it" if undo_steps else ""
-    return f"Brought back your session of {when} ({preset}) as its last completed step{steps}."
-
-
-def recover(session_class, origin: str | None = None, **options):
-    """(the newest stopped session of `origin` (None: any) brought back, or None; notices): the session has its undo
-    history and its folder (it goes on saving there), and nothing trains until the next intent; `options` go to
-    `session_class` (device, start...). A folder that cannot be read is set aside (renamed, never deleted) and the next
-    one tried; each notice says what was wrong and where."""
-    notices: list[str] = []
-    start = options.pop("start", True)
-    max_vertices = options.get("max_vertices") or max_vertices_for(options.get("device"))
-    for folder in stopped(notices):
-        manifest = peek(folder)
-        if manifest is not None and origin is not None and manifest.get("origin") != origin:
-            continue
-        try:
-            store = SessionStore.adopt(folder)
-        except OSError as exc:
-            notices.append(f"cannot open the saved session {folder}: {exc.strerror or exc}")
-            continue
-        if store is None:
-            continue  # live: another process has it
-        try:
-            saved = store.read(max_vertices)
-        except Unreadable as exc:
-            try:
-                aside = store.set_aside()
-                notices.append(f"the saved session in {folder} cannot be read ({exc}); it is kept at {aside}")
-            except OSError as err:
-                store.release()
-                notices.append(f"the saved session in {folder} cannot be read ({exc}) nor set aside ({err})")
-            continue
-        if origin is not None and saved.origin != origin:
-            store.release()
-            continue
-        try:
-            session = session_class(saved.current.preset, start=False, origin=saved.origin, _store=store, **options)
-        except ValueError as exc:  # it does not fit this device
-            store.release()
-            notices.append(f"the saved session in {folder} cannot be brought back here: {exc}")
-            continue
-        session.timeline.bring_back(saved.current, saved.undo, saved.redo)
-        session.recovered = {"path": str(folder), "saved": saved.saved, "preset": saved.current.preset.name,
-                             "gesture": saved.gesture, "undo": len(saved.undo), "redo": len(saved.redo),
-                             "message": recovered_message(saved.saved, saved.current.preset.title or
-                                                          saved.current.preset.name, saved.gesture, len(saved.undo))}
-        session.notices.extend(notices)
-        if start:
-            session.start()
-        return session, notices
-    session = _recover_legacy(session_class, origin, notices, max_vertices, options)
-    if session is not None and start:
-        session.start()
-    return session, notices
-
-
-#: An earlier version's autosave: `<id>.npz` (a session file) beside `<id>.lock` in the autosave folder.
-LEGACY_SUFFIX = ".npz"
-
-
-def legacy_stopped() -> list[Path]:
-    """Autosaves written by somwidget before 2026-11-25 (one session file each, no undo history) of sessions that
-    stopped (their lock free or gone), newest first."""
-    folder = autosave_dir()
-    if not folder.is_dir():
-        return []
-    found = []
-    for path in folder.glob(f"*{LEGACY_SUFFIX}"):
-        if not path.is_file():
-            continue
-        lock_path = path.with_suffix(".lock")
-        if lock_path.exists():
-            try:
-                handle = lock(lock_path)
-            except OSError:
-                continue
-            if handle is None:
-                continue  # its process is alive
-            handle.close()
-        found.append((path.stat().st_mtime, path))
-    return [p for _, p in sorted(found, reverse=True)]
-
-
-def _recover_legacy(session_class, origin, notices: list[str], max_vertices: int, options: dict):
-    """The newest earlier-version autosave brought back (as a loaded session file: its step, no undo history), the
-    file then renamed `<id>.npz.brought-back-<time>` so it is taken once and never deleted; or None."""
-    for path in legacy_stopped():
-        try:
-            state = read(path, max_vertices)
-            preset = preset_of(state)[0]
-        except ValueError as exc:
-            try:
-                notices.append(f"the earlier version's autosave {path} cannot be read ({exc}); it is kept at "
-                               f"{set_aside(path)}")
-            except OSError as err:
-                notices.append(f"the earlier version's autosave {path} cannot be read ({exc}) nor set aside ({err})")
-            continue
-        try:
-            session = session_class(preset, start=False, origin=origin or "python", **options)
-        except ValueError as exc:  # it does not fit this device
-            notices.append(f"the earlier version's autosave {path} cannot be brought back here: {exc}")
-            continue
-        session.files.restore(state)
-        kept = path.with_name(f"{path.name}.brought-back-{time.strftime('%Y%m%d-%H%M%S')}")
-        try:
-            os.replace(path, kept)
-            path.with_suffix(".lock").unlink(missing_ok=True)
-        except OSError as exc:
-            notices.append(f"the earlier version's autosave {path} was brought back but cannot be renamed: {exc}")
-            kept = path
-        saved = kept.stat().st_mtime if kept.exists() else time.time()
-        when = time.strftime("%Y-%m-%d %H:%M", time.localtime(saved))
-        message = (f"Brought back your session of {when} ({preset.title or preset.name}) from an earlier version's "
-                   f"autosave, as it was saved; the file is kept at {kept}.")
-        session.recovered = {"path": str(kept), "saved": saved, "preset": preset.name, "gesture": False, "undo": 0,
-                             "redo": 0, "message": message}
-        session.notices.extend(notices)
-        return session
-    return None

@@ -62,12 +62,14 @@ class ControlEdits:
         self.frames = frames
         self.hands = hands  # a control another hand holds is refused (hands.py)
 
-    def _queue(self, controls: np.ndarray, keep: bool = False) -> None:
+    def _queue(self, controls: np.ndarray, keep: bool = False,
+               rest: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """The new controls (and the radii and strokes the clay holds) to the Som (caller holds state.lock); inside a
-        drag they restart from where it began; with `keep` nothing restarts (a control placed)."""
+        drag they restart from where it began; with `keep` nothing restarts (a control placed); with `rest` (weights
+        and controls before a move) the move is made again from that shape."""
         state = self.state
         self.trainer.enqueue(SetControls(controls, state.radii.copy(), state.strokes, self.timeline.drag_anchor(),
-                                         state.control_ids, keep=keep, group=state.symmetry))
+                                         state.control_ids, keep=keep, group=state.symmetry, rest=rest))
 
     @property
     def radii(self) -> np.ndarray:
@@ -139,6 +141,9 @@ class ControlEdits:
         self._edit("colour", index, edit)
 
     def set_radius(self, index, radius) -> None:
+        """Control `index`'s radius (its stroke's), or every control's with `index` None; it acts at once: where the
+        control was moved last (the latest steps moved it and set nothing else but radii), the move is done again
+        from the shape before it with the new radius, so the clay shows the radius; otherwise a local restart."""
         state = self.state
         r = check_radius("every control's radius" if index is None else f"control {index} radius", radius)
         if index is not None:
@@ -146,11 +151,36 @@ class ControlEdits:
         with self.timeline.step(f"parameter:radius:{'all' if index is None else index}"), state.lock:
             radii = state.radii.copy()
             if index is None:
-                radii[:] = r
+                run = range(len(radii))
             else:
-                radii[list(state.run_of(check_index("control", index, state.controls.shape[0])))] = r
+                run = state.run_of(check_index("control", index, state.controls.shape[0]))
+            radii[list(run)] = r
             state.radii = radii
-            self._queue(state.controls.copy())
+            before = None if self.timeline.drag_anchor() is not None else self._before_move(run)
+            self._queue(state.controls.copy(), rest=before)
+
+    def _before_move(self, run: range) -> tuple[np.ndarray, np.ndarray] | None:
+        """The weights and the controls before the latest move of the controls `run`, when every step since changed
+        only their positions and radii (caller holds state.lock); else None."""
+        state = self.state
+        k = len(state.controls)
+        others = np.ones(k, bool)
+        others[list(run)] = False
+        strokes = tuple(state.strokes)
+        for step in reversed(self.timeline.history.steps()[0]):
+            radii = np.zeros(k, np.float32) if step.radii is None else np.asarray(step.radii)
+            if (step.preset is not state.preset or step.symmetry != state.symmetry or step.controls.shape != (k,) +
+                    state.controls.shape[1:] or tuple(step.strokes or (1,) * k) != strokes
+                    or step.parameters != state.params or radii.shape != (k,)
+                    or not np.array_equal(step.controls[others], state.controls[others])
+                    or not np.array_equal(radii[others], state.radii[others])):
+                return None
+            if not np.array_equal(step.controls[list(run)], state.controls[list(run)]):
+                try:
+                    return np.asarray(step.loaded().weights, np.float32), np.array(step.controls, np.float32)
+                except (OSError, ValueError):
+                    return None
+        return None
 
     def replace(self, controls, radii=None) -> None:
         arr = checks.finite_array("controls", controls, 2, np.float64)
@@ -263,12 +293,12 @@ MAX_STROKE_SAMPLES = 24
 SPACING_SHARE = 0.1
 
 
-def resample(points: np.ndarray, position, spacing: float) -> np.ndarray:
+def resample(points: np.ndarray, position, spacing: float, most: int = MAX_STROKE_SAMPLES) -> np.ndarray:
     """Samples of a polyline (all features interpolated) evenly spaced about `spacing` apart along its positions,
-    its ends included; 2 to MAX_STROKE_SAMPLES of them."""
+    its ends included; 2 to `most` of them."""
     pos = points[:, list(position)]
     seg = np.linalg.norm(np.diff(pos, axis=0), axis=1)
     along = np.concatenate([[0.0], np.cumsum(seg)])
-    count = int(np.clip(np.ceil(along[-1] / spacing) + 1, 2, MAX_STROKE_SAMPLES))
+    count = int(np.clip(np.ceil(along[-1] / spacing) + 1, 2, max(2, most)))
     at = np.linspace(0.0, along[-1], count)
     return np.stack([np.interp(at, along, points[:, d]) for d in range(points.shape[1])], axis=1)

@@ -103,10 +103,14 @@ class Frame:
     @property
     def control_display_colours(self) -> np.ndarray:
         """(k_eff, 3) the colours the views draw the effective controls in: their colour dims' where the layout has
-        them, else the palette's by the control's stable id (a mirrored copy in its control's colour)."""
+        them, else the palette's by the control's stable id (a mirrored copy in its control's colour; a stroke's samples
+        in its first sample's)."""
         if self.preset.layout.colour_space != "none":
             return np.asarray(self.effective_colours, np.float32)
         ids = self.control_ids if len(self.control_ids) == self.n_controls else None
+        if ids is not None and sum(self.strokes) == self.n_controls:
+            first = np.repeat(np.cumsum((0, *self.strokes[:-1])), self.strokes)
+            ids = tuple(ids[i] for i in first)
         return _presets.palette_colours(self.n_controls, len(self.effective_controls), ids)[1]
 
     @property

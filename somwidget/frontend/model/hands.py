@@ -304,7 +304,7 @@ def undo_own(session, hand: Hand) -> bool:
         if cid in ids and holder is not None and holder is not hand:
             raise ValueError(refusal("undo", ids.index(cid), holder))
     with acting(hand.id), timeline.step("undo"):
-        controls, radii = session.controls, session.radii
+        controls, radii = session.controls, session.control_edits.radii
         for cid, (values, radius) in change.controls.items():
             if cid in ids:
                 controls[ids.index(cid)], radii[ids.index(cid)] = values, radius

@@ -15,12 +15,13 @@ import logging
 import os
 import shutil
 import tempfile
-import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Protocol
 
 import numpy as np
+
+from ...backend import checks
 
 log = logging.getLogger(__name__)
 
@@ -73,14 +74,19 @@ class Step:
 
 
 def load_weights(path: Path) -> np.ndarray:
-    """The weights of a step file (an .npz with a "weights" member)."""
+    """The weights of a step file (an .npz with a "weights" member): finite float32 values within the engine's
+    bounds (checks.MAX_MAGNITUDE). ValueError in plain words when the file is not one, OSError when it cannot be
+    read."""
     try:
         with np.load(path, allow_pickle=False) as z:
             weights = z["weights"]
-    except (zipfile.BadZipFile, KeyError, EOFError) as exc:
-        raise ValueError(f"{path}: not a step file ({exc})") from None
-    if weights.dtype != np.float32 or weights.ndim != 2 or not np.isfinite(weights).all():
-        raise ValueError(f"{path}: not the weights of a step ({weights.dtype} {weights.shape})")
+    except OSError:
+        raise
+    except Exception:  # zipfile's, zlib's and numpy's own words for a damaged file: ours are given instead
+        raise ValueError(f"{path}: not a step file (cut short or damaged)") from None
+    if weights.dtype != np.float32 or weights.ndim != 2 or not np.isfinite(weights).all() \
+            or np.abs(weights).max(initial=0.0) > checks.MAX_MAGNITUDE:
+        raise ValueError(f"{path}: not the weights of a step (finite float32 values up to {checks.MAX_MAGNITUDE:g})")
     return weights
 
 

@@ -50,7 +50,10 @@ class SetControls(Operation):
     move would; while a hand holds a control with a radius (a handle, bound at its grab: `Grab`) the frames go on
     from the latest weights, as the handle carries its patch step by step.
     With `keep` (a control placed: it moves nothing until it is dragged) the weights and s stay and nothing trains;
-    `group` is then the symmetry group the Som keeps."""
+    `group` is then the symmetry group the Som keeps. With `rest` (the weights and the controls before a control's
+    last move) the move is made again from there: the shape and the controls go back (nothing trains), then the
+    controls move as the move did, so a radius changed after a move re-does the move with the new radius (a handle
+    binds at the old place, as a typed move does)."""
 
     controls: np.ndarray
     radii: np.ndarray
@@ -59,6 +62,7 @@ class SetControls(Operation):
     ids: tuple
     keep: bool = False
     group: object = None
+    rest: tuple[np.ndarray, np.ndarray] | None = None
     key = "controls"
 
     @property
@@ -75,6 +79,10 @@ class SetControls(Operation):
             som.regroup(self.controls, self.radii, *engine_symmetry(self.group), keep_shape=True,
                         strokes=self.strokes)
         else:
+            if self.rest is not None and self.anchor is not som:
+                weights, controls = self.rest
+                som.restore(weights, som.iterations)
+                som.regroup(controls, self.radii, *engine_symmetry(self.group), keep_shape=True, strokes=self.strokes)
             som.set_controls(self.controls, self.radii, strokes=self.strokes,
                              from_anchor=self.anchor is som and not som.held)
 

@@ -179,6 +179,11 @@ class PanelModel:
         """What the panel's banner says about a session brought back (which state came back), "" for any other."""
         return (self.session.recovered or {}).get("message", "")
 
+    def notice_message(self) -> str:
+        """What the panel's notice says about the saved sessions that could not be read whole (what was wrong, in
+        which file, what came back and where the folder is kept), "" when there is none."""
+        return " ".join(self.session.notices)
+
     @staticmethod
     def train_label(frame: Frame) -> str:
         """What the run button does now: Pause a running map, Resume one stopped part way through its schedule
@@ -203,23 +208,37 @@ class PanelModel:
 
     @staticmethod
     def control_rows(frame: Frame) -> list[dict]:
-        """One row per control: its index, colour ('#rrggbb'), position ("x, y, z"), its other features' values
-        (the dims that are neither position nor colour, `other_dims`; "" when there are none), gap text (original /
-        mirror) and radius. Position and features are written as a panel's field takes them back."""
+        """One row per control, a stroke's samples in one row: its index (a stroke's first sample's), its stable id
+        (the number the views show), colour ('#rrggbb'), position ("x, y, z"; a stroke's first sample's: typed, the
+        whole stroke moves by as much), its other features' values (the dims that are neither position nor colour,
+        `other_dims`; "" when there are none), gap text (original / mirror; a stroke's largest), radius and `samples`
+        (1, or a stroke's count). Position and features are written as a panel's field takes them back."""
         k, gaps = frame.n_controls, frame.gaps
         colours = frame.control_display_colours[:k]
         others = other_dims(frame.preset.layout) if frame.preset is not None else ()
-        rows = []
-        for i in range(k):
-            g = [float(gaps[i])] if i < len(gaps) else []
-            if len(gaps) >= 2 * k:  # mirrored copy i sits at k + i
-                g.append(float(gaps[k + i]))
+        ids = frame.control_ids if len(frame.control_ids) == k else tuple(range(k))
+        runs = frame.strokes if sum(frame.strokes) == k else (1,) * k
+        rows, i = [], 0
+        for n in runs:
+            run = range(i, i + n)
+            g = [max(float(gaps[j]) for j in run)] if i < len(gaps) else []
+            if len(gaps) >= 2 * k:  # mirrored copy j sits at k + j
+                g.append(max(float(gaps[k + j]) for j in run))
             radius = float(frame.radii[i]) if i < len(frame.radii) else 0.0
-            rows.append({"i": i, "colour": hex_colour(colours[i]),
+            rows.append({"i": i, "id": int(ids[i]), "samples": n, "colour": hex_colour(colours[i]),
                          "position": ", ".join(f"{x:.3g}" for x in frame.control_positions[i]),
                          "features": ", ".join(f"{float(frame.controls[i, d]):.3g}" for d in others),
                          "gap": " / ".join(f"{x:.3f}" for x in g), "radius": round(radius, 4)})
+            i += n
         return rows
+
+    @staticmethod
+    def common_radius(frame: Frame) -> str:
+        """Every control's radius when they all have one ("" when they differ): what the "all radii" field shows."""
+        radii = np.asarray(frame.radii, np.float64)
+        if not len(radii) or np.ptp(radii) > 1e-9 * max(1.0, float(radii.max())):
+            return ""
+        return f"{float(radii[0]):.4g}"
 
     def set_position(self, index, text) -> str | None:
         """Control `index` moved to a typed position: "x, y, z" (commas or spaces between the numbers); where it is

@@ -44,12 +44,13 @@ from ...backend import io as mesh_io
 from ...backend import presets as _presets
 from ...backend.presets import FeatureLayout, Preset
 from .autosave import SessionAutosave
-from .autosave import recover as recover_session
 from .controls import ControlEdits
 from .files import SessionFiles
 from .frames import Frame, FrameListener, FrameStream
 from .hands import Hand, Hands, redo_own, undo_own
 from .operations import Publish, Reset, Restart
+from . import revolving
+from .recovery import recover as recover_session
 from .refining import refined_preset
 from .settings import SessionSettings
 from .state import GPU_MAX_VERTICES, ModellingState, build, max_vertices_for
@@ -364,6 +365,14 @@ class Session:
         .add_stroke`). Returns the index of its first sample."""
         return self.control_edits.add_stroke(points, radius)
 
+    def revolve(self, profile_points, axis="z", n: int = 16, radius: float | None = None) -> int:
+        """Lathe the clay: its nodes placed on the surface of revolution of the profile (m >= 2 points beside the axis
+        "x", "y" or "z" through the origin; each node keeps its angle about the axis and its place along the clay's
+        meridian), n-fold radial symmetry about the axis, and the profile's samples as a stroke control (radius:
+        None for the preset's) with its copies in place of the controls. One undo step; nothing trains until the
+        next intent. Returns the stroke's sample count (revolving.py)."""
+        return revolving.revolve(self, profile_points, axis, n, radius)
+
     def remove_control(self, index: int) -> None:
         self.control_edits.remove(index)
 
@@ -372,6 +381,13 @@ class Session:
         """Set one setting by name (backend/schedule.py: S or iterations, the schedule's, symmetry) or
         metric_weights. A schedule setting restarts the schedule locally from the latest weights."""
         self.settings.set(name, value)
+
+    def set_symmetry(self, group) -> str:
+        """The symmetry group: a Symmetry, its spec ("mirror-y", "radial-8-z"), True (the last group, else the
+        preset's), False or None (off). Off, every copy becomes a control of its own and nothing moves; on, no control
+        is merged into another's copy unless all of them pair up (the copies a group left when turned off). One undo
+        step; returns what happened to the controls, in words (`settings.set_symmetry`)."""
+        return self.settings.set_symmetry(group)
 
     def set_iterations(self, value) -> None:
         """S: cycles in a run."""
@@ -462,9 +478,11 @@ class Session:
         ("python": made from Python, a notebook's included; "serve": `somwidget serve`'s; None: any), brought back
         as its autosave left it: its last completed step (or a drag not released, as a step of its own) with its
         undo history; nothing trains until the next intent. None if there is none. `session.recovered["message"]`
-        says which state came back. `options` go to Session (device, start...). It goes on saving in the same
-        folder. A saved session that cannot be read is set aside (renamed, never deleted; `session.notices` and the
-        log say where) and the next one tried."""
+        says which state came back. `options` go to Session (device, start...). Everything it reads is checked
+        before anything is built (readback.py); read whole, it goes on saving in the same folder, which is not
+        written until the next step. A folder not read whole is set aside whole (renamed, never changed) and what
+        could be read comes back in a new folder, or the next one is tried; `session.notices` and the log say what
+        was wrong, in which file, and what was kept where (recovery.py)."""
         session, notices = recover_session(cls, origin, **options)
         for notice in notices:
             log.warning("%s", notice)

@@ -12,6 +12,7 @@ settings a view sets by name, `check_set(name, value)` checks a "set" intent's v
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -60,6 +61,8 @@ class SessionSettings:
         self.state = state
         self.timeline = timeline
         self.trainer = trainer
+        self.notice = ""  # what the latest symmetry change did to the controls, in words
+        self.notices = 0  # symmetry changes so far: a panel shows `notice` when this moves
 
     def values(self) -> dict:
         """Every setting held by name, with "mirror" (the dims a mirror group negates) and "group" (the symmetry
@@ -82,9 +85,9 @@ class SessionSettings:
         d_max = int(self.state.preset.topology.d_max)  # the Som's own d_max: sessions keep the dense table
         return min(schedule.MAX_ITERATIONS, MAX_TABLE_ENTRIES // (d_max + 1))
 
-    def set(self, name: str, value) -> None:
+    def set(self, name: str, value) -> str | None:
         """One setting by name (a schedule setting, "symmetry" or "group", "metric_weights"); a schedule setting
-        restarts the schedule locally from the latest weights."""
+        restarts the schedule locally from the latest weights. For the symmetry: what happened to the controls."""
         name = ALIASES.get(name, name)
         if name in ("symmetry", "group"):
             return self.set_symmetry(value)
@@ -116,23 +119,32 @@ class SessionSettings:
             if all(declared[name].scope != "engine" for name in checked):
                 self.trainer.enqueue(Publish())  # nothing for the Som: a frame shows it
 
-    def set_symmetry(self, value) -> None:
-        """A group (a Symmetry, its spec "radial-8-z") or on / off (True: the last group, else the preset's mirror).
-        Off, each copy becomes a control of its own; on, controls that are each other's images pair up again; when
-        the controls the engine applies stay the same, nothing moves and nothing trains."""
+    def set_symmetry(self, value) -> str:
+        """A group (a Symmetry, its spec "radial-8-z"), on / off (True: the last group, else the preset's mirror) or
+        None (off). Off, each copy becomes a control of its own. On, the controls pair up again as a control and its
+        copies only where every control finds all its copies (the copies a group left when it was turned off): then
+        nothing moves and nothing trains. Otherwise every control is kept with copies of its own, none merged; the
+        clay follows. Returns what happened to the controls, in words (also `notice`, for the panels)."""
         state = self.state
         group = self._group_of(value)
         with self.timeline.step("symmetry"), state.lock:
-            controls, radii, ids, strokes, keep = regroup(state, group)
-            check_count(controls, group)
-            state.controls, state.radii, state.control_ids, state.strokes = controls, radii, ids, strokes
+            done = regroup(state, group)
+            check_count(done.controls, group)
+            state.controls, state.radii, state.control_ids, state.strokes = (done.controls, done.radii, done.ids,
+                                                                              done.strokes)
             state.set_symmetry(group)
-            if keep:
+            if done.keep:
                 state.hold = True
-            self.trainer.enqueue(SetSymmetry(group, controls.copy(), radii.copy(), strokes, ids, keep))
+            self.trainer.enqueue(SetSymmetry(group, done.controls.copy(), done.radii.copy(), done.strokes, done.ids,
+                                             done.keep))
+            self.notice = done.notice(group, state.layout)
+            self.notices += 1
+            return self.notice
 
     def _group_of(self, value) -> Symmetry | None:
         state = self.state
+        if value is None:
+            return None
         if isinstance(value, Symmetry):
             group = value
         elif isinstance(value, str) and value.strip().lower() not in ("true", "false", "on", "off", "1", "0"):
@@ -178,16 +190,47 @@ def expand(controls: np.ndarray, radii: np.ndarray, strokes: tuple, group) -> tu
     return group.images(controls).astype(np.float32), np.tile(radii, order), strokes * order
 
 
-def regroup(state, group) -> tuple[np.ndarray, np.ndarray, tuple, tuple, bool]:
-    """(controls, radii, ids, strokes, keep) of the controls under a new `group` (caller holds state.lock):
-    the old group's copies become controls of their own, then, under a group, controls (or strokes) that are images
-    of an earlier one (within PAIR_TOLERANCE of the size) join it as its copies. keep: the effective controls stay
-    the same (every image found), so nothing needs to move."""
+@dataclass(frozen=True)
+class Regrouped:
+    """The controls under a new group (`regroup`): their values, radii, ids and strokes; `keep`: the controls the
+    engine applies stay the same, so nothing moves; `images`: (id, id) of controls kept apart although one is an
+    image of the other under the group."""
+
+    controls: np.ndarray
+    radii: np.ndarray
+    ids: tuple
+    strokes: tuple
+    keep: bool
+    merged: int = 0
+    images: tuple = ()
+
+    def notice(self, group, layout) -> str:
+        """What happened to the controls, in words (numbered by their ids, as the views number them)."""
+        k = len(self.controls)
+        if group is None:
+            return f"symmetry off: {k} controls, each copy now a control of its own (nothing moves)"
+        said = f"{group.describe()}: "
+        if self.merged:
+            return said + (f"{self.merged} controls paired up again as {k} controls and their copies (nothing "
+                           "moves)")
+        said += f"{k} control{'s' * (k != 1)} kept, each with {group.order - 1} cop{'ies' if group.order > 2 else 'y'}"
+        if self.images:
+            pairs = ", ".join(f"{a} and {b}" for a, b in self.images[:4]) + (", ..." if len(self.images) > 4 else "")
+            said += (f"; {pairs} are each other's images, kept apart: remove one to leave its place to the other's "
+                     "copy")
+        return said
+
+
+def regroup(state, group) -> Regrouped:
+    """The controls under a new `group` (caller holds state.lock): the old group's copies become controls of their
+    own; then, under a group, controls (or strokes) pair up as a control and its copies only when every one finds all
+    its images (within PAIR_TOLERANCE of the controls' spread): the copies that group left when it was turned off, so
+    the effective controls stay the same. Otherwise none merges: every control is kept, with copies of its own."""
     controls, radii, strokes = expand(state.controls, state.radii, state.strokes, state.symmetry)
     k = len(state.controls)
     ids = list(state.control_ids) + list(state.fresh_ids(len(controls) - k))
     if group is None:
-        return controls, radii, tuple(ids), strokes, True
+        return Regrouped(controls, radii, tuple(ids), strokes, True)
     pos = list(state.layout.position)
     size = float(np.linalg.norm(np.ptp(controls[:, pos], axis=0))) if len(controls) > 1 else 1.0
     tol = PAIR_TOLERANCE * (size or 1.0)
@@ -196,7 +239,7 @@ def regroup(state, group) -> tuple[np.ndarray, np.ndarray, tuple, tuple, bool]:
     runs = [np.arange(starts[r], starts[r + 1]) for r in range(len(strokes))]
     c64 = controls.astype(np.float64)
     taken = np.zeros(len(runs), bool)
-    kept, complete = [], True
+    kept, images, complete = [], [], True
     for r, run in enumerate(runs):
         if taken[r]:
             continue
@@ -210,9 +253,12 @@ def regroup(state, group) -> tuple[np.ndarray, np.ndarray, tuple, tuple, bool]:
                 complete = False
             else:
                 taken[match] = True
+                images.append((ids[run[0]], ids[runs[match][0]]))
+    if not complete:  # some control lacks a copy: nothing merges
+        return Regrouped(controls, radii, tuple(ids), strokes, False, images=tuple(images))
     index = np.concatenate([runs[r] for r in kept])
-    return (controls[index], radii[index], tuple(ids[i] for i in index), tuple(len(runs[r]) for r in kept),
-            complete)
+    return Regrouped(controls[index], radii[index], tuple(ids[i] for i in index), tuple(len(runs[r]) for r in kept),
+                     True, merged=len(runs))
 
 
 #: Two controls pair up as a control and its symmetric copy when the copy lies within this share of the controls'

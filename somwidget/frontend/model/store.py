@@ -15,37 +15,38 @@ A session's folder holds:
 
 Every file is written whole under a temporary name, flushed to the disk (fsync) and renamed into place, the manifest
 last; so a kill at any moment leaves the previous manifest and every file it names whole. A file that no manifest
-names any more is deleted once the next manifest is on disk.
+names any more is deleted once the next manifest is on disk. A folder taken over from a stopped session is read back
+by readback.py and written only once the session rebuilt from it is whole (`SessionStore.writable`).
 
 Stopped sessions are pruned (`prune`): those older than KEEP_DAYS go, and past KEEP_SESSIONS of them or KEEP_BYTES
 in all the oldest go first; the newest stopped session of each origin is always kept (a notebook's many sessions
 never push out the web app's last one). A folder or file that cannot be read is set
-aside under a name ending ".unreadable" (`set_aside`), never deleted.
+aside under a name ending ".unreadable" (`set_aside`), never deleted. A link in the autosave folder is never
+followed (neither read nor written through), and no file is read that is not a plain one (`read_small`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import logging
 import os
 import re
 import shutil
+import stat
 import threading
 import time
 import uuid
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ...backend import schedule, session_file
-from ...backend.presets import MAX_CONTROLS, Preset
+from ...backend import session_file
+from ...backend.presets import Preset
 from ...backend.session_file import write_atomic
-from ...backend.symmetry import Symmetry
 from .history import Step
-from .state import held_settings
 from .storage import autosave_dir
 
 log = logging.getLogger(__name__)
@@ -63,12 +64,17 @@ KEEP_BYTES = 4 << 30
 #: A folder changed within this many seconds is never pruned (a session being made).
 FRESH_SECONDS = 60.0
 UNREADABLE = ".unreadable"
-_STEP_FILE = re.compile(r"s(\d+)\.npz")
-_PRESET_FILE = re.compile(r"p(\d+)\.npz")
+#: The names of a folder's step and preset files (ASCII digits, as many as this module writes at most).
+STEP_FILE = re.compile(r"s([0-9]{1,12})\.npz")
+PRESET_FILE = re.compile(r"p([0-9]{1,12})\.npz")
+#: File numbers counted when a folder is taken over (far below the 12 digits a name may have).
+COUNTED = 10**9
+#: The largest manifest read (200 undo and 200 redo steps of 32 dims take about 1 MiB).
+MAX_MANIFEST_BYTES = 16 << 20
 
 
 class Unreadable(ValueError):
-    """A stored session that cannot be read back: the message names the file and what is wrong."""
+    """A file of a stored session that cannot be read: the message says what is wrong in plain words."""
 
 
 @dataclass(frozen=True)
@@ -80,18 +86,6 @@ class Saving:
     undo: list
     redo: list
     gesture: bool = False
-
-
-@dataclass(frozen=True)
-class Saved:
-    """A session read back from its folder (`SessionStore.read`)."""
-
-    current: Step
-    undo: list
-    redo: list
-    gesture: bool
-    saved: float  # when it was written (time.time())
-    origin: str
 
 
 # -- files --------------------------------------------------------------------------------------------------------
@@ -108,8 +102,15 @@ def sync_folder(folder: Path) -> None:
 
 def lock(path: Path):
     """The open lock file at `path`, locked exclusively (the OS drops the lock when the process ends, however it
-    ends), or None when another process holds it. OSError when the file cannot be opened."""
-    handle = open(path, "a+b")  # noqa: SIM115 (held open for as long as the lock is)
+    ends), or None when another process holds it. OSError when it cannot be opened, or is not a plain file (a link
+    is never followed: a lock is made only inside the session's folder)."""
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) \
+        | getattr(os, "O_CLOEXEC", 0)
+    fd = os.open(path, flags, 0o644)
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise OSError(errno.EINVAL, "not a plain file", str(path))
+    handle = os.fdopen(fd, "r+b")
     try:
         import fcntl
 
@@ -128,6 +129,42 @@ def lock(path: Path):
             pass
     handle.close()
     return None
+
+
+def check_plain(path: Path, limit: int) -> None:
+    """Unreadable (in plain words) unless `path` is a plain file of at most `limit` bytes: a link (never followed),
+    a folder, a named pipe or a file too large for what it should hold."""
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        raise Unreadable("missing") from None
+    except OSError as exc:
+        raise Unreadable(f"cannot be read ({exc.strerror or exc})") from None
+    if stat.S_ISLNK(info.st_mode):
+        raise Unreadable("a link to somewhere else, not a file of this folder")
+    if stat.S_ISDIR(info.st_mode):
+        raise Unreadable("a folder where a file should be")
+    if not stat.S_ISREG(info.st_mode):
+        raise Unreadable("not a plain file")
+    if info.st_size > limit:
+        raise Unreadable(f"{info.st_size:,} bytes, more than such a file holds ({limit:,} at most)")
+
+
+def read_small(path: Path, limit: int) -> bytes:
+    """The bytes of the plain file at `path` (`check_plain`), of at most `limit` bytes; Unreadable otherwise, or when
+    it cannot be read. Nothing blocks and no link is followed."""
+    check_plain(path, limit)
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0))
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise Unreadable("not a plain file")
+            data = f.read(limit + 1)
+    except OSError as exc:
+        raise Unreadable(f"cannot be read ({exc.strerror or exc})") from None
+    if len(data) > limit:
+        raise Unreadable(f"more than such a file holds ({limit:,} bytes at most)")
+    return data
 
 
 def set_aside(path: Path) -> Path:
@@ -160,8 +197,8 @@ def _session_folders(folder: Path) -> list[tuple[float, Path]]:
     """(when it was last saved, folder) of each session folder under `folder`, newest first."""
     found = []
     for entry in folder.iterdir():
-        if UNREADABLE in entry.name or not entry.is_dir():
-            continue
+        if UNREADABLE in entry.name or entry.is_symlink() or not entry.is_dir():
+            continue  # set aside, not a folder, or a link to one elsewhere (never read, never written)
         manifest, lock_path = entry / MANIFEST, entry / LOCK
         try:
             when = (manifest if manifest.exists() else lock_path).stat().st_mtime
@@ -186,11 +223,11 @@ def stopped(notices: list[str] | None = None) -> list[Path]:
 
 
 def peek(folder: Path) -> dict | None:
-    """A session folder's manifest, or None when it cannot be read."""
+    """A session folder's manifest as it is (nothing checked: readback.py checks), or None when it cannot be read."""
     try:
-        data = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))
+        data = json.loads(read_small(folder / MANIFEST, MAX_MANIFEST_BYTES).decode("utf-8"))
         return data if isinstance(data, dict) else None
-    except (OSError, ValueError):
+    except (ValueError, RecursionError):  # Unreadable, not UTF-8, not JSON
         return None
 
 
@@ -242,28 +279,6 @@ def prune(keep_days: float = KEEP_DAYS, keep_sessions: int = KEEP_SESSIONS, keep
     return gone
 
 
-def read_settings(stored: dict, n_dims: int) -> dict:
-    """A step's settings as a manifest keeps them, checked against their declaration: a setting the step lacks
-    (declared since it was written) takes its default; one no declaration names is refused (ValueError)."""
-    declared = {s.name: s for s in held_settings()}
-    unknown = sorted(set(stored) - set(declared))
-    if unknown:
-        raise ValueError(f"a step's settings {unknown[:5]} are not settings of this somwidget; it knows "
-                         f"{sorted(declared)}")
-    values = {}
-    for name, s in declared.items():
-        if name not in stored:
-            values[name] = [s.default] * n_dims if s.per else s.default
-        elif s.per:
-            value = [s.check(float(x), f"{s.label} {d}") for d, x in enumerate(stored[name])]
-            if len(value) != n_dims:
-                raise ValueError(f"{len(value)} values of {name} for {n_dims} dims")
-            values[name] = value
-        else:
-            values[name] = s.check(stored[name], name)
-    return values
-
-
 # -- one session's folder ------------------------------------------------------------------------------------------
 def _jsonable(value):
     if isinstance(value, (np.integer,)):
@@ -277,12 +292,16 @@ def _jsonable(value):
 
 class SessionStore:
     """One session's folder (see the module's docstring). `put` and `drop` make it the shelf of the session's
-    History; `commit` writes a save; `read` reads the folder back. Made with `new` (the folder and its lock come with
-    the first write) or `adopt` (a stopped session's folder, locked at once)."""
+    History; `commit` writes a save. Made with `new` (the folder and its lock come with the first write) or `adopt`
+    (a stopped session's folder, locked at once, read by readback.py).
 
-    def __init__(self, folder: Path, origin: str, handle=None):
+    `writable`: a store taken over from a stopped session (or made for one being brought back) writes nothing until
+    the rebuilt session is whole (`allow_writes`): a start that fails half way leaves the folder as it found it."""
+
+    def __init__(self, folder: Path, origin: str, handle=None, writable: bool = True):
         self.folder = Path(folder)
         self.origin = origin
+        self.writable = writable
         self._handle = handle  # the lock file, open and locked
         self._lock = threading.Lock()
         self._files: dict[int, str] = {}  # step key -> its file's name
@@ -291,22 +310,39 @@ class SessionStore:
         self._counter = 0
 
     @classmethod
-    def new(cls, origin: str) -> SessionStore:
+    def new(cls, origin: str, writable: bool = True) -> SessionStore:
         """A store for a new session (nothing on disk until its first write)."""
         name = f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-        return cls(autosave_dir() / name, origin)
+        return cls(autosave_dir() / name, origin, writable=writable)
 
     @classmethod
     def adopt(cls, folder: Path) -> SessionStore | None:
-        """The store of a stopped session's folder, locked for this process; None when it is live (another process
-        holds it). OSError when its lock cannot be opened."""
+        """The store of a stopped session's folder, locked for this process and not writable yet; None when it is
+        live (another process holds it). OSError when its lock cannot be opened (or is not a plain file)."""
         handle = lock(Path(folder) / LOCK)
         if handle is None:
             return None
-        manifest = peek(folder) or {}
-        store = cls(folder, str(manifest.get("origin", "python")), handle)
+        origin = (peek(folder) or {}).get("origin", "python")
+        store = cls(folder, origin if isinstance(origin, str) else "python", handle, writable=False)
         store._count_files()
         return store
+
+    def take_over(self, files: dict[int, str], presets: dict[str, Preset], current: int) -> None:
+        """The files of the steps and presets read back from this folder (step key -> name, name -> preset), and the
+        key of its current step: the next saves name them again instead of writing them anew."""
+        with self._lock:
+            self._files.update(files)
+            self._presets.update({id(preset): (preset, name) for name, preset in presets.items()})
+            self._current = current
+
+    def allow_writes(self) -> None:
+        """The session is whole: saves may go to the folder from now on."""
+        self.writable = True
+
+    def _check_writable(self) -> None:
+        if not self.writable:
+            raise OSError(errno.EPERM, "nothing is written here until the session brought back is whole",
+                          str(self.folder))
 
     def open(self, notices: list[str] | None = None) -> None:
         """Make the folder and take its lock (once); OSError when the disk refuses."""
@@ -334,9 +370,11 @@ class SessionStore:
         return aside
 
     def _count_files(self) -> None:
+        """Number the next files past those in the folder (a stray one numbered near the names' limit, which no
+        session reaches, is not counted: the names written stay names the reader takes)."""
         for entry in os.listdir(self.folder):
-            m = _STEP_FILE.fullmatch(entry) or _PRESET_FILE.fullmatch(entry)
-            if m:
+            m = STEP_FILE.fullmatch(entry) or PRESET_FILE.fullmatch(entry)
+            if m and int(m.group(1)) < COUNTED:
                 self._counter = max(self._counter, int(m.group(1)))
 
     def _next(self) -> int:
@@ -361,6 +399,7 @@ class SessionStore:
         name = self._files.get(step.key)
         if name is not None:
             return name
+        self._check_writable()
         self.open()
         weights = step.loaded().weights
         controls = np.asarray(step.controls, np.float32)
@@ -386,6 +425,7 @@ class SessionStore:
         delete the files no manifest names any more. OSError (a full disk, a folder that cannot be written) or
         ValueError leaves the previous manifest and its files as they were."""
         with self._lock:
+            self._check_writable()
             self.open()
             presets: dict[str, dict] = {}
 
@@ -420,105 +460,9 @@ class SessionStore:
         for r in [manifest["current"], *manifest["undo"], *manifest["redo"]]:
             named.add(r["file"])
         for entry in os.listdir(self.folder):
-            if entry not in named and (_STEP_FILE.fullmatch(entry) or _PRESET_FILE.fullmatch(entry)
+            if entry not in named and (STEP_FILE.fullmatch(entry) or PRESET_FILE.fullmatch(entry)
                                        or entry.startswith(".tmp-")):
                 try:
                     os.unlink(self.folder / entry)
                 except OSError:
                     pass
-
-    # -- reading back -------------------------------------------------------------------------------------------
-    def read(self, max_vertices: int) -> Saved:
-        """The session this folder holds: its current step with its weights in memory, its undo and redo steps with
-        theirs on disk (read when reached). Unreadable naming the file and what is wrong."""
-        path = self.folder / MANIFEST
-        try:
-            manifest = json.loads(path.read_text(encoding="utf-8"))
-            if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
-                raise ValueError(f"not a somwidget session manifest of format {FORMAT}")
-            presets = {name: self._read_preset(name, record, max_vertices)
-                       for name, record in dict(manifest["presets"]).items()}
-            current = self._read_step(manifest["current"], presets, load=True)
-            undo = [self._read_step(r, presets, load=False) for r in list(manifest["undo"])]
-            redo = [self._read_step(r, presets, load=False) for r in list(manifest["redo"])]
-            saved = float(manifest["saved"])
-            gesture = bool(manifest.get("gesture", False))
-        except Unreadable:
-            raise
-        except IsADirectoryError:
-            raise Unreadable(f"{path}: a folder where the session's manifest should be") from None
-        except OSError as exc:
-            raise Unreadable(f"{getattr(exc, 'filename', None) or path}: {exc.strerror or exc}") from None
-        except (ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise Unreadable(f"{path}: {exc}") from None
-        for name, preset in presets.items():
-            self._presets[id(preset)] = (preset, name)
-        self._current = current.key
-        self.origin = str(manifest.get("origin", self.origin))
-        return Saved(current, undo, redo, gesture, saved, self.origin)
-
-    def _read_preset(self, name: str, record: dict, max_vertices: int) -> Preset:
-        if not _PRESET_FILE.fullmatch(str(name)):
-            raise ValueError(f"a preset file named {str(name)[:40]!r}")
-        try:
-            state = session_file.load_session(self.folder / name, max_vertices=max_vertices,
-                                              max_iterations=schedule.MAX_ITERATIONS)
-        except ValueError as exc:
-            raise Unreadable(str(exc)) from None
-        preset = session_file.preset_from_session(state)
-        return dataclasses.replace(preset, name=str(record["name"]), title=str(record["title"]),
-                                   description=str(record["description"]), grow=bool(record["grow"]),
-                                   radius=float(record["radius"]), meta=dict(record["meta"]))
-
-    def _read_step(self, record: dict, presets: dict[str, Preset], load: bool) -> Step:
-        name = str(record["file"])
-        if not _STEP_FILE.fullmatch(name):
-            raise ValueError(f"a step file named {name[:40]!r}")
-        path = self.folder / name
-        preset = presets[record["preset"]]
-        n_nodes, n_dims = preset.weights.shape
-        weights_bytes = 4 * n_nodes * n_dims
-        if path.stat().st_size > weights_bytes + 8 * MAX_CONTROLS * (n_dims + 1) + 65536:
-            raise Unreadable(f"{path}: {path.stat().st_size:,} bytes, more than a step of this mesh holds")
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                if set(z.files) != {"weights", "controls", "radii"}:
-                    raise ValueError(f"members {sorted(z.files)[:5]}, expected weights, controls, radii")
-                controls, radii = z["controls"], z["radii"]
-                if load:
-                    weights = z["weights"]
-                    if weights.shape != (n_nodes, n_dims) or weights.dtype != np.float32 \
-                            or not np.isfinite(weights).all():
-                        raise ValueError(f"weights {weights.dtype} {weights.shape}, expected finite float32 "
-                                         f"({n_nodes}, {n_dims})")
-                else:
-                    stored = z.zip.getinfo("weights.npy").file_size
-                    if not weights_bytes <= stored <= weights_bytes + 4096:
-                        raise ValueError(f"weights of {stored:,} bytes, expected a ({n_nodes}, {n_dims}) float32 array")
-                    weights = path
-        except Unreadable:
-            raise
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
-            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-            raise Unreadable(f"{path}: {reason or 'cut short or damaged'}") from None
-        k = len(controls)
-        if controls.ndim != 2 or controls.shape[1] != n_dims or not 1 <= k <= MAX_CONTROLS \
-                or not np.isfinite(controls).all():
-            raise Unreadable(f"{path}: controls of shape {controls.shape}, expected (k, {n_dims}) finite values")
-        if radii.shape != (k,) or not np.isfinite(radii).all() or (radii < 0).any():
-            raise Unreadable(f"{path}: radii of shape {radii.shape}, expected {k} values >= 0")
-        parameters = read_settings(dict(record["parameters"]), n_dims)
-        iteration = int(record["iteration"])
-        if not 0 <= iteration <= parameters["iterations"]:
-            raise ValueError(f"iteration {iteration} outside 0..{parameters['iterations']}")
-        group = record.get("symmetry")
-        group = None if group is None else Symmetry(**{k: tuple(v) if isinstance(v, list) else v
-                                                       for k, v in dict(group).items()})
-        strokes = record.get("strokes")
-        strokes = None if strokes is None else tuple(int(n) for n in strokes)
-        if strokes is not None and (sum(strokes) != k or min(strokes, default=1) < 1):
-            raise ValueError(f"strokes {list(strokes)[:8]} do not cover the {k} controls")
-        step = Step(preset=preset, controls=np.array(controls, np.float32), parameters=parameters, weights=weights,
-                    iteration=iteration, radii=np.array(radii, np.float32), symmetry=group, strokes=strokes)
-        self._files[step.key] = name
-        return step

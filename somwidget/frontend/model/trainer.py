@@ -235,8 +235,10 @@ class Trainer:
                 self.busy = True
             self._run_calls()
             with wake:
-                if not self.ops and not self.should_step():
-                    continue
+                idle = not self.ops and not self.should_step()
+            if idle:  # a call may have completed a step that trains nothing (a bare release): the autosave's turn
+                self.after_turn()
+                continue
             t0 = time.monotonic()
             self._turn()
             self.after_turn()

@@ -72,6 +72,7 @@ class Panel(widgets.VBox):
         self._generation = None
         self._preset_name = None
         self.refreshes = 0  # refreshes applied (for tests)
+        self._notices_seen = session.settings.notices
         self.last_frame_seq = -1
 
         style = {"description_width": LABEL_WIDTH}
@@ -127,11 +128,12 @@ class Panel(widgets.VBox):
                                                     "download")
         self.export_link = widgets.HTML(layout=_fluid())
         self.recovered = _banner(self.model.recovered_message())
+        self.notices = _banner(self.model.notice_message(), "#e0a030")  # saved sessions not read whole
         self.saving = widgets.HTML()  # the autosave's failure, until a save is on disk again
         self.variants = VariantsSection(self.model, self._intent)
 
         super().__init__([
-            self.recovered, self.saving, self.title,
+            self.recovered, self.notices, self.saving, self.title,
             _row([self.preset, self.reload_button, self.refine_button]),
             _row([self.train_button, self.undo_button, self.redo_button, self.reset_button]),
             self.progress, self.status, self.error,
@@ -294,18 +296,21 @@ class Panel(widgets.VBox):
             if list(self.group.options) != choices:
                 self.group.options = choices
             _set(self.group, p["group"])
-            k = frame.n_controls
-            if list(self.radius_of.options) != [(str(i), i) for i in range(k)]:
-                self.radius_of.options = [(str(i), i) for i in range(k)]
-            i = self.radius_of.value if self.radius_of.value is not None and self.radius_of.value < k else 0
+            rows = self.model.control_rows(frame)  # by the controls' ids, as the view numbers them; a stroke one row
+            options = [(f'{r["id"]}{" (stroke)" if r["samples"] > 1 else ""}', r["i"]) for r in rows]
+            if list(self.radius_of.options) != options:
+                self.radius_of.options = options
+            starts = [r["i"] for r in rows]
+            i = self.radius_of.value if self.radius_of.value in starts else starts[0] if starts else 0
             _set(self.radius_of, i)
             self.radius.max = max(2.0 * self.model.size, float(frame.radii.max(initial=0.0)))  # a few sizes at most
             if i < len(frame.radii):
                 _set(self.radius, round(float(frame.radii[i]), 4))
-            rows = self.model.control_rows(frame)
-            if i < len(rows):
-                _set(self.position, rows[i]["position"])
-                _set(self.features, rows[i]["features"])
+            row = next((r for r in rows if r["i"] == i), None)
+            if row is not None:
+                _set(self.position, row["position"])
+                _set(self.features, row["features"])
+            _set(self.all_radii, self.model.common_radius(frame))
             names = self.model.feature_names()
             self.features.layout.display = "" if names else "none"
             self.features.placeholder = names
@@ -327,6 +332,9 @@ class Panel(widgets.VBox):
             self.controls_html.value = _controls_table(rows)
             if session.error and not self.error.value:
                 self.error.value = f'<span style="color:#b00020">{_html.escape(session.error)}</span>'
+            if session.settings.notices != self._notices_seen:  # what a symmetry change did to the controls
+                self._notices_seen = session.settings.notices
+                self.error.value = f'<span style="color:#1d428a">{_html.escape(session.settings.notice)}</span>'
             failed = session.save_error
             _set(self.saving, _BLOCK.format(f'<b style="color:#b00020">{_html.escape(failed)}</b>') if failed else "")
             self.last_frame_seq = frame.seq
@@ -428,12 +436,13 @@ def _show(widget, p: Setting, value) -> None:
     _set(widget, value)
 
 
-def _banner(message: str) -> widgets.HBox:
-    """The recovered session's banner (hidden when there is none to say) with a button that dismisses it."""
+def _banner(message: str, colour: str = "#9c9") -> widgets.HBox:
+    """A banner (the recovered session's; the notices about saved sessions) hidden when there is nothing to say, with
+    a button that dismisses it."""
     dismiss = widgets.Button(icon="times", tooltip="Dismiss", layout=widgets.Layout(width="32px", min_width="32px"))
     banner = widgets.HBox([widgets.HTML(_BLOCK.format(f"<small>{_html.escape(message)}</small>"),
                                         layout=widgets.Layout(flex="1 1 auto")), dismiss],
-                          layout=widgets.Layout(display="flex" if message else "none", border="1px solid #9c9",
+                          layout=widgets.Layout(display="flex" if message else "none", border=f"1px solid {colour}",
                                                 padding="2px 4px", margin="0 0 4px 0", align_items="center"))
     banner.add_class("somwidget-recovered")
 
@@ -457,7 +466,8 @@ def _set(widget, value) -> None:
 
 def _controls_table(rows: list[dict]) -> str:
     """The panel model's control rows as a small HTML table."""
-    cells = [f'<tr><td>{r["i"]}</td><td><span style="display:inline-block;width:12px;height:12px;'
+    cells = [f'<tr><td title="{"a stroke: its samples act as one" if r["samples"] > 1 else ""}">{r["id"]}'
+             f'{"~" if r["samples"] > 1 else ""}</td><td><span style="display:inline-block;width:12px;height:12px;'
              f'background:{r["colour"]};border:1px solid #888"></span></td><td>{r["position"]}</td>'
              f'<td class="somwidget-gap">{r["gap"]}</td><td class="somwidget-radius">{r["radius"]:.3g}</td></tr>'
              for r in rows]

@@ -48,6 +48,7 @@ from .messages import (
     ReleaseIntent,
     RemoveIntent,
     ResetIntent,
+    RevolveIntent,
     ServerMessage,
     SetIntent,
     StrokeIntent,
@@ -254,6 +255,14 @@ def _radius(c: ViewConnection, intent: RadiusIntent) -> None:
         c.session.set_control_radius(c.session.index_of_control(cid), intent.radius)
 
 
+def _revolve(c: ViewConnection, intent: RevolveIntent) -> None:
+    """Lathe about the radial group's axis with its copies (none in effect: the z-axis, 16 copies)."""
+    group = c.session.settings.symmetry
+    radial = group is not None and group.kind == "radial"
+    c.session.revolve([list(p) for p in intent.points], group.axis if radial else "z", group.n if radial else 16,
+                      intent.radius)
+
+
 #: The one dispatch table: each intent's class -> what it does (on the training thread, but for AT_ONCE).
 HANDLERS: dict[type[Intent], Callable[[ViewConnection, Intent], ServerMessage | None]] = {
     HelloIntent: _hello,
@@ -266,6 +275,7 @@ HANDLERS: dict[type[Intent], Callable[[ViewConnection, Intent], ServerMessage | 
     RadiusIntent: _radius,
     AddIntent: lambda c, intent: c.session.add_control(list(intent.position), intent.radius),
     StrokeIntent: lambda c, intent: c.session.add_stroke([list(p) for p in intent.points], intent.radius),
+    RevolveIntent: _revolve,
     SetIntent: lambda c, intent: c.session.set_parameter(intent.name, intent.value),
     UndoIntent: lambda c, _: c.session.undo(c.hand),
     RedoIntent: lambda c, _: c.session.redo(c.hand),

@@ -422,6 +422,17 @@ class StrokeIntent(Intent):
 
 
 @dataclass(frozen=True, kw_only=True)
+class RevolveIntent(Intent):
+    """A profile of 2 to MAX_STROKE_POINTS points drawn beside the axis of the radial group in effect (none: the
+    z-axis, 16 copies): the clay is lathed around it and the profile becomes its stroke control (Session.revolve);
+    radius optional."""
+
+    type: ClassVar[str] = "revolve"
+    points: Polyline
+    radius: Radius | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
 class SetIntent(Intent):
     """Set a setting by name (the topology message lists them: "parameters"), checked against its declaration."""
 
@@ -501,7 +512,7 @@ class RedoIntent(Intent):
 INTENTS: dict[str, type[Intent]] = {
     i.type: i for i in (GrabIntent, MoveIntent, ReleaseIntent, ResetIntent, TrainIntent, PauseIntent, UndoIntent,
                         RedoIntent, PingIntent, HelloIntent, SetIntent, AddIntent, RemoveIntent, RadiusIntent,
-                        StrokeIntent, HandIntent)
+                        StrokeIntent, HandIntent, RevolveIntent)
 }
 
 

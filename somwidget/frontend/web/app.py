@@ -120,6 +120,7 @@ class SomApp:
         s.session_upload = None
         s.stats = {}
         s.controls_ui = []
+        s.all_radii = ""
         s.features_ui = []
         s.param_errors = {}
         s.field_revs = {}  # bumped when a field's value is refused: the page draws it anew (panel_state.py)
@@ -324,7 +325,15 @@ class SomApp:
         if not guard_state_updates(wslink_server):
             log.warning("could not guard the page's state updates (trame's state.update not found)")
         wslink_server.app.router.add_get("/api/state", self._api_state)
+        wslink_server.app.router.add_post("/paraview/", self._launcher)
         self.view_hub = attach_hub(wslink_server, self.session, token=self.xr_token)
+
+    async def _launcher(self, request: web.Request) -> web.Response:
+        """trame's page first asks a launcher where its websocket is (POST <base>/paraview/) and, refused (405), falls
+        back to the page's own /ws; answering with that same /ws (the page puts in its host and ws or wss) spares
+        every page load the refused request in its console."""
+        prefix = request.path[: -len("paraview/")]
+        return web.json_response({"sessionURL": f"ws://USE_HOST{prefix}ws"}, headers={"Cache-Control": "no-store"})
 
     async def _api_state(self, request: web.Request) -> web.Response:
         positions = request.query.get("positions", "0") not in ("0", "", "false")

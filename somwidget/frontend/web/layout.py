@@ -111,7 +111,8 @@ def build_page(server, panel: PanelModel):
         client.Script(RECONNECT_JS)
         # what trame draws in the page's place while its websocket is closed (instead of "Connection closed")
         server.state.trame__template_error = '<trame-loading message="The page reloads when the server is back" />'
-        with layout.content:
+        with layout.content, html.Div(style="position: relative"):
+            _alerts()  # over the view's top left corner: they never move the panel nor cover its fields
             # the clay view mounts here (MOUNT_VIEW_JS); Vue leaves the element's children alone
             html.Div(id="clay-view", style="position: relative; width: 100%; height: calc(100vh - 88px)")
     return layout
@@ -130,24 +131,38 @@ _TIGHT = "padding: 0 3px"
 def _on_enter_or_change(handler: str) -> list[str]:
     return [f'@change="{handler}"', f'@keydown.enter="{handler}"']
 
-def _panel(panel: PanelModel) -> None:
-    with v3.VContainer(classes="pa-2 text-body-2", id="panel"):
+
+#: The panel's alerts lie over the clay view's top left corner, below the view's own bar line, so that showing or
+#: closing one never moves the panel's fields (at the top of the panel they took 50-66 px, and every field moved
+#: down by as much) and never covers them (over the foot of the drawer they hid the export buttons).
+_ALERTS = ("position: absolute; left: 8px; top: 40px; width: min(440px, 55%); z-index: 20; display: flex; "
+           "flex-direction: column; gap: 6px")
+
+
+def _alerts() -> None:
+    """The alerts (a refusal, news, a recovered session, a failing autosave, saved sessions set aside) over the clay
+    view's corner (_ALERTS): they come and go without moving the panel."""
+    with html.Div(id="panel-alerts", style=_ALERTS):
         v3.VAlert(v_if="error_message", text=("error_message",), type="error", density="compact",
-                  closable=True, id="error-alert", classes="mb-2",
-                  click_close="error_message = ''")
-        v3.VAlert(v_if="info_message && !error_message", text=("info_message",), type="info",
-                  density="compact", closable=True, classes="mb-2", click_close="info_message = ''")
-        with v3.VAlert(v_if="recovered_message", type="success", density="compact", classes="mb-2",
+                  closable=True, id="error-alert", click_close="error_message = ''", elevation=4)
+        v3.VAlert(v_if="info_message && !error_message", text=("info_message",), type="info", id="info-alert",
+                  density="compact", closable=True, click_close="info_message = ''", elevation=4)
+        with v3.VAlert(v_if="recovered_message", type="success", density="compact", elevation=4,
                        id="recovered-alert", closable=True, click_close="recovered_message = ''"):
             html.Div("{{ recovered_message }}")
             v3.VBtn("Start fresh", size="small", variant="tonal", classes="mt-1", id="start-fresh",
                     click="trigger('start_fresh')", title="Load the preset the server was started with (Undo "
                                                        "brings the recovered session back)")
         v3.VAlert(v_if="save_error", text=("save_error",), type="error", density="compact", id="save-alert",
-                  classes="mb-2", icon="mdi-content-save-alert")  # until a save is on disk again: not closable
+                  icon="mdi-content-save-alert", elevation=4)  # until a save is on disk again: not closable
         v3.VAlert(v_if="notice_message", text=("notice_message",), type="warning", density="compact",
-                  id="notice-alert", closable=True, classes="mb-2", click_close="notice_message = ''")
-        v3.VProgressLinear(v_if="busy", indeterminate=True, classes="mb-2")
+                  id="notice-alert", closable=True, click_close="notice_message = ''", elevation=4)
+
+
+def _panel(panel: PanelModel) -> None:
+    with v3.VContainer(classes="pa-2 text-body-2", id="panel", style="position: relative"):
+        # busy: a bar over the top of the panel (it takes no room)
+        v3.VProgressLinear(v_if="busy", indeterminate=True, style="position: absolute; left: 0; top: 0; z-index: 5")
 
         # preset and files
         with html.Div(classes="d-flex align-center mb-1"):
@@ -206,8 +221,9 @@ def _panel(panel: PanelModel) -> None:
             html.Div("Controls (position; gap to the nearest node: original / copy; radius)",
                      classes="text-subtitle-2", title=GAP_HELP)
             v3.VSpacer()
-            v3.VTextField(key=_revision_key("radius", "'all'"), placeholder="all radii", density="compact",
-                          type="number", variant="underlined", hide_details=True, min=0, step=0.05, id="all-radii",
+            v3.VTextField(key=_revision_key("radius", "'all'"), model_value=("all_radii",), label="all radii",
+                          density="compact", type="number", variant="underlined", hide_details=True, min=0, step=0.05,
+                          id="all-radii",
                           style="max-width: 80px", title="Every control's radius of influence at once: type it and "
                                                          "press Enter (model units; 0: the paper's point controls)",
                           raw_attrs=_on_enter_or_change("trigger('set_radius', [null, $event.target.value])"))
@@ -216,10 +232,15 @@ def _panel(panel: PanelModel) -> None:
                                             "moves nothing until dragged); or double-click the clay in the view")
         with v3.VTable(density="compact", id="controls-table"):
             with html.Tbody():
-                with html.Tr(v_for="c in controls_ui", key=_revision_key("radius", "c.i")):
-                    html.Td("{{ c.i }}", style=f"{_TIGHT}; cursor: pointer", classes="control-index",
-                            raw_attrs=[':data-control="c.i"'],
-                            title="Select this control in the view: its handle moves it, also from behind the clay")
+                with html.Tr(v_for="c in controls_ui", key=_revision_key("radius", "c.id")):
+                    # numbered by the control's stable id, as the view numbers it; a stroke is one row
+                    with html.Td(style=f"{_TIGHT}; cursor: pointer", classes="control-index",
+                                 raw_attrs=[':data-control="c.i"'],
+                                 title=("c.samples > 1 ? 'A stroke of ' + c.samples + ' samples that act as one: "
+                                        "select it in the view' : 'Select this control in the view: its handle "
+                                        "moves it, also from behind the clay'",)):
+                        html.Span("{{ c.id }}")
+                        v3.VIcon("mdi-gesture", v_if="c.samples > 1", size="x-small", classes="stroke-mark ml-1")
                     with html.Td(style=_TIGHT):
                         html.Input(type="color", value=("c.colour",), disabled=("!has_colour",),
                                    style="width: 32px; height: 22px; border: none; padding: 0",

@@ -36,6 +36,7 @@ class PanelState:
         self._generation_seen = session.frame.generation
         self._history_seen = session.frame.history
         self._params_seen = session.parameters
+        self._notices_seen = session.settings.notices
         self._values_synced: dict = {}
         self._last_panel = 0.0
         self._panel_seq = -1
@@ -63,6 +64,7 @@ class PanelState:
         if failed != self.state.save_error:  # a save failed or works again: at once, not with the next numbers
             with self.state:
                 self.state.save_error = failed
+        self._show_notice()
         with self._latest_lock:
             frame = self._latest
         if frame is None:
@@ -107,9 +109,18 @@ class PanelState:
         s.feature_names = self.panel.feature_names()
         s.param_errors = {}
 
+    def _show_notice(self) -> None:
+        """What a symmetry change did to the controls (from any view or script), in the panel's news."""
+        settings = self.session.settings
+        if settings.notices != self._notices_seen:
+            self._notices_seen = settings.notices
+            with self.state:
+                self.state.info_message = settings.notice
+
     def show_frame(self, frame: Frame) -> None:
         with self.state as s:
             s.controls_ui = self.panel.control_rows(frame)
+            s.all_radii = self.panel.common_radius(frame)
             s.stats = self.panel.status(frame)
             s.paused = frame.paused
             if self.session.error and not s.error_message:
@@ -147,6 +158,7 @@ class PanelState:
             with self.state:
                 self.state.error_message = ""
                 self.sync_fields()
+            self._show_notice()
         else:
             field = name if isinstance(name, str) and name in BY_NAME else "other"
             self._refused(field, field, error)
@@ -185,11 +197,13 @@ class PanelState:
             self._refused("radius", key, error)  # "radius" draws the whole control row anew (layout.py)
 
     def set_group(self, spec) -> None:
-        """A symmetry group chosen in the panel; refused, the field goes back to the group in effect."""
+        """A symmetry group chosen in the panel (what it did to the controls in the panel's news); refused, the field
+        goes back to the group in effect."""
         error = self.panel.set_group(spec)
         self._show(error)
         with self.state:
             self.sync_fields()
+        self._show_notice()
 
     def add_control(self) -> None:
         self._show(self.panel.attempt(self.session.add_control))

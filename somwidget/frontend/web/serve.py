@@ -10,7 +10,7 @@ import sys
 
 from ...backend import device as _device
 from ..model import Session
-from ..model import autosave as _autosave
+from ..model import recovery as _recovery
 from ..model.state import max_vertices_for
 from . import lan as _lan
 from .app import build_app
@@ -46,7 +46,7 @@ def run_server(preset=None, mesh=None, host: str | None = None, port: int = 8080
 
         start = sw_io.load_mesh(mesh, max_vertices=max_vertices_for(device))
         start.name = f"mesh:{start.name}"
-    session, notices = (None, []) if fresh else _autosave.recover(Session, "serve", device=device, start=False)
+    session, notices = (None, []) if fresh else _recovery.recover(Session, "serve", device=device, start=False)
     for notice in notices:
         print(f"somwidget: {notice}", flush=True)
     if session is not None:

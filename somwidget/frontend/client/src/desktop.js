@@ -1,5 +1,5 @@
 // Mouse, touch and keys on a flat screen. A press goes to what is visible under it: the selected control's handle
-// (handle.js), the Stroke tool while it is on (stroke.js), a control (before the clay: a control lying on the
+// (handle.js), the Stroke or Revolve tool while it is on (stroke.js, revolve.js), a control (before the clay: a control lying on the
 // surface is taken even where the clay shows in front of part of it, and a small one within PICKED_PX of it; a
 // control the clay hides is not), else the orbit (camera.js: drag to orbit, right-drag to pan). A drag moves the
 // control on the plane facing the camera (with Shift along the model axis closest to the motion only). A click on
@@ -18,9 +18,10 @@ const CLICK_PX = 4; // a press and release closer than this is a click
 const KEY_NOTCH = 100; // [ and ] turn a radius as one wheel notch does
 
 export class Desktop {
-  // rig: the CameraRig; handle: the Handle; radius: the RadiusBall; stroke: the StrokeDraw; act: the view's actions
-  // for keys {fit(), look(name), orthographic(on), stroke(on)}; onDragStart / onDragEnd: a control drag begins / ends
-  constructor({ renderer, rig, clay, grabs, link, handle, radius, disc, stroke, act, onDragStart, onDragEnd }) {
+  // rig: the CameraRig; handle: the Handle; radius: the RadiusBall; stroke: the StrokeDraw; guide: the RevolveGuide;
+  // act: the view's actions for keys {fit(), look(name), orthographic(on), stroke(on), revolve(on)}; onDragStart /
+  // onDragEnd: a control drag begins / ends
+  constructor({ renderer, rig, clay, grabs, link, handle, radius, disc, stroke, guide, act, onDragStart, onDragEnd }) {
     this.renderer = renderer;
     this.disc = disc; // the RadiusDisc: the radius under the cursor
     this.rig = rig;
@@ -30,6 +31,7 @@ export class Desktop {
     this.handle = handle;
     this.radius = radius;
     this.stroke = stroke;
+    this.guide = guide;
     this.act = act;
     this.onDragStart = onDragStart;
     this.onDragEnd = onDragEnd;
@@ -38,11 +40,12 @@ export class Desktop {
     this.drag = null;
     this.press = null; // where the last left press went down (to tell a click)
     this.strokeTool = false;
+    this.revolveTool = false; // a profile drawn beside the axis lathes the clay
     this.hovered = null; // the effective control under the pointer
     this.pointer = null; // the last pointer event over the view (null: the pointer is elsewhere)
     this.onEscape = null; // after Escape's own work (a notebook: the focus goes back to it, keys.js focusHost)
-    this.stats = { drags: 0, moves: 0, adds: 0, removes: 0, strokes: 0, radii: 0, hiddenPresses: 0, keys: 0,
-      undos: 0, redos: 0 };
+    this.stats = { drags: 0, moves: 0, adds: 0, removes: 0, strokes: 0, revolves: 0, radii: 0, hiddenPresses: 0,
+      keys: 0, undos: 0, redos: 0 };
     const el = renderer.domElement;
     el.tabIndex = 0; // keys go to the view that has the focus
     el.dataset.lmSuppressShortcuts = 'true'; // JupyterLab leaves its own keys to the view while it has the focus
@@ -62,6 +65,11 @@ export class Desktop {
     el.addEventListener('dblclick', (ev) => this.doubleClick(ev));
     // every key in the view (its canvas, its bar, its Display menu) is the view's first
     el.parentElement?.addEventListener('keydown', (ev) => this.key(ev), true);
+  }
+
+  // A press draws (a stroke, or a profile to revolve) rather than grabbing or orbiting.
+  get drawTool() {
+    return this.strokeTool || this.revolveTool;
   }
 
   get presenting() {
@@ -97,7 +105,7 @@ export class Desktop {
     this.hovered = j;
     this.clay.setHover(j === null ? new Set() : new Set([j]));
     this.radius.show(j ?? this.handle.selected);
-    this.renderer.domElement.style.cursor = this.strokeTool ? 'crosshair' : j !== null ? 'grab' : '';
+    this.renderer.domElement.style.cursor = this.drawTool ? 'crosshair' : j !== null ? 'grab' : '';
   }
 
   // The radius under the cursor: the dragged control's, the hovered one's, else a new control's where the cursor is
@@ -115,7 +123,7 @@ export class Desktop {
     if (j !== null && j !== undefined) {
       this.disc.show(j, { hit, centre: this.clay.controlWorld(j), facing: this.rig.camera.getWorldDirection(
         new THREE.Vector3()), at });
-    } else if (hit || this.strokeTool) {
+    } else if (hit || this.drawTool) {
       this.disc.show('new', { hit, centre: hit ? null : this.strokePoint(ev), facing:
         this.rig.camera.getWorldDirection(new THREE.Vector3()), at });
     } else {
@@ -133,7 +141,7 @@ export class Desktop {
       return;
     }
     this.press = { x: ev.clientX, y: ev.clientY, control: null };
-    if (this.strokeTool) {
+    if (this.drawTool) {
       ev.stopImmediatePropagation();
       ev.preventDefault();
       this.renderer.domElement.setPointerCapture?.(ev.pointerId);
@@ -179,7 +187,7 @@ export class Desktop {
         return;
       }
       const rc = this.ray(ev);
-      const hit = this.strokeTool ? null : this.visibleControl(rc);
+      const hit = this.drawTool ? null : this.visibleControl(rc);
       this.hover(hit ? hit.index : null);
       this.showDisc(ev, rc);
       return;
@@ -204,7 +212,10 @@ export class Desktop {
     const click = press && ev.button === 0 && Math.hypot(ev.clientX - press.x, ev.clientY - press.y) < CLICK_PX;
     if (this.stroke.drawing) {
       this.renderer.domElement.releasePointerCapture?.(ev.pointerId);
-      if (this.stroke.end(this.radius.newRadius)) this.stats.strokes += 1;
+      if (this.revolveTool) { // one profile, one revolve: the tool lets go
+        if (this.stroke.end(this.radius.newRadius, 'revolve')) this.stats.revolves += 1;
+        this.act.revolve(false);
+      } else if (this.stroke.end(this.radius.newRadius)) this.stats.strokes += 1;
       return;
     }
     if (this.drag) {
@@ -227,9 +238,11 @@ export class Desktop {
     this.onDragEnd?.();
   }
 
-  // Where a stroke goes under the pointer: on the clay, else on the plane through the target facing the camera.
+  // Where a stroke goes under the pointer: on the clay, else on the plane through the target facing the camera; a
+  // profile to revolve: on the plane that holds the axis and faces the camera.
   strokePoint(ev) {
     const rc = this.ray(ev);
+    if (this.revolveTool) return this.guide.pointOn(rc.ray);
     const surface = this.clay.surfaceHit(rc);
     return surface ? surface.point : this.rig.onTargetPlane(rc.ray);
   }
@@ -239,7 +252,7 @@ export class Desktop {
     ev.preventDefault();
     ev.stopImmediatePropagation();
     const j = this.drag ? this.drag.j : this.hovered;
-    if (j !== null && j !== undefined && !this.strokeTool) { // over a control (Alt or not): its radius
+    if (j !== null && j !== undefined && !this.drawTool) { // over a control (Alt or not): its radius
       this.radius.show(j);
       this.radius.turn(j, ev.deltaY);
       this.stats.radii += 1;
@@ -261,7 +274,7 @@ export class Desktop {
   // A double click on the clay (not on a control) adds a control at that point of its surface, of the radius the
   // disc showed there.
   doubleClick(ev) {
-    if (this.presenting || this.strokeTool) return;
+    if (this.presenting || this.drawTool) return;
     const rc = this.ray(ev);
     if (this.visibleControl(rc)) return;
     const surface = this.clay.surfaceHit(rc);
@@ -282,6 +295,7 @@ export class Desktop {
     } else if (action === 'fit') this.act.fit();
     else if (action === 'ortho') this.act.orthographic(!this.rig.orthographicOn);
     else if (action === 'stroke') this.act.stroke(!this.strokeTool);
+    else if (action === 'revolve') this.act.revolve(!this.revolveTool);
     else if (action === 'delete') this.removeHovered();
     else if (action === 'undo' || action === 'redo') {
       if (this.link.send(intents[action]())) this.stats[`${action}s`] += 1;
@@ -289,6 +303,7 @@ export class Desktop {
     else if (action === 'escape') {
       if (this.stroke.drawing) this.stroke.cancel();
       else if (this.strokeTool) this.act.stroke(false);
+      else if (this.revolveTool) this.act.revolve(false);
       else this.handle.select(null);
       this.onEscape?.();
     }

@@ -1,6 +1,6 @@
 // Which keys reach the view, and what they do there. The view's keys: 1-6 the axis views, F fit, O orthographic,
-// S the Stroke tool, Delete (Backspace) removes the control under the pointer (else the selected one), [ and ] make
-// the radius under the pointer smaller or larger (radius.js), Esc lets go (a stroke, the tool, the selection),
+// S the Stroke tool, R the Revolve tool, Delete (Backspace) removes the control under the pointer (else the selected one), [ and ] make
+// the radius under the pointer smaller or larger (radius.js), Esc lets go (a stroke, a tool, the selection),
 // Ctrl+Z undoes and Ctrl+Shift+Z or Ctrl+Y redoes (Cmd on a Mac).
 //
 // A key the view takes goes no further: no panel field, menu or notebook shortcut sees it. The view takes its keys
@@ -30,7 +30,7 @@ export function viewAction(ev) {
     return k === 'y' ? 'redo' : null;
   }
   if (k >= '1' && k <= '6' && k.length === 1) return `look:${k}`;
-  return { f: 'fit', o: 'ortho', s: 'stroke', delete: 'delete', backspace: 'delete', escape: 'escape',
+  return { f: 'fit', o: 'ortho', s: 'stroke', r: 'revolve', delete: 'delete', backspace: 'delete', escape: 'escape',
     '[': 'smaller', ']': 'larger' }[k] || null;
 }
 

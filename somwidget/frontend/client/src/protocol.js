@@ -239,4 +239,9 @@ export const intents = {
   // one; a notebook's as "notebook"), or "headset" while the page is in its immersive session.
   // (kind: string)
   hand: (kind) => ({ type: 'hand', kind }),
+  // A profile of 2 to MAX_STROKE_POINTS points drawn beside the axis of the radial group in effect (none: the
+  // z-axis, 16 copies): the clay is lathed around it and the profile becomes its stroke control
+  // (Session.revolve); radius optional.
+  // (points: number[][], radius: number (optional))
+  revolve: (points, radius) => compact({ type: 'revolve', points, radius }),
 };

@@ -68,15 +68,15 @@ export class StrokeDraw {
     this.onChange?.();
   }
 
-  // The stroke ends: sent as one control (radius: model units, or undefined for the preset's) when it has a length;
-  // returns whether it went.
-  end(radius) {
+  // The stroke ends: sent as one control (radius: model units, or undefined for the preset's) when it has a length,
+  // or with `kind` 'revolve' as the profile that lathes the clay (revolve.js); returns whether it went.
+  end(radius, kind = 'stroke') {
     const points = this.points;
     this.cancel();
     if (!points || points.length < 2) return false;
     const model = points.map((p) => this.clay.worldToModel(p));
     const out = resampled(model);
-    const sent = this.link.send(intents.stroke(out, radius === undefined ? undefined : Number(radius.toPrecision(5))));
+    const sent = this.link.send(intents[kind](out, radius === undefined ? undefined : Number(radius.toPrecision(5))));
     if (sent) this.sent += 1;
     return sent;
   }

@@ -1,5 +1,5 @@
-// The view's own bar, top right: Fit, the six axis views, perspective / orthographic, the Stroke tool and the
-// Display menu (wireframe, shading, look, floor grid, axes, labels). Each button's tooltip names its key.
+// The view's own bar, top right: Fit, the six axis views, perspective / orthographic, the Stroke and Revolve tools
+// and the Display menu (wireframe, shading, look, floor grid, axes, labels). Each button's tooltip names its key.
 
 import { VIEWS } from './camera.js';
 import { LOOKS, SHADINGS } from './display.js';
@@ -32,7 +32,8 @@ function button(text, title, onClick, className) {
 }
 
 export class Toolbar {
-  // act: {fit(), look(name), orthographic(on), stroke(on), display(name, value)}; state(): what the view shows now
+  // act: {fit(), look(name), orthographic(on), stroke(on), revolve(on), display(name, value)}; state(): what the view
+  // shows now
   constructor(container, act, state) {
     this.act = act;
     this.state = state;
@@ -45,10 +46,13 @@ export class Toolbar {
       () => act.orthographic(!state().orthographic), 'somview-ortho');
     this.stroke = button('Stroke', 'Draw a stroke: drag on the clay (or beside it, on the view plane) to add a line '
       + 'that pulls the clay as one control; Esc cancels (S)', () => act.stroke(!state().stroke), 'somview-stroke');
+    this.revolve = button('Revolve', 'Revolve (lathe): draw a profile beside the axis shown (the radial group\'s, '
+      + 'else z) and the clay turns into its surface of revolution, the profile its control; Esc cancels (R)',
+    () => act.revolve(!state().revolve), 'somview-revolve');
     this.menuButton = button('Display', 'How the clay is drawn: wireframe, shading, look, floor, axes, labels',
       () => this.toggleMenu(), 'somview-display');
     const gap = () => Object.assign(document.createElement('span'), { className: 'gap' });
-    this.bar.append(this.fit, gap(), ...views, gap(), this.ortho, this.stroke, this.menuButton);
+    this.bar.append(this.fit, gap(), ...views, gap(), this.ortho, this.stroke, this.revolve, this.menuButton);
     this.menu = this.buildMenu();
     this.menu.hidden = true;
     for (const el of [this.bar, this.menu]) {
@@ -99,6 +103,7 @@ export class Toolbar {
     const st = this.state();
     this.ortho.classList.toggle('on', st.orthographic);
     this.stroke.classList.toggle('on', st.stroke);
+    this.revolve.classList.toggle('on', Boolean(st.revolve));
     this.menuButton.classList.toggle('on', !this.menu.hidden);
     for (const [name, input] of Object.entries(this.fields)) {
       const v = st.display[name];

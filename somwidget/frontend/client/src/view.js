@@ -21,6 +21,7 @@ import { Handle } from './handle.js';
 import { ControlLabels, LABEL_CSS } from './labels.js';
 import { RadiusBall, RadiusDisc } from './radius.js';
 import { PRESENCE_CSS, Presence } from './presence.js';
+import { RevolveGuide } from './revolve.js';
 import { StrokeDraw } from './stroke.js';
 import { TOOLBAR_CSS, Toolbar } from './toolbar.js';
 
@@ -114,6 +115,7 @@ export class ClayView {
     this.radius = new RadiusBall(this.clay, this.link);
     this.stroke = new StrokeDraw(this.clay, this.link, this.scene);
     this.stroke.onChange = redraw;
+    this.guide = new RevolveGuide(this.clay, this.rig, this.scene);
     this.handle = new Handle({ rig: this.rig, clay: this.clay, grabs: this.grabs, scene: this.scene,
       domElement: this.renderer.domElement, onChange: redraw });
     const act = { // what the view's bar and keys do
@@ -123,7 +125,8 @@ export class ClayView {
         this.rig.setOrthographic(on);
         this.handle.controls.camera = this.rig.camera; // aimed and sized for the camera now drawing
       },
-      stroke: (on) => { this.desktop.strokeTool = on; this.desktop.hover(null); },
+      stroke: (on) => this.useTool(on ? 'stroke' : null),
+      revolve: (on) => this.useTool(on ? 'revolve' : null),
       display: (name, value) => this.display.set(name, value),
     };
     const refreshBar = (f) => (...args) => { f(...args); this.toolbar.refresh(); };
@@ -134,7 +137,7 @@ export class ClayView {
     this.disc = new RadiusDisc({ clay: this.clay, radius: this.radius, scene: this.scene, label: this.radiusLabel,
       onChange: redraw });
     this.desktop = new Desktop({ renderer: this.renderer, rig: this.rig, clay: this.clay, grabs: this.grabs,
-      link: this.link, handle: this.handle, radius: this.radius, disc: this.disc, stroke: this.stroke, act,
+      link: this.link, handle: this.handle, radius: this.radius, disc: this.disc, stroke: this.stroke, guide: this.guide, act,
       onDragStart: () => this.clay.setMoving(true),
       onDragEnd: () => this.clay.setMoving(!!this.state.frame?.running) });
 
@@ -156,7 +159,7 @@ export class ClayView {
     container.append(this.labels.layer, this.radiusLabel, this.statusLine, this.errorBox);
     this.presence = new Presence(container, this.clay);
     this.toolbar = new Toolbar(container, act, () => ({ orthographic: this.rig.orthographicOn,
-      stroke: this.desktop.strokeTool, display: this.display.describe() }));
+      stroke: this.desktop.strokeTool, revolve: this.desktop.revolveTool, display: this.display.describe() }));
     this.pixelScratch = new THREE.Vector3();
     this.pixelForward = new THREE.Vector3();
 
@@ -373,7 +376,8 @@ export class ClayView {
       synapsesShown: this.clay.segments ? this.clay.segments.visible : null,
       ...this.labels.describe(), // labels, behind, markers
       ...this.rig.describe(), // camera, target, distance (to the target), fitDistance, projection, zoom
-      display: this.display.describe(), selected: this.handle.selected, tool: this.desktop.strokeTool ? 'stroke' : null,
+      display: this.display.describe(), selected: this.handle.selected,
+      tool: this.desktop.strokeTool ? 'stroke' : this.desktop.revolveTool ? 'revolve' : null,
       radii: [...clay.radii], strokes: [...clay.strokes], controlIds: [...clay.controlIds],
       radiusBall: { of: this.radius.shownFor, shown: this.radius.ball.visible, radius: this.radius.ball.scale.x },
       radiusDisc: { ...this.disc.describe(), px: this.disc.disc.visible
@@ -412,6 +416,15 @@ export class ClayView {
   }
 
   // Select control j (its handle shows and moves it), as a click on it does; the web panel's table calls this.
+  // The drawing tool in use: 'stroke', 'revolve' (the axis shown) or null (grab and orbit).
+  useTool(name) {
+    this.desktop.strokeTool = name === 'stroke';
+    this.desktop.revolveTool = name === 'revolve';
+    this.guide.show(name === 'revolve');
+    this.desktop.hover(null);
+    this.dirty = true;
+  }
+
   selectControl(j) {
     this.handle.select(Number.isInteger(j) && j >= 0 && j < this.clay.kEff ? j : null);
   }
