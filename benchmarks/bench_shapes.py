@@ -390,8 +390,6 @@ BRIEFS = [
           camera=view((0.6, 0.0, -0.05), 6.4, (0.3, -1.0, 0.35)), actions=[
               every_radius(0.5, "set every control's radius to 0.5 (the panel's 'all radii')"),
               parameter("smoothing", 0.3, "set smoothing to 0.3"),
-              Action("press Reset: the body grows again from the ellipsoid, carried by the controls' regions",
-                     "reset"),
               refine("refine (602 -> 2,402 nodes)"),
               refine("refine again (2,402 -> 9,602 nodes)"),
               drag(2, (3.4, 0.25, -0.2), "drag the nose pair (control 2) 0.8 forward"),
@@ -402,8 +400,8 @@ BRIEFS = [
     Brief("canopy", "A saddle canopy (hyperbolic paraboloid) from the open grid", "grid", saddle,
           camera=view((0.0, 0.0, -0.2), 4.0), actions=[
               symmetry("radial-2-z", "half-turn symmetry about z (opposite corners pair up)"),
-              every_radius(2.0, "set every control's radius to 2 (the panel's 'all radii'): a corner holds the sheet"
-                           " up to the far edge's middle"),
+              every_radius(2.4, "set every control's radius to 2.4 (the panel's 'all radii'): a corner's falloff, less "
+                           "the other pair's, gives the saddle's heights"),
               drag(1, (1.0, 1.0, SADDLE_RISE), "drag the corner pair (1, 1) / (-1, -1) (control 1) up by 1"),
               drag(2, (1.0, -1.0, -SADDLE_RISE), "drag the corner pair (1, -1) / (-1, 1) (control 2) down by 1"),
           ]),
