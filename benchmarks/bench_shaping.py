@@ -199,19 +199,32 @@ def main() -> None:
     speed(args.devices, args.frames)
 
 
-def speed(devices: list[str], frames: int) -> None:
+def figures(device: str, frames: int, repeats: int = 3) -> dict:
+    """Issue 34's speed figures on one device: a drag frame of the shaping path and of point controls (ms, median of
+    `frames`), their ratio (target <= 2), and the car's single shaping run (us a cycle, least of `repeats`; target
+    <= 5 on a GPU)."""
     import warp as wp
 
-    print("frames: sphere drag frame (set_controls + step(10) + weights; point controls from the anchor), median ms")
+    shaping, point = frame_ms(device, False, frames), frame_ms(device, True, frames)
+    us, cycles = run_us_per_cycle(device, repeats)
+    return dict(device=device, card=wp.get_device(device).name, frame_ms=shaping, point_frame_ms=point,
+                ratio=shaping / point, run_us_per_cycle=us, run_cycles=cycles)
+
+
+def report(f: dict) -> list[str]:
+    """The figures as the lines `speed` and `somwidget bench` print."""
+    return [f"  drag frame on the sphere (set_controls + step(10) + weights), median: shaping path {f['frame_ms']:.3f} "
+            f"ms | point controls {f['point_frame_ms']:.3f} ms | ratio {f['ratio']:.2f}",
+            f"  single shaping run on the car (radii 0.5, the nose typed forward 10%, to S): "
+            f"{f['run_us_per_cycle']:.2f} us a cycle ({f['run_cycles']} cycles)"]
+
+
+def speed(devices: list[str], frames: int) -> None:
     for dev in devices:
-        shaping, point = frame_ms(dev, False, frames), frame_ms(dev, True, frames)
-        name = wp.get_device(dev).name
-        print(f"  {dev:7s} ({name}) shaping path {shaping:6.3f} | point controls {point:6.3f} | ratio "
-              f"{shaping / point:.2f}")
-    print("run: the car with radii 0.5, the nose typed forward 10%, the run to S")
-    for dev in devices:
-        us, cycles = run_us_per_cycle(dev)
-        print(f"  {dev:7s} ({wp.get_device(dev).name}) {us:7.2f} us a cycle ({cycles} cycles)")
+        f = figures(dev, frames)
+        print(f"handles, the shaping path on {dev} ({f['card']}):")
+        for line in report(f):
+            print(line)
 
 
 if __name__ == "__main__":
