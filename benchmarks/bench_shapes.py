@@ -330,12 +330,6 @@ def parameter(name: str, value, text: str) -> Action:
     return Action(text, "set_parameter", (name, value))
 
 
-def ring(r: float, z: float, points: int = 49) -> np.ndarray:
-    """A closed circle of radius r at height z around the z-axis, as a polyline."""
-    t = np.linspace(0.0, 2.0 * np.pi, points)
-    return np.stack([r * np.cos(t), r * np.sin(t), np.full(points, z)], axis=1)
-
-
 @dataclass
 class Brief:
     name: str
@@ -362,10 +356,8 @@ BRIEFS = [
     Brief("vase", "A vase from the sphere: foot, belly, long neck, flared lip", "sphere", vase, closed=True,
           camera=view((0.0, 0.0, 0.66), 4.9), actions=[
               refine("refine once (482 -> 1,922 nodes): rows enough for the neck and the lip to turn on"),
+              radius(0, 1.5, "set the top control's radius to 1.5 (control 0): the dome it holds stays round"),
               drag(0, (0.0, 0.0, 2.32), "drag the control on the top (control 0) up to the vase's top, z 2.32"),
-              stroke(ring(0.36, 1.35), "draw a ring round the neck (r 0.36 at z 1.35), radius 1.3", r=1.3),
-              stroke(ring(0.52, 1.98), "draw a ring at the lip (r 0.52 at z 1.98), radius 1.4", r=1.4),
-              stroke(ring(0.62, -0.95), "draw a ring round the foot (r 0.62 at z -0.95)"),
           ]),
     Brief("bowl", "A bowl pressed into the open grid", "grid", bowl,
           camera=view((0.0, 0.0, -0.3), 3.0, (0.55, -1.0, 0.75)), actions=[
