@@ -282,7 +282,10 @@ class Action:
     count: int = 1  # person-sized actions it stands for
 
     def apply(self, session) -> None:
-        getattr(session, self.call)(*self.args, **self.kwargs)
+        target = session
+        for name in self.call.split("."):  # "settings.set_symmetry": a method of a part of the session
+            target = getattr(target, name)
+        target(*self.args, **self.kwargs)
 
     @property
     def code(self) -> str:
@@ -294,7 +297,7 @@ class Action:
 
 
 def symmetry(spec: str, text: str) -> Action:
-    return Action(text, "set_symmetry", (spec,))
+    return Action(text, "settings.set_symmetry", (spec,))
 
 
 def radius(index: int, r: float, text: str) -> Action:
@@ -327,12 +330,6 @@ def parameter(name: str, value, text: str) -> Action:
     return Action(text, "set_parameter", (name, value))
 
 
-def ring(r: float, z: float, points: int = 49) -> np.ndarray:
-    """A closed circle of radius r at height z around the z-axis, as a polyline."""
-    t = np.linspace(0.0, 2.0 * np.pi, points)
-    return np.stack([r * np.cos(t), r * np.sin(t), np.full(points, z)], axis=1)
-
-
 @dataclass
 class Brief:
     name: str
@@ -359,15 +356,14 @@ BRIEFS = [
     Brief("vase", "A vase from the sphere: foot, belly, long neck, flared lip", "sphere", vase, closed=True,
           camera=view((0.0, 0.0, 0.66), 4.9), actions=[
               refine("refine once (482 -> 1,922 nodes): rows enough for the neck and the lip to turn on"),
+              radius(0, 1.5, "set the top control's radius to 1.5 (control 0): the dome it holds stays round"),
               drag(0, (0.0, 0.0, 2.32), "drag the control on the top (control 0) up to the vase's top, z 2.32"),
-              stroke(ring(0.36, 1.35), "draw a ring round the neck (r 0.36 at z 1.35), radius 1.3", r=1.3),
-              stroke(ring(0.52, 1.98), "draw a ring at the lip (r 0.52 at z 1.98), radius 1.4", r=1.4),
-              stroke(ring(0.62, -0.95), "draw a ring round the foot (r 0.62 at z -0.95)"),
           ]),
     Brief("bowl", "A bowl pressed into the open grid", "grid", bowl,
           camera=view((0.0, 0.0, -0.3), 3.0, (0.55, -1.0, 0.75)), actions=[
-              drag(0, (0.0, 0.0, -BOWL_DEPTH), "drag the middle control (control 0) down to the bowl's bottom, z -0.9 "
-                   "(its falloff widens for so long a pull: sigma 0.43 where the radius alone gives 0.28)"),
+              radius(0, 1.0, "set the middle control's radius to 1, the bowl's own (control 0)"),
+              drag(0, (0.0, 0.0, -BOWL_DEPTH), "drag the middle control down to the bowl's bottom, z -0.9: the clay "
+                   "it holds goes with it"),
           ]),
     Brief("chair", "A chair shell from the open grid: seat and back in one sheet", "grid", chair,
           camera=view((0.0, 0.0, 0.35), 3.1, (-0.6, -1.0, 0.6)), actions=[
@@ -386,8 +382,6 @@ BRIEFS = [
           camera=view((0.6, 0.0, -0.05), 6.4, (0.3, -1.0, 0.35)), actions=[
               every_radius(0.5, "set every control's radius to 0.5 (the panel's 'all radii')"),
               parameter("smoothing", 0.3, "set smoothing to 0.3"),
-              Action("press Reset: the body grows again from the ellipsoid, carried by the controls' regions",
-                     "reset"),
               refine("refine (602 -> 2,402 nodes)"),
               refine("refine again (2,402 -> 9,602 nodes)"),
               drag(2, (3.4, 0.25, -0.2), "drag the nose pair (control 2) 0.8 forward"),
@@ -398,6 +392,8 @@ BRIEFS = [
     Brief("canopy", "A saddle canopy (hyperbolic paraboloid) from the open grid", "grid", saddle,
           camera=view((0.0, 0.0, -0.2), 4.0), actions=[
               symmetry("radial-2-z", "half-turn symmetry about z (opposite corners pair up)"),
+              every_radius(2.4, "set every control's radius to 2.4 (the panel's 'all radii'): a corner's falloff, less "
+                           "the other pair's, gives the saddle's heights"),
               drag(1, (1.0, 1.0, SADDLE_RISE), "drag the corner pair (1, 1) / (-1, -1) (control 1) up by 1"),
               drag(2, (1.0, -1.0, -SADDLE_RISE), "drag the corner pair (1, -1) / (-1, 1) (control 2) down by 1"),
           ]),

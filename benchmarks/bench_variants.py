@@ -4,8 +4,9 @@ For the car (1,024 variants, S = 1000) and the space grid (256 variants): the ba
 and all in: set-up, tables, upload, training, weights back), the same variants run one after another on one `Som`
 (reset, then train), the ratio, how far the batch's weights are from the single runs', and the figures' floors: the
 arithmetic the cycles must do over the GPU's float32 rate, and the bytes that must cross its memory at least once.
-`--shaping N`: N variants of the sphere with its controls' radii (the shaping rules, Taubin's smoothing), as
-`somwidget sweep --preset sphere` runs them, batched against the same N single runs. A count of 0 skips a case.
+`--shaping N`: N variants of the sphere with its controls' radii (handles, Taubin's smoothing), as
+`somwidget sweep --preset sphere` runs them: single Soms, each its controls' typed move (variants.run_plan; the
+batched kernel runs the paper's rule only). A count of 0 skips a case.
 numpy and warp-lang only.
 """
 
@@ -25,7 +26,7 @@ from somwidget.backend import batch, presets  # noqa: E402
 from somwidget.backend.device import resolve  # noqa: E402
 from somwidget.backend.schedule import Schedule  # noqa: E402
 from somwidget.backend.som import Som  # noqa: E402
-from somwidget.backend.variants import plan_variants  # noqa: E402
+from somwidget.backend.variants import plan_variants, run_plan  # noqa: E402
 
 #: float32 rate (non-tensor) and memory bandwidth of the GPUs these figures are taken on (their data sheets).
 PEAKS = {"H200": (67e12, 4.8e12), "H100": (67e12, 3.35e12)}
@@ -45,47 +46,20 @@ def plan_for(name: str, n: int, seed: int = 0, radii: bool = False):
 def make_batch(p, plan, device):
     s = plan.schedules
     return batch.BatchSom(p.topology, plan.start, plan.controls, smooth_dims=plan.smooth_dims,
-                          metric_weights=plan.metric_weights, mirror=plan.mirror, device=device,
-                          smoothing_rule=plan.smoothing_rule, radii=plan.radii, **s)
+                          metric_weights=plan.metric_weights, mirror=plan.mirror, device=device, **s)
 
 
-def bench_shaping(name: str, n: int, device: str, singles: int) -> None:
-    """Variants whose controls have radii: the batch (all in) against single runs of one `Som` (set_controls,
-    reset, train: the shaping path), in one run."""
+def bench_shaping(name: str, n: int, device: str) -> None:
+    """Variants whose controls have radii: run_plan's single Soms, one after another (the first two compile)."""
     p, plan = plan_for(name, n, radii=True)
-    sync = (lambda: wp.synchronize_device(device)) if device != "cpu" else (lambda: None)
-    make_batch(p, plan.part(0, 2), device).train()  # compile
+    run_plan(plan.part(0, 2), device=device)  # compile and capture
     print(f"\n{name} with radii {float(plan.radii.max()):.3f} ({plan.smoothing_rule} smoothing {p.smoothing}): {n} "
           f"variants of N = {p.n_vertices}, S = {p.iterations}, {len(p.controls)} controls on {device} "
-          f"({wp.get_device(device).name})")
-    sync()
+          f"({wp.get_device(device).name}), each a typed move as a single Som")
     t0 = time.perf_counter()
-    som = make_batch(p, plan, device)
-    som.train()
-    weights = som.weights
-    batched = time.perf_counter() - t0
-    print(f"  batched, all in (set-up, upload, training, weights back): {batched * 1e3:.1f} ms")
-    count = min(singles, n)
-    single = Som(p.topology, p.weights, plan.controls[0], **plan.params(0), smooth_dims=p.smooth_dims,
-                 metric_weights=p.metric_weights, mirror=p.mirror, radii=plan.radii,
-                 smoothing_rule=plan.smoothing_rule, device=device)
-    single.step(4)  # compile
-    diff = 0.0
-    sync()
-    t0 = time.perf_counter()
-    for i in range(count):
-        single.set_controls(plan.controls[i])
-        single.reset()
-        single.train()
-        if i < 8:
-            diff = max(diff, float(np.abs(single.weights - weights[i]).max()))
-    sync()
-    singles_time = time.perf_counter() - t0
-    scaled = singles_time * n / count
-    print(f"  {count} single runs one after another: {singles_time * 1e3:.1f} ms"
-          + (f" (x {n / count:.0f}: {scaled * 1e3:.0f} ms for {n})" if count < n else ""))
-    print(f"  batched / single runs: {scaled / batched:.1f} x faster (all in); largest weight difference from the "
-          f"single runs (first 8): {diff:.2e}")
+    run_plan(plan, device=device)
+    took = time.perf_counter() - t0
+    print(f"  run_plan, all in: {took * 1e3:.1f} ms ({took / n * 1e3:.2f} ms a variant)")
 
 
 def floors(p, plan, device) -> tuple[float, float, float]:
@@ -172,7 +146,7 @@ def main(argv=None) -> None:
     parser.add_argument("--car", type=int, default=1024, help="car variants (default 1024)")
     parser.add_argument("--grid", type=int, default=256, help="space-grid variants (default 256)")
     parser.add_argument("--shaping", type=int, default=0,
-                        help="sphere variants with their controls' radii (default 0: none)")
+                        help="sphere variants with their controls' radii, run as single Soms (default 0: none)")
     parser.add_argument("--singles", type=int, default=None, help="single runs to time (default: all)")
     parser.add_argument("--shapes", default="",
                         help="CUDA kernel shapes to try beside the default: threads:min_blocks:gather:searched,...")
@@ -184,7 +158,7 @@ def main(argv=None) -> None:
     if args.grid:
         bench("space-grid", args.grid, device, args.singles or args.grid, configs)
     if args.shaping:
-        bench_shaping("sphere", args.shaping, device, args.singles or args.shaping)
+        bench_shaping("sphere", args.shaping, device)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,9 @@ For each case: the engine's time per cycle over a whole run (`train()` from s = 
 as the app calls it (`step(10)` between frames), the numpy baseline's time per cycle measured in the same process
 (both of its updates are timed; the table shows the faster), and the ratio numpy / engine. Warm-up (kernel load or
 compile, graph capture) is timed and reported apart. Then the engine and each baseline run cycle by cycle from the
-start and their winners and weights are compared, so the figures are known to come from the same cycles.
+start and their winners and weights are compared, so the figures are known to come from the same cycles. Last, the
+shaping path's figures (bench_shaping.py: a handle's drag frame against the point path's, the car's single shaping
+run in us a cycle).
 
 Imports only numpy, warp, somwidget.backend and tests/reference.py (the float64 learning table, numpy only): it runs
 on a GPU machine with nothing else installed. somwidget/cli.py
@@ -21,6 +23,7 @@ parses the arguments (`somwidget bench`, or bench_engine.py without an install) 
 from __future__ import annotations
 
 import datetime as _dt
+import importlib.util
 import json
 import math
 import os
@@ -29,6 +32,7 @@ import statistics
 import sys
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 import warp as wp
@@ -530,6 +534,21 @@ def meta(device: str) -> dict:
     }
 
 
+def shaping_figures(device: str, repeats: int, out=print) -> dict:
+    """The shaping path's figures (benchmarks/bench_shaping.py, issue 34): a handle's drag frame against the point
+    path's and the car's single shaping run, the card named; printed with `out` and returned."""
+    path = Path(__file__).with_name("bench_shaping.py")
+    spec = importlib.util.spec_from_file_location("somwidget_bench_shaping", path)
+    bench_shaping = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench_shaping)
+    figures = bench_shaping.figures(device, frames=20 * repeats, repeats=repeats)
+    out("")
+    out(f"handles, the shaping path on {figures['card']} [{device}] (benchmarks/bench_shaping.py):")
+    for line in bench_shaping.report(figures):
+        out(line)
+    return figures
+
+
 def run(device: str | None = "auto", cases=None, cycles: int | None = None, repeats: int = 3,
         baseline: bool = True, json_path: str | None = None, out=print, cpu_cores: int | None = None
         ) -> list[CaseResult]:
@@ -567,10 +586,11 @@ def run(device: str | None = "auto", cases=None, cycles: int | None = None, repe
             out(f"    own learning table vs engine's: max diff {res.table_max_diff:.1e}")
     out("")
     out(format_table(results))
+    handles = shaping_figures(dev, repeats, out)
     if json_path:
         with open(json_path, "w") as f:
             json.dump({"meta": info, "cycles": cycles, "frame_step": FRAME_STEP, "repeats": repeats,
-                       "results": [asdict(r) for r in results]}, f, indent=2, allow_nan=True)
+                       "results": [asdict(r) for r in results], "handles": handles}, f, indent=2, allow_nan=True)
         out(f"\nwrote {json_path}")
     return results
 

@@ -55,6 +55,13 @@ ONE CYCLE s (s0 <= s < S), in this order:
   5. with Taubin's rule, every node clamped into the box (the only steps that can leave it are Taubin's mu and the
      volume's, by far less than BOX_MARGIN on any mesh measured: the clamp is a guarantee, not a shaping step).
   s += 1; when s reaches S the released bindings end.
+
+STROKES (`strokes`: run lengths of controls that act as one, the samples of a polyline; None: each control alone)
+  The bindings of one stroke's samples for one copy g are one group, and a group enters step 3 (b) as one binding:
+  its weight w_Gv = max over its bindings of w_bv, its displacement D_Gv = sum w_bv D_b / sum w_bv. So a stroke's
+  clay falls off across it as one sample's does (the product of many overlapping samples' (1 - w) would make a
+  flat top with steep walls), and T_v is still a convex blend within r of a place a member has been. A group of
+  one binding is the rule above, unchanged.
 """
 
 from __future__ import annotations
@@ -274,7 +281,7 @@ class HandleSom:
     def __init__(self, weights, controls, radii=None, faces=None, edges=None, maps=None, position=(0, 1, 2),
                  iterations: int = 1000, l_start: float = 0.25, l_end: float = 0.03, reach: float = 0.3,
                  smoothing: float = 0.0, smoothing_rule: str = "taubin", smooth_dims=None, metric_weights=None,
-                 rule: Rule = Rule()):
+                 rule: Rule = Rule(), strokes=None):
         self.W = np.array(weights, np.float64, copy=True)
         self.n = len(self.W)
         self.faces = None if faces is None else face_lists(faces)
@@ -289,6 +296,8 @@ class HandleSom:
         self.smooth_dims = self.position if smooth_dims is None else list(smooth_dims)
         self.metric_weights = metric_weights
         self.rule = rule
+        runs = [1] * k if strokes is None else [int(x) for x in strokes]
+        self.stroke_of = np.repeat(np.arange(len(runs)), runs)  # each control's stroke
         self.iteration = self.S  # a kept shape: nothing trains until the person acts
         self.neighbours = adjacency(self.n, self.edges)
         self._src = np.repeat(np.arange(self.n), [len(nb) for nb in self.neighbours])
@@ -460,7 +469,23 @@ class HandleSom:
         num = np.zeros_like(self.W)
         den = np.zeros(self.n)
         miss = np.ones(self.n)
+        groups: dict[tuple[int, int], list[Binding]] = {}  # a stroke's samples, one copy: one binding (STROKES)
         for b in self.bindings:
+            groups.setdefault((int(self.stroke_of[b.control]), b.copy), []).append(b)
+        for group in groups.values():
+            if len(group) > 1:
+                most, gnum, gden = np.zeros(self.n), np.zeros_like(self.W), np.zeros(self.n)
+                for b in group:
+                    place = self.member(b.control, b.copy) if b.place is None else b.place
+                    most[b.nodes] = np.maximum(most[b.nodes], b.weights)
+                    gnum[b.nodes] += b.weights[:, None] * (place - b.anchor)[None, :]
+                    gden[b.nodes] += b.weights
+                held = gden > 0
+                num[held] += most[held, None] * gnum[held] / gden[held, None]
+                den[held] += most[held]
+                miss[held] *= 1.0 - most[held]
+                continue
+            (b,) = group
             place = self.member(b.control, b.copy) if b.place is None else b.place
             num[b.nodes] += b.weights[:, None] * (place - b.anchor)[None, :]
             den[b.nodes] += b.weights

@@ -1,16 +1,18 @@
 """B variants of one mesh trained together: the same algorithm as `Som` (som.py), B runs in the same launches.
 
 Each variant has its own weights, controls and schedule (a value of each of schedule.KEYS); the topology, the
-feature count, the mirror, the controls' radii, smooth_dims and the metric weights are shared. Variant b equals the
-single run `Som(topology, weights[b], controls[b], ..., radii=radii, **schedule of b)` driven the same way:
-`train()` after construction is a whole run from the given weights; `restart()` first makes it the local restart a
-move of the controls would be (from s0 = floor((1 - reach) S)).
+feature count, the mirror, smooth_dims and the metric weights are shared. Variant b equals the single run
+`Som(topology, weights[b], controls[b], ..., **schedule of b)` driven the same way: `train()` after construction is a
+whole run from the given weights; `restart()` first makes it the local restart a move of the controls would be (from
+s0 = floor((1 - reach) S)).
 
 On CUDA a block of threads runs one variant's whole schedule (batch_kernels.py): a cycle of a mesh of a few
 thousand neurons is too short to fill a GPU, B of them side by side do. On the CPU the variants are shared among
-the cores, each running its variants one after another. Controls with a radius take the shaping rules (BENCHMARKS.md,
-"Shaping rules": batch_shaping_kernels.py), each variant's falloffs measured on its rest positions (its weights where
-its run restarted); point controls alone keep the paper's kernel (batch_kernels.py).
+the cores, each running its variants one after another. A batch takes the paper's rule: point controls, a mirror,
+the Laplacian step. Controls with a radius (handles: bound at a grab, DESIGN.md "Handles") and Taubin's smoothing
+(the free nodes only, the volume put back) follow the shaping path's rules, which keep per-variant bindings and
+floods that one block per variant does not hold: such variants run as single Soms (variants.run_plan), each equal to
+its own run by construction.
 """
 
 from __future__ import annotations
@@ -25,18 +27,13 @@ from numpy.typing import ArrayLike
 
 from . import checks
 from .batch_kernels import GATHER, SEARCH, variants_kernel
-from .batch_shaping_kernels import shaping_variants_kernel
 from .cycle_kernels import MAX_CONTROLS
 from .device import resolve, usable_cores, warp_exclusive, warp_lock
-from .metrics import bounding_diagonal, median_edge
 from .schedule import BY_NAME, KEYS, SMOOTHING_RULES, TABLE_KEYS, learning_table
-from .shaping_kernels import CARRY_CUT
-from .shaping_path import SIGMA_OF_RADIUS
-from .smoothing_kernels import taubin_mu
 from .som_controls import check_radii
 from .som_model import MAX_DIMS
 from .som_schedule import restart_iteration
-from .topology import Topology, _components
+from .topology import Topology
 
 #: Learning-table entries (rows of every distinct schedule x (d_max + 1), float32) a batch may hold: 2 GiB.
 MAX_TABLE_ENTRIES = 1 << 29
@@ -57,13 +54,6 @@ def _per_variant(name: str, value, n: int) -> np.ndarray:
     return values
 
 
-def _scale(topology: Topology, start: np.ndarray, dims: list[int]) -> tuple[float, float]:
-    """(the median edge length, the carrying floor) of a start mesh, as a Som measures them on its start weights
-    (som_model.SomModel.median_edge and carry_floor)."""
-    p = start[:, dims]
-    return median_edge(p, topology.edges) or 1.0, CARRY_CUT * (bounding_diagonal(p) or 1.0)
-
-
 class BatchSom:
     """B variants of one mesh (see the module's docstring).
 
@@ -72,11 +62,9 @@ class BatchSom:
     (a key left out: its default). device: "cpu", "cuda:N" or
     None (the GPU when there is one). cpu_cores: cores the CPU shares the variants among (None: those this process
     may use, at most 8 and at most OMP_NUM_THREADS where that is set). smoothing_rule: "laplacian" (the paper's
-    step) or "taubin" (the volume-keeping pair, as Som's). radii (k,): each control's radius of influence, the same
-    in every variant (None: all 0, the paper's point controls); with any above 0 the shaping rules run, mirrored
-    pairs included. origin (N, n): the start mesh of the Soms the variants stand for, whose median edge and size set
-    the falloffs' scale (a session's restart: `Som(topology, origin, ...)`, then `restore(weights[b])`); None: each
-    variant's weights. Radial symmetry groups and strokes run as single Soms (variants.run_plan).
+    step); "taubin" with smoothing above 0 is refused, as are radii above 0 (the module's docstring: such variants,
+    like radial symmetry groups, run as single Soms through variants.run_plan). radii (k,): all 0 (None), kept for a
+    plan's arguments.
     """
 
     @warp_exclusive
@@ -93,7 +81,6 @@ class BatchSom:
         cpu_cores: int | None = None,
         smoothing_rule: str = "laplacian",
         radii: ArrayLike | None = None,
-        origin: ArrayLike | None = None,
         **schedule: float | ArrayLike,
     ) -> None:
         unknown = sorted(set(schedule) - set(KEYS))
@@ -136,11 +123,9 @@ class BatchSom:
                              f"({k_eff} with mirroring)")
         self._controls = c.astype(np.float32)
         self._radii = check_radii(radii, k)
-        if origin is not None:
-            origin = checks.finite_array("origin", origin, 2)
-            if origin.shape != (self.n_neurons, n):
-                raise ValueError(f"origin: expected shape {(self.n_neurons, n)} (the start mesh), got {origin.shape}")
-        self._shaping = bool(self._radii.any())
+        if self._radii.any():
+            raise ValueError("radii: a batch runs point controls only; controls with a radius are handles, bound at a "
+                             "grab, and such variants run as single Soms (variants.run_plan does so)")
         B = self.n_variants
         # each variant's schedule: a column of B values per key (iterations as integers)
         self._columns = {key: _per_variant(key, schedule.get(key, BY_NAME[key].default), B) for key in KEYS}
@@ -149,9 +134,11 @@ class BatchSom:
         self._smoothing = self._columns["smoothing"]
         self._reach = self._columns["reach"]
         checks.choice("smoothing_rule", smoothing_rule, SMOOTHING_RULES)
+        if smoothing_rule == "taubin" and (self._smoothing > 0).any():
+            raise ValueError("smoothing_rule: a batch takes the paper's Laplacian step; Taubin's rule smooths the "
+                             "nodes no handle holds and puts the volume back, and such variants run as single Soms "
+                             "(variants.run_plan does so)")
         self.smoothing_rule = smoothing_rule
-        self._taubin = smoothing_rule == "taubin" and bool((self._smoothing > 0).any())
-        second = [taubin_mu(x) if x > 0 else 0.0 for x in self._smoothing.tolist()]
         smooth = tuple(range(min(3, n))) if smooth_dims is None else checks.dims("smooth_dims", smooth_dims, n)
         metric = np.ones(n, np.float32) if metric_weights is None else checks.finite_array(
             "metric_weights", metric_weights, 1)
@@ -180,40 +167,11 @@ class BatchSom:
         self._mask = wp.array(mask[None, :], dtype=vec, device=dev)
         self._table_row = wp.array(rows, dtype=wp.int32, device=dev)
         self._lam = wp.array(self._smoothing.astype(np.float32), dtype=wp.float32, device=dev)
-        self._second = wp.array(np.asarray(second, np.float32), dtype=wp.float32, device=dev)
         self._keys = wp.zeros(B * 3 * k_eff if dev == "cpu" else 1, dtype=wp.uint64, device=dev)
         self._s = np.zeros(B, np.int64)
-        self._fresh = np.ones(B, bool)  # the next cycle begins a run: rest positions and widths anew
         self._cores = self._plan_cores(cpu_cores)
-        if self._shaping:
-            self._shaping_setup(origin, vec)
 
     # -- set-up -------------------------------------------------------------------------------------------
-    def _shaping_setup(self, origin, vec) -> None:
-        """The shaping rules' state: each slot's least sigma (r / 2), each variant's median edge and floor (from
-        `origin` or its start weights), the mesh's connected parts, and room for the rest positions and for each
-        control's winner, offset and fitted width."""
-        dev, B, n = self.device, self.n_variants, self.n_dims
-        dims = list(range(min(3, n)))
-        if origin is not None or self._shared_start:
-            scales = [_scale(self.topology, self._start[0] if origin is None else origin, dims)] * B
-        else:
-            scales = [_scale(self.topology, self._start[b], dims) for b in range(B)]
-        sigma = self._radii.astype(np.float64) * SIGMA_OF_RADIUS
-        sigma = np.repeat(sigma, 2) if self._mirror else sigma  # each original next to its copy
-        position = np.zeros(n, np.float32)
-        position[dims] = 1.0
-        self._position = vec(*position.tolist())
-        self._sigma = wp.array(sigma.astype(np.float32), dtype=wp.float32, device=dev)
-        self._edge = wp.array(np.float32([e for e, _ in scales]), dtype=wp.float32, device=dev)
-        self._floor = wp.array(np.float32([f for _, f in scales]), dtype=wp.float32, device=dev)
-        self._component = wp.array(_components(self.topology)[0].astype(np.int32), dtype=wp.int32, device=dev)
-        self._rest = wp.empty_like(self._w)
-        self._winner = wp.zeros((B, self._k_eff), dtype=wp.int32, device=dev)
-        self._winners = wp.zeros((B, self._k_eff), dtype=vec, device=dev)
-        self._largest = wp.zeros((B, self._k_eff), dtype=wp.float32, device=dev)
-        self._inv = wp.zeros((B, self._k_eff), dtype=wp.float32, device=dev)
-
     def _effective(self, controls: np.ndarray) -> np.ndarray:
         """(B, k_eff, n): with mirroring each original next to its copy (the mirror dims negated), as pairs."""
         if not self._mirror:
@@ -303,24 +261,19 @@ class BatchSom:
         move of its controls (or a change of its schedule) makes in a Som."""
         self._s = np.array([restart_iteration(float(r), int(S)) for r, S in zip(self._reach, self._iterations)],
                            np.int64)
-        self._fresh[:] = True
 
     def reset(self) -> None:
         """The start weights and s = 0: the whole schedule again."""
         with warp_lock:
             self._w.assign(self._start)
         self._s[:] = 0
-        self._fresh[:] = True
 
     @warp_exclusive
     def load(self, weights: ArrayLike, iteration: ArrayLike, controls: ArrayLike) -> None:
         """Put every variant's weights (B, N, n), cycle s (B,) and controls (B, k, n) in place, as `Som.restore` and
         a `set_controls` without its restart would: the next step goes on from there. What lets B separate Soms be
         stepped in one launch (the studio's rooms: their states in, `step_to`, `weights` back out). Point controls
-        only: with radii a run keeps rest positions that a load cannot set."""
-        if self._shaping:
-            raise ValueError("load: controls with a radius keep each run's rest positions, which a load cannot set; "
-                             "load works with point controls (radius 0) only")
+        only (a batch takes no radii)."""
         B, N, n, k = self.n_variants, self.n_neurons, self.n_dims, self._controls.shape[1]
         w = np.asarray(weights)
         if w.shape != (B, N, n):
@@ -337,7 +290,6 @@ class BatchSom:
         self._controls = c.astype(np.float32)
         self._c.assign(self._effective(self._controls))
         self._s = s.astype(np.int64)
-        self._fresh[:] = True
 
     # -- training -----------------------------------------------------------------------------------------
     def step_to(self, to: ArrayLike) -> int:
@@ -371,19 +323,9 @@ class BatchSom:
         s_from = wp.array(self._s.astype(np.int32), dtype=wp.int32, device=dev)
         s_to = wp.array(to.astype(np.int32), dtype=wp.int32, device=dev)
 
-        if self._shaping:
-            fresh = wp.array((self._fresh & (to > self._s)).astype(np.int32), dtype=wp.int32, device=dev)
-
-            def inputs(first: int) -> list:
-                return [self._w, self._moved, self._rest, self._c, self._k_eff, self._m, self._mask, self._tables,
-                        self._table_row, self._lam, self._second, s_from, s_to, fresh, self._distances,
-                        self._offsets, self._neighbors, self._component, self._sigma, self._edge, self._floor,
-                        self._position, self._winner, self._winners, self._largest, self._inv, self._keys, first]
-        else:
-            def inputs(first: int) -> list:
-                return [self._w, self._moved, self._c, self._k_eff, self._m, self._mask, self._tables,
-                        self._table_row, self._lam, self._second, s_from, s_to, self._distances, self._offsets,
-                        self._neighbors, self._keys, first]
+        def inputs(first: int) -> list:
+            return [self._w, self._moved, self._c, self._k_eff, self._m, self._mask, self._tables, self._table_row,
+                    self._lam, s_from, s_to, self._distances, self._offsets, self._neighbors, self._keys, first]
 
         if dev == "cpu":
             bounds = np.linspace(0, B, self._cores + 1).astype(int)
@@ -404,18 +346,11 @@ class BatchSom:
             kernel = self._kernel(True, shape)
             wp.launch_tiled(kernel, dim=[B], block_dim=shape["threads"], device=dev, inputs=inputs(0))
             wp.synchronize_device(dev)
-        self._fresh &= ~(to > self._s)
         self._s = to.astype(np.int64)
 
     def _kernel(self, cuda: bool, shape: dict):
-        """The paper's kernel (point controls), or the shaping rules' (controls with radii), for a launch shape."""
-        if self._shaping:
-            options = {"threads": shape["threads"], "min_blocks": shape.get("min_blocks", 1),
-                       "searched": shape.get("searched", SEARCH)} if cuda else {}
-            return shaping_variants_kernel(self.n_dims, self._pairs, cuda, unit_metric=self._unit_metric,
-                                           taubin=self._taubin, **options)
-        return variants_kernel(self.n_dims, self._pairs, cuda, unit_metric=self._unit_metric, taubin=self._taubin,
-                               **(shape if cuda else {}))
+        """The paper's kernel for a launch shape."""
+        return variants_kernel(self.n_dims, self._pairs, cuda, unit_metric=self._unit_metric, **(shape if cuda else {}))
 
 
 def cuda_shape(n_neurons: int) -> dict:

@@ -11,8 +11,8 @@ algorithm's three steps (som.py, The cycle; the same arithmetic as cycle_kernels
 2. move: each thread moves its neurons by the controls in list order, W_v <- W_v + L[s, D[u_c, v]] (C_c - W_v), or
    a mirrored pair at once (`move_pair`, scaled by 1 / max(1, l1 + l2));
 3. smoothing (a variant with lambda > 0): the moved weights go to a scratch array, a barrier, then one Jacobi step
-   (smoothing_kernels.smoothed on the variant's row); with Taubin's rule (`taubin`) a barrier and a second step of
-   strength mu < 0 into the scratch array, a barrier and a copy back: the volume-keeping pair.
+   (smoothing_kernels.smoothed on the variant's row). (Taubin's rule and controls with a radius follow the shaping
+   path's rules, handles included, which run as single Soms: batch.py.)
 
 Winner keys rotate through three buffers (cycle s fills buffer s % 3 and clears buffer s + 1), so one barrier a
 cycle is enough without smoothing. On the CPU, where Warp runs a block as one thread, the keys live in a global
@@ -76,12 +76,11 @@ SEARCH = 4
 
 
 @functools.cache
-def variant_funcs(n_dims: int, searched: int, unit_metric: bool, taubin: bool) -> SimpleNamespace:
-    """The steps both batched kernels take (this module's and batch_shaping_kernels'), for variant b run by a block
-    of `threads` threads (thread t): `start_run` (the keys of its first cycle cleared), `find_winners` (step 1 of
-    cycle s: `searched` controls at a time over each thread's neurons, offered to the block's keys; `unit_metric`
-    skips the metric weights) and `smooth` (step 3 from the moved weights, smoothing_kernels.smoothed on the
-    variant's row; with `taubin` the second step of Taubin's pair, its strength `second`)."""
+def variant_funcs(n_dims: int, searched: int, unit_metric: bool) -> SimpleNamespace:
+    """The steps of the batched kernel, for variant b run by a block of `threads` threads (thread t): `start_run`
+    (the keys of its first cycle cleared), `find_winners` (step 1 of cycle s: `searched` controls at a time over each
+    thread's neurons, offered to the block's keys; `unit_metric` skips the metric weights) and `smooth` (step 3 from
+    the moved weights, smoothing_kernels.smoothed on the variant's row)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     keys_of = wp.types.vector(length=searched, dtype=wp.uint64)
     targets_of = wp.types.matrix(shape=(searched, n_dims), dtype=wp.float32)
@@ -131,39 +130,30 @@ def variant_funcs(n_dims: int, searched: int, unit_metric: bool, taubin: bool) -
 
     @wp.func
     def smooth(weights: wp.array2d(dtype=vec), moved: wp.array2d(dtype=vec), b: int, t: int, threads: int,
-               offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32), pull: vec, push: vec):
-        """Step 3: `moved` (the moved weights) smoothed into `weights` by pull = lambda mask; with `taubin` then
-        by push = mu mask into `moved` and copied back, barriers between."""
+               offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32), pull: vec):
+        """Step 3: `moved` (the moved weights) smoothed into `weights` by pull = lambda mask, after a barrier."""
         n = weights.shape[1]
         sync_block()
         for v in range(t, n, threads):
             weights[b, v] = smoothed(moved[b], v, offsets, neighbors, pull)
-        if wp.static(taubin):
-            sync_block()
-            for v in range(t, n, threads):
-                moved[b, v] = smoothed(weights[b], v, offsets, neighbors, push)
-            sync_block()
-            for v in range(t, n, threads):
-                weights[b, v] = moved[b, v]
 
     return SimpleNamespace(distance=distance, start_run=start_run, find_winners=find_winners, smooth=smooth)
 
 
 @functools.cache
 def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, min_blocks: int = 1,
-                    gather: int = GATHER, searched: int = SEARCH, unit_metric: bool = False, taubin: bool = False):
+                    gather: int = GATHER, searched: int = SEARCH, unit_metric: bool = False):
     """The kernel for weights of n_dims features; with `pairs` the effective controls come as mirrored pairs, each
     original next to its copy. `cuda`: the keys in shared memory (on the CPU Warp's shared tiles are one static
     buffer, which concurrent launches on several cores would share), blocks of at most `threads` threads of which
     `min_blocks` fit an SM at once (the compiler's register budget); `gather`, `searched`: GATHER, SEARCH.
-    `unit_metric`: every metric weight is 1, so the winner search skips multiplying by them (the same bits).
-    `taubin`: each smoothing step is followed by the second step of Taubin's pair (its strength in `second`)."""
+    `unit_metric`: every metric weight is 1, so the winner search skips multiplying by them (the same bits)."""
     vec = wp.types.vector(length=n_dims, dtype=wp.float32)
     rates = wp.types.vector(length=gather, dtype=wp.float32)
     group_of = wp.types.matrix(shape=(gather, n_dims), dtype=wp.float32)
     group_ints = wp.types.vector(length=gather, dtype=wp.int32)
     options = {"max_unroll": 32}
-    steps = variant_funcs(n_dims, searched, unit_metric, taubin)
+    steps = variant_funcs(n_dims, searched, unit_metric)
 
     @wp.func
     def move_pair(w: vec, l1: wp.float32, l2: wp.float32, a: vec, b: vec) -> vec:
@@ -219,7 +209,6 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
         tables: wp.array2d(dtype=wp.float32),
         table_row: wp.array(dtype=wp.int32),
         smoothing: wp.array(dtype=wp.float32),
-        second: wp.array(dtype=wp.float32),
         s_from: wp.array(dtype=wp.int32),
         s_to: wp.array(dtype=wp.int32),
         distances: wp.array2d(dtype=wp.uint16),
@@ -229,7 +218,7 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
         first: int,
     ):
         """Cycles s_from[b] .. s_to[b] - 1 of variant b = first + block (weights[b], controls[b], its table from row
-        table_row[b], its smoothing and with `taubin` its second step). `moved` is scratch for smoothing; `keys`
+        table_row[b], its smoothing). `moved` is scratch for smoothing; `keys`
         holds the winner keys on the CPU."""
         block, t = wp.tid()
         b = first + block
@@ -250,6 +239,6 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
                 move_group(weights, moved, into_moved, c0, b, controls, k, tables, row, distances, keys, base,
                            (s % 3) * k, t, threads)
             if into_moved != 0:  # 3. smoothing from the moved weights
-                steps.smooth(weights, moved, b, t, threads, offsets, neighbors, lam * mask[0], second[b] * mask[0])
+                steps.smooth(weights, moved, b, t, threads, offsets, neighbors, lam * mask[0])
 
     return train_variants

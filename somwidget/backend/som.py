@@ -8,7 +8,8 @@ the mesh's edges and L[s, d] = alpha(s) theta(d, s) the learning table (schedule
    mirrored copy act at once, W <- W + (l1 (C - W) + l2 (C' - W)) / max(1, l1 + l2), so a symmetric mesh stays exactly
    symmetric (cycle_kernels.move_pair);
 3. with smoothing lambda > 0, one Jacobi step of the uniform Laplacian on smooth_dims (smoothing_kernels.py).
-Controls with a radius, radial groups, strokes and Taubin's smoothing take the shaping rules (shaping_path.py).
+Controls with a radius (handles: bound to the patch of clay a grab takes, handles.py), radial groups and Taubin's
+smoothing take the shaping rules (shaping_path.py).
 
 Restarts: moving the controls or changing the schedule goes on from the latest weights at s0 = floor((1 - reach) S)
 of the same table, where the neighbourhood is `reach` of its full radius (the clay follows locally; s = 0 would pull
@@ -87,11 +88,15 @@ class Som:
     s0 = floor((1 - reach) S) from the latest weights (the clay follows locally); `reset()` runs the whole schedule
     from the start weights; `restore()` puts saved weights and s back without training.
 
-    radii (k,): each control's radius of influence in model units (None: all 0, the paper's point controls); a
-    control with a radius carries the clay around its winner with a smooth falloff (shaping_kernels.py). symmetry: a
-    `Symmetry` group whose copies of each control act together with it (`mirror` is the shorthand for a mirror of
-    any dims). strokes: the lengths of consecutive runs of controls that act together as one (the samples of a
-    polyline; None: every control alone). smoothing_rule: "laplacian" (the paper's) or "taubin" (keeps the volume).
+    radii (k,): each control's radius of influence in model units (None: all 0, the paper's point controls). A
+    control with a radius is a handle (handles.py; DESIGN.md "Handles"): `grab(i)` binds the patch of clay within
+    its radius of its winner, while held the patch goes where the control goes (`set_controls`, then cycles) and
+    `release(i)` lets go; moved while no hand holds it (a typed position), it is grabbed at its old place and
+    released at once; unbound, it does nothing. symmetry: a `Symmetry` group whose copies of each control act
+    together with it (`mirror` is the shorthand for a mirror of any dims). strokes: the lengths of consecutive runs
+    of controls that a hand takes as one (the samples of a polyline; None: every control alone). smoothing_rule:
+    "laplacian" (the paper's) or "taubin" (lambda capped at 0.7, then mu, smoothing the nodes no handle holds, the
+    volume of every closed part put back).
     """
 
     @warp_exclusive
@@ -145,7 +150,7 @@ class Som:
         else:
             cuda = CudaPath(self._model)
             self._path = RowsPath(cuda) if rows else cuda
-        self._shaping = ShapingPath(self._cores)
+        self._shaping = ShapingPath(self._model)
         self._build_table(values)
         self._upload_controls()
 
@@ -328,11 +333,12 @@ class Som:
         state = self._state
         if from_anchor and state.w_anchor is None:
             raise ValueError("set_controls: from_anchor needs anchor() first (no weights are kept)")
-        self._controls = self._controls.moved(controls, radii, strokes)
+        new = self._controls.moved(controls, radii, strokes)
         state.from_anchor(from_anchor)
+        self._shaping.handles.moved(state, new)  # (the released bindings end: the restart's part)
+        self._controls = new
         self._upload_controls()
-        self._restart()
-        state.rest_source = state.anchor_version if from_anchor else None
+        state.restart(self._schedule.restart_iteration())
 
     @warp_exclusive
     def regroup(self, controls: ArrayLike, radii: ArrayLike | None, symmetry: Symmetry | None = None,
@@ -342,6 +348,7 @@ class Som:
         restart. ValueError (nothing changed) if they do not fit together."""
         self._controls = Controls.make(controls, radii, strokes, check_group(symmetry, mirror, self.n_dims),
                                        self.n_dims)
+        self._shaping.handles.end_all(self._state)
         self._upload_controls()
         if keep_shape:
             self._state.settle_anchor()
@@ -358,7 +365,7 @@ class Som:
     @warp_exclusive
     def set_weights(self, weights: ArrayLike) -> None:
         """Replace the current weights (same shape); the schedule restarts at s0 from them."""
-        self._state.assign(self._checked_weights(weights))
+        self._let_go(self._checked_weights(weights))
         self._restart()
 
     @warp_exclusive
@@ -369,14 +376,14 @@ class Som:
     @warp_exclusive
     def reset(self) -> None:
         """Back to the start weights and s = 0 (the whole schedule); the controls stay."""
-        self._state.assign(self._model.start)
+        self._let_go(self._model.start)
         self._restart(0)
 
     @warp_exclusive
     def restore(self, weights: ArrayLike, iteration: int) -> None:
         """Put saved weights and s back exactly (a loaded session, an undo): nothing trains, nothing restarts."""
         s = checks.integer("iteration", iteration, 0, self.iterations)
-        self._state.assign(self._checked_weights(weights))
+        self._let_go(self._checked_weights(weights))
         self._restart(s)
 
     @warp_exclusive
@@ -385,6 +392,34 @@ class Som:
         order of `effective_controls`."""
         parts = self.parts
         return parts.next_path().winners(self._model, self._state, self._controls, self._schedule)
+
+    @warp_exclusive
+    def grab(self, i: int) -> None:
+        """A hand takes control i (with the rest of its stroke): each member of a control with a radius binds the
+        patch of clay around its winner (handles.py). Nothing moves and nothing restarts; a point control binds
+        nothing, and a control held already stays as it is."""
+        self._shaping.handles.grab(self._state, self._stroke_of(i))
+
+    @warp_exclusive
+    def release(self, i: int) -> None:
+        """The hand lets go of control i (with the rest of its stroke): its bindings carry the clay to where the hand
+        left it until the run reaches S or the next restart. Nothing trains."""
+        self._shaping.handles.release(self._stroke_of(i))
+
+    @property
+    def held(self) -> tuple[int, ...]:
+        """The controls a hand holds (`grab`), in order."""
+        return tuple(sorted(self._shaping.handles.held))
+
+    def _stroke_of(self, i: int) -> range:
+        """The controls of control i's stroke (i alone when it is not a stroke's sample)."""
+        i = checks.integer("control", i, 0, len(self._controls.values) - 1)
+        first = 0
+        for length in self._controls.strokes:
+            if i < first + length:
+                return range(first, first + length)
+            first += length
+        raise AssertionError("unreachable: the strokes cover every control")
 
     def _checked_weights(self, weights: ArrayLike) -> np.ndarray:
         w = checks.finite_array("weights", weights, 2)
@@ -404,6 +439,8 @@ class Som:
             chunk = min(LONGEST_GRAPH, 1 << ((n - done).bit_length() - 1))
             path.run(self._model, self._state, self._controls, self._schedule, chunk)
             done += chunk
+        if n and self._state.s >= self.iterations:
+            self._shaping.handles.end_released(self._state)  # the run is over: released bindings end
         return n
 
     def train(self) -> int:
@@ -426,17 +463,32 @@ class Som:
         self._restart()
 
     def _build_table(self, values: Schedule) -> None:
-        self._schedule.rebuild(values, self._model.d_max(), self._model.rows, drop=self._path.forget)
+        def drop() -> None:
+            self._path.forget()
+            self._shaping.forget()
+
+        self._schedule.rebuild(values, self._model.d_max(), self._model.rows, drop=drop)
 
     def _regroup(self, controls: Controls) -> None:
-        """New controls (checked), on the device, and a local restart."""
+        """New controls (checked), on the device, and a local restart (bindings kept where the controls' count,
+        group and which have a radius stay)."""
         self._controls = controls
         self._upload_controls()
         self._restart()
 
+    def _let_go(self, weights: np.ndarray) -> None:
+        """New weights: every binding ends, every hold is let go, and the clamp's box takes them."""
+        handles = self._shaping.handles
+        handles.end_all(self._state)
+        handles.grow(weights)
+        self._state.assign(weights)
+
     def _upload_controls(self) -> None:
         self._state.upload(self._controls)
+        self._shaping.handles.adopt(self._controls)
 
     def _restart(self, s: int | None = None) -> None:
-        """Continue the schedule from cycle s (default: s0, a local restart) with the winners found afresh."""
+        """Continue the schedule from cycle s (default: s0, a local restart) with the winners found afresh; the
+        bindings no hand holds end."""
+        self._shaping.handles.end_released(self._state)
         self._state.restart(self._schedule.restart_iteration() if s is None else s)

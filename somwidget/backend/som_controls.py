@@ -133,10 +133,10 @@ class Controls:
         return np.concatenate([found[0::2], found[1::2]]) if self.mirror else found
 
     def shaping(self, smoothing_steps: int) -> bool:
-        """Whether the shaping path runs the cycles: radii, a radial group, strokes, or a second smoothing step
-        (Taubin's); else the paper's rule (cpu_path.py, cuda_path.py, rows_path.py, local_path.py)."""
-        return bool(self.radii.any()) or self.symmetry is not None or len(self.strokes) < len(self.values) or (
-            smoothing_steps > 1)
+        """Whether the shaping path runs the cycles: radii (handles), a radial group, or a second smoothing step
+        (Taubin's); else the paper's rule (cpu_path.py, cuda_path.py, rows_path.py, local_path.py). Strokes only say
+        which controls a hand takes together."""
+        return bool(self.radii.any()) or self.symmetry is not None or smoothing_steps > 1
 
     def pairs(self, table_max: float) -> int:
         """How step 2 applies the controls (cycle_kernels.SINGLES, PAIRS, SCALED_PAIRS): with a mirror in mirrored

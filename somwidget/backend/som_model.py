@@ -6,17 +6,13 @@ rows of recent winners computed on demand (row_cache.RowCache).
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 import warp as wp
 
 from . import checks
 from .cycle_kernels import CUDA_BLOCK, cycle_kernels
-from .metrics import bounding_diagonal, median_edge
 from .row_cache import RowCache
-from .shaping_kernels import CARRY_CUT
-from .topology import MAX_DENSE_NEURONS, Topology, _components
+from .topology import MAX_DENSE_NEURONS, Topology
 
 MAX_DIMS = 32
 #: On the CPU the dense table is the default up to this many neurons (512 MiB, built by the CPU's cores); past it,
@@ -122,19 +118,3 @@ class SomModel:
     def d_max(self) -> int:
         """The largest finite hop distance: the learning table's last column."""
         return self.topology.diameter(self.device) if self.rows else self.topology.d_max
-
-    # -- the shaping rules' scale (measured once, when the shaping path first needs it) -------------------------
-    @functools.cached_property
-    def median_edge(self) -> float:
-        """The median length of the start mesh's edges in the position dims (a falloff's unit)."""
-        return median_edge(self.start[:, self.position_dims], self.topology.edges) or 1.0
-
-    @functools.cached_property
-    def carry_floor(self) -> float:
-        """shaping_kernels.CARRY_CUT of the start shape's size: a carrying group moves no node by less."""
-        return CARRY_CUT * (bounding_diagonal(self.start[:, self.position_dims]) or 1.0)
-
-    @functools.cached_property
-    def component(self) -> wp.array:
-        """(N,) int32 the connected part of the mesh each neuron is in, on the device."""
-        return wp.array(_components(self.topology)[0].astype(np.int32), dtype=wp.int32, device=self.device)

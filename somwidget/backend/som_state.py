@@ -31,10 +31,9 @@ class SomState:
 
     w, w_moved: (N,) vectors, the weights and the moved weights of a cycle with smoothing; w_anchor: the weights
     `anchor()` kept (None before), with anchor_pending while a restart from them waits for its run. s, parity (CUDA:
-    which of the two counters holds s), winners_valid (keys[s % 3] holds the winners of W(s)); rest_pending and
-    rest_source: a restart waits for its first cycle, from the anchor of that `anchor_version` or (None) from the
-    latest weights. keys (3, MAX_CONTROLS): winner keys (primitives.winner_key) rotating by s % 3. c: the effective
-    controls (MAX_CONTROLS slots, `upload`); cycle: the counters the kernels pass on (CUDA: two; CPU: one per core).
+    which of the two counters holds s), winners_valid (keys[s % 3] holds the winners of W(s)). keys (3,
+    MAX_CONTROLS): winner keys (primitives.winner_key) rotating by s % 3. c: the effective controls (MAX_CONTROLS
+    slots, `upload`); cycle: the counters the kernels pass on (CUDA: two; CPU: one per core).
     boxes: the CPU's block boxes of the weights (block_boxes.BlockBoxes), None on CUDA.
     """
 
@@ -71,8 +70,6 @@ class SomState:
         self.s = 0
         self.parity = 0
         self.winners_valid = False
-        self.rest_pending = True  # taken when the first cycle runs
-        self.rest_source: int | None = None
         if dev == "cpu":  # the keys as one flat array, and a host view of them (CPU memory)
             self.flat_keys = wp.array(ptr=self.keys.ptr, dtype=wp.uint64, shape=(3 * MAX_CONTROLS,), device="cpu")
             self.keys_host = self.keys.numpy()
@@ -114,12 +111,9 @@ class SomState:
 
     # -- the schedule's position --------------------------------------------------------------------------------
     def restart(self, s: int) -> None:
-        """Continue the schedule from cycle s with the winners found afresh (and, on the shaping path, the falloffs
-        measured from the shape the restart begins with)."""
+        """Continue the schedule from cycle s with the winners found afresh."""
         self.s = s
         self.winners_valid = False
-        self.rest_pending = True
-        self.rest_source = None
 
     def start_run(self) -> bool:
         """Whether a run of the paper's captured cycles starts afresh (the winners of cycle s unknown: it finds them

@@ -354,7 +354,7 @@ def _components(topology: Topology) -> tuple[np.ndarray, np.ndarray, np.ndarray]
                          device="cpu")
     out = [wp.empty(n, dtype=wp.int32, device="cpu") for _ in range(3)]
     wp.launch(distance_kernels.label_components, dim=1, device="cpu", inputs=[offsets, neighbors, *out])
-    return tuple(a.numpy() for a in out)
+    return tuple(a.numpy().copy() for a in out)  # (a CPU array's numpy() is a view of memory freed with it)
 
 
 def _diameter(topology: Topology, device: str) -> int:

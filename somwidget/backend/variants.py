@@ -16,6 +16,7 @@ import numpy as np
 
 from . import checks, metrics
 from .batch import MAX_BATCH_NEURONS, MAX_TABLE_ENTRIES, BatchSom
+from .metrics import _face_arrays
 from .schedule import BY_NAME, KEYS
 from .symmetry import Symmetry
 from .topology import Topology
@@ -28,7 +29,10 @@ class VariantPlan:
     """n variants of one mesh: their controls (n, k, dims) and schedules (each key of schedule.KEYS: (n,)).
 
     restart False: each variant is a whole run from `start` (as `Som.reset()` then `train()`); True: each is a local
-    restart from `start` (a session's current weights), as a move of its controls would be."""
+    restart from `start` (a session's current weights), as a move of its controls would be. With controls that have
+    a radius (handles), each variant is always its controls' typed move from `base` (the design's controls) on
+    `start`: every moved control grabbed at its old place and released, the run from s0 to S (a whole run would
+    bind nothing)."""
 
     n_vertices: int
     edges: np.ndarray
@@ -45,14 +49,23 @@ class VariantPlan:
     strokes: tuple[int, ...] | None = None  # the runs of controls that act as one (None: each alone)
     symmetry: Symmetry | None = None  # a radial group (a mirror is `mirror`)
     smoothing_rule: str = "laplacian"
+    base: np.ndarray | None = None  # (k, dims) the design's controls, where a typed move grabs (None: each variant's)
+    faces: tuple[np.ndarray, np.ndarray] | None = None  # (every face's vertices in a row, each face's size): the
+    # closed parts whose volume Taubin's smoothing keeps (None: a mesh of edges)
+
+    @property
+    def handles(self) -> bool:
+        """Some control has a radius: each variant is a typed move of its controls from `base`."""
+        return self.radii is not None and bool(np.any(np.asarray(self.radii) > 0))
 
     @property
     def singles(self) -> bool:
-        """The variants run as single Soms, one after another: a radial group or strokes (the batched kernels have
-        the shaping rules for controls with radii and mirrored pairs only), or a mesh past a batch's dense table
-        (batch.MAX_BATCH_NEURONS)."""
-        return self.symmetry is not None or bool(self.strokes and len(self.strokes) < self.controls.shape[1]) or (
-            self.n_vertices > MAX_BATCH_NEURONS)
+        """The variants run as single Soms, one after another: the shaping path's rules (controls with a radius, a
+        radial group, Taubin's smoothing), strokes, or a mesh past a batch's dense table (batch.MAX_BATCH_NEURONS).
+        The batched kernel runs the paper's rule only (batch.py)."""
+        taubin = self.smoothing_rule == "taubin" and bool(np.any(self.schedules["smoothing"] > 0))
+        return self.handles or taubin or self.symmetry is not None or bool(
+            self.strokes and len(self.strokes) < self.controls.shape[1]) or self.n_vertices > MAX_BATCH_NEURONS
 
     @property
     def n_variants(self) -> int:
@@ -125,6 +138,10 @@ def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: 
     out[:, :, dims] += direction * radius
     schedules = {key: _draw(key, params.get(key), base_params[key], n, rng) for key in KEYS}
     edges = np.ascontiguousarray(np.asarray(topology.edges, np.int32).reshape(-1, 2))
+    faces = None
+    if topology.faces is not None:
+        flat, sizes = _face_arrays(getattr(topology.faces, "array", topology.faces))
+        faces = (flat.astype(np.int32), sizes.astype(np.int32))
     return VariantPlan(n_vertices=topology.n_vertices, edges=edges, start=start, controls=out.astype(np.float32),
                        schedules=schedules, restart=bool(restart), mirror=tuple(mirror),
                        smooth_dims=None if smooth_dims is None else tuple(smooth_dims),
@@ -132,18 +149,23 @@ def plan_variants(topology: Topology, start, controls, base_params: Mapping, n: 
                        position_dims=tuple(dims), radii=None if radii is None else np.asarray(radii, np.float32),
                        symmetry=symmetry, smoothing_rule=smoothing_rule,
                        origin=None if origin is None else np.asarray(origin, np.float32),
-                       strokes=None if strokes is None else tuple(strokes))
+                       strokes=None if strokes is None else tuple(strokes), base=base.astype(np.float32), faces=faces)
 
 
 @functools.lru_cache(maxsize=4)
-def _topology(n_vertices: int, edges_bytes: bytes) -> Topology:
-    edges = np.frombuffer(edges_bytes, np.int32).reshape(-1, 2)
-    return Topology.from_edges(edges, n_vertices)
+def _topology(n_vertices: int, edges_bytes: bytes, flat: bytes | None, sizes: bytes | None) -> Topology:
+    if flat is None or sizes is None:
+        edges = np.frombuffer(edges_bytes, np.int32).reshape(-1, 2)
+        return Topology.from_edges(edges, n_vertices)
+    cuts = np.cumsum(np.frombuffer(sizes, np.int32))[:-1]
+    return Topology.from_faces(np.split(np.frombuffer(flat, np.int32).astype(np.int64), cuts), n_vertices)
 
 
 def topology_of(plan: VariantPlan) -> Topology:
-    """The plan's mesh, built once per process (a Dask worker keeps it for the next batch)."""
-    return _topology(plan.n_vertices, plan.edges.tobytes())
+    """The plan's mesh (with its faces where it has them), built once per process (a Dask worker keeps it for the
+    next batch)."""
+    flat, sizes = (None, None) if plan.faces is None else (plan.faces[0].tobytes(), plan.faces[1].tobytes())
+    return _topology(plan.n_vertices, plan.edges.tobytes(), flat, sizes)
 
 
 def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray, dict]:
@@ -155,8 +177,7 @@ def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray,
         return weights, figures(plan, weights)
     som = BatchSom(topology_of(plan), plan.start, plan.controls, smooth_dims=plan.smooth_dims,
                    metric_weights=plan.metric_weights, mirror=plan.mirror, device=device,
-                   smoothing_rule=plan.smoothing_rule, radii=plan.radii, origin=plan.origin,
-                   **{key: s[key] for key in KEYS})
+                   smoothing_rule=plan.smoothing_rule, **{key: s[key] for key in KEYS})
     if plan.restart:
         som.restart()
     som.train()
@@ -165,19 +186,22 @@ def run_batch(plan: VariantPlan, device: str | None = None) -> tuple[np.ndarray,
 
 
 def _run_singles(plan: VariantPlan, device: str | None) -> np.ndarray:
-    """The variants one Som after another (radial groups, strokes, big meshes): the same results as their own
-    runs."""
+    """The variants one Som after another (the shaping path's rules, strokes, big meshes): each is its own run. A
+    local restart (or any variant with handles) is the variant's controls set on the design's shape: a typed move
+    from `base` of each control with a radius, a local restart for the point controls."""
     from .som import Som
 
     topology, out = topology_of(plan), []
     origin = plan.start if plan.origin is None else plan.origin
+    typed = plan.restart or plan.handles
     for i in range(plan.n_variants):
-        som = Som(topology, origin, plan.controls[i], **plan.params(i), smooth_dims=plan.smooth_dims,
+        places = plan.base if typed and plan.base is not None else plan.controls[i]
+        som = Som(topology, origin, places, **plan.params(i), smooth_dims=plan.smooth_dims,
                   metric_weights=plan.metric_weights, mirror=plan.mirror, radii=plan.radii, symmetry=plan.symmetry,
                   strokes=plan.strokes, smoothing_rule=plan.smoothing_rule, device=device)
-        if plan.restart:  # a local restart from the design's shape, as a move of its controls would be
+        if typed:
             som.restore(plan.start, som.iterations)
-            som.restart()
+            som.set_controls(plan.controls[i])
         som.train()
         out.append(som.weights)
     return np.stack(out)

@@ -1,9 +1,8 @@
 """A drag costs what it touches (backend/local_path.py): the CPU's local cycle, which moves only the blocks of neurons
 within reach of a winner and searches only the blocks that may hold one, against the full computation (the engine's
 paths that move and search every neuron, run on the Som's parts: the same weights bit for bit) and against the float64
-reference with the cuts the engine states: past the dense table theta < 2^-24 is 0 (schedule.NEIGHBOURHOOD_CUT), and
-a carrying group leaves a node where it could move it by less than 2^-24 of the start shape's size
-(shaping_kernels.CARRY_CUT). Past the cuts the nodes stay exactly where they were.
+reference with the cut the engine states: past the dense table theta < 2^-24 is 0 (schedule.NEIGHBOURHOOD_CUT).
+Past the cut the nodes stay exactly where they were. (Handles in distance rows mode: test_handles.py.)
 """
 
 from __future__ import annotations
@@ -19,7 +18,6 @@ from somwidget.backend.cpu_path import CpuPath
 from somwidget.backend.local_kernels import BLOCK
 from somwidget.backend.local_path import find_in_blocks
 from somwidget.backend.rows_path import RowsPath
-from somwidget.backend.shaping_path import ShapingPath
 
 S = 200
 
@@ -103,47 +101,6 @@ def test_paper_rule_local_matches_reference_with_the_cut():
     ref = ReferenceSom(len(pts), edges, pts.astype(np.float64), controls.astype(np.float64), iterations=S,
                        reach=0.04, cut=ROWS_CUT)
     _drag_matches_reference(som, ref, pts, controls)
-
-
-def _shaping_full_run(som: Som, cycles: int) -> None:
-    """`cycles` cycles of the shaping rules with the full kernels (shaping_path.ShapingPath without the CPU's
-    cores): the winners by the full scan (a carrying control keeping the one it grabbed at the restart), every neuron
-    moved by the thread-per-neuron `move`, the point controls' rows searched whole."""
-    parts = som.parts
-    ShapingPath(None).run(parts.model, parts.state, parts.controls, parts.schedule, cycles)
-
-
-@pytest.mark.parametrize(("distances", "cores"), [("dense", 1), ("rows", 1), ("rows", 2)])
-def test_shaping_local_equals_full_computation(distances, cores):
-    """Controls with a radius (a kept shape) and a point control: the CPU's move of the blocks a group can reach gives
-    the thread-per-neuron kernel's weights bit for bit; the far end of the strip stays as it was."""
-    topo, _, pts = _strip(16, 520)
-    controls = pts[[19, 136, 204, 250]].copy()
-    radii = [0.25, 0.25, 0.0, 0.25]
-    local, full = (Som(topo, pts, controls, iterations=S, reach=0.04, radii=radii, distances=distances,
-                       device="cpu", cpu_cores=n) for n in (cores, 1))
-    for som in (local, full):
-        som.restore(pts, S)
-        som.anchor()
-    for moved in _drag(pts, controls, 3):
-        local.set_controls(moved, from_anchor=True)
-        local.step(5)
-        full.set_controls(moved, from_anchor=True)
-        _shaping_full_run(full, 5)
-        np.testing.assert_array_equal(local.weights, full.weights)
-    assert (local.weights[-64:] == pts[-64:]).all()
-
-
-def test_shaping_local_matches_reference_with_the_floor():
-    """The drag of a carrying control against the float64 reference with the carry floor: equal within float32
-    rounding; the nodes it leaves in place stay bit for bit."""
-    topo, edges, pts = _strip()
-    controls = pts[[19, 136, 250]].copy()
-    radii = [0.25, 0.3, 0.25]
-    som = Som(topo, pts, controls, iterations=S, reach=0.3, radii=radii, distances="rows", device="cpu")
-    ref = ReferenceSom(len(pts), edges, pts.astype(np.float64), controls.astype(np.float64), iterations=S,
-                       reach=0.3, radii=radii, cut=ROWS_CUT)
-    _drag_matches_reference(som, ref, pts, controls, 3)
 
 
 def test_block_search_equals_full_scan():

@@ -107,12 +107,14 @@ def test_every_preset_makes_a_som_that_trains(name):
     assert som.iterations == p.iterations and som.mirror == p.mirror
     assert som.smoothing == pytest.approx(p.smoothing)
     np.testing.assert_allclose(som.radii, p.radius)
-    if p.radius:  # controls with a radius carry their winners: on the clay's own nodes they pull nothing
-        som.step(3)
+    if p.radius:  # handles: nothing bound moves the clay; a typed move carries it
+        assert som.step(3) == 3
         np.testing.assert_array_equal(som.weights, p.weights)
         som.set_controls(p.controls * 1.1)
-        som.reset()
-    assert som.step(3) == 3 and som.iteration == 3
+        start = som.iteration
+        assert start < som.iterations and som.step(3) == 3 and som.iteration == start + 3
+    else:
+        assert som.step(3) == 3 and som.iteration == 3
     assert np.isfinite(som.weights).all() and not np.array_equal(som.weights, p.weights)
 
 
@@ -328,7 +330,35 @@ def test_the_open_shapes_are_open_with_their_controls_and_copies_on_nodes(name):
     assert mirror_symmetric(p.weights, (1,))
     assert copies_on_nodes(p) < 1e-6  # every copy of every control sits on a node: nothing pulls before the person
     group = p.symmetry.spec if p.symmetry is not None else ("mirror-y" if p.mirror == (1,) else "none")
-    assert group == {"tube": "radial-8-z", "cone": "radial-16-z", "disc": "mirror-y", "bowl": "radial-16-z"}[name]
+    assert group == {"tube": "radial-16-z", "cone": "radial-16-z", "disc": "mirror-y", "bowl": "radial-16-z"}[name]
+
+
+def test_the_tube_under_its_16_fold_group_keeps_a_vase_script_in_its_box():
+    """The designer's seven rings of radius 0.5 dragged to a vase within z -1.35 .. 1.45 on the tube preset under its
+    own 16-fold group (the reason it had 8 under `carry`, which blew such a script up to z -5.2 .. 10.5): every node
+    stays in the box of the start and the controls grown by the radius."""
+    from somwidget.backend.som import Som
+
+    t = get_preset("tube")
+    p = t.weights.astype(np.float32)
+    rings = [r * 32 for r in (0, 4, 8, 12, 16, 20, 24)]
+    som = Som(t.topology, p, p[rings], radii=[0.5] * 7, symmetry=t.symmetry, device="cpu", reach=0.3)
+    som.restore(p, som.iterations)
+    vase = [(0.3, -1.35), (0.45, -1.0), (0.55, -0.45), (0.45, 0.15), (0.22, 0.75), (0.16, 1.1), (0.5, 1.45)]
+    for c, (rho, z) in enumerate(vase):
+        start = som.controls[c].astype(np.float64)
+        som.grab(c)
+        for f in range(1, 9):
+            controls = som.controls
+            controls[c] = start + (np.array([rho, 0.0, z]) - start) * f / 8
+            som.set_controls(controls)
+            som.step(10)
+        som.release(c)
+        som.train()
+    w = som.weights
+    assert -1.85 - 1e-5 <= w[:, 2].min() and w[:, 2].max() <= 1.95 + 1e-5
+    assert np.hypot(w[:, 0], w[:, 1]).max() <= 0.55 + 0.5 + 1e-5
+    assert w[:, 2].max() > 1.3 and w[:, 2].min() < -1.3  # and it did follow the script
 
 
 def test_tube_is_an_open_cylinder_facing_out_with_a_control_on_five_rings():

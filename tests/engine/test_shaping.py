@@ -1,13 +1,13 @@
-"""The shaping rules in the engine (backend/shaping_kernels.py): controls with a radius of influence, symmetry groups,
-Taubin's smoothing; against the independent float64 reference (tests/reference.py) and by the figures a designer
-sees (the swell's volume, the far side staying, the symmetry kept). Real Warp kernels on the CPU, and on CUDA where
-there is a GPU."""
+"""The shaping rules in the engine (backend/shaping_path.py, handles.py): controls with a radius (handles), symmetry
+groups, Taubin's smoothing, strokes; against the independent float64 reference of the rule (tests/reference_handles.py)
+and by the figures a designer sees (the swell's volume, the far side staying, the symmetry kept). Real Warp kernels on
+the CPU, and on CUDA where there is a GPU. (The handles' own guarantees and the issue's figures: test_handles.py.)"""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from reference import ReferenceSom
+from reference_handles import HandleSom
 
 from somwidget.backend import io, metrics, presets
 from somwidget.backend.shaping_path import ShapingPath
@@ -28,13 +28,23 @@ def _volume(points, faces) -> float:
     return abs(float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0)
 
 
-def _compare(som: Som, ref: ReferenceSom, cycles: int, tol: float) -> None:
-    """Run both the same cycles; the winners well apart all along (no near-tie decides the comparison)."""
+def _reference(faces, pts, controls, radii=None, symmetry=None, mirror=(), **kw) -> HandleSom:
+    """The float64 reference of the same Som (a mirror as the group of its dim)."""
+    maps = symmetry.maps(3) if symmetry is not None else Symmetry.mirror(mirror[0]).maps(3) if mirror else None
+    kw.setdefault("smoothing_rule", "laplacian")
+    return HandleSom(np.asarray(pts, np.float64), np.asarray(controls, np.float64), radii, faces=faces, maps=maps,
+                     **kw)
+
+
+def _compare(som: Som, ref: HandleSom, cycles: int, tol: float) -> None:
+    """Run both the same cycles; the point controls' winners well apart all along (no near-tie decides the
+    comparison)."""
     som.step(cycles)
     ref.step(cycles)
-    assert ref.min_margin() > 1e-4, f"a near-tie ({ref.min_margin():.2e}): choose another case"
-    size = metrics.bounding_diagonal(ref.weights[:, :3])
-    err = np.abs(som.weights.astype(np.float64) - ref.weights).max() / size
+    margin = min((float(np.min(m)) for m in ref.margins), default=float("inf"))
+    assert margin > 1e-4, f"a near-tie ({margin:.2e}): choose another case"
+    size = metrics.bounding_diagonal(ref.W[:, :3])
+    err = np.abs(som.weights.astype(np.float64) - ref.W).max() / size
     assert err < tol, f"engine and float64 reference part by {err:.2e} of the size"
 
 
@@ -56,16 +66,16 @@ def test_point_controls_keep_the_case_studies_path():
 
 @pytest.mark.parametrize("mirror", [(), (1,)])
 def test_radius_rule_matches_the_float64_reference(device, mirror):
-    topo, pts, _ = _mesh()
+    """Typed moves: each moved control with a radius grabbed at its old place and released at once."""
+    topo, pts, faces = _mesh()
     controls = pts[[3, 40, 70]].copy()
     controls[0, :3] += [0.0, 0.0, 0.35]  # pulled out
     controls[1, :3] *= 0.85  # pushed in
     radii = [0.6, 0.0, 0.4]  # a point control among controls with radii
-    kw = dict(iterations=300, l_start=0.25, l_end=0.03, reach=0.3, mirror=mirror)
-    som = Som(topo, pts, pts[[3, 40, 70]], device=device, radii=radii, **kw)
-    ref = ReferenceSom(topo.n_vertices, topo.edges, pts, pts[[3, 40, 70]], radii=radii, **kw)
+    kw = dict(iterations=300, l_start=0.25, l_end=0.03, reach=0.3)
+    som = Som(topo, pts, pts[[3, 40, 70]], device=device, radii=radii, mirror=mirror, **kw)
+    ref = _reference(faces, pts, pts[[3, 40, 70]], radii, mirror=mirror, **kw)
     som.restore(pts, 300)
-    ref.restore(pts, 300)
     som.set_controls(controls)
     ref.set_controls(controls)
     _compare(som, ref, 90, 2e-5)
@@ -74,13 +84,14 @@ def test_radius_rule_matches_the_float64_reference(device, mirror):
 
 
 def test_radial_group_matches_the_float64_reference(device):
-    topo, pts, _ = _mesh(n_lon=12)
+    """A point control and its copies under 4-fold symmetry; the control with a radius, never moved, does nothing."""
+    topo, pts, faces = _mesh(n_lon=12)
     group = Symmetry.radial(4, 2)
     controls = pts[[14, 50]].copy()
     controls[:, :2] *= 1.3
     kw = dict(iterations=200, reach=0.3)
     som = Som(topo, pts, controls, device=device, radii=[0.5, 0.0], symmetry=group, **kw)
-    ref = ReferenceSom(topo.n_vertices, topo.edges, pts, controls, radii=[0.5, 0.0], group_maps=group.maps(3), **kw)
+    ref = _reference(faces, pts, controls, [0.5, 0.0], group, **kw)
     ref.restart()
     som.restart()
     _compare(som, ref, 60, 2e-5)
@@ -90,10 +101,11 @@ def test_radial_group_matches_the_float64_reference(device):
 
 
 def test_taubin_smoothing_matches_the_float64_reference(device):
-    topo, pts, _ = _mesh()
+    """Point controls with Taubin's smoothing: lambda and mu, the volume put back, the clamp into the box."""
+    topo, pts, faces = _mesh()
     kw = dict(iterations=200, reach=0.5, smoothing=0.3, smoothing_rule="taubin")
     som = Som(topo, pts, pts[[3, 40]], device=device, **kw)
-    ref = ReferenceSom(topo.n_vertices, topo.edges, pts, pts[[3, 40]], **kw)
+    ref = _reference(faces, pts, pts[[3, 40]], **kw)
     som.restart()
     ref.restart()
     _compare(som, ref, 50, 2e-5)
@@ -111,9 +123,9 @@ def test_a_radial_start_stays_radial(device):
     assert np.abs(pts[partner] - image).max() < 1e-5  # the start is 8-fold symmetric
     c = pts[[100]].copy()
     c[0, :2] *= 1.4
-    som = Som(p.topology, pts, c, device=device, radii=[0.6], symmetry=group, reach=0.3)
+    som = Som(p.topology, pts, pts[[100]], device=device, radii=[0.6], symmetry=group, reach=0.3)
     som.restore(pts, som.iterations)
-    som.set_controls(c)
+    som.set_controls(c)  # a typed move: each copy's patch goes with it
     som.train()
     w = som.weights.astype(np.float64)
     size = metrics.bounding_diagonal(w)
@@ -314,16 +326,26 @@ def test_a_session_refines_its_clay_as_one_step():
 
 # -- strokes -------------------------------------------------------------------------------------------------------
 def test_a_stroke_matches_the_float64_reference(device):
-    topo, pts, _ = _mesh()
+    """A hand takes a stroke by any of its samples: the engine's grab of sample 2 holds all three, as the
+    reference's grab of each; dragged out, released, the run to S."""
+    topo, pts, faces = _mesh()
+    start = pts[[3, 30, 31, 32, 70]].astype(np.float32)
     controls = np.concatenate([pts[[3]], pts[[30, 31, 32]] * 1.15, pts[[70]]]).astype(np.float32)
-    kw = dict(iterations=200, reach=0.3, radii=[0.0, 0.4, 0.4, 0.4, 0.5], strokes=[1, 3, 1])
-    som = Som(topo, pts, controls, device=device, **kw)
-    ref = ReferenceSom(topo.n_vertices, topo.edges, pts, controls, **kw)
+    radii = [0.0, 0.4, 0.4, 0.4, 0.5]
+    som = Som(topo, pts, start, device=device, iterations=200, reach=0.3, radii=radii, strokes=[1, 3, 1])
+    ref = _reference(faces, pts, start, radii, iterations=200, reach=0.3, strokes=[1, 3, 1])
     som.restore(pts, 200)
-    ref.restore(pts, 200)
-    som.restart()
-    ref.restart()
-    _compare(som, ref, 60, 2e-5)
+    som.grab(2)
+    for c in (1, 2, 3):
+        ref.grab(c)
+    assert som.held == (1, 2, 3)
+    som.set_controls(controls)
+    ref.set_controls(controls)
+    _compare(som, ref, 30, 2e-5)
+    som.release(1)
+    for c in (1, 2, 3):
+        ref.release(c)
+    _compare(som, ref, 200, 2e-5)
     assert som.strokes == (1, 3, 1)
 
 
@@ -367,20 +389,17 @@ def test_a_stroke_drawn_over_the_grid_raises_a_smooth_ridge():
             s.add_stroke([[0.0, 0.0, 0.0]])
 
 
-def test_carrying_controls_keep_the_node_they_grabbed(device):
-    """The sphere preset with control 4 pulled out 30% of the size: each control with a radius keeps the winner it
-    grabbed at the restart, so the controls that hold the clay pull back clay that slides under them (controls 0 and
-    1 sit among the pole's dense rings, where re-searching the winner every cycle let them take the sliding nodes
-    and hold nothing: the far half moved 3.6%). Against the float64 reference, which keeps the grabbed winners too."""
+def test_a_pulled_handle_keeps_the_node_it_grabbed(device):
+    """The sphere preset with control 4 typed 30% of the size out: its binding keeps the node it grabbed while the
+    clay moves under it, and nothing else moves the far half. Against the float64 reference."""
     p = presets.get_preset("sphere")
     size = metrics.bounding_diagonal(p.weights[:, :3])
     controls = p.controls.copy()
     controls[4, :3] += 0.3 * size * controls[4, :3] / np.linalg.norm(controls[4, :3])
-    kw = dict(iterations=1000, reach=p.reach, radii=p.control_radii())
-    som = Som(p.topology, p.weights, p.controls, device=device, **kw)
-    ref = ReferenceSom(p.topology.n_vertices, p.topology.edges, p.weights, p.controls, **kw)
+    kw = dict(iterations=1000, reach=p.reach)
+    som = Som(p.topology, p.weights, p.controls, device=device, radii=p.control_radii(), **kw)
+    ref = _reference(p.topology.faces, p.weights, p.controls, p.control_radii(), **kw)
     som.restore(p.weights, 1000)
-    ref.restore(p.weights, 1000)
     som.set_controls(controls)
     ref.set_controls(controls)
     grabbed = som.winners()

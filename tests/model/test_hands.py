@@ -7,9 +7,12 @@ tests/xr/test_many_hands_browser.py, tests/notebook/test_notebook_and_browser.py
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
+from somwidget.backend import metrics
 from somwidget.frontend.model import Session
 from somwidget.frontend.model.hands import SILENT_SECONDS
 
@@ -120,3 +123,44 @@ def test_a_silent_hand_and_a_removed_control_let_go(session):
     hands.leave(a)
     hands.leave(b)
     assert hands.present() == []
+
+
+def held(session, controls: tuple, timeout: float = 30.0) -> None:
+    """Wait until the Som holds exactly `controls` (a grab or release reaches it on the training thread)."""
+    deadline = time.monotonic() + timeout
+    while session.modelling.som.held != controls:
+        assert time.monotonic() < deadline, f"the Som holds {session.modelling.som.held}, not {controls}"
+        time.sleep(0.01)
+
+
+def test_a_hands_grab_binds_the_clay_it_takes_and_its_release_lets_go():
+    """A view's hand pushes the sphere's top control (a radius) straight down into the clay in a few moves: while
+    it holds the control the Som holds it too and its node stays the one the grab took (the winner never jumps);
+    the clay goes with the hand (the control ends on the clay, the far half stays), and the release lets go."""
+    s = Session("sphere", device="cpu", autosave=False)
+    try:
+        assert s.wait_idle(120)
+        som = s.modelling.som
+        start = s.frame.positions.copy()
+        size = float(np.linalg.norm(start.max(0) - start.min(0)))
+        hand, cid = s.hands.join("desktop"), s.control_ids[0]
+        c0 = s.controls[0][:3].copy()
+        s.hands.grab(hand, cid)
+        held(s, (0,))  # the grab is the session's own operation, queued for the training thread
+        with s.modelling.som_lock:
+            took = int(som.winners()[0])
+        for k in range(1, 7):
+            with s.hands.acting(hand, cid):
+                s.move_control_id(cid, c0 - np.float32([0.0, 0.0, 0.7 * k / 6]))
+            assert s.wait_applied(30)
+            with s.modelling.som_lock:
+                assert int(som.winners()[0]) == took, f"move {k}: the winner jumped"
+        s.hands.release(hand, cid)
+        held(s, ())
+        assert s.wait_idle(120)
+        end = s.frame.positions
+        target = c0 - np.float32([0.0, 0.0, 0.7])
+        assert np.linalg.norm(end - target, axis=1).min() <= 0.03 * size  # the dent followed the hand
+        assert metrics.far_half_moved(start, end, c0) <= 0.02
+    finally:
+        s.close()

@@ -95,7 +95,7 @@ def test_a_vase_from_a_tube_and_a_profile(tube):
     np.testing.assert_array_equal(tube.frame.weights, f.weights)  # nothing trained
     assert tube.undo()  # one step back: the tube exactly, with its five rings of controls
     np.testing.assert_array_equal(tube.frame.weights, start)
-    assert tube.n_controls == 5 and tube.parameters["group"] == "radial-8-z"
+    assert tube.n_controls == 5 and tube.parameters["group"] == "radial-16-z"
     assert tube.redo() and tube.n_controls == samples
 
 

@@ -680,3 +680,27 @@ def test_a_control_keeps_its_id_and_colour_while_others_come_and_go():
         assert s.frame.control_ids == tuple(range(s.frame.n_controls))
     finally:
         s.close()
+
+
+def test_a_typed_radius_after_a_move_makes_the_move_again_with_the_handle():
+    """A control with a radius moved by a typed position, then given a larger radius: the move is made again from
+    the shape before it (a handle binds at the old place), so the bump widens and still reaches the control (the
+    shape before the move alone would leave the clay round, 0.3 short of it)."""
+    s = Session("sphere", device="cpu", autosave=False)
+    try:
+        assert s.wait_idle(120)
+        start = s.frame.positions.copy()
+        c0 = s.controls[0][:3].copy()
+        assert s.control_edits.radii[0] > 0
+        s.move_control(0, 1.3 * c0)
+        assert s.wait_idle(120)
+        pulled = s.frame.positions.copy()
+        s.set_control_radius(0, 1.5)
+        assert s.wait_idle(120)
+        wider = s.frame.positions.copy()
+        moved = lambda w: int((np.linalg.norm(w - start, axis=1) > 0.01).sum())  # noqa: E731
+        assert moved(wider) > moved(pulled) + 30, (moved(pulled), moved(wider))
+        assert _nearest(wider, 1.3 * c0) < 0.01 * np.linalg.norm(start.max(0) - start.min(0))
+        np.testing.assert_allclose(s.controls[0][:3], 1.3 * c0, rtol=1e-6)
+    finally:
+        s.close()

@@ -14,8 +14,11 @@ from somwidget.cli import main as cli_main
 from somwidget.frontend.model import Session
 
 
-def _single_run(preset, controls, params, start=None, restart=False):
-    som = Som(preset.topology, preset.weights, controls, iterations=params["iterations"], l_start=params["l_start"],
+def _single_run(preset, controls, params, start=None, restart=False, base=None):
+    """A variant's own Som: a whole run, or (`restart`) its controls set on `start` where they were at `base` (each
+    moved control with a radius a typed move from there)."""
+    som = Som(preset.topology, preset.weights, controls if base is None else base, iterations=params["iterations"],
+              l_start=params["l_start"],
               l_end=params["l_end"], smoothing=params["smoothing"], reach=params["reach"],
               smooth_dims=preset.smooth_dims, metric_weights=preset.metric_weights, mirror=preset.mirror, device="cpu",
               radii=preset.control_radii(), symmetry=preset.symmetry, smoothing_rule=preset.smoothing_rule)
@@ -57,10 +60,13 @@ def test_a_sweep_from_a_session_restarts_from_its_shape_and_a_variant_is_one_und
         session.move_control(0, session.controls[0, :3] + 0.2)
         session.wait_idle(60)
         shape = session.files.snapshot()["weights"]
+        places = session.controls
         v = somwidget.sweep(session, n=3, jitter=0.1, seed=1, device="cpu", progress=False)
         lattice = presets.get_preset("lattice")
         params = v.params[1]
-        np.testing.assert_array_equal(v.weights[1], _single_run(lattice, v.controls[1], params, shape, restart=True))
+        np.testing.assert_array_equal(v.weights[1], _single_run(lattice, v.controls[1], params, shape, restart=True,
+                                                                base=places))
+        assert np.abs(v.weights[1] - shape).max() > 0.01  # the typed moves carried the clay
         # the far part of the shape is kept: a local restart, not a regrown lattice
         assert np.median(np.linalg.norm(v.weights[1] - shape, axis=1)) < 0.1 * np.ptp(shape[:, 0])
         before = session.history
@@ -73,22 +79,26 @@ def test_a_sweep_from_a_session_restarts_from_its_shape_and_a_variant_is_one_und
         np.testing.assert_array_equal(session.frame.weights, shape)
 
 
-def test_plans_with_radii_run_batched_and_radial_groups_as_single_soms():
-    """Controls with radii and a mirror: one batch (BatchSom's shaping rules); a radial group: single Soms; either
-    way each variant equals its own Som (whole runs of the sphere, its radii, Taubin's smoothing)."""
+def test_plans_with_handles_run_as_single_soms_each_a_typed_move():
+    """Controls with radii (handles) under a mirror or a radial group, Taubin's smoothing: single Soms (the batch runs
+    the paper's rule only), each variant the typed move of its controls from the design's places (each moved control
+    grabbed there and released, the run to S), equal to its own Som; the moved controls took the clay with them."""
     p = presets.get_preset("sphere")
     radii = p.control_radii()[:2]
     base = {"iterations": 60, "l_start": p.l_start, "l_end": p.l_end, "smoothing": 0.1, "reach": p.reach}
     for symmetry, mirror in ((None, (1,)), (Symmetry.radial(4, "z"), ())):
         plan = plan_variants(p.topology, p.weights, p.controls[:2], base, 2, jitter=0.1, seed=1, mirror=mirror,
                              radii=radii, symmetry=symmetry, smoothing_rule="taubin")
-        assert plan.singles == (symmetry is not None)
+        assert plan.singles and plan.handles
         weights, _ = run_batch(plan, "cpu")
         for i in range(2):
-            som = Som(p.topology, p.weights, plan.controls[i], **plan.params(i), mirror=mirror, radii=radii,
+            som = Som(p.topology, p.weights, p.controls[:2], **plan.params(i), mirror=mirror, radii=radii,
                       symmetry=symmetry, smoothing_rule="taubin", device="cpu")
+            som.restore(p.weights, som.iterations)
+            som.set_controls(plan.controls[i])
             som.train()
             np.testing.assert_array_equal(weights[i], som.weights)
+            assert np.abs(weights[i] - p.weights).max() > 0.02
 
 
 def test_the_gallery_shows_each_variant():

@@ -301,6 +301,27 @@ def test_clay_widget_protocol_over_the_comm(shown):
     wait_for(lambda: len(rec.of("frame")) >= 2, what="frames after a reset")
 
 
+def test_a_notebook_views_grab_binds_the_clay_as_the_browsers_does():
+    """The notebook's view is the same connection as a browser's: its grab of a control with a radius (the sphere's
+    top) binds the clay that control takes, its moves carry the clay, and its release lets go."""
+    session = Session("sphere", device="cpu", autosave=False)
+    try:
+        assert session.wait_idle(60)
+        view, som = show(session).view, session.modelling.som
+        start = session.frame.positions.copy()
+        target = [float(v) for v in session.controls[0][:3] - np.array([0.0, 0.0, 0.5])]
+        view._on_message(view, {"type": "grab", "index": 0}, [])
+        wait_for(lambda: som.held == (0,), what="the Som holding control 0")
+        view._on_message(view, {"type": "move", "index": 0, "position": target}, [])
+        view._on_message(view, {"type": "release", "index": 0}, [])
+        wait_for(lambda: som.held == (), what="the Som letting go")
+        assert session.wait_idle(60)
+        end = session.frame.positions
+        assert np.linalg.norm(end - np.asarray(target), axis=1).min() < 0.03 * np.ptp(start, axis=0).max()
+    finally:
+        session.close()
+
+
 def test_a_widget_of_a_closed_view_stops_following(session):
     w = show(session)
     view = w.view

@@ -116,7 +116,12 @@ def test_bench_tiny_run_on_cpu(tmp_path):
         value = float(car[i].replace(",", ""))
         assert math.isfinite(value) and value > 0, f"{header[i]} = {car[i]}"
 
+    shaping = [line for line in out.stdout.splitlines() if "shaping path" in line or "shaping run" in line]
+    assert len(shaping) == 3 and "ratio" in shaping[1] and "us a cycle" in shaping[2], out.stdout  # issue 34's two
+
     data = json.loads(report.read_text())
+    handles = data["handles"]
+    assert handles["card"] and handles["ratio"] > 0 and handles["run_us_per_cycle"] > 0
     (result,) = data["results"]
     assert result["case"] == "car" and result["neurons"] == 602 and result["controls"] == 18 and result["dims"] == 5
     assert result["cycles"] == 20 and result["device"] == "cpu"

@@ -98,10 +98,9 @@ def test_a_room_with_a_radius_is_never_batched():
     som.radii = np.full(len(som.controls), 0.1)
     assert batch_key(som, {}) is None
     p = presets.get_preset("car")
-    batch = BatchSom(p.topology, p.weights, np.repeat(p.controls[None], 2, axis=0), mirror=p.mirror, device="cpu",
-                     radii=np.full(len(p.controls), 0.1))
-    with pytest.raises(ValueError, match="point controls"):
-        batch.load(np.repeat(p.weights[None], 2, axis=0), np.zeros(2, np.int64), np.repeat(p.controls[None], 2, 0))
+    with pytest.raises(ValueError, match="point controls"):  # a batch takes no handles at all
+        BatchSom(p.topology, p.weights, np.repeat(p.controls[None], 2, axis=0), mirror=p.mirror, device="cpu",
+                 radii=np.full(len(p.controls), 0.1))
 
 
 def test_load_names_a_bad_shape_and_cycle():

@@ -77,10 +77,10 @@ def test_an_uploaded_non_session_names_the_file_not_a_temporary_path(app):
     assert "mine.npz" in message and not INTERNALS.search(message), message
 
 
-def test_the_size_limit_in_messages_is_the_readme_s():
+def test_the_size_limit_in_messages_is_the_docs():
     from somwidget.frontend.web import uploads
 
-    readme = (helpers.ROOT / "README.md").read_text()
+    readme = (helpers.ROOT / "docs" / "modelling.md").read_text()  # where the README sends a person for uploads
     shown = re.search(r"up to (\d+) MB", readme).group(1)
     with pytest.raises(ValueError) as info:
         uploads.file_of({"name": "big.obj", "size": 60_000_000, "content": b"x"})

@@ -172,7 +172,7 @@ def test_a_vase_from_the_tube_in_five_actions(browser, server):
             n = np.cross(p[1] - p[0], p[3] - p[0])
             centre = p.mean(axis=0)
             assert n @ np.array([centre[0], centre[1], 0.0]) > 0, face
-        assert st["session"]["parameters"]["group"] == "radial-8-z" and len(st["session"]["strokes"]) == 1
+        assert st["session"]["parameters"]["group"] == "radial-16-z" and len(st["session"]["strokes"]) == 1
         rows_shown(page, 1)  # the stroke: one row
         assert page.locator("#controls-table .stroke-mark").count() == 1
         v = page.evaluate(f"() => {VIEW}.describe()")

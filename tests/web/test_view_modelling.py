@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS, Serve
 
+from somwidget.backend import metrics
+
 pytestmark = pytest.mark.browser
 
 playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
@@ -300,6 +302,44 @@ def test_a_selected_control_moves_along_one_axis_by_its_handle(page, server):
     assert st["session"]["history"][0] == st0["session"]["history"][0] + 1  # one step
     page.keyboard.press("Escape")
     page.wait_for_function(f"() => {VIEW}.describe().selected === null", timeout=5000)
+
+
+def test_a_control_pushed_straight_into_the_clay_takes_the_clay_with_it(page, server):
+    """Seen from the front (key 1, orthographic: O), the top control is dragged straight down into the sphere in one
+    drag: it holds the clay it took (a handle), so the dent follows the mouse: the clay ends within 3% of its size of
+    the control and nothing is left standing over it, the far half of the clay does not move, and no node leaves
+    the box of the start and the controls grown by their radius. (A control whose nearest node is chosen again at
+    every cycle left the top standing and jumped to another node.)"""
+    st0 = server.idle()
+    start = np.asarray(server.state(positions=True)["session"]["frame"]["positions"], np.float64)
+    size = float(np.linalg.norm(start.max(0) - start.min(0)))
+    controls = np.asarray(st0["session"]["controls"], np.float64)[:, :3]
+    top, bottom = int(np.argmax(controls[:, 2])), int(np.argmin(controls[:, 2]))
+    page.mouse.move(*centre(page, 0, 250))  # over the view: its keys
+    page.keyboard.press("1")
+    page.keyboard.press("o")
+    page.wait_for_timeout(400)
+    assert top not in view(page)["behind"], "the top control lies on the clay's outline: in sight"
+    a, b = np.array(screen(page, top)), np.array(screen(page, bottom))
+    per_unit = (b[1] - a[1]) / (controls[top, 2] - controls[bottom, 2])  # pixels down per model unit down
+    push = 0.7
+    page.mouse.move(*a)
+    page.wait_for_timeout(50)
+    drag(page, tuple(a), (0.0, push * per_unit), steps=10)
+    st = server.idle()
+    assert st["session"]["history"][0] == st0["session"]["history"][0] + 1  # one drag, one step
+    c = np.asarray(st["session"]["controls"][top], np.float64)[:3]
+    np.testing.assert_allclose(c, controls[top] - [0.0, 0.0, push], atol=0.03)  # straight down, as dragged
+    end = np.asarray(server.state(positions=True)["session"]["frame"]["positions"], np.float64)
+    assert np.linalg.norm(end - c, axis=1).min() <= 0.03 * size, "the dent did not follow the control"
+    above = (np.hypot(*(start[:, :2] - c[:2]).T) < 0.05 * size) & (start[:, 2] > c[2])  # the clay it was pushed into
+    assert end[above, 2].max() <= c[2] + 0.03 * size, "clay left standing over the pushed control"
+    assert metrics.far_half_moved(start, end, controls[top]) <= 0.02, "the far half moved"
+    reach = max(st["session"]["radii"]) + 0.01 * size
+    lo = np.minimum(start.min(0), np.concatenate([controls, c[None]]).min(0)) - reach
+    hi = np.maximum(start.max(0), np.concatenate([controls, c[None]]).max(0)) + reach
+    assert np.all(end >= lo) and np.all(end <= hi), "a node left the box"
+    page.keyboard.press("o")
 
 
 def test_the_stroke_tool_draws_a_line_on_the_clay_as_one_control(page, server):

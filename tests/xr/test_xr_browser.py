@@ -581,3 +581,43 @@ def test_strokes_and_radii_in_the_headset(ar_page, server, session):
     assert session.wait_idle(120)
     while session.history[0] > steps:  # the module's other tests start from the converged car
         session.undo()
+
+
+def test_a_controllers_and_a_hands_grab_bind_the_clay_as_the_mouse_does(ar_page, server, session):
+    """Controls with a radius (handles): the controller's trigger and the hand's pinch each bind the clay the control
+    takes, as a mouse's grab does: while held the Som holds the control and its node stays the one the grab took
+    (the winner never jumps), and letting go lets go."""
+    assert session.wait_idle(60)
+    steps = session.history[0]
+    p = session.frame.positions
+    size = float(np.linalg.norm(p.max(0) - p.min(0)))
+    som = session.modelling.som
+    for index, kind in ((2, "controller"), (4, "hand")):
+        session.set_control_radius(index, 0.1 * size)
+        assert session.wait_idle(120)
+        if kind == "hand":
+            ar_page.evaluate("iwerDevice.primaryInputMode = 'hand'")
+            ar_page.wait_for_function("somxr.inputs().some((i) => i.hand && i.handedness === 'right' && i.point)",
+                                      timeout=10000)
+        dev = device_input(ar_page, kind)
+        if kind == "hand":
+            ar_page.evaluate(f"{dev}.poseId = 'pinch'")
+            wait_frames(ar_page, 2)
+        bring_to(ar_page, dev, kind == "hand", np.array(ar_page.evaluate(f"somxr.controlWorld({index})")))
+        ar_page.wait_for_function(f"somxr.state().hover.includes({index})", timeout=5000)
+        ar_page.evaluate(f"{dev}.updatePinchValue(1)" if kind == "hand" else f"{dev}.updateButtonValue('trigger', 1)")
+        wait_for(lambda index=index: som.held == (index,), what=f"the Som to hold control {index} ({kind})")
+        with session.modelling.som_lock:
+            took = int(som.winners()[index])
+        before = session.controls[index].copy()
+        glide(ar_page, dev, [0.0, -0.04, 0.0])
+        wait_for(lambda: np.abs(session.controls[index] - before).max() > 0.01, what="the move")  # noqa: B023
+        assert session.wait_applied(30)
+        assert som.held == (index,)
+        with session.modelling.som_lock:
+            assert int(som.winners()[index]) == took, f"{kind}: the winner jumped while held"
+        ar_page.evaluate(f"{dev}.updatePinchValue(0)" if kind == "hand" else f"{dev}.updateButtonValue('trigger', 0)")
+        wait_for(lambda: som.held == (), what=f"the Som to let go of control {index} ({kind})")
+        assert session.wait_idle(120)
+    while session.history[0] > steps:  # the module's other tests start from the converged car
+        session.undo()

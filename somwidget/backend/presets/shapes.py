@@ -119,15 +119,15 @@ def _revolved(name: str, title: str, description: str, radii, heights, at, **fie
 
 
 def tube_preset() -> Preset:
-    """An open tube (no caps): radius 0.5, z -1 .. 1, 25 rings of 32; a control on 5 rings, 8-fold about z (16-fold
-    copies, each carrying the clay by a radius past their spacing, blew the tube up under the `carry` rule:
-    tests/engine/test_clay.py, needles)."""
+    """An open tube (no caps): radius 0.5, z -1 .. 1, 25 rings of 32; a control on 5 rings, 16-fold about z (where
+    the copies' handles overlap their weights are normalised, so a vase script stays in its box:
+    tests/engine/test_presets.py)."""
     rings = 25
     return _revolved(
         "tube", "Tube", "An open tube (no caps) standing on the z-axis, with a control on five of its rings and "
-                        "8-fold symmetry about the axis: pull a ring to swell or pinch the tube; draw a profile "
+                        "16-fold symmetry about the axis: pull a ring to swell or pinch the tube; draw a profile "
                         "with Revolve (R) to lathe a vase.",
-        np.full(rings, 0.5), np.linspace(-1.0, 1.0, rings), at=(0, 6, 12, 18, 24), symmetry=Symmetry.radial(8, 2))
+        np.full(rings, 0.5), np.linspace(-1.0, 1.0, rings), at=(0, 6, 12, 18, 24), symmetry=Symmetry.radial(16, 2))
 
 
 def cone_preset() -> Preset:

@@ -62,10 +62,11 @@ class ControlEdits:
         self.frames = frames
         self.hands = hands  # a control another hand holds is refused (hands.py)
 
-    def _queue(self, controls: np.ndarray, keep: bool = False, rest: np.ndarray | None = None) -> None:
+    def _queue(self, controls: np.ndarray, keep: bool = False,
+               rest: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """The new controls (and the radii and strokes the clay holds) to the Som (caller holds state.lock); inside a
-        drag they restart from where it began; with `keep` nothing restarts (a control placed); with `rest` (weights)
-        they restart from that shape."""
+        drag they restart from where it began; with `keep` nothing restarts (a control placed); with `rest` (weights
+        and controls before a move) the move is made again from that shape."""
         state = self.state
         self.trainer.enqueue(SetControls(controls, state.radii.copy(), state.strokes, self.timeline.drag_anchor(),
                                          state.control_ids, keep=keep, group=state.symmetry, rest=rest))
@@ -158,9 +159,9 @@ class ControlEdits:
             before = None if self.timeline.drag_anchor() is not None else self._before_move(run)
             self._queue(state.controls.copy(), rest=before)
 
-    def _before_move(self, run: range) -> np.ndarray | None:
-        """The weights before the latest move of the controls `run`, when every step since changed only their
-        positions and radii (caller holds state.lock); else None."""
+    def _before_move(self, run: range) -> tuple[np.ndarray, np.ndarray] | None:
+        """The weights and the controls before the latest move of the controls `run`, when every step since changed
+        only their positions and radii (caller holds state.lock); else None."""
         state = self.state
         k = len(state.controls)
         others = np.ones(k, bool)
@@ -176,7 +177,7 @@ class ControlEdits:
                 return None
             if not np.array_equal(step.controls[list(run)], state.controls[list(run)]):
                 try:
-                    return np.asarray(step.loaded().weights, np.float32)
+                    return np.asarray(step.loaded().weights, np.float32), np.array(step.controls, np.float32)
                 except (OSError, ValueError):
                     return None
         return None

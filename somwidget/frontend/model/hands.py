@@ -24,6 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from .gestures import PYTHON, acting, actor
+from .operations import Grab, Release
 
 #: What a view is, as the others see it.
 KINDS = ("desktop", "notebook", "headset")
@@ -147,6 +148,7 @@ class Hands:
             self._held[control_id] = hand
         if holder is None:
             self.timeline.begin_gesture((hand.id, control_id))
+            self._engine(Grab, [control_id])
             self._tell()
 
     def check_holds(self, hand: Hand, control_id: int, what: str) -> None:
@@ -164,6 +166,7 @@ class Hands:
             if self._held.get(control_id) is not hand:
                 return False
             del self._held[control_id]
+        self._engine(Release, [control_id])
         self.timeline.end_gesture((hand.id, control_id))
         self._tell()
         return True
@@ -186,6 +189,7 @@ class Hands:
             if take:
                 self._held[control_id] = self.python
         if take:
+            self._engine(Grab, [control_id])
             self._tell()
 
     def begin_script(self) -> None:
@@ -201,6 +205,7 @@ class Hands:
             mine = [cid for cid, who in self._held.items() if who is self.python]
             for cid in mine:
                 del self._held[cid]
+        self._engine(Release, mine)
         self.timeline.end_gesture((PYTHON, None))
         if mine:
             self._tell()
@@ -232,10 +237,21 @@ class Hands:
             ended = [(cid, who) for cid, who in grabs if self._held.get(cid) is who]
             for cid, _ in ended:
                 del self._held[cid]
+        self._engine(Release, [cid for cid, _ in ended])
         for cid, who in ended:
             self.timeline.end_gesture((who.id, cid))
         if ended or lost:
             self._tell(lost)
+
+    def _engine(self, operation, control_ids) -> None:
+        """The Som holds what the hands hold: a grab binds each control with a radius to the clay it takes, a release
+        lets go (operations.Grab, Release: queued in order with the intents, so a drag's first move comes after its
+        grab)."""
+        with self.state.lock:
+            ids = self.state.control_ids
+            indices = tuple(ids.index(cid) for cid in control_ids if cid in ids)
+            if indices:
+                self.timeline.trainer.enqueue(operation(indices), intent=False)
 
     # -- listeners -----------------------------------------------------------------------------------------------
     def subscribe(self, listener: Callable[[list[Lost]], None]) -> None:

@@ -46,10 +46,14 @@ def _controls_back(state, som) -> None:
 @dataclass(frozen=True)
 class SetControls(Operation):
     """New controls and their radii. In a drag, `anchor` is the Som that anchored the shape the drag began with: each
-    frame of the drag restarts from it (Som.set_controls(from_anchor=True)), so a long drag ends as one move would.
+    frame of a point control's drag restarts from it (Som.set_controls(from_anchor=True)), so a long drag ends as one
+    move would; while a hand holds a control with a radius (a handle, bound at its grab: `Grab`) the frames go on
+    from the latest weights, as the handle carries its patch step by step.
     With `keep` (a control placed: it moves nothing until it is dragged) the weights and s stay and nothing trains;
-    `group` is then the symmetry group the Som keeps. With `rest` (weights: the shape before a control's last move),
-    the restart begins from that shape: a radius changed after a move re-does the move with the new radius."""
+    `group` is then the symmetry group the Som keeps. With `rest` (the weights and the controls before a control's
+    last move) the move is made again from there: the shape and the controls go back (nothing trains), then the
+    controls move as the move did, so a radius changed after a move re-does the move with the new radius (a handle
+    binds at the old place, as a typed move does)."""
 
     controls: np.ndarray
     radii: np.ndarray
@@ -58,7 +62,7 @@ class SetControls(Operation):
     ids: tuple
     keep: bool = False
     group: object = None
-    rest: np.ndarray | None = None
+    rest: tuple[np.ndarray, np.ndarray] | None = None
     key = "controls"
 
     @property
@@ -76,14 +80,45 @@ class SetControls(Operation):
                         strokes=self.strokes)
         else:
             if self.rest is not None and self.anchor is not som:
-                som.restore(self.rest, som.iterations)
-            som.set_controls(self.controls, self.radii, strokes=self.strokes, from_anchor=self.anchor is som)
+                weights, controls = self.rest
+                som.restore(weights, som.iterations)
+                som.regroup(controls, self.radii, *engine_symmetry(self.group), keep_shape=True, strokes=self.strokes)
+            som.set_controls(self.controls, self.radii, strokes=self.strokes,
+                             from_anchor=self.anchor is som and not som.held)
 
     def applied(self, state) -> None:
         state.applied_ids = self.ids  # the ids of the controls the Som now holds
 
     def roll_back(self, state, som) -> None:
         _controls_back(state, som)
+
+
+@dataclass(frozen=True)
+class Grab(Operation):
+    """A hand took these controls (indices now): each with a radius binds the clay it grabs (Som.grab). Nothing
+    moves, nothing trains."""
+
+    indices: tuple
+    acts = False
+
+    def apply(self, som) -> None:
+        for i in self.indices:
+            if i < len(som.controls):
+                som.grab(i)
+
+
+@dataclass(frozen=True)
+class Release(Operation):
+    """A hand let go of these controls (indices now): their bindings carry the clay to where the hand left it until
+    the run ends (Som.release). Nothing trains that was not training."""
+
+    indices: tuple
+    acts = False
+
+    def apply(self, som) -> None:
+        for i in self.indices:
+            if i < len(som.controls):
+                som.release(i)
 
 
 @dataclass(frozen=True)

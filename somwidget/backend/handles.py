@@ -1,0 +1,282 @@
+"""Handles: what a Som's controls with a radius hold of the clay (DESIGN.md "Handles"; tests/reference_handles.py is
+the normative float64 reference, whose docstring this follows).
+
+A grab binds each member of the control (the control and its symmetric copies): its winner u (fixed while the
+binding lives), its place p = W_u, and its patch, the nodes joined to u through nodes whose straight distance from
+W_u is below the radius r, weighted (1 - t^2)^2. While it lives, each cycle steps p after the member by at most r / 4
+and binds the patch again around the same u, and the patch is carried to p (shaping_kernels.py). A release ends
+nothing at once: a released binding still carries its patch to where the hand left it until the run reaches S or
+the next restart (a set_controls, a parameter change), then ends. A control of radius > 0 moved while no hand holds
+it (a typed position) is grabbed at its old place and released at once. Controls with a radius that nothing binds do
+nothing. Every bound node stays within r of a place its member has been, and a node several bindings hold takes
+their weighted mean displacement: no node leaves the box of the start and every place of the members grown by the
+largest radius; with Taubin's rule (whose mu and volume steps could stand out by a hair) every node is clamped into
+that box grown by BOX_MARGIN of the start's size.
+
+The engine keeps one binding per slot (member g of control c: slot c G + g). A grab of a control whose released
+bindings still live ends them first (the reference would keep both until its next restart; they carry to the same
+place once the released one has arrived). A change of the controls' count, symmetry group or of which controls have a
+radius, a reset, restored or assigned weights end every binding and let go of every hold.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+
+import numpy as np
+import warp as wp
+
+from .metrics import bounding_diagonal
+from .shaping_kernels import FIND_STRETCH, clear_flag, shaping_kernels
+from .som_controls import Controls
+from .som_model import SomModel
+from .som_state import KEY_NONE, SomState
+
+#: Taubin's lambda is capped here: past about 0.72 the pair amplifies the checkerboard mode of a quad mesh
+#: ((1 - 2 lambda)(1 - 2 mu) < -1) and the clay blows up (BENCHMARKS.md, "Handles").
+TAUBIN_MOST = 0.7
+#: The clamp's box is grown by this share of the start's size beyond the largest radius.
+BOX_MARGIN = 0.01
+
+
+def members_of(controls: Controls) -> np.ndarray:
+    """(k G, n) float32: member g of control c (its image under the group's map g) at slot c G + g."""
+    maps = controls.group_maps()
+    grouped = np.einsum("gij,kj->kgi", maps, controls.values.astype(np.float64))
+    return np.ascontiguousarray(grouped.reshape(-1, controls.values.shape[1]), np.float32)
+
+
+class Handles:
+    """The bindings of one Som: which controls a hand holds (`held`), which slots have a live binding (`live`), the
+    box, and their device arrays (slot arrays made again when the controls' structure changes, `version` counts
+    them). The events are its methods; shaping_path.ShapingPath runs the cycles on its arrays."""
+
+    def __init__(self, model: SomModel):
+        self.model = model
+        dev, n, vec = model.device, model.n_neurons, model.vec
+        self.kernels = shaping_kernels(model.n_dims)
+        self.held: set[int] = set()
+        self.live = np.zeros(0, bool)
+        self.controls: Controls | None = None
+        self.version = 0
+        self._structure: tuple | None = None
+        self._uploaded: Controls | None = None  # the controls whose members and radii the device holds
+        start = model.start.astype(np.float64)
+        self._lo, self._hi = start.min(axis=0), start.max(axis=0)
+        self.size = bounding_diagonal(start[:, model.position_dims]) or 1.0
+        self._box_for: tuple[np.ndarray, np.ndarray] | None = None
+        position = np.zeros(model.n_dims, np.float32)
+        position[model.position_dims] = 1.0
+        self.position = vec(*position.tolist())
+        self.anchors = wp.empty(n, dtype=vec, device=dev)
+        self.held_nodes = wp.zeros(n, dtype=wp.int32, device=dev)  # 1 where a live binding holds the node
+        self.box = wp.zeros(2, dtype=vec, device=dev)
+        self.stepped = wp.zeros(1, dtype=wp.int32, device=dev)
+        self.changed = wp.zeros(1, dtype=wp.int32, device=dev)
+
+    # -- the slots ----------------------------------------------------------------------------------------------
+    def _layout(self, controls: Controls) -> None:
+        """The slot arrays for the controls' structure (count, group order, which have a radius); made again, and
+        every binding ended, when it changes."""
+        last = self.controls
+        if last is not None and controls.radii is last.radii and controls.order == last.order and (
+                controls.strokes is last.strokes):
+            return  # (a move keeps the radii array: the same structure, found without a look)
+        structure = (len(controls.values), controls.order, tuple((controls.radii > 0).tolist()), controls.strokes)
+        if structure == self._structure:
+            return
+        self._structure = structure
+        self.version += 1
+        dev, vec, n = self.model.device, self.model.vec, self.model.n_neurons
+        k, order = len(controls.values), controls.order
+        slots = k * order
+        copies = np.arange(order)
+        point = np.flatnonzero(controls.radii == 0)
+        self.order = order
+        rows, starts, first = [], [0], 0  # the handle rows by group: a stroke's samples (or one control), one copy
+        for length in controls.strokes:
+            run = [c for c in range(first, first + length) if controls.radii[c] > 0]
+            first += length
+            for g in range(order if run else 0):
+                rows += [c * order + g for c in run]
+                starts.append(len(rows))
+        self.n_rows = len(rows)
+        self.rows = np.array(rows, np.int32)  # the slot of each handle row
+        self.row_of = np.full(slots, -1, np.int64)
+        self.row_of[self.rows] = np.arange(self.n_rows)
+        self.point_slots = (point[:, None] * order + copies).ravel().astype(np.int32)
+        self.live = np.zeros(slots, bool)
+        self.held.clear()
+        self.held_nodes.zero_()
+        self._uploaded = None
+
+        def ints(values):
+            values = np.asarray(values, np.int32)
+            return wp.array(values if len(values) else np.zeros(1, np.int32), dtype=wp.int32, device=dev)
+
+        self.slot_of_row = ints(self.rows)
+        self.group_start = ints(starts)
+        self.point_controls = wp.array(point.astype(np.int32), dtype=wp.int32, device=dev)
+        self.point_slot_list = ints(self.point_slots)
+        self.members = wp.zeros(slots, dtype=vec, device=dev)
+        self.probe = wp.zeros(slots, dtype=vec, device=dev)  # members where a grab searches
+        self.radius = wp.zeros(slots, dtype=wp.float32, device=dev)
+        self.live_dev = wp.zeros(slots, dtype=wp.int32, device=dev)
+        self.winners = wp.zeros(slots, dtype=wp.int32, device=dev)
+        self.places = wp.zeros(slots, dtype=vec, device=dev)
+        self.winner_anchors = wp.zeros(slots, dtype=vec, device=dev)
+        self.keys = wp.full(slots, KEY_NONE, dtype=wp.uint64, device=dev)
+        self.rebind = wp.zeros(max(1, self.n_rows), dtype=wp.int32, device=dev)
+        self.binding = wp.zeros(max(1, self.n_rows), dtype=wp.int32, device=dev)
+        self.patch = wp.full((self.n_rows, n), -1.0, dtype=wp.float32, device=dev) if self.n_rows else None
+
+    def adopt(self, controls: Controls) -> None:
+        """The Som's controls are now `controls` (their members and radii go up with the next run)."""
+        if controls is self.controls:
+            return
+        self._layout(controls)
+        self.controls = controls
+        if controls.radii.any() or controls.symmetry is not None:
+            self.grow(controls.effective())
+
+    def upload(self, controls: Controls) -> None:
+        """The members, radii and box on the device for these controls (if they are not there yet)."""
+        if controls is not self.controls:
+            self.adopt(controls)
+        if self._uploaded is not controls:
+            self.grow(controls.effective())
+            self.members.assign(members_of(controls))
+            self.radius.assign(np.repeat(controls.radii.astype(np.float32), controls.order))
+            self._uploaded = controls
+        box = self.box_values()
+        if self._box_for is None or not all(np.array_equal(a, b) for a, b in zip(box, self._box_for)):
+            self.box.assign(np.stack(box).astype(np.float32))
+            self._box_for = box
+
+    # -- the box ------------------------------------------------------------------------------------------------
+    def grow(self, points: np.ndarray) -> None:
+        """The box takes these places (or weights) too."""
+        p = np.asarray(points, np.float64).reshape(-1, len(self._lo))
+        if len(p):
+            self._lo = np.minimum(self._lo, p.min(axis=0))
+            self._hi = np.maximum(self._hi, p.max(axis=0))
+
+    def box_values(self, margin: float = BOX_MARGIN) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi): the start's, every weight set's and every member's places, grown on the position dims by the
+        largest radius and `margin` of the start's size."""
+        grow = np.zeros(len(self._lo))
+        radius = float(self.controls.radii.max(initial=0.0)) if self.controls is not None else 0.0
+        grow[self.model.position_dims] = radius + margin * self.size
+        return self._lo - grow, self._hi + grow
+
+    # -- events -------------------------------------------------------------------------------------------------
+    def grab(self, state: SomState, controls: Iterable[int]) -> None:
+        """Bind every member of these controls (those with a radius that no hand holds yet) and hold them."""
+        c = self.controls
+        assert c is not None, "Handles.adopt comes first (the Som adopts its controls when made)"
+        chosen = [i for i in controls if c.radii[i] > 0 and i not in self.held]
+        if not chosen:
+            return
+        self._end([i for i in chosen if self.live[self._slots([i])].any()], state)
+        self._bind(state, c, c, chosen)
+        self.held.update(chosen)
+
+    def release(self, controls: Iterable[int]) -> None:
+        """The hand lets go: the bindings carry on until the run ends or the next restart."""
+        self.held.difference_update(controls)
+
+    def moved(self, state: SomState, new: Controls) -> None:
+        """set_controls: the released bindings end; a control with a radius that moved while no hand holds it is
+        grabbed at its old place and released at once; then `new` are the controls."""
+        old = self.controls
+        self.end_released(state)
+        if old is not None and new.radii.any() and len(new.values) == len(old.values) and new.order == old.order and (
+                np.array_equal(new.radii > 0, old.radii > 0)):
+            moved = np.any(new.values != old.values, axis=1) & (new.radii > 0)
+            typed = [int(i) for i in np.flatnonzero(moved) if int(i) not in self.held]
+            if typed:
+                self._bind(state, old, new, typed)
+        self.adopt(new)
+
+    def end_released(self, state: SomState) -> None:
+        """A restart, or the run at S: every binding no hand holds ends."""
+        if self.live.any() and self.controls is not None:
+            let_go = [c for c in range(len(self.controls.values)) if c not in self.held]
+            self._end(let_go, state)
+
+    def end_all(self, state: SomState) -> None:
+        """Every binding ends and every hold is let go (new weights, another group, a reset)."""
+        self.held.clear()
+        if self.live.any():
+            self.live[:] = False
+            self.live_dev.zero_()
+            self.held_nodes.zero_()
+
+    # -- device work --------------------------------------------------------------------------------------------
+    def _slots(self, controls: Iterable[int]) -> np.ndarray:
+        return np.array([c * self.order + g for c in controls for g in range(self.order)], np.int64)
+
+    def _end(self, controls: list[int], state: SomState) -> None:
+        slots = self._slots(controls)
+        if not len(slots) or not self.live[slots].any():
+            return
+        self.live[slots] = False
+        self.live_dev.assign(self.live.astype(np.int32))
+        if self.live.any():
+            state.settle_anchor()
+            self.reanchor(state)
+        else:
+            self.held_nodes.zero_()
+
+    def _bind(self, state: SomState, at: Controls, radii: Controls, controls: list[int]) -> None:
+        """Bind the members of `controls` where `at` has them, with the radii of `radii`: each one's winner, place and
+        patch; then every anchor again."""
+        model, kern, dev = self.model, self.kernels, self.model.device
+        state.settle_anchor()
+        slots = self._slots(controls)
+        self.radius.assign(np.repeat(radii.radii.astype(np.float32), radii.order))
+        self._uploaded = None  # (the members of the new controls still go up)
+        self.probe.assign(members_of(at))
+        self.keys.fill_(KEY_NONE)
+        stretches = max(1, math.ceil(model.n_neurons / FIND_STRETCH))
+        wp.launch(kern.find, dim=len(slots) * stretches, device=dev,
+                  inputs=[state.w, self.probe, wp.array(slots.astype(np.int32), dtype=wp.int32, device=dev), model.m,
+                          self.keys, stretches])
+        binding = np.zeros(max(1, self.n_rows), np.int32)
+        binding[self.row_of[slots]] = 1
+        self.binding.assign(binding)
+        wp.launch(kern.bind, dim=self.n_rows, device=dev, inputs=[self.slot_of_row, self.binding, self.keys, state.w,
+                                                                  self.winners, self.places, self.rebind])
+        self.changed.fill_(1)
+        self.bind_patches(state)
+        self.live[slots] = True
+        self.live_dev.assign(self.live.astype(np.int32))
+        self.reanchor(state)
+
+    def bind_patches(self, state: SomState) -> None:
+        """The patches of the rows marked in `rebind`, from the weights now (changed[0] must be 1): seeded with their
+        winners, then flooded while a round joins a node. Launched, or recorded into a captured graph."""
+        model, kern, dev = self.model, self.kernels, self.model.device
+        rows = (self.n_rows, model.n_neurons)
+        wp.launch(kern.seed, dim=rows, device=dev, inputs=[self.rebind, self.slot_of_row, self.winners, self.patch])
+
+        def round_():
+            wp.launch(clear_flag, dim=1, device=dev, inputs=[self.changed])
+            wp.launch(kern.flood, dim=rows, device=dev,
+                      inputs=[state.w, self.rebind, self.slot_of_row, self.winners, self.radius, self.position,
+                              model.offsets, model.neighbors, self.patch, self.changed])
+
+        wp.capture_while(self.changed, round_)
+
+    def reanchor(self, state: SomState) -> None:
+        """Every anchor from the weights now (launched, or recorded into a captured graph)."""
+        wp.launch(self.kernels.reanchor, dim=max(self.model.n_neurons, len(self.live)), device=self.model.device,
+                  inputs=[state.w, self.live_dev, self.winners, self.anchors, self.winner_anchors])
+
+    def winners_now(self) -> np.ndarray:
+        """(k G,) the winner of each live binding, -1 for the other slots."""
+        out = np.full(len(self.live), -1, np.int64)
+        if self.live.any():
+            out[self.live] = self.winners.numpy()[self.live]
+        return out
