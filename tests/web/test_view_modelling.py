@@ -222,6 +222,31 @@ def test_a_control_hidden_behind_the_clay_is_not_grabbed_through_it(page, server
     assert np.linalg.norm(np.subtract(v["camera"], camera)) > 0.05, "the press went to the orbit"
 
 
+def test_a_hidden_control_is_dragged_by_its_dimmed_label(page, server):
+    """A press on the dimmed label of a control behind the clay drags that control as a press on its sphere would
+    (a person dragged the label and nothing happened): it follows the pointer, one undo step, and the view does not
+    turn."""
+    st0 = server.idle()
+    page.wait_for_timeout(350)
+    v = view(page)
+    box = canvas(page)
+    hidden = [j for j in v["behind"] if j < v["k"] and box["x"] + 80 < screen(page, j)[0] < box["x"] + box["width"] - 80
+              and box["y"] + 80 < screen(page, j)[1] < box["y"] + box["height"] - 80]
+    assert hidden, f"no control behind the clay on screen: {v['behind']}"
+    j = hidden[0]
+    label = page.locator(".somview-label.behind").filter(has_text=re.compile(f"^{j}$")).first
+    at = label.bounding_box()
+    camera = v["camera"]
+    drag(page, (at["x"] + at["width"] / 2, at["y"] + at["height"] / 2), (40, -30))
+    st = server.idle()
+    moved = np.linalg.norm(np.subtract(st["session"]["controls"][j][:3], st0["session"]["controls"][j][:3]))
+    assert moved > 0.05, f"control {j} did not follow the drag of its label ({moved:.3f})"
+    others = [c for i, c in enumerate(st["session"]["controls"]) if i != j]
+    assert others == [c for i, c in enumerate(st0["session"]["controls"]) if i != j]
+    assert st["session"]["history"][0] == st0["session"]["history"][0] + 1  # one undo step
+    np.testing.assert_allclose(view(page)["camera"], camera, atol=1e-9)  # the view did not turn
+
+
 def test_a_hidden_control_is_taken_by_its_dimmed_label_and_moved_by_its_handle(page, server):
     """A control behind the clay is not grabbed through it, but a click on its dimmed label selects it: its handle is
     drawn over the clay and moves it along one axis, without turning the view."""

@@ -31,6 +31,7 @@ export class CameraRig {
     this.camera = this.perspective;
     this.orbit = new OrbitControls(this.camera, domElement);
     this.orbit.enableDamping = false;
+    this.orbit.rotateSpeed = 0.6; // a drag across the view turns it about 200 degrees (1: a 120 px drag turned 90)
     this.orbit.enableZoom = false; // the wheel is ours: towards the cursor, and a control's radius over a control
     this.domElement = domElement;
     this.aspect = 1;

@@ -158,6 +158,17 @@ export class Desktop {
     this.beginDrag(hit.index, ev);
   }
 
+  // A press on the dimmed label of a control the clay hides (labels.js): the control is dragged as a press on its
+  // sphere would drag it (the clay in front of it still turns the view when pressed).
+  pressLabel(j, ev) {
+    if (this.presenting || ev.button !== 0 || this.drawTool || this.drag) return;
+    ev.preventDefault();
+    this.renderer.domElement.focus({ preventScroll: true });
+    this.ray(ev);
+    this.press = { x: ev.clientX, y: ev.clientY, control: j };
+    this.beginDrag(j, ev);
+  }
+
   beginDrag(j, ev) {
     const i = this.clay.originalOf(j);
     const centre = this.clay.controlWorld(j);

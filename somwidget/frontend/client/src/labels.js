@@ -24,12 +24,13 @@ export function labelOf(clay, i) {
 }
 
 export class ControlLabels {
-  // clay: the Clay; display: the Display (labels on or off); onPick(j): a dimmed label was clicked; onMarker(j): a
-  // marker was clicked
-  constructor({ clay, display, onPick, onMarker }) {
+  // clay: the Clay; display: the Display (labels on or off); onPick(j): a dimmed label was clicked; onPress(j, ev):
+  // a dimmed label was pressed; onMarker(j): a marker was clicked
+  constructor({ clay, display, onPick, onPress, onMarker }) {
     this.clay = clay;
     this.display = display;
     this.onPick = onPick;
+    this.onPress = onPress;
     this.layer = document.createElement('div');
     this.layer.className = 'somview-labels';
     this.divs = [];
@@ -88,12 +89,16 @@ export class ControlLabels {
     this.markers.update(clay, camera, size, (j) => labelOf(clay, clay.originalOf(j)));
   }
 
-  // The label of effective control j: the dimmed label of a control behind the clay takes a click, which selects
-  // the control, so it can be moved by its handle without turning the view.
+  // The label of effective control j: the dimmed label of a control behind the clay takes a press, which drags the
+  // control as a press on its sphere would (onPress), and a click, which selects it, so it can be moved by its
+  // handle; neither turns the view.
   div(j) {
     const d = document.createElement('div');
     d.className = 'somview-label';
-    d.addEventListener('pointerdown', (ev) => ev.stopPropagation());
+    d.addEventListener('pointerdown', (ev) => {
+      ev.stopPropagation();
+      if (d.classList.contains('behind')) this.onPress?.(j, ev);
+    });
     d.addEventListener('click', (ev) => {
       ev.stopPropagation();
       this.onPick(j);

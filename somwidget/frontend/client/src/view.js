@@ -146,6 +146,7 @@ export class ClayView {
       if (drag && this.grabs.current(drag.i) === i && j >= 0) drag.j = j + drag.copy * k;
     };
     this.labels = new ControlLabels({ clay: this.clay, display: this.display, onPick: (j) => this.handle.select(j),
+      onPress: (j, ev) => this.desktop.pressLabel(j, ev),
       onMarker: (j) => { // centred and selected: its handle moves it
         this.rig.centreOn(this.clay.controlWorld(j));
         this.handle.select(j);
