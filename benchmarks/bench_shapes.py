@@ -322,6 +322,13 @@ def stroke(points, text: str, r: float | None = None) -> Action:
     return Action(text, "add_stroke", (pts,), {} if r is None else {"radius": r}, count=1 if r is None else 2)
 
 
+def lathe(profile_rz, text: str) -> Action:
+    """A profile (r, z) drawn in the xz-plane beside the z axis, lathed 16-fold (Session.revolve)."""
+    rz = np.asarray(profile_rz, np.float64)
+    points = np.stack([rz[:, 0], np.zeros(len(rz)), rz[:, 1]], axis=1)
+    return Action(text, "revolve", (np.round(points, 4),))
+
+
 def refine(text: str) -> Action:
     return Action(text, "refine")
 
@@ -350,14 +357,16 @@ class Brief:
 
 
 _TOP = chair_back_at(1.0)  # where the chair's back ends (y at z = 1)
-_KNEE = 0.3  # the height of the stroke that draws the back's foot
+CHAIR_BACK_RADIUS = 0.8  # the back edge's stroke holds the grid this deep: the back, not the seat (y < 0.2)
 
 BRIEFS = [
     Brief("vase", "A vase from the sphere: foot, belly, long neck, flared lip", "sphere", vase, closed=True,
           camera=view((0.0, 0.0, 0.66), 4.9), actions=[
-              refine("refine once (482 -> 1,922 nodes): rows enough for the neck and the lip to turn on"),
-              radius(0, 1.5, "set the top control's radius to 1.5 (control 0): the dome it holds stays round"),
-              drag(0, (0.0, 0.0, 2.32), "drag the control on the top (control 0) up to the vase's top, z 2.32"),
+              refine("refine once (482 -> 1,922 nodes): rings enough for the neck and the lip to turn on"),
+              lathe(VASE_PROFILE, "draw the vase's profile beside the z axis, 13 clicks from the foot's middle to "
+                      "the top (revolve: the clay lathed on it, 16-fold about z)"),
+              parameter("smoothing", 0.3, "set smoothing to 0.3 (Taubin's, the sphere's): the clicked profile's "
+                        "corners ease, the volume stays"),
           ]),
     Brief("bowl", "A bowl pressed into the open grid", "grid", bowl,
           camera=view((0.0, 0.0, -0.3), 3.0, (0.55, -1.0, 0.75)), actions=[
@@ -367,16 +376,10 @@ BRIEFS = [
           ]),
     Brief("chair", "A chair shell from the open grid: seat and back in one sheet", "grid", chair,
           camera=view((0.0, 0.0, 0.35), 3.1, (-0.6, -1.0, 0.6)), actions=[
-              symmetry("mirror-x", "mirror across x (the corners pair up; the others get copies)"),
-              remove(1, "remove the back corner pair (control 1), which would hold the back down"),
-              remove(0, "remove the middle control, which would dent the seat"),
-              stroke([(0.0, 1.0, 0.0), (1.0, 1.0, 0.0)], "draw a stroke along the back edge (x 0 to 1; its mirror "
-                     "image does the other half), radius 1.2", r=1.2),
-              drag(2, (0.0, _TOP, 1.0), f"drag the stroke (its first sample, control 2) up to the back's top, "
-                   f"y {_TOP:.2f} z 1"),
-              stroke([(0.0, chair_back_at(_KNEE), _KNEE), (1.0, chair_back_at(_KNEE), _KNEE)],
-                     f"draw a stroke where the back's foot should be (y {chair_back_at(_KNEE):.2f} z {_KNEE}), "
-                     "radius 1.2", r=1.2),
+              stroke([(-1.0, 1.0, 0.0), (1.0, 1.0, 0.0)], "draw a stroke along the back edge (x -1 to 1), radius "
+                     "0.8: the back's depth", r=CHAIR_BACK_RADIUS),
+              drag(6, (-1.0, _TOP, 1.0), f"drag the stroke (its first sample, control 6: the preset has six) up to "
+                   f"the back's top, y {_TOP:.2f} z 1: the back goes with it, the seat stays flat"),
           ]),
     Brief("car", "The car with a longer nose and a lower roof", "car", car_target, closed=True, of_start=True,
           camera=view((0.6, 0.0, -0.05), 6.4, (0.3, -1.0, 0.35)), actions=[

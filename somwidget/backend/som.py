@@ -13,8 +13,9 @@ smoothing take the shaping rules (shaping_path.py).
 
 Restarts: moving the controls or changing the schedule goes on from the latest weights at s0 = floor((1 - reach) S)
 of the same table, where the neighbourhood is `reach` of its full radius (the clay follows locally; s = 0 would pull
-it into a blob and regrow all of it); `reset()` runs the whole schedule from the start weights; `restore()` puts
-weights and s back (an undo, a loaded session) and restarts nothing.
+it into a blob and regrow all of it); `reset()` runs the whole schedule from the start weights (with `grow`, as a case
+study grows: every control a point until S); `restore()` puts weights and s back (an undo, a loaded session) and
+restarts nothing.
 
 The parts, apart as in warp.sim: the model (som_model.py), the state (som_state.py), the controls (som_controls.py),
 the schedule (som_schedule.py), and the paths that run the cycles, chosen once: cpu_path.py, cuda_path.py,
@@ -151,13 +152,14 @@ class Som:
             cuda = CudaPath(self._model)
             self._path = RowsPath(cuda) if rows else cuda
         self._shaping = ShapingPath(self._model)
+        self._growing: Controls | None = None  # after a reset: the controls as points, until S or a restart
         self._build_table(values)
         self._upload_controls()
 
     @property
     def parts(self) -> SomParts:
         """The engine's parts (an internal API: tests and benchmarks drive a path with them)."""
-        return SomParts(self._model, self._state, self._controls, self._schedule, self._path, self._shaping,
+        return SomParts(self._model, self._state, self._running(), self._schedule, self._path, self._shaping,
                         self._cores)
 
     # -- configuration ------------------------------------------------------------------------------------
@@ -334,6 +336,7 @@ class Som:
         if from_anchor and state.w_anchor is None:
             raise ValueError("set_controls: from_anchor needs anchor() first (no weights are kept)")
         new = self._controls.moved(controls, radii, strokes)
+        self._end_growth()
         state.from_anchor(from_anchor)
         self._shaping.handles.moved(state, new)  # (the released bindings end: the restart's part)
         self._controls = new
@@ -374,10 +377,16 @@ class Som:
         self._restart()
 
     @warp_exclusive
-    def reset(self) -> None:
-        """Back to the start weights and s = 0 (the whole schedule); the controls stay."""
+    def reset(self, grow: bool = False) -> None:
+        """Back to the start weights and s = 0 (the whole schedule); the controls stay. With `grow` (a start mesh the
+        controls grow into a form: the paper's case studies), every control acts as the paper's point control until
+        the run reaches S or anything restarts it (a move, a grab, a change of a value), so the clay grows to where
+        the controls are, whatever their radii; then the controls with a radius are handles again. (A handle binds
+        only the clay a grab takes: from the car's ellipsoid, handles alone would grow nothing.)"""
         self._let_go(self._model.start)
         self._restart(0)
+        if grow and self._controls.radii.any():
+            self._growing = self._controls.with_radii(np.zeros(len(self._controls.values), np.float32))
 
     @warp_exclusive
     def restore(self, weights: ArrayLike, iteration: int) -> None:
@@ -391,13 +400,14 @@ class Som:
         """(k_eff,) the nearest neuron (metric-weighted) of each effective control for the current weights, in the
         order of `effective_controls`."""
         parts = self.parts
-        return parts.next_path().winners(self._model, self._state, self._controls, self._schedule)
+        return parts.next_path().winners(parts.model, parts.state, parts.controls, parts.schedule)
 
     @warp_exclusive
     def grab(self, i: int) -> None:
         """A hand takes control i (with the rest of its stroke): each member of a control with a radius binds the
         patch of clay around its winner (handles.py). Nothing moves and nothing restarts; a point control binds
-        nothing, and a control held already stays as it is."""
+        nothing, and a control held already stays as it is. A grab ends a reset's growth (`reset`)."""
+        self._end_growth()
         self._shaping.handles.grab(self._state, self._stroke_of(i))
 
     @warp_exclusive
@@ -433,13 +443,15 @@ class Som:
         """Run up to n cycles (stopping at S); returns how many ran."""
         n = checks.integer("n", n, 0)
         n = min(n, self.iterations - self._state.s)
-        path = self.parts.next_path()
+        parts = self.parts
+        path = parts.next_path()
         done = 0
         while done < n:
             chunk = min(LONGEST_GRAPH, 1 << ((n - done).bit_length() - 1))
-            path.run(self._model, self._state, self._controls, self._schedule, chunk)
+            path.run(parts.model, parts.state, parts.controls, parts.schedule, chunk)
             done += chunk
         if n and self._state.s >= self.iterations:
+            self._end_growth()
             self._shaping.handles.end_released(self._state)  # the run is over: released bindings end
         return n
 
@@ -483,12 +495,23 @@ class Som:
         handles.grow(weights)
         self._state.assign(weights)
 
+    def _running(self) -> Controls:
+        """The controls the cycles take: after a reset, until S or a restart, every control as a point (`reset`)."""
+        return self._controls if self._growing is None else self._growing
+
+    def _end_growth(self) -> None:
+        """A reset's growth ends: the controls with a radius are handles again."""
+        if self._growing is not None:
+            self._growing = None
+            self._shaping.handles.adopt(self._controls)
+
     def _upload_controls(self) -> None:
         self._state.upload(self._controls)
         self._shaping.handles.adopt(self._controls)
 
     def _restart(self, s: int | None = None) -> None:
         """Continue the schedule from cycle s (default: s0, a local restart) with the winners found afresh; the
-        bindings no hand holds end."""
+        bindings no hand holds end, and so does a reset's growth."""
+        self._end_growth()
         self._shaping.handles.end_released(self._state)
         self._state.restart(self._schedule.restart_iteration() if s is None else s)

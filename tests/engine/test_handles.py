@@ -355,3 +355,21 @@ def test_restored_weights_end_every_binding(device):
     som.restart()
     som.train()
     np.testing.assert_array_equal(som.weights, p.astype(np.float32))  # nothing bound: nothing moves
+
+
+def test_a_growing_reset_grows_the_case_study_whatever_the_radii():
+    """reset(grow=True) runs the paper's point rule to S (the car grows from its ellipsoid as with radius 0, bit for
+    bit), then the radii are handles again; a plain reset from the start mesh binds nothing, so handles grow
+    nothing (the ellipsoid stays)."""
+    car = presets.get_preset("car")
+    points = car.make_som("cpu")
+    points.train()
+    som = car.make_som("cpu")
+    som.radii = np.full(len(som.controls), 0.5)
+    som.reset(grow=True)
+    som.train()
+    assert np.array_equal(som.weights, points.weights)
+    assert som.parts.controls.radii.min() == pytest.approx(0.5)  # handles again
+    som.reset()
+    som.train()
+    assert np.abs(som.weights - car.weights).max() < 1e-5

@@ -183,10 +183,13 @@ class SetMetricWeights(Operation):
 
 @dataclass(frozen=True)
 class Reset(Operation):
-    """Back to the start mesh and s = 0: the whole schedule runs again."""
+    """Back to the start mesh and s = 0: the whole schedule runs again; `grow`: a preset that grows (the case
+    studies) grows again to where the controls are, whatever their radii (Som.reset)."""
+
+    grow: bool = False
 
     def apply(self, som) -> None:
-        som.reset()
+        som.reset(grow=self.grow)
 
 
 @dataclass(frozen=True)

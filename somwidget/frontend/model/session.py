@@ -424,9 +424,10 @@ class Session:
             self.trainer.enqueue(Publish())
 
     def reset(self) -> None:
-        """Back to the start mesh and s = 0: the whole schedule runs again; the controls stay."""
+        """Back to the start mesh and s = 0: the whole schedule runs again; the controls stay. A preset that grows
+        (the paper's case studies) grows again to where the controls are, whatever their radii."""
         with self.timeline.step("reset"), self.modelling.lock:
-            self.trainer.enqueue(Reset())
+            self.trainer.enqueue(Reset(grow=self.preset.grow))
 
     # -- intents: whole session --------------------------------------------------------------------------------
     def load_preset(self, preset: str | Preset) -> None:
