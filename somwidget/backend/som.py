@@ -69,6 +69,20 @@ class SomParts(NamedTuple):
         return self.shaping if self.controls.shaping(len(self.schedule.steps())) else self.path
 
 
+def _schedule_value(name: str, doc: str) -> property:
+    """Som.<name>: a value of the schedule (backend/schedule.py declares it); setting it restarts the schedule from
+    the current weights (Som._change_schedule)."""
+
+    def get(som: Som):
+        return getattr(som._schedule.values, name)
+
+    @warp_exclusive
+    def set_(som: Som, value) -> None:
+        som._change_schedule(**{name: value})
+
+    return property(get, set_, doc=f"{doc} Setting it restarts the schedule from the current weights.")
+
+
 class Som:
     """A SOM whose neurons are the vertices of `topology`, trained towards `controls`.
 
@@ -183,43 +197,10 @@ class Som:
         """s0, where the next local restart begins."""
         return self._schedule.restart_iteration()
 
-    @property
-    def iterations(self) -> int:
-        """S: cycles in a run. Setting it restarts the schedule from the current weights."""
-        return self._schedule.values.iterations
-
-    @iterations.setter
-    @warp_exclusive
-    def iterations(self, value: int) -> None:
-        self._change_schedule(iterations=value)
-
-    @property
-    def l_start(self) -> float:
-        return self._schedule.values.l_start
-
-    @l_start.setter
-    @warp_exclusive
-    def l_start(self, value: float) -> None:
-        self._change_schedule(l_start=value)
-
-    @property
-    def l_end(self) -> float:
-        return self._schedule.values.l_end
-
-    @l_end.setter
-    @warp_exclusive
-    def l_end(self, value: float) -> None:
-        self._change_schedule(l_end=value)
-
-    @property
-    def smoothing(self) -> float:
-        """lambda of the Laplacian step after each cycle; 0 switches smoothing off."""
-        return self._schedule.values.smoothing
-
-    @smoothing.setter
-    @warp_exclusive
-    def smoothing(self, value: float) -> None:
-        self._change_schedule(smoothing=value)
+    iterations = _schedule_value("iterations", "S: cycles in a run.")
+    l_start = _schedule_value("l_start", "The learning rate at s = 0.")
+    l_end = _schedule_value("l_end", "The learning rate at s = S.")
+    smoothing = _schedule_value("smoothing", "lambda of the smoothing step after each cycle; 0 switches it off.")
 
     @property
     def smooth_dims(self) -> tuple[int, ...]:
@@ -275,10 +256,8 @@ class Som:
     def radii(self, value: ArrayLike) -> None:
         self._regroup(self._controls.with_radii(value))
 
-    @property
-    def strokes(self) -> tuple[int, ...]:
-        """The lengths of the runs of controls that act as one (a stroke's samples); 1 for a control alone."""
-        return self._controls.strokes
+    strokes = property(lambda self: self._controls.strokes, doc="The lengths of the runs of controls that act as one "
+                       "(a stroke's samples); 1 for a control alone.")
 
     @property
     def smoothing_rule(self) -> str:
@@ -315,9 +294,7 @@ class Som:
         """"dense" (the N x N table) or "rows" (distance rows of the winners, computed on demand and cached)."""
         return "rows" if self._model.rows else "dense"
 
-    @property
-    def start_weights(self) -> np.ndarray:
-        return self._model.start.copy()
+    start_weights = property(lambda self: self._model.start.copy(), doc="(N, n) the start mesh's weights (a copy).")
 
     def learning_table(self) -> np.ndarray:
         """L[s, d] (S, d_max + 1) float32 (a copy)."""
@@ -408,28 +385,18 @@ class Som:
         patch of clay around its winner (handles.py). Nothing moves and nothing restarts; a point control binds
         nothing, and a control held already stays as it is. A grab ends a reset's growth (`reset`)."""
         self._end_growth()
-        self._shaping.handles.grab(self._state, self._stroke_of(i))
+        self._shaping.handles.grab(self._state, self._controls.stroke_of(i))
 
     @warp_exclusive
     def release(self, i: int) -> None:
         """The hand lets go of control i (with the rest of its stroke): its bindings carry the clay to where the hand
         left it until the run reaches S or the next restart. Nothing trains."""
-        self._shaping.handles.release(self._stroke_of(i))
+        self._shaping.handles.release(self._controls.stroke_of(i))
 
     @property
     def held(self) -> tuple[int, ...]:
         """The controls a hand holds (`grab`), in order."""
         return tuple(sorted(self._shaping.handles.held))
-
-    def _stroke_of(self, i: int) -> range:
-        """The controls of control i's stroke (i alone when it is not a stroke's sample)."""
-        i = checks.integer("control", i, 0, len(self._controls.values) - 1)
-        first = 0
-        for length in self._controls.strokes:
-            if i < first + length:
-                return range(first, first + length)
-            first += length
-        raise AssertionError("unreachable: the strokes cover every control")
 
     def _checked_weights(self, weights: ArrayLike) -> np.ndarray:
         w = checks.finite_array("weights", weights, 2)

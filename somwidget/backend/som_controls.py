@@ -122,6 +122,16 @@ class Controls:
             maps[1][list(self.mirror), list(self.mirror)] = -1.0
         return maps
 
+    def stroke_of(self, i: int) -> range:
+        """The controls of control i's stroke (i alone when it is not a stroke's sample)."""
+        i = checks.integer("control", i, 0, len(self.values) - 1)
+        first = 0
+        for length in self.strokes:
+            if i < first + length:
+                return range(first, first + length)
+            first += length
+        raise AssertionError("unreachable: the strokes cover every control")
+
     def effective(self) -> np.ndarray:
         """[originals..., their first copies..., their second copies...] (copy j is of control j mod k)."""
         if self.order == 1:

@@ -76,3 +76,17 @@ def test_no_ui_package_in_the_engine_or_the_model():
             for node in top:
                 names = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""]
                 assert not any(n.split(".")[0] in ui for n in names), f"{path} imports a UI package: {names}"
+
+
+def test_no_class_over_400_lines_and_no_module_over_600():
+    """Sizes a newcomer can read: no class over 400 lines, no module over 600 (Warp's *_kernels.py aside)."""
+    too_big = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        name = path.relative_to(helpers.ROOT).as_posix()
+        if text.count("\n") > 600 and not path.name.endswith("_kernels.py"):
+            too_big.append(f"{name}: {text.count(chr(10))} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.ClassDef) and node.end_lineno - node.lineno + 1 > 400:
+                too_big.append(f"{name}: class {node.name} {node.end_lineno - node.lineno + 1} lines")
+    assert not too_big, too_big

@@ -42,7 +42,7 @@ import numpy as np
 from ...backend import checks
 from ...backend import io as mesh_io
 from ...backend import presets as _presets
-from ...backend.presets import FeatureLayout, Preset
+from ...backend.presets import Preset
 from . import revolving
 from .autosave import SessionAutosave
 from .controls import ControlEdits
@@ -72,6 +72,12 @@ def _close_live_sessions() -> None:
             session.close(timeout=2.0)
         except Exception:  # pragma: no cover - nothing must stop the exit
             pass
+
+
+
+def _of_modelling(name: str, doc: str) -> property:
+    """Session.<name>: the modelling state's value of that name (session.modelling), read only."""
+    return property(lambda session: getattr(session.modelling, name), doc=doc)
 
 
 class Session:
@@ -223,21 +229,12 @@ class Session:
         return self.trainer.wait_applied(timeout)
 
     # -- read-only state ---------------------------------------------------------------------------------------
-    @property
-    def preset(self) -> Preset:
-        return self.modelling.preset
-
-    @property
-    def layout(self) -> FeatureLayout:
-        return self.modelling.layout
-
-    @property
-    def topology(self):
-        return self.modelling.preset.topology
-
-    @property
-    def generation(self) -> int:
-        return self.modelling.generation
+    preset = _of_modelling("preset", "The Preset the session started from (its mesh, controls and schedule).")
+    layout = _of_modelling("layout", "The FeatureLayout: what each feature dim means (position, colour, ...).")
+    generation = _of_modelling("generation", "Counts the clays: a new preset, mesh, refine or load makes the next.")
+    paused = _of_modelling("paused", "Whether training is paused (`pause`, `train`).")
+    topology = property(lambda self: self.modelling.preset.topology, doc="The mesh's Topology (its neurons' graph).")
+    n_dims = property(lambda self: self.modelling.layout.n_dims, doc="n: the feature dims of every node and control.")
 
     @property
     def controls(self) -> np.ndarray:
@@ -251,17 +248,9 @@ class Session:
             return int(self.modelling.controls.shape[0])
 
     @property
-    def n_dims(self) -> int:
-        return self.modelling.layout.n_dims
-
-    @property
     def parameters(self) -> dict:
         """Every setting held by name (`settings.values()`)."""
         return self.settings.values()
-
-    @property
-    def paused(self) -> bool:
-        return self.modelling.paused
 
     @property
     def error(self) -> str | None:

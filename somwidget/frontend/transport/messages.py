@@ -2,9 +2,9 @@
 every view and what it accepts from one. Validation, the Python encoders and the browser's side
 (client/src/protocol.js, written by `python -m somwidget.frontend.transport.codegen`) are derived from these classes.
 
-One protocol for every view: the web app's page and the XR page over the websocket /view/ws (web/hub.py; /xr/ws is
-the same route under its old name), the notebook widget over the kernel's comm (notebook/widget.py); both through
-one `ViewConnection` (connection.py). Field types and bounds are the wire field types of fields.py.
+One protocol for every view: the web app's and the XR page over the websocket /view/ws (web/hub.py; /xr/ws is its
+old name), the notebook widget over the kernel's comm (notebook/widget.py); both through one `ViewConnection`
+(connection.py). Field types and bounds are the wire field types of fields.py.
 
 Server -> client: a `TopologyMessage` once per connection and again whenever the session's generation changes (a new
 preset or mesh); then binary frames (`FrameHeader` and FRAME_ARRAYS below: the latest state, a slow view skips
@@ -14,8 +14,7 @@ frames, never lags); then, as things happen, the other `ServerMessage`s. Over th
 Client -> server: JSON text, one `Intent` per message, at most MAX_MESSAGE_BYTES bytes. Anything else is refused with
 an `ErrorMessage` sent back (and logged) and changes nothing: binary messages, messages over the size limit, text
 that is not JSON (NaN and Infinity included), non-objects, unknown types, unknown or missing fields, and fields that
-break their declared type (fields.py). A mirrored copy is moved through its original (the client reflects the
-point).
+break their declared type (fields.py). A mirrored copy is moved through its original (the client reflects the point).
 """
 
 from __future__ import annotations
@@ -283,8 +282,7 @@ class PongMessage(ServerMessage):
 
 @dataclass(frozen=True, kw_only=True)
 class StatusMessage(ServerMessage):
-    """The engine's time per cycle (ms) and the frames published per second, every STATUS_PERIOD while frames
-    flow."""
+    """The engine's time per cycle (ms) and the frames published a second, every STATUS_PERIOD while frames flow."""
 
     type: ClassVar[str] = "status"
     cycle_ms: float

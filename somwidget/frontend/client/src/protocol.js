@@ -169,7 +169,7 @@ export const FRAME_MESSAGE = 'frame';
  */
 
 /**
- * The engine's time per cycle (ms) and the frames published per second, every STATUS_PERIOD while frames flow.
+ * The engine's time per cycle (ms) and the frames published a second, every STATUS_PERIOD while frames flow.
  * @typedef {object} StatusMessage
  * @property {'status'} type
  * @property {number} cycle_ms
