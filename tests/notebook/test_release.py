@@ -48,10 +48,7 @@ print(json.dumps({"n": n, "base": base, "opened": opened, "closed": closed, "ali
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("view", [
-    "panel", pytest.param("view", marks=pytest.mark.xfail(strict=True, reason=(
-        "found 2026-11-27: with the clay view (ClayWidget, its ViewConnection) about 190 MB of a 9,602-node "
-        "session stay in the process after close although no Python object of it is left (not yet traced)")))])
+@pytest.mark.parametrize("view", ["panel", "view"])
 def test_closing_the_widget_frees_the_sessions_memory(tmp_path, view):
     env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(tmp_path / "data")}
     out = subprocess.run([sys.executable, "-c", CODE, str(helpers.ROOT / "tests"), view], env=env,

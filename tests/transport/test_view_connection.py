@@ -8,7 +8,9 @@ session's training thread: `receive` returns a Future of whether the intent was 
 
 from __future__ import annotations
 
+import gc
 import json
+import weakref
 
 import numpy as np
 import pytest
@@ -132,3 +134,19 @@ def test_a_release_at_the_last_move_runs_nothing(session):
     assert session.wait_applied(30)
     np.testing.assert_allclose(session.controls[4][:3], further, atol=1e-6)
     view.close().result(30)
+
+
+def test_a_closed_view_keeps_nothing_of_its_session():
+    """Neither the session's registry of holders nor the display geometry kept per preset (both module-wide) holds
+    a session, its preset or its topology (with its distance tables) once its last view and the session are closed:
+    tests/notebook/test_release.py measures the memory this gives back."""
+    s = Session("car", device="cpu", paused=True, autosave=False)
+    view = ViewConnection(s, RecordingPipe(), name="a view that goes")
+    view.open()  # the topology message: the preset's display geometry is made and kept
+    assert s.wait_applied(30)
+    gone = [weakref.ref(x) for x in (s, s.preset, s.preset.topology)]
+    view.close().result(30)
+    s.close()
+    del s, view
+    gc.collect()
+    assert [r() for r in gone] == [None, None, None]

@@ -522,10 +522,13 @@ def test_a_clay_past_the_streaming_limit_streams_a_decimated_mesh_on_its_trained
     side = np.linalg.norm(kept[t[:, 0]] - kept[t[:, 1]], axis=1)
     assert side.max() < 0.05
     # a frame of that session streams those nodes' trained positions
-    session = SimpleNamespace(preset=SimpleNamespace(display="surface", weights=pts.astype(np.float32),
-                                                     layout=SimpleNamespace(position=(0, 1, 2)),
-                                                     topology=SimpleNamespace(n_vertices=len(pts),
-                                                                              edges=edges, faces=quads.tolist())))
+    class StandIn(SimpleNamespace):  # a preset's stand-in: display.py keeps its geometry by a weak reference
+        pass
+
+    session = SimpleNamespace(preset=StandIn(display="surface", weights=pts.astype(np.float32),
+                                             layout=SimpleNamespace(position=(0, 1, 2)),
+                                             topology=SimpleNamespace(n_vertices=len(pts), edges=edges,
+                                                                      faces=quads.tolist())))
     geo = wire_display.display_of(session)
     assert geo["n_vertices"] == len(geo["nodes"]) <= wire_display.DECIMATED_NODES
     trained = pts + 0.01

@@ -118,9 +118,10 @@ class ClayWidget(anywidget.AnyWidget):
         self.connection.receive(json.dumps(content))
 
     def close(self) -> None:
-        """Stop following the session (the session goes on) and close the widget."""
-        if not hasattr(self, "outbox"):  # __init__ stopped before it followed the session (ClientNotBuilt)
-            return super().close()
+        """Stop following the session (the session goes on) and close the widget. Once: a closed widget's own
+        collection (ipywidgets' __del__) closes it again, perhaps after its session has gone."""
+        if not hasattr(self, "outbox") or self._closed:  # __init__ stopped before it followed the session
+            return super().close()  # (ClientNotBuilt), or closed already
         self.outbox.unsubscribe(self._on_frame)
         self.connection.close()
         with self._wake:

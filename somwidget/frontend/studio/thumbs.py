@@ -8,28 +8,25 @@ positions, then RGB bytes; about 7 KB for the car. Nothing here runs unless a wa
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 
 from ...backend import io as _io
 from ...backend import presets as _presets
-from ..transport.display import decimate_display
+from ..transport.display import PerPreset, decimate_display
 
 #: Most nodes a thumbnail carries.
 THUMB_NODES = 2048
 
-_SHAPES: dict[int, tuple] = {}  # id(preset) -> (preset, shape)
-_LOCK = threading.Lock()
+_SHAPES = PerPreset(64)  # each preset's shape while it lives
 
 
 def shape_of(preset) -> dict:
     """What the wall draws of `preset`: {"draw": "surface" | "lines" | "points", "n": nodes a thumbnail carries,
     "triangles": flat indices, "segments": flat indices} and "nodes" (the nodes carried, None: all), kept per preset."""
-    with _LOCK:
-        cached = _SHAPES.get(id(preset))
-        if cached is not None and cached[0] is preset:
-            return cached[1]
+    return _SHAPES.get(preset, _shape)
+
+
+def _shape(preset) -> dict:
     topo = preset.topology
     n = topo.n_vertices
     edges = np.asarray(topo.edges, np.int64).reshape(-1, 2)
@@ -45,10 +42,6 @@ def shape_of(preset) -> dict:
     shape = {"draw": "surface" if surface else ("lines" if preset.display == "lines" else "points"), "n": int(n),
              "triangles": np.asarray(triangles, np.int64).ravel().tolist(),
              "segments": np.asarray(segments, np.int64).ravel().tolist(), "nodes": nodes}
-    with _LOCK:
-        if len(_SHAPES) >= 64:
-            _SHAPES.clear()
-        _SHAPES[id(preset)] = (preset, shape)
     return shape
 
 

@@ -6,6 +6,10 @@ triangulate and decimate.
 
 from __future__ import annotations
 
+import threading
+import weakref
+from collections.abc import Callable
+
 import numpy as np
 
 from ...backend import io as _io
@@ -41,23 +45,44 @@ def decimate_display(points: np.ndarray, triangles: np.ndarray, segments: np.nda
     return first, remap(triangles, 3), remap(segments, 2)
 
 
-_DISPLAYS: dict[int, tuple] = {}  # id(preset) -> (preset, display): the latest few presets' display geometry
+class PerPreset:
+    """Values made from a preset (display geometry, a wall's thumbnail shape), each made once and kept while its preset
+    lives, the latest `most` of them. Weakly: a preset holds its topology and that its distance tables (184 MB at
+    9,602 nodes), which must go with the last session of it (tests/notebook/test_release.py)."""
+
+    def __init__(self, most: int) -> None:
+        self.most = most
+        self._kept: dict[int, tuple[weakref.ref, object]] = {}  # id(preset) -> (a weak reference to it, its value)
+        self._lock = threading.Lock()
+
+    def get(self, preset, make: Callable[[object], object]):
+        """The value of `preset`, made by `make(preset)` the first time."""
+        with self._lock:
+            kept = self._kept.get(id(preset))
+            if kept is not None and kept[0]() is preset:
+                return kept[1]
+        value = make(preset)
+        with self._lock:
+            if len(self._kept) >= self.most:
+                self._kept.clear()
+            self._kept[id(preset)] = (weakref.ref(preset), value)
+        weakref.finalize(preset, self._forget, id(preset))
+        return value
+
+    def _forget(self, key: int) -> None:
+        with self._lock:
+            self._kept.pop(key, None)
+
+
+_DISPLAYS = PerPreset(4)  # the latest few presets' display geometry
 
 
 def display_of(session) -> dict:
     """The display geometry of the session's current preset: triangles, segments, points flag, n_vertices, and
     `nodes` (the nodes a frame streams, in order) when the clay is past STREAM_LIMIT and shown decimated (to
-    DECIMATED_NODES). Made once
-    per preset (a million-vertex mesh takes seconds to triangulate and decimate), then kept."""
-    preset = session.preset
-    cached = _DISPLAYS.get(id(preset))
-    if cached is not None and cached[0] is preset:
-        return cached[1]
-    display = _display_geometry(preset)
-    if len(_DISPLAYS) >= 4:
-        _DISPLAYS.clear()
-    _DISPLAYS[id(preset)] = (preset, display)
-    return display
+    DECIMATED_NODES). Made once per preset (a million-vertex mesh takes seconds to triangulate and decimate), then
+    kept while the preset lives."""
+    return _DISPLAYS.get(session.preset, _display_geometry)
 
 
 def _display_geometry(preset) -> dict:

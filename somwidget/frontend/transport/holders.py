@@ -14,7 +14,7 @@ import threading
 import weakref
 from typing import Protocol
 
-from ..model.hands import SILENT_SECONDS, Hand, Lost
+from ..model.hands import SILENT_SECONDS, Hand, Hands, Lost
 from .messages import ErrorMessage, GrabsMessage, HeldControl, PresenceMessage, PresentHand, ServerMessage
 
 #: Seconds between two looks for silent hands.
@@ -42,12 +42,22 @@ class HolderRegistry:
     """The views of one Session and their hands (see the module's docstring)."""
 
     def __init__(self, session) -> None:
-        self._session = weakref.ref(session)  # the registry above is keyed by the session: no strong way back
-        self.hands = session.hands
+        # The registry above is keyed by the session: no strong way back to it, not even through its hands (they
+        # reach the session through its timeline), else a closed session and its arrays would live on forever.
+        self._session = weakref.ref(session)
+        self._hands = weakref.ref(session.hands)
         self._lock = threading.Lock()
         self._views: dict[View, Hand] = {}
         self._watcher: threading.Thread | None = None
         self.hands.subscribe(self._changed)
+
+    @property
+    def hands(self) -> Hands:
+        """The session's hands (model/hands.py); RuntimeError once the session is gone."""
+        hands = self._hands()
+        if hands is None:
+            raise RuntimeError("the session of these views is gone")
+        return hands
 
     # -- views ----------------------------------------------------------------------------------------------------
     def join(self, view: View, kind: str) -> Hand:
@@ -133,5 +143,5 @@ class HolderRegistry:
                 if session is None or session.closed or not self._views:
                     self._watcher = None
                     return
-            del session
-            self.hands.quiet(SILENT_SECONDS)
+            session.hands.quiet(SILENT_SECONDS)
+            del session  # not held while it waits
