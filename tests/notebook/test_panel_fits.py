@@ -48,20 +48,32 @@ CHECK = """async () => {
   const problems = [];
   const name = (e) => (e.getAttribute('title') || e.getAttribute('aria-label') || e.textContent || e.value
     || e.placeholder || e.className || e.tagName).toString().trim().slice(0, 40);
-  for (const f of fields) {
-    f.scrollIntoView({ block: 'center', inline: 'nearest' });
-    await new Promise((r) => requestAnimationFrame(r));
+  // a field's verdict after it was scrolled to and the host settled: a windowed notebook (Notebook 7) places its
+  // cells again over a few frames after a scroll, so a field is judged on the last of up to 12 looks
+  const frame = () => new Promise((r) => requestAnimationFrame(r));
+  const verdict = (f) => {
     const r = f.getBoundingClientRect();
     const x = r.left + r.width / 2, y = r.top + r.height / 2;
     if (r.left < -1 || r.right > innerWidth + 1) {
-      problems.push(`off the width: ${name(f)} [${Math.round(r.left)}, ${Math.round(r.right)}] of ${innerWidth}`);
-      continue;
+      return `off the width: ${name(f)} [${Math.round(r.left)}, ${Math.round(r.right)}] of ${innerWidth}`;
     }
-    if (y < 0 || y > innerHeight) { problems.push(`not on screen: ${name(f)}`); continue; }
+    if (y < 0 || y > innerHeight) return `not on screen: ${name(f)}`;
     const hit = f.getRootNode().elementFromPoint(x, y);
     if (!hit || !(hit === f || f.contains(hit) || (hit.tagName === 'LABEL' && hit.contains(f)))) {
-      problems.push(`covered: ${name(f)} by ${hit ? hit.tagName + '.' + hit.className : 'nothing'}`);
+      return `covered: ${name(f)} by ${hit ? hit.tagName + '.' + hit.className : 'nothing'}`;
     }
+    return null;
+  };
+  for (const f of fields) {
+    let problem = null;
+    for (let look = 0; look < 12; look++) {
+      f.scrollIntoView({ block: 'center', inline: 'nearest' });
+      await frame();
+      await frame();
+      problem = verdict(f);
+      if (!problem) break;
+    }
+    if (problem) problems.push(problem);
   }
   const labels = 'label, .widget-label, .widget-label-basic, button, .widget-html-content, .widget-readout, th';
   for (const l of inPanel(labels)) {
