@@ -64,3 +64,15 @@ def devices(request) -> str:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20181210)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """A real Chromium (Debian's, driven by Playwright), one a test file; a file may define its own."""
+    from helpers import CHROMIUM, CHROMIUM_ARGS
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()

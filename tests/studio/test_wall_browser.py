@@ -13,7 +13,7 @@ import os
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, CHROMIUM_ARGS, wait_for
+from helpers import CHROMIUM, wait_for
 
 import somwidget
 from somwidget.frontend.client import DIST
@@ -64,14 +64,6 @@ def designers(studio):
     yield joined
     for room in joined.values():
         room.close()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with playwright_sync.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
-        yield b
-        b.close()
 
 
 def room_state(page, name) -> dict:

@@ -19,7 +19,7 @@ import time
 import helpers
 import numpy as np
 import pytest
-from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, wave_mesh
+from helpers import CHROMIUM, Serve, wave_mesh
 
 pytestmark = pytest.mark.browser
 
@@ -35,14 +35,6 @@ def server():
     srv = Serve()
     yield srv
     srv.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with playwright_sync.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 VIEW = "document.getElementById('clay-view')?.somview"

@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, CHROMIUM_ARGS, Serve
+from helpers import CHROMIUM, Serve
 
 from somwidget.backend.presets import get_preset
 
@@ -34,14 +34,6 @@ def server():
     srv = Serve("--preset", "sphere")
     yield srv
     srv.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with playwright_sync.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 def open_page(browser, server, log: list | None = None):

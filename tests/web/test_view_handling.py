@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, CHROMIUM_ARGS, ROOT, Serve
+from helpers import CHROMIUM, ROOT, Serve
 
 pytestmark = pytest.mark.browser
 
@@ -31,14 +31,6 @@ def server():
     srv = Serve("--preset", "sphere")
     yield srv
     srv.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with playwright_sync.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 @pytest.fixture

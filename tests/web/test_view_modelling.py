@@ -12,7 +12,7 @@ import re
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, CHROMIUM_ARGS, Serve
+from helpers import CHROMIUM, Serve
 
 from somwidget.backend import metrics
 
@@ -30,14 +30,6 @@ def server():
     srv = Serve("--preset", "sphere")
     yield srv
     srv.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with playwright_sync.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 @pytest.fixture
@@ -222,6 +214,14 @@ def test_a_control_hidden_behind_the_clay_is_not_grabbed_through_it(page, server
     assert np.linalg.norm(np.subtract(v["camera"], camera)) > 0.05, "the press went to the orbit"
 
 
+def hidden_original(page, v: dict, box: dict, margin: float = 80) -> int:
+    """A control (an original, not a copy) the clay hides, on screen at least `margin` pixels inside the canvas."""
+    hidden = [j for j in v["behind"] if j < v["k"] and box["x"] + margin < screen(page, j)[0] < box["x"] + box["width"]
+              - margin and box["y"] + margin < screen(page, j)[1] < box["y"] + box["height"] - margin]
+    assert hidden, f"no control behind the clay on screen: {v['behind']}"
+    return hidden[0]
+
+
 def test_a_hidden_control_is_dragged_by_its_dimmed_label(page, server):
     """A press on the dimmed label of a control behind the clay drags that control as a press on its sphere would
     (a person dragged the label and nothing happened): it follows the pointer, one undo step, and the view does not
@@ -230,10 +230,7 @@ def test_a_hidden_control_is_dragged_by_its_dimmed_label(page, server):
     page.wait_for_timeout(350)
     v = view(page)
     box = canvas(page)
-    hidden = [j for j in v["behind"] if j < v["k"] and box["x"] + 80 < screen(page, j)[0] < box["x"] + box["width"] - 80
-              and box["y"] + 80 < screen(page, j)[1] < box["y"] + box["height"] - 80]
-    assert hidden, f"no control behind the clay on screen: {v['behind']}"
-    j = hidden[0]
+    j = hidden_original(page, v, box)
     label = page.locator(".somview-label.behind").filter(has_text=re.compile(f"^{j}$")).first
     at = label.bounding_box()
     camera = v["camera"]
@@ -254,10 +251,7 @@ def test_a_hidden_control_is_taken_by_its_dimmed_label_and_moved_by_its_handle(p
     page.wait_for_timeout(350)
     v = view(page)
     box = canvas(page)
-    hidden = [j for j in v["behind"] if j < v["k"] and box["x"] + 80 < screen(page, j)[0] < box["x"] + box["width"] - 80
-              and box["y"] + 80 < screen(page, j)[1] < box["y"] + box["height"] - 80]
-    assert hidden, f"no control behind the clay on screen: {v['behind']}"
-    j = hidden[0]
+    j = hidden_original(page, v, box)
     label = page.locator(".somview-label.behind").filter(has_text=re.compile(f"^{j}$")).first
     label.click()
     page.wait_for_function(f"() => {VIEW}.describe().selected === {j}", timeout=5000)

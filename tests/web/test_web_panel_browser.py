@@ -17,7 +17,7 @@ import json
 import time
 
 import pytest
-from helpers import CHROMIUM, CHROMIUM_ARGS, Serve, free_port, sync_playwright, wait_for
+from helpers import Serve, free_port, wait_for
 from test_app_browser import VIEW, VIEWPORT, open_page
 
 pytestmark = pytest.mark.browser
@@ -28,14 +28,6 @@ def server():
     srv = Serve()
     yield srv
     srv.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 def field(page, name: str) -> str:

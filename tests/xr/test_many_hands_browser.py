@@ -18,7 +18,7 @@ import os
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, CHROMIUM_ARGS, wait_for
+from helpers import CHROMIUM, wait_for
 
 from somwidget.frontend.client import DIST
 
@@ -50,14 +50,6 @@ def server(session):
 
     with XRServer(session) as srv:
         yield srv
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with playwright_sync.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
-        yield b
-        b.close()
 
 
 def open_page(browser, url: str):
