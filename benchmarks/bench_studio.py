@@ -94,7 +94,6 @@ async def _designer(url: str, index: int, seconds: float, start_at: float, out: 
         at = HEADER_SIZE + 12 * n  # control 0 in the frame's control positions
         home = np.array(struct.unpack_from("<3f", latest, at), np.float64)
         size = float(np.linalg.norm(np.subtract(topology["bounds"]["max"], topology["bounds"]["min"])))
-        await ws.send_json({"type": "grab", "id": cid})
         pending: list[tuple[float, tuple]] = []
         latencies, sent, frames = [], 0, 0
         done = asyncio.Event()
@@ -123,6 +122,8 @@ async def _designer(url: str, index: int, seconds: float, start_at: float, out: 
 
         receiver = asyncio.ensure_future(receive())
         await asyncio.sleep(max(0.0, start_at - time.time()))
+        # the grab just before the moves: a hand silent for hands.SILENT_SECONDS while it holds lets go
+        await ws.send_json({"type": "grab", "id": cid})
         t0 = time.perf_counter()
         phase = 2 * math.pi * (index % 7) / 7
         tick = t0
