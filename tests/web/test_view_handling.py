@@ -14,7 +14,8 @@ import os
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, ROOT, Serve
+from helpers import CHROMIUM, ROOT
+from sphere_app import VIEW, canvas, centre, open_tab, serve_sphere, view
 
 pytestmark = pytest.mark.browser
 
@@ -22,57 +23,17 @@ playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Play
 if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
     pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
 
-VIEW = "document.getElementById('clay-view')?.somview"
 SHOTS = os.environ.get("SOMWIDGET_SHOTS")  # a folder: the tests leave their screenshots there
 
 
 @pytest.fixture(scope="module")
 def server():
-    srv = Serve("--preset", "sphere")
-    yield srv
-    srv.stop()
+    yield from serve_sphere()
 
 
 @pytest.fixture
 def page(browser, server):
-    """A tab on the app once its view has drawn the session as it is; the session is left as it was found."""
-    steps = server.idle()["session"]["history"][0]
-    page = browser.new_page(viewport={"width": 1200, "height": 800})
-    page.goto(server.url)
-    page.wait_for_function(f"() => {{ const v = {VIEW}; return v && v.describe().painted > 0; }}", timeout=30000)
-    page.wait_for_timeout(400)
-    yield page
-    page.close()
-    undo_to(browser, server, steps)
-
-
-def undo_to(browser, server, steps: int) -> None:
-    """Press the toolbar's Undo until the session has `steps` undo steps again."""
-    st = server.idle()
-    if st["session"]["history"][0] <= steps:
-        return
-    page = browser.new_page(viewport={"width": 1200, "height": 800})
-    page.goto(server.url)
-    page.wait_for_selector("#undo-button", timeout=30000)
-    for _ in range(st["session"]["history"][0] - steps):
-        page.wait_for_function("() => !document.querySelector('#undo-button').disabled", timeout=10000)
-        page.locator("#undo-button").click()
-        page.wait_for_timeout(250)
-    server.wait(lambda s: s["session"]["history"][0] <= steps, what="the steps undone")
-    page.close()
-
-
-def view(page) -> dict:
-    return page.evaluate(f"() => {VIEW}.describe()")
-
-
-def canvas(page) -> dict:
-    return page.locator("#clay-view canvas").bounding_box()
-
-
-def centre(page, dx: float = 0.0, dy: float = 0.0) -> tuple[float, float]:
-    box = canvas(page)
-    return box["x"] + box["width"] / 2 + dx, box["y"] + box["height"] / 2 + dy
+    yield from open_tab(browser, server)
 
 
 def screen(page, j: int) -> np.ndarray:
