@@ -79,6 +79,18 @@ def clear_flag(flag: wp.array(dtype=wp.int32)):
     flag[0] = 0
 
 
+@wp.kernel(enable_backward=False)
+def count_down(stepped: wp.array(dtype=wp.int32), left: wp.array(dtype=wp.int32), going: wp.array(dtype=wp.int32)):
+    """A run of carry-only cycles (shaping_path): one cycle fewer left (left[0]), and going[0] = 1 while a place
+    stepped in this cycle and cycles are left. A cycle in which no place stepped carries its patches to where the
+    cycle before did: every later one would too, so the run stops there."""
+    n = left[0] - 1
+    left[0] = n
+    going[0] = 0
+    if stepped[0] != 0 and n > 0:
+        going[0] = 1
+
+
 @functools.cache
 def shaping_kernels(n_dims: int) -> SimpleNamespace:
     """The shaping cycle's kernels for weights of n_dims features (compiled once per device on first use)."""

@@ -6,7 +6,9 @@ paper's paths and gives their results bit for bit.
 A run of cycles is captured as a graph (on the CPU too, where Warp replays it without Python) and replayed: a cycle
 is the point members' search and move (when there are point controls), the handles' step, binding again and carry
 (when a binding lives; binding again is a conditional node, and its flood a conditional loop, so a cycle whose
-bindings stand still costs two small launches), and the smoothing of the free nodes with the volume put back and the
+bindings stand still costs two small launches; with nothing else in the cycle, the run is a conditional loop that
+stops at the first cycle in which no place stepped, as every later cycle would carry to the same places), and the
+smoothing of the free nodes with the volume put back and the
 clamp (with smoothing). The cycle s reaches the point members' move through a device counter (two, passed on in
 turn), so one graph serves every s. Past the dense table, point members need their winners' distance rows fetched
 by the host each cycle: those cycles are launched one by one.
@@ -21,7 +23,7 @@ import warp as wp
 
 from .closed_parts import closed_parts, no_closed_parts
 from .handles import TAUBIN_MOST, Handles
-from .shaping_kernels import FIND_STRETCH
+from .shaping_kernels import FIND_STRETCH, count_down
 from .smoothing_kernels import smoothing_steps
 from .som_controls import Controls
 from .som_model import SomModel, mask_of
@@ -47,6 +49,8 @@ class ShapingPath:
         self.graphs = Graphs(model.device)
         self.captured = model.device == "cpu" or wp.is_conditional_graph_supported()
         self.counter = wp.zeros(2, dtype=wp.int32, device=model.device)
+        self.left = wp.zeros(1, dtype=wp.int32, device=model.device)  # a carry-only run's cycles left ...
+        self.going = wp.zeros(1, dtype=wp.int32, device=model.device)  # ... and whether it goes on
         self._counter_s = None  # the s counter[parity] holds (None: unknown)
         self._parity = 0
         self._setup = None
@@ -111,6 +115,17 @@ class ShapingPath:
         parts = self._closed() if taubin else None
         volume = parts is not None and parts.count > 0
         stretches = max(1, math.ceil(n / FIND_STRETCH))
+        if live and not points and not steps:  # carry only: the cycles after the places arrived change nothing
+            self.left.fill_(cycles)
+            self.going.fill_(1)
+
+            def cycle() -> None:
+                self._step_places(model, state)
+                wp.launch(count_down, dim=1, device=dev, inputs=[h.stepped, self.left, self.going])
+                self._carry(model, state)
+
+            wp.capture_while(self.going, cycle)
+            return
         for i in range(cycles):
             if points:
                 h.keys.fill_(KEY_NONE)
@@ -122,15 +137,26 @@ class ShapingPath:
                           inputs=[state.w, h.members, h.keys, h.point_controls, h.order, schedule.table, self.counter,
                                   (parity + i) % 2, model.distances, model.slot_of])
             if live:
-                wp.launch(kern.advance, dim=h.n_rows, device=dev,
-                          inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.rebind,
-                                  h.stepped, h.changed])
-                wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
-                wp.launch(kern.carry, dim=n, device=dev,
-                          inputs=[h.slot_of_row, h.group_start, h.live_dev, h.patch, h.places, h.winner_anchors,
-                                  h.anchors, state.w, h.held_nodes, h.stepped])
+                self._step_places(model, state)
+                self._carry(model, state)
             if steps:
                 self._smooth(model, state, pulls, parts if volume else None, taubin)
+
+    def _step_places(self, model: SomModel, state: SomState) -> None:
+        """Step 3 (a): each live binding's place steps after its member, and the patches that stepped are bound again
+        (a conditional node)."""
+        h = self.handles
+        wp.launch(h.kernels.advance, dim=h.n_rows, device=model.device,
+                  inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.rebind, h.stepped,
+                          h.changed])
+        wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
+
+    def _carry(self, model: SomModel, state: SomState) -> None:
+        """Step 3 (b): every held node onto its target (clears `stepped` for the next cycle)."""
+        h = self.handles
+        wp.launch(h.kernels.carry, dim=model.n_neurons, device=model.device,
+                  inputs=[h.slot_of_row, h.group_start, h.live_dev, h.patch, h.places, h.winner_anchors, h.anchors,
+                          state.w, h.held_nodes, h.stepped])
 
     def _smooth(self, model: SomModel, state: SomState, pulls: list, parts, taubin: bool) -> None:
         """Step 4: the smoothing steps on the free nodes; with Taubin's rule the volume of each closed part put back

@@ -81,6 +81,37 @@ def apart(som: Som, ref: HandleSom) -> float:
 
 
 # ------------------------------------------------------------------------------------------- against the reference
+def test_a_drag_with_nothing_but_handles_matches_the_reference_frame_by_frame(device):
+    """No point control and no smoothing: a run carries the patches only, and the engine stops its cycles at the
+    first one in which no place stepped (every later one would carry to the same places). Frame by frame, with
+    frames longer and shorter than the places need to arrive, and after the rest of the run, as the reference's
+    cycle by cycle."""
+    faces, p = sphere()
+    size = metrics.bounding_diagonal(p)
+    controls = p[[40, 300]].copy()
+    radii = [0.12 * size, 0.1 * size]  # a place steps at most a quarter radius a cycle: the frames need several
+    som = kept(faces, p, controls, radii, device, smoothing=0.0)
+    ref = reference(faces, p, controls, radii, smoothing=0.0)
+    target = controls[0] * 1.6 + np.array([0.05, -0.2, 0.1])
+    som.grab(0)
+    ref.grab(0)
+    for f, cycles in enumerate((1, 2, 10, 3, 40), 1):
+        place = controls[0] + (target - controls[0]) * f / 5
+        move(som, 0, place)
+        ref.move(0, place)
+        som.step(cycles)
+        ref.step(cycles)
+        assert apart(som, ref) < 2e-5, f"frame {f}"
+    som.release(0)
+    ref.release(0)
+    move(som, 1, controls[1] * 0.8)  # a typed move of the other control: grabbed and released at once
+    ref.move(1, controls[1] * 0.8)
+    som.train()
+    ref.train()
+    assert apart(som, ref) < 2e-5
+    assert np.linalg.norm(som.weights[:, :3] - target, axis=1).min() < 0.03 * size  # the clay reached the hand
+
+
 @pytest.mark.parametrize("group", list(GROUPS))
 def test_a_drag_matches_the_float64_reference(device, group):
     """Control 0 of the sphere (radius a quarter of the size) dragged out and sideways in six frames, a point
