@@ -286,7 +286,7 @@ class ControlEdits:
             state.radii = np.concatenate([state.radii, np.full(len(samples), r, np.float32)])
             state.strokes = (*state.strokes, len(samples))
             state.controls = controls
-            state.control_ids = (*state.control_ids, *state.fresh_ids(len(samples)))
+            state.control_ids = (*state.control_ids, *state.run_ids((len(samples),)))
             self._queue(controls.copy())
             return first
 

@@ -193,7 +193,7 @@ def _panel(panel: PanelModel) -> None:
             with html.Div(classes="text-caption", id="speed-text",
                           style="white-space: nowrap; overflow: hidden; text-overflow: ellipsis"):
                 html.Div("cycle {{ stats.cycle_ms }} ms, {{ stats.fps }} frames/s")
-                html.Div("{{ stats.n_vertices }} nodes, {{ stats.k }} controls ({{ stats.k_eff }} with copies)")
+                html.Div("{{ stats.n_vertices }} nodes, {{ stats.controls_text }}", id="status-counts")
 
         # settings: each comes from its declaration (backend/schedule.py) and shows the value in effect (bound one
         # way: what a person types goes to the session as an intent, never into the state); a refused value shows
