@@ -646,25 +646,30 @@ def test_preset_chooser_lines_and_export(browser, server, tmp_path):
         shows(page, st)
         assert view_state(page)["kEff"] == 16
         assert not_blank(view_image(page)) > 0.05
-        day = datetime.date.today().isoformat()
+        def stamps(before):  # the minute of the click: "<day>-<hhmm>", local time (two exports of a day differ)
+            return {f"{t:%Y-%m-%d-%H%M}" for t in (before, datetime.datetime.now())}
+
+        before = datetime.datetime.now()
         with page.expect_download(timeout=20000) as dl:  # OBJ: the format menu's first choice
             page.locator("#export-mesh").click()
-        assert dl.value.suggested_filename == f"lines-{day}.obj"  # named after the session
+        assert dl.value.suggested_filename in {f"lines-{t}.obj" for t in stamps(before)}  # the session and the time
         path = tmp_path / "lines.obj"
         dl.value.save_as(path)
         text = path.read_text()
         assert text.count("\nv ") + text.startswith("v ") == 1204  # roots and tips
         page.locator(".v-select:has(#export-format) .v-field").click()  # the format menu: Rhino
         page.get_by_text("Rhino .3dm (mesh, controls)").click()
+        before = datetime.datetime.now()
         with page.expect_download(timeout=20000) as dl:
             page.locator("#export-mesh").click()
-        assert dl.value.suggested_filename == f"lines-{day}.3dm"
+        assert dl.value.suggested_filename in {f"lines-{t}.3dm" for t in stamps(before)}
         dl.value.save_as(tmp_path / "lines.3dm")
         rhino = helpers.read_3dm(tmp_path / "lines.3dm")
         assert len(rhino["clay"].vertices) == 1204 and len(rhino["controls"]) == 8
+        before = datetime.datetime.now()
         with page.expect_download(timeout=20000) as dl:
             page.locator("#save-session").click()
-        assert dl.value.suggested_filename == f"lines-{day}.npz"
+        assert dl.value.suggested_filename in {f"lines-{t}.npz" for t in stamps(before)}
         saved = tmp_path / "session.npz"
         dl.value.save_as(saved)
         assert saved.stat().st_size > 1000

@@ -285,7 +285,7 @@ class PanelModel:
         return self.attempt(edit)
 
     def export_name(self, ext: str) -> str:
-        """What an export (or a saved session) of this session is called: "sphere-2026-11-27.obj"."""
+        """What an export (or a saved session) of this session is called: "sphere-2026-11-27-1042.obj"."""
         return self.session.files.export_name(ext)
 
     def export_bytes(self, ext: str) -> bytes:
