@@ -199,6 +199,29 @@ def sigma_of(d_max: int) -> float:
     return d_max / math.sqrt(2.0 * math.log(2.0))
 
 
+#: A point control moved across h edges restarts with a neighbourhood c(s0) = reach * sigma of at least MOVE_SPAN * h
+#: hops, up to a reach of MOVE_REACH_MOST (`reach_for_move`). Measured on the car (BENCHMARKS.md, "A long move of a
+#: point control"): at the default reach, moves of 0.3 to 1.2 units (1.4 to 5.5 median edges) ended with the moved
+#: control's winner drawn out to a needle (spike figure 0.38 to 1.30) and up to 0.096 short of it; with these two the
+#: spike stayed at most 0.48 (mean 0.27, the trained car's own 0.26), the gap 0.031 and the far half within 2.6% of
+#: the size. A wider restart draws the whole car in for a moment, every control's patch with it (its bounding
+#: diagonal fell to 0.945 of its size at a reach of 0.18, 0.91 at 0.2, 0.86 at 0.22), and past about a quarter of
+#: the schedule regrows it (the far half moved 6-7% at 0.26 to 0.39).
+MOVE_SPAN = 1.5
+MOVE_REACH_MOST = 0.18
+
+
+def reach_for_move(reach: float, hops: float, d_max: int) -> float:
+    """The reach a local restart takes after a point control moved across `hops` edges (its distance moved over the
+    clay's median edge length): `reach`, or wider where the neighbourhood it begins with spans less than MOVE_SPAN
+    times the move (up to MOVE_REACH_MOST), so the clay around the control follows it rather than one node drawn out
+    to a needle."""
+    sigma = sigma_of(d_max)
+    if not sigma or not math.isfinite(hops) or hops <= 0:
+        return reach
+    return max(reach, min(MOVE_REACH_MOST, MOVE_SPAN * hops / sigma))
+
+
 #: Entries of the table computed at once in float64 (8 MiB a temporary).
 TABLE_BLOCK = 1 << 20
 #: Past the dense table the neighbourhood is cut where theta(d, s) < NEIGHBOURHOOD_CUT = 2^-24 (half of float32's

@@ -69,8 +69,9 @@ class SomSchedule:
         assert self.table is not None  # made with the schedule
         return self.table.numpy()
 
-    def restart_iteration(self) -> int:
-        return restart_iteration(self.values.reach, self.values.iterations)
+    def restart_iteration(self, reach: float | None = None) -> int:
+        """s0 of a local restart with `reach` (None: the schedule's)."""
+        return restart_iteration(self.values.reach if reach is None else reach, self.values.iterations)
 
     def steps(self) -> list[float]:
         """The strengths of the smoothing steps a cycle runs (smoothing_kernels.smoothing_steps)."""

@@ -95,8 +95,9 @@ def test_a_loaded_mesh_goes_back_in_its_own_frame_with_its_controls(tmp_path):
     s = Session("car", device="cpu", autosave=False, start=False)
     try:
         s.load_mesh(tmp_path / "ball.stl")
+        before = datetime.datetime.now()
         path = tmp_path / s.files.export_name("3dm")
-        assert path.name == f"ball-{datetime.date.today().isoformat()}.3dm"
+        assert path.name in {f"ball-{t:%Y-%m-%d-%H%M}.3dm" for t in (before, datetime.datetime.now())}
         s.export_mesh(path, units="millimeters")
         got = helpers.read_3dm(path)
         np.testing.assert_allclose(np.ptp(got["clay"].vertices, axis=0), np.ptp(src.vertices, axis=0), rtol=1e-6)
@@ -109,9 +110,11 @@ def test_a_loaded_mesh_goes_back_in_its_own_frame_with_its_controls(tmp_path):
         s.close()
 
 
-def test_export_names_say_the_session_and_the_day():
-    day = datetime.date(2026, 11, 27)
-    assert export_name("sphere", "obj", day) == "sphere-2026-11-27.obj"
-    assert export_name("mesh:my chair (v2)", ".3DM", day) == "my-chair-v2-2026-11-27.3dm"
-    assert export_name("../../etc/passwd", "stl", day) == "etc-passwd-2026-11-27.stl"
-    assert export_name("", "glb", day) == "clay-2026-11-27.glb"
+def test_export_names_say_the_session_the_day_and_the_time():
+    """Two exports of a day do not collide (the chair and the canopy of the trial, both grids, did)."""
+    when = datetime.datetime(2026, 11, 27, 10, 42, 31)
+    assert export_name("sphere", "obj", when) == "sphere-2026-11-27-1042.obj"
+    assert export_name("mesh:my chair (v2)", ".3DM", when) == "my-chair-v2-2026-11-27-1042.3dm"
+    assert export_name("../../etc/passwd", "stl", when) == "etc-passwd-2026-11-27-1042.stl"
+    assert export_name("", "glb", when) == "clay-2026-11-27-1042.glb"
+    assert export_name("grid", "obj", when.replace(hour=9, minute=5)) == "grid-2026-11-27-0905.obj"

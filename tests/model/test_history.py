@@ -154,7 +154,7 @@ def test_choosing_the_current_preset_again_restores_its_controls(car):
 
 def test_a_loaded_session_is_exactly_as_saved_and_trains_nothing(car, tmp_path):
     car.pause()
-    drag(car, 4, [-0.2, 0.7, 1.3])
+    drag(car, 4, [-0.25, 0.5, 1.0])  # a short drag: s0 of the preset's reach (a long one widens it)
     assert car.wait_applied(30)
     saved = state_of(car)
     assert saved["iteration"] == 920  # saved mid-run: restarted at s0, paused there

@@ -125,9 +125,10 @@ def test_move_control_restarts_schedule_and_mesh_follows(session):
     np.testing.assert_allclose(after.effective_controls[9 + 2, :3], target * [1, -1, 1])
     d_after = _nearest(after.positions, target)
     assert d_after < 0.5 * d_before
-    # the schedule restarts locally from the latest weights, not from the start mesh: s0 = floor((1 - reach) S)
+    # the schedule restarts locally from the latest weights, not from the start mesh: s0 = floor((1 - reach) S) for a
+    # short move (a long one widens the reach: tests/model/test_long_moves.py)
     session.pause()
-    session.move_control(2, [3.0, 1.0, 0.5])
+    session.move_control(2, [3.2, 1.4, 0.95])
     assert session.wait_applied(10)
     paused = session.frame
     assert paused.iteration == 920 and session.parameters["reach"] == 0.08

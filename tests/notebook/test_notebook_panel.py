@@ -30,6 +30,7 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 pytest.importorskip("ipywidgets")
 
+from somwidget.backend.schedule import MOVE_REACH_MOST  # noqa: E402
 from somwidget.frontend.model import Session  # noqa: E402
 from somwidget.frontend.notebook import Panel, SomWidget, show  # noqa: E402
 
@@ -187,8 +188,10 @@ def test_session_intents_update_the_widgets(panel, session):
     gap_before = _gap_of(panel, 2)
     session.move_control(2, [3.6, 0.25, -0.2])  # the nose control, 1 unit forward: the schedule restarts
     wait_for(lambda: "3.6, 0.25, -0.2" in panel.controls_html.value, what="the control's new position")
-    # a local restart: s0 = floor((1 - reach) S) = 460
-    wait_for(lambda: panel.progress.value == 460 and "iteration 460 / 500 (paused)" in panel.status.value,
+    # a local restart: s0 = floor((1 - reach) S), the reach widened for a long move (4.6 median edges) to its most,
+    # MOVE_REACH_MOST: 410
+    s0 = int(np.floor((1 - MOVE_REACH_MOST) * 500))
+    wait_for(lambda: panel.progress.value == s0 and f"iteration {s0} / 500 (paused)" in panel.status.value,
              what="the restarted iteration")
     assert _gap_of(panel, 2) > gap_before + 0.5  # paused: the clay has not followed yet
     assert panel.train_button.description == "Resume"  # stopped part way through the restarted schedule

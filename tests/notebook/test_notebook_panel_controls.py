@@ -41,6 +41,14 @@ def test_controls_are_numbered_by_their_ids_and_a_stroke_is_one_row(panel):
     panel.refresh()
     assert session.n_controls > 6 and numbers(panel) == ["0", "2", "3", "4", "5", "6"]
     assert panel.controls_html.value.count("~") == 1  # the stroke's row, marked
+    assert "6 controls" in panel.status.value  # the status counts the table's rows, a stroke as one
+    session.add_control([0.3, 0.9, -0.3])  # a double click: the number after the table's highest
+    assert session.wait_applied(30)
+    panel.refresh()
+    assert numbers(panel) == ["0", "2", "3", "4", "5", "6", "7"] and "7 controls" in panel.status.value
+    session.remove_control(session.n_controls - 1)
+    assert session.wait_applied(30)
+    panel.refresh()
     assert panel.radius_of.options[-1] == ("6 (stroke)", first)
     panel.radius_of.value = first
     panel.radius.value = 0.3  # the stroke's radius: every sample's
@@ -62,4 +70,6 @@ def test_all_radii_follows_a_preset_switch_and_a_group_change_is_told(panel):
     panel.group.value = "mirror-y"
     panel.refresh()
     assert "6 controls kept" in panel.error.value and "2 and 3" in panel.error.value
-    assert session.n_controls == 6
+    assert session.n_controls == 6 and session.wait_applied(30)
+    panel.refresh()
+    assert "6 controls (12 with their copies)" in panel.status.value

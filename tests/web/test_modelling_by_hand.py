@@ -165,8 +165,10 @@ def test_a_vase_from_the_tube_in_five_actions(browser, server):
             centre = p.mean(axis=0)
             assert n @ np.array([centre[0], centre[1], 0.0]) > 0, face
         assert st["session"]["parameters"]["group"] == "radial-16-z" and len(st["session"]["strokes"]) == 1
-        rows_shown(page, 1)  # the stroke: one row
+        rows_shown(page, 1)  # the stroke: one row, counted as one control with its 15 copies
         assert page.locator("#controls-table .stroke-mark").count() == 1
+        page.wait_for_function("() => document.querySelector('#status-counts')?.innerText.endsWith("
+                               "'1 control (16 with its copies)')", timeout=10000)
         v = page.evaluate(f"() => {VIEW}.describe()")
         assert v["tool"] is None and v["desktop"]["revolves"] == 1  # one profile, one revolve: the tool let go
         page.mouse.move(5, 5)  # off the view: no disc under the cursor in the pictures
@@ -201,7 +203,8 @@ def test_turning_a_group_on_keeps_every_control_and_says_so(browser, server):
         page.wait_for_function("() => document.querySelector('#info-alert')?.innerText.includes('6 controls kept')",
                                timeout=10000)
         said = page.locator("#info-alert").inner_text()
-        assert "2 and 3" in said and "4 and 5" in said and "images" in said, said
+        assert "Controls 2 and 3 as well as 4 and 5 already sit where each other's copies go" in said, said
+        assert "delete one of each pair" in said and "images" not in said and "kept apart" not in said, said
         assert rows_shown(page, 6) == ["0", "1", "2", "3", "4", "5"]
     finally:
         page.close()
@@ -296,7 +299,17 @@ def test_a_stroke_is_one_row_and_one_undo_step(browser, server):
                          what="the stroke")
         assert len(st["session"]["controls"]) > k + 1  # a stroke of several samples
         assert rows_shown(page, k + 1)[-1] == str(k) and page.locator("#controls-table .stroke-mark").count() == 1
+        page.wait_for_function(  # the status counts the table's rows, the stroke as one, no copies without a group
+            f"() => document.querySelector('#status-counts')?.innerText.endsWith('{k + 1} controls')", timeout=10000)
         page.keyboard.press("Escape")
+        if page.evaluate(f"() => {VIEW}.describe().tool") == "stroke":
+            page.keyboard.press("s")  # the pen put down
+        page.mouse.dblclick(*page.evaluate(f"() => {VIEW}.modelScreen([0.8, 0.35, -0.5])"))  # a control added
+        server.wait(lambda s: len(s["session"]["strokes"]) == k + 2, what="the double click's control")
+        assert rows_shown(page, k + 2)[-2:] == [str(k), str(k + 1)]  # the number after the table's highest
+        page.wait_for_function(
+            f"() => document.querySelector('#status-counts')?.innerText.endsWith('{k + 2} controls')", timeout=10000)
+        page.locator("#undo-button").click()
         page.locator("#undo-button").click()
         server.wait(lambda s: s["session"]["history"][0] == steps and len(s["session"]["controls"]) == k,
                     what="the stroke undone whole")

@@ -420,3 +420,42 @@ def test_the_radius_under_the_cursor_shows_as_a_disc_and_follows_brackets_and_al
     assert view(page)["radiusDisc"]["radius"] == pytest.approx(rj, rel=1e-3)
     shot(page, "radius-disc-control")
     assert ROOT.exists()
+
+
+def _azimuth(v: dict) -> float:
+    """The camera's direction about the vertical (world y, the model's z), degrees."""
+    d = looking_from(v)
+    return float(np.degrees(np.arctan2(d[0], d[2])))
+
+
+def test_an_orbit_turns_about_a_third_of_a_degree_a_pixel_and_stays_above_the_ground(page, server):
+    """The first-time user's orbit: a 180 px drag across swung the view about 90 degrees and a drag up showed the
+    underside. Now 180 px turn about 63 degrees (0.35 a pixel), a drag up stops at the ground plane, and only the
+    Bottom view (key 6) looks from below; orbiting up from there past the ground brings the limit back."""
+    server.idle()
+    background = centre(page, 330, -200)  # empty space: a drag there orbits
+    page.mouse.move(*centre(page, 0, 300))
+    page.keyboard.press("1")  # Front: level with the ground
+    page.wait_for_timeout(200)
+    v0 = view(page)
+    assert abs(v0["polar"] - np.pi / 2) < 1e-3 and v0["maxPolar"] == pytest.approx(np.pi / 2)
+    drag(page, background, (180, 0))
+    turned = abs((_azimuth(view(page)) - _azimuth(v0) + 180) % 360 - 180)
+    assert 55 < turned < 70, f"a 180 px drag turned the view {turned:.1f} degrees"
+    drag(page, background, (0, 100))  # a drag down looks from higher up: 35 degrees
+    v = view(page)
+    assert np.degrees(np.pi / 2 - v["polar"]) == pytest.approx(35, abs=4)
+    drag(page, background, (0, -300))  # a long drag up: the camera stops level with the target, never below
+    v = view(page)
+    assert v["polar"] <= np.pi / 2 + 1e-6 and v["camera"][1] >= v["target"][1] - 1e-6
+    page.keyboard.press("6")  # Bottom: the person asks to look from below
+    page.wait_for_timeout(200)
+    v = view(page)
+    assert v["polar"] > 0.9 * np.pi and v["camera"][1] < v["target"][1]
+    drag(page, background, (0, 100))  # orbiting from below is free
+    v = view(page)
+    assert np.pi / 2 < v["polar"] < 0.85 * np.pi
+    drag(page, background, (0, 300))  # up past the ground: the limit is back
+    drag(page, background, (0, -400))
+    v = view(page)
+    assert v["polar"] <= np.pi / 2 + 1e-6 and v["maxPolar"] == pytest.approx(np.pi / 2)

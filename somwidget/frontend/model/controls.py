@@ -24,6 +24,8 @@ from .trainer import Trainer
 MAX_CONTROLS = _presets.MAX_CONTROLS
 #: Largest |value| accepted for a control coordinate or feature.
 MAX_ABS_VALUE = 1e6
+#: Edges sampled (evenly) for the clay's median edge length when a move's restart is sized: a drag frame stays cheap.
+MEDIAN_EDGES = 4096
 
 
 def check_index(name: str, value, count: int) -> int:
@@ -63,13 +65,35 @@ class ControlEdits:
         self.hands = hands  # a control another hand holds is refused (hands.py)
 
     def _queue(self, controls: np.ndarray, keep: bool = False,
-               rest: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+               rest: tuple[np.ndarray, np.ndarray] | None = None, reach: float | None = None) -> None:
         """The new controls (and the radii and strokes the clay holds) to the Som (caller holds state.lock); inside a
         drag they restart from where it began; with `keep` nothing restarts (a control placed); with `rest` (weights
-        and controls before a move) the move is made again from that shape."""
+        and controls before a move) the move is made again from that shape; `reach`: the restart's own."""
         state = self.state
         self.trainer.enqueue(SetControls(controls, state.radii.copy(), state.strokes, self.timeline.drag_anchor(),
-                                         state.control_ids, keep=keep, group=state.symmetry, rest=rest))
+                                         state.control_ids, keep=keep, group=state.symmetry, rest=rest, reach=reach))
+
+    def _move_reach(self, run: range, values: np.ndarray) -> float | None:
+        """The reach of the restart that moves the point controls `run` to `values` (caller holds state.lock): wide
+        enough for the distance they moved from where the restart's shape had them (a drag's start, else where they
+        are), over the clay's median edge (schedule.reach_for_move); None for a handle (its patch goes with it)."""
+        state = self.state
+        if state.radii[list(run)].any():
+            return None
+        pos = list(state.layout.position)
+        before = state.controls[list(run)]
+        boundary = self.timeline.gestures.boundary if self.timeline.drag_anchor() is not None else None
+        if boundary is not None:
+            ids = self.timeline.gestures.boundary_ids
+            known = [ids.index(state.control_ids[i]) for i in run if state.control_ids[i] in ids]
+            if len(known) == len(run):
+                before = np.asarray(boundary.controls)[known]
+        moved = float(np.linalg.norm(values[:, pos] - before[:, pos], axis=1).max(initial=0.0))
+        edges = state.preset.topology.edges
+        edge = median_edge(self.frames.latest.positions, edges[::max(1, len(edges) // MEDIAN_EDGES)])
+        if not moved or not edge:
+            return None
+        return schedule.reach_for_move(float(state.params["reach"]), moved / edge, state.som.d_max)
 
     @property
     def radii(self) -> np.ndarray:
@@ -103,10 +127,12 @@ class ControlEdits:
                  else self.index_of(control_id))
             controls = state.controls.copy()
             values = edit(i, controls[i].copy())
-            controls[list(state.run_of(i))] += values - controls[i]
+            run = state.run_of(i)
+            controls[list(run)] += values - controls[i]
             controls[i] = values  # exactly as given
+            reach = self._move_reach(run, controls[list(run)])
             state.controls = controls
-            self._queue(controls.copy())
+            self._queue(controls.copy(), reach=reach)
 
     def move(self, index, position, control_id=None) -> None:
         layout = self.state.layout
@@ -260,7 +286,7 @@ class ControlEdits:
             state.radii = np.concatenate([state.radii, np.full(len(samples), r, np.float32)])
             state.strokes = (*state.strokes, len(samples))
             state.controls = controls
-            state.control_ids = (*state.control_ids, *state.fresh_ids(len(samples)))
+            state.control_ids = (*state.control_ids, *state.run_ids((len(samples),)))
             self._queue(controls.copy())
             return first
 

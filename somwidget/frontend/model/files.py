@@ -33,11 +33,18 @@ def state_of(snapshot: dict) -> dict:
     }
 
 
-def export_name(session_name: str, ext: str, day: datetime.date | None = None) -> str:
-    """The file an export or a save of a session is named: "<session>-<day>.<ext>" ("sphere-2026-11-27.obj"); the
-    session's name (its preset's, a loaded file's stem) in letters, digits, "-", "_" and "." only."""
-    name = re.sub(r"[^A-Za-z0-9._-]+", "-", str(session_name).removeprefix("mesh:")).strip("-.") or "clay"
-    return f"{name[:60]}-{(day or datetime.date.today()).isoformat()}.{str(ext).lower().lstrip('.')}"
+def export_stem(session_name: str) -> str:
+    """The session's name as the start of a file name (its preset's, a loaded file's stem): letters, digits, "-",
+    "_" and "." only."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", str(session_name).removeprefix("mesh:")).strip("-.")[:60] or "clay"
+
+
+def export_name(session_name: str, ext: str, when: datetime.datetime | None = None) -> str:
+    """The file an export or a save of a session is named: "<session>-<day>-<hhmm>.<ext>" ("sphere-2026-11-27-1042.obj",
+    local time, default now), so two exports of a day do not collide. The web page names its downloads the same way
+    from `export_stem` and the browser's clock (web/layout.py)."""
+    stamp = f"{(when or datetime.datetime.now()):%Y-%m-%d-%H%M}"
+    return f"{export_stem(session_name)}-{stamp}.{str(ext).lower().lstrip('.')}"
 
 
 def read(path, max_vertices: int) -> dict:
@@ -136,7 +143,7 @@ class SessionFiles:
                             units=units)
 
     def export_name(self, ext: str) -> str:
-        """The name a download of this session's export (or save) gets: "sphere-2026-11-27.obj"."""
+        """The name a download of this session's export (or save) gets now: "sphere-2026-11-27-1042.obj"."""
         return export_name(self.state.preset.name, ext)
 
     def apply_variant(self, controls, parameters: dict, weights) -> None:

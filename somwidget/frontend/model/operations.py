@@ -63,6 +63,7 @@ class SetControls(Operation):
     keep: bool = False
     group: object = None
     rest: tuple[np.ndarray, np.ndarray] | None = None
+    reach: float | None = None  # the restart's own reach (a long move of a point control), None: the Som's
     key = "controls"
 
     @property
@@ -71,8 +72,11 @@ class SetControls(Operation):
 
     def after(self, earlier: SetControls) -> SetControls:
         """This operation in place of `earlier`, still queued (several within one frame: only the latest counts):
-        a restart the earlier one asked for still happens."""
-        return self if self.keep <= earlier.keep else dataclasses.replace(self, keep=False)
+        a restart the earlier one asked for still happens, as wide as the wider of the two asked."""
+        reach = max((r for r in (self.reach, earlier.reach) if r is not None), default=None)
+        if self.keep <= earlier.keep and reach == self.reach:
+            return self
+        return dataclasses.replace(self, keep=self.keep and earlier.keep, reach=reach)
 
     def apply(self, som) -> None:
         if self.keep:
@@ -84,7 +88,7 @@ class SetControls(Operation):
                 som.restore(weights, som.iterations)
                 som.regroup(controls, self.radii, *engine_symmetry(self.group), keep_shape=True, strokes=self.strokes)
             som.set_controls(self.controls, self.radii, strokes=self.strokes,
-                             from_anchor=self.anchor is som and not som.held)
+                             from_anchor=self.anchor is som and not som.held, reach=self.reach)
 
     def applied(self, state) -> None:
         state.applied_ids = self.ids  # the ids of the controls the Som now holds
@@ -134,6 +138,8 @@ class SetParameter(Operation):
 
     def apply(self, som) -> None:
         setattr(som, self.name, self.value)
+        if self.name == "reach":  # the Som takes it at its next restart: this change is one
+            som.restart()
 
     def roll_back(self, state, som) -> None:
         state.params[self.name] = type(state.params[self.name])(getattr(som, self.name))

@@ -192,8 +192,23 @@ class PanelModel:
             return "Pause"
         return "Resume" if frame.iteration < frame.iterations else "Train"
 
+    @staticmethod
+    def control_count(frame: Frame) -> tuple[int, int]:
+        """(controls, with their copies) as the person counts them: a stroke is one control (one row of the controls
+        table), and each has as many copies as the symmetry group makes."""
+        samples = max(1, frame.n_controls)
+        rows = len(frame.strokes) if sum(frame.strokes) == frame.n_controls else frame.n_controls
+        return rows, rows * max(1, len(frame.gaps) // samples)
+
+    @classmethod
+    def controls_text(cls, frame: Frame) -> str:
+        """"9 controls (18 with their copies)", "1 control (16 with its copies)", "3 controls" without a group."""
+        k, k_eff = cls.control_count(frame)
+        said = f"{k} control{'s' * (k != 1)}"
+        return said if k_eff == k else f"{said} ({k_eff} with {'its' if k == 1 else 'their'} copies)"
+
     def status(self, frame: Frame) -> dict:
-        k = frame.n_controls
+        k, k_eff = self.control_count(frame)
         gaps = frame.gaps
         return {
             "iteration": frame.iteration, "S": frame.iterations, "progress": round(100.0 * frame.progress, 1),
@@ -201,7 +216,8 @@ class PanelModel:
             "state": "training" if frame.running else ("paused" if frame.paused else "converged"),
             "cycle_ms": fmt(frame.cycle_time * 1e3, 3) if frame.cycle_time > 0 else "-",
             "fps": fmt(self.session.frames_per_second, 3), "n_vertices": int(frame.positions.shape[0]), "k": k,
-            "k_eff": int(len(gaps)), "max_gap": fmt(float(gaps.max()) if len(gaps) else 0.0, 3),
+            "k_eff": k_eff, "controls_text": self.controls_text(frame),
+            "max_gap": fmt(float(gaps.max()) if len(gaps) else 0.0, 3),
             "can_undo": frame.history[0] > 0, "can_redo": frame.history[1] > 0, "held": frame.held,
             "train_label": self.train_label(frame), "train_help": TRAIN_HELP[self.train_label(frame)],
         }
@@ -269,7 +285,7 @@ class PanelModel:
         return self.attempt(edit)
 
     def export_name(self, ext: str) -> str:
-        """What an export (or a saved session) of this session is called: "sphere-2026-11-27.obj"."""
+        """What an export (or a saved session) of this session is called: "sphere-2026-11-27-1042.obj"."""
         return self.session.files.export_name(ext)
 
     def export_bytes(self, ext: str) -> bytes:

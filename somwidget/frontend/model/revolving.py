@@ -78,4 +78,4 @@ def _lathed(state, profile_r, profile_h, angle, axis, group, radius, pts) -> Ste
     params = {name: list(v) if isinstance(v, list) else v for name, v in state.params.items()}
     return Step(preset=state.preset, controls=samples, parameters=params, weights=weights,
                 iteration=int(som.iterations), radii=np.full(len(samples), radius, np.float32), symmetry=group,
-                strokes=(len(samples),), control_ids=state.fresh_ids(len(samples)))
+                strokes=(len(samples),), control_ids=state.run_ids((len(samples),)))

@@ -215,9 +215,11 @@ class Regrouped:
                            "moves)")
         said += f"{k} control{'s' * (k != 1)} kept, each with {group.order - 1} cop{'ies' if group.order > 2 else 'y'}"
         if self.images:
-            pairs = ", ".join(f"{a} and {b}" for a, b in self.images[:4]) + (", ..." if len(self.images) > 4 else "")
-            said += (f"; {pairs} are each other's images, kept apart: remove one to leave its place to the other's "
-                     "copy")
+            shown = [f"{a} and {b}" for a, b in self.images[:4]]
+            pairs = (", ".join(shown[:-1]) + " as well as " + shown[-1] if len(shown) > 1 else shown[0]) + (
+                " (and more)" if len(self.images) > 4 else "")
+            said += (f". Controls {pairs} already sit where each other's copies go, so two controls now pull at each "
+                     "of those places: delete one of each pair to leave one there")
         return said
 
 
@@ -227,8 +229,7 @@ def regroup(state, group) -> Regrouped:
     its images (within PAIR_TOLERANCE of the controls' spread): the copies that group left when it was turned off, so
     the effective controls stay the same. Otherwise none merges: every control is kept, with copies of its own."""
     controls, radii, strokes = expand(state.controls, state.radii, state.strokes, state.symmetry)
-    k = len(state.controls)
-    ids = list(state.control_ids) + list(state.fresh_ids(len(controls) - k))
+    ids = list(state.control_ids) + list(state.run_ids(strokes[len(state.strokes):]))
     if group is None:
         return Regrouped(controls, radii, tuple(ids), strokes, True)
     pos = list(state.layout.position)

@@ -29,6 +29,10 @@ DEFAULT_MAX_VERTICES = 262_144
 GPU_MAX_VERTICES = 4_194_304
 
 
+#: Ids of a stroke's samples after its first start here (`run_ids`): no view shows them, so the numbers shown count
+#: strokes as one. Below fields.py's u31 limit with room for 2^30 samples.
+SAMPLE_IDS = 1 << 30
+
 def max_vertices_for(device: str | None) -> int:
     """The largest mesh a session on `device` takes by default: GPU_MAX_VERTICES on a GPU, DEFAULT_MAX_VERTICES on
     the CPU."""
@@ -131,6 +135,7 @@ class ModellingState:
         self.unsaved = True  # a change the autosave has not written yet (a new session: its first state)
         self.completed = 0  # steps completed (and undos, redos) so far: the autosave writes each at once
         self._next_id = 0
+        self._next_sample_id = SAMPLE_IDS
         self.install(preset, som)
 
     def install(self, preset: Preset, som) -> None:
@@ -144,8 +149,9 @@ class ModellingState:
         self.radii = np.array(som.radii, dtype=np.float32)
         self.strokes = tuple(som.strokes)
         if not same:  # another clay's controls: numbered from 0 again (the same controls, Refine: their ids stay)
-            self._next_id = 0
-            self.control_ids = self.fresh_ids(len(self.controls))
+            self._next_id, self._next_sample_id = 0, SAMPLE_IDS
+            self.control_ids = self.run_ids(self.strokes if sum(self.strokes) == len(self.controls)
+                                            else (1,) * len(self.controls))
         self.applied_ids = self.control_ids
         self.symmetry = som_group(som, preset.layout)
         self.params = settings_of(som)
@@ -154,10 +160,26 @@ class ModellingState:
         self.generation += 1
 
     def fresh_ids(self, k: int) -> tuple[int, ...]:
-        """k new control ids, never used before on this clay (since its preset was installed)."""
+        """k new control ids, never used before on this clay (since its preset was installed): the numbers the views
+        and the controls table show, each the next after the highest given."""
         first = self._next_id
         self._next_id += k
         return tuple(range(first, first + k))
+
+    def run_ids(self, strokes) -> tuple[int, ...]:
+        """New ids for controls in runs of these lengths (a stroke's samples act as one): a run's first sample takes
+        the next shown number (`fresh_ids`), the others ids from SAMPLE_IDS on, which no view shows, so a stroke
+        counts as one number and the next control added takes the number after it."""
+        ids = []
+        for n in strokes:
+            ids += [*self.fresh_ids(1), *range(self._next_sample_id, self._next_sample_id + n - 1)]
+            self._next_sample_id += n - 1
+        return tuple(ids)
+
+    def _renumber_after(self, ids) -> None:
+        """The next ids follow `ids` (ids put back by an undo or a loaded session)."""
+        self._next_id = max(self._next_id, max((i for i in ids if i < SAMPLE_IDS), default=-1) + 1)
+        self._next_sample_id = max(self._next_sample_id, max((i for i in ids if i >= SAMPLE_IDS), default=-1) + 1)
 
     def run_of(self, i: int) -> range:
         """The indices of the controls that act as one with control i (a stroke's samples; i alone otherwise)."""
@@ -209,9 +231,10 @@ class ModellingState:
         self.strokes = tuple(som.strokes)
         if step.control_ids is not None and len(step.control_ids) == len(self.controls):  # the ids it had: each
             self.control_ids = tuple(step.control_ids)  # control's number and colour come back with it
-            self._next_id = max(self._next_id, max(self.control_ids, default=-1) + 1)
+            self._renumber_after(self.control_ids)
         elif len(self.controls) != len(self.control_ids):  # a control added or removed: new ids (a grab on an id
-            self.control_ids = self.fresh_ids(len(self.controls))  # that is gone ends)
+            self.control_ids = self.run_ids(self.strokes if sum(self.strokes) == len(self.controls)  # that is gone
+                                            else (1,) * len(self.controls))  # ends)
         self.applied_ids = self.control_ids
         self.params = {name: list(v) if isinstance(v, list) else v for name, v in p.items()}
         self.set_symmetry(step.symmetry)

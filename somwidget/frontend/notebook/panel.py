@@ -323,7 +323,7 @@ class Panel(widgets.VBox):
             self.status.value = _BLOCK.format(
                 f'<span class="somwidget-iteration">iteration {st["iteration"]} / {st["S"]} ({st["state"]})'
                 f"</span><br><small>cycle {st['cycle_ms']} ms, {st['fps']} frames/s; "
-                f"{st['n_vertices']} nodes, {st['k']} controls ({st['k_eff']} with copies)</small>")
+                f"{st['n_vertices']} nodes, {st['controls_text']}</small>")
             self.train_button.description = st["train_label"]
             self.train_button.tooltip = st["train_help"]
             self.train_button.icon = "pause" if frame.running else "play"

@@ -15,6 +15,11 @@ from ..model.panel import GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
 from ..model.variants import VARIANTS_HELP
 from .state_guard import state_key
 
+#: What a download's name gets after the session's (`export_stem`): "-<day>-<hhmm>" by the browser's clock, as
+#: model/files.py's export_name writes it ("sphere-2026-11-27-1042.obj"): two exports of a day do not collide.
+STAMP = ("'-' + new Date(Date.now() - new Date().getTimezoneOffset() * 60000).toISOString().slice(0, 16)"
+         ".replace('T', '-').replace(':', '')")
+
 #: The page's keyboard shortcuts: Ctrl+Z undoes, Ctrl+Shift+Z or Ctrl+Y redoes (Cmd on a Mac), except while a text
 #: field has the focus (its own undo).
 SHORTCUTS_JS = """
@@ -193,7 +198,7 @@ def _panel(panel: PanelModel) -> None:
             with html.Div(classes="text-caption", id="speed-text",
                           style="white-space: nowrap; overflow: hidden; text-overflow: ellipsis"):
                 html.Div("cycle {{ stats.cycle_ms }} ms, {{ stats.fps }} frames/s")
-                html.Div("{{ stats.n_vertices }} nodes, {{ stats.k }} controls ({{ stats.k_eff }} with copies)")
+                html.Div("{{ stats.n_vertices }} nodes, {{ stats.controls_text }}", id="status-counts")
 
         # settings: each comes from its declaration (backend/schedule.py) and shows the value in effect (bound one
         # way: what a person types goes to the session as an intent, never into the state); a refused value shows
@@ -309,11 +314,11 @@ def _panel(panel: PanelModel) -> None:
                              "Blender and game engines (the controls as named nodes)")
             v3.VBtn("Export", size="small", variant="tonal", prepend_icon="mdi-download", id="export-mesh",
                     title="Download the clay in the chosen format",
-                    click="utils.download(export_stem + '.' + export_format, trigger('export_mesh', "
+                    click=f"utils.download(export_stem + {STAMP} + '.' + export_format, trigger('export_mesh', "
                           "[export_format]), export_mimes[export_format])")
             v3.VBtn("Save session", size="small", variant="tonal", prepend_icon="mdi-content-save",
                     id="save-session",
-                    click="utils.download(export_stem + '.npz', trigger('save_session'), "
+                    click=f"utils.download(export_stem + {STAMP} + '.npz', trigger('save_session'), "
                           "'application/octet-stream')")
         v3.VFileInput(v_model=("session_upload",), label="Load a session (.npz)", density="compact",
                       hide_details=True, prepend_icon="mdi-folder-open", accept=".npz", id="session-upload",

@@ -13,6 +13,7 @@ import threading
 import time
 
 from ..model import Frame, Session
+from ..model.files import export_stem
 from ..model.panel import PanelModel, fmt
 from ..model.picture import png_bytes
 from ..model.settings import BY_NAME
@@ -96,7 +97,7 @@ class PanelState:
         s.preset_name = sess.preset.name
         s.preset_title = sess.preset.title
         s.preset_description = sess.preset.description
-        s.export_stem = self.panel.export_name("x")[:-2]  # what downloads are called: "<session>-<day>"
+        s.export_stem = export_stem(sess.preset.name)  # downloads: "<session>-<day>-<hhmm>" (layout.py, STAMP)
         for f in self.panel.fields:
             if force or values[f.name] != last.get(f.name):
                 s[state_key(f.name)] = values[f.name]

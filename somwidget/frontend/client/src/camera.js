@@ -12,6 +12,8 @@ const MARGIN = 1.0; // the fitted sphere (around the clay and its controls) just
 export const CLOSEST = 0.05; // the nearest the camera comes to its target, as a share of the Fit distance
 const WHEEL_STEP = 0.9; // one wheel notch (100 px of deltaY) takes the camera to this share of its distance
 const FOV = 45;
+export const DEGREES_PER_PIXEL = 0.35; // an orbit drag turns the view this much a pixel, whatever the view's size
+const ABOVE_GROUND = Math.PI / 2; // the orbit's largest polar angle: the camera stays above the ground plane
 
 // The axis views: where the camera looks from (world direction from the target) and the key that picks each. Top
 // and bottom lean a hair towards the right side so that the model's x runs left to right on screen.
@@ -31,7 +33,8 @@ export class CameraRig {
     this.camera = this.perspective;
     this.orbit = new OrbitControls(this.camera, domElement);
     this.orbit.enableDamping = false;
-    this.orbit.rotateSpeed = 0.6; // a drag across the view turns it about 200 degrees (1: a 120 px drag turned 90)
+    this.orbit.maxPolarAngle = ABOVE_GROUND; // orbiting never shows the underside (Bottom, key 6, looks from below)
+    this.setOrbitSpeed(domElement.clientHeight || 600);
     this.orbit.enableZoom = false; // the wheel is ours: towards the cursor, and a control's radius over a control
     this.domElement = domElement;
     this.aspect = 1;
@@ -55,12 +58,22 @@ export class CameraRig {
     return this.orthographicOn ? this.fitDistance / this.orthographic.zoom : d;
   }
 
+  // OrbitControls turns 2 pi rotateSpeed over the view's height: DEGREES_PER_PIXEL at this height (a 180 px drag
+  // turns about 63 degrees; 0.6 turned a 180 px drag about 90 in a 720 px view).
+  setOrbitSpeed(height) {
+    this.orbit.rotateSpeed = (DEGREES_PER_PIXEL * Math.max(1, height)) / 360;
+  }
+
   changed() {
+    // after a look from below, orbiting up past the ground plane brings the limit back
+    const polar = this.orbit.getPolarAngle();
+    if (this.orbit.maxPolarAngle > ABOVE_GROUND && polar <= ABOVE_GROUND + 1e-6) this.orbit.maxPolarAngle = ABOVE_GROUND;
     this.clip();
     this.onChange?.();
   }
 
   resize(width, height) {
+    this.setOrbitSpeed(height);
     this.aspect = width / height;
     this.perspective.aspect = this.aspect;
     this.perspective.updateProjectionMatrix();
@@ -145,6 +158,7 @@ export class CameraRig {
     if (!view) return false;
     const d = this.camera.position.distanceTo(this.orbit.target);
     const dir = new THREE.Vector3().fromArray(view.from).normalize();
+    this.orbit.maxPolarAngle = dir.y < 0 ? Math.PI : ABOVE_GROUND; // a view key may look from below
     this.camera.position.copy(this.orbit.target).addScaledVector(dir, d);
     this.orbit.update();
     this.stats.views += 1;
@@ -202,7 +216,7 @@ export class CameraRig {
     return {
       camera: this.camera.position.toArray(), target: this.orbit.target.toArray(), distance: this.distance,
       fitDistance: this.fitDistance, projection: this.orthographicOn ? 'orthographic' : 'perspective',
-      zoom: this.camera.zoom,
+      zoom: this.camera.zoom, polar: this.orbit.getPolarAngle(), maxPolar: this.orbit.maxPolarAngle,
     };
   }
 }
