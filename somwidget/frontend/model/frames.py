@@ -165,11 +165,12 @@ class FrameStream:
         self._times: list[float] = []
 
     def make(self, som, preset: Preset, generation: int, *, cycles: int, cycle_time: float,
-             status: Callable[[], dict]) -> Frame:
+             status: Callable[[], dict], weights: np.ndarray | None = None) -> Frame:
         """A frame of `som` now. `status()` gives what the session knows besides the Som (paused, held, applied,
-        history, control_ids); it is read under the session's lock, together with the frame's number."""
+        history, control_ids); it is read under the session's lock, together with the frame's number. `weights`: the
+        Som's weights where they are held elsewhere (a batch: a studio's room), else read from it."""
         layout = preset.layout
-        w = np.asarray(som.weights, dtype=np.float32)
+        w = np.asarray(som.weights if weights is None else weights, dtype=np.float32)
         controls = np.asarray(som.controls, dtype=np.float32)
         eff = np.asarray(som.effective_controls, dtype=np.float32)
         pos = w if layout.position == (0, 1, 2) and w.shape[1] == 3 else _presets.positions_of(w, layout)
