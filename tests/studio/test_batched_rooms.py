@@ -167,3 +167,50 @@ def test_a_studio_steps_its_car_rooms_in_one_launch(tmp_path):
             assert room.session.error is None
     finally:
         rooms.close()
+
+
+def test_rooms_that_drag_and_undo_while_batched_end_as_a_session_alone(tmp_path):
+    """Three car rooms dragged at once (their steps batched, their states held between rounds), undone and dragged
+    again, each show what a session of its own shows: the same weights at each settled state."""
+    rooms = Rooms(tmp_path / "rooms", device="cpu", limits=StudioLimits(park_after=0))
+    alone = Session("car", device="cpu", autosave=False)
+    try:
+        sessions = [rooms.create(f"r{i}", f"token-{i}-abcdefgh", "car").session for i in range(3)] + [alone]
+        home = np.asarray(alone.controls[0][:3], np.float64)
+
+        def drag(offsets) -> None:
+            for session in sessions:
+                session.begin_gesture()
+            for offset in offsets:
+                for session in sessions:
+                    session.move_control(0, home + offset)
+                time.sleep(0.05)  # the rooms train between the moves: later moves reach held rooms
+            for session in sessions:
+                session.end_gesture()
+            settled()
+
+        def settled() -> None:
+            for session in sessions:
+                assert session.wait_idle(300) and session.error is None
+            want = alone.frame.weights
+            for session in sessions[:-1]:
+                assert session.frame.iteration == alone.frame.iteration
+                np.testing.assert_allclose(session.frame.weights, want, rtol=0, atol=5e-5)
+
+        settled()  # the car grows from its start mesh first: each drag's anchor is the settled shape
+        drag([np.array([0.05, 0.0, 0.0]), np.array([0.08, 0.02, 0.0]), np.array([0.1, 0.03, -0.02])])
+        held = rooms.batches.batched
+        assert rooms.batches.widest >= 2 and held >= 2  # the rooms trained in shared launches
+        before = alone.frame.weights
+        for session in sessions:
+            assert session.undo()
+        settled()
+        assert np.abs(alone.frame.weights - before).max() > 1e-3  # the undo changed the shape
+        drag([np.array([-0.04, 0.05, 0.0]), np.array([-0.06, 0.05, 0.03])])
+        assert rooms.batches.batched > held  # held again after the undo gave the states back
+        for session in sessions[:-1]:  # the Soms' own weights, given back, are the frames'
+            with session.modelling.som_lock:
+                np.testing.assert_allclose(session.modelling.som.weights, session.frame.weights, atol=1e-6)
+    finally:
+        alone.close()
+        rooms.close()
