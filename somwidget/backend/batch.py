@@ -173,6 +173,7 @@ class BatchSom:
         self._anchor: wp.array | None = None  # each variant's anchored weights (`put`), made at the first
         self._to_anchor: set[int] = set()  # variants whose weights go back to their anchor's before the next step
         self._controls_moved = False  # `_controls` changed since they went up
+        self._pool: ThreadPoolExecutor | None = None  # the CPU's threads for the variants' parts, made at the first
 
     # -- set-up -------------------------------------------------------------------------------------------
     def _effective(self, controls: np.ndarray) -> np.ndarray:
@@ -430,8 +431,9 @@ class BatchSom:
             if len(parts) == 1:
                 run(parts[0])
             else:
-                with ThreadPoolExecutor(len(parts), thread_name_prefix="som-variants") as pool:
-                    list(pool.map(run, parts))
+                if self._pool is None:  # kept: a round of a studio's rooms launches every frame
+                    self._pool = ThreadPoolExecutor(self._cores, thread_name_prefix="som-variants")
+                list(self._pool.map(run, parts))
         else:
             shape = cuda_shape(self.n_neurons)
             kernel = self._kernel(True, shape)
