@@ -8,7 +8,8 @@ batch's one copy of the weights: `Trainer.end_step`) and its autosave's turn. A 
 reached it since its last turn, or when it trains and its last turn was a frame's time ago (the rooms' frame rate):
 so a move is answered by the next round, which starts as soon as one is poked (at most one every MIN_GAP seconds),
 and rooms that only train get a frame `frame_rate` times a second. Alike rooms step batched from the round after two
-or more of them stepped in one round (a room alone steps by itself: its own path, its graphs).
+or more of them stepped in one round, and a room held stays in its batch when it steps alone (no copies back and
+forth); a room of a kind no other room steps with steps by itself (its own path, its graphs).
 """
 
 from __future__ import annotations
@@ -121,7 +122,7 @@ class Rounds:
                 key = self.batches.key(som) if cycles else None
                 if key is not None:
                     counts[key] = counts.get(key, 0) + 1
-                if key is not None and self._counts.get(key, 0) >= 2:
+                if key is not None and (self._counts.get(key, 0) >= 2 or self.batches.holds(trainer)):
                     self.batches.hold(trainer, som, key)
                     asks.append((trainer, cycles))
                     continue
