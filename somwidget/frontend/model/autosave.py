@@ -2,8 +2,9 @@
 that recovery.py can bring back a stopped session, however it stopped.
 
 When a session writes (`SessionAutosave`): at once when a step completes (a drag released, a control added, a
-setting, a reset, an undo...), and while training goes on or a drag is held, when training settles or every
-AUTOSAVE_SECONDS; never what is not whole. A save of a drag not yet released is marked as one: brought back, the drag
+setting, a reset, an undo...); while training goes on, when training settles or every AUTOSAVE_SECONDS; while a drag
+is held, every AUTOSAVE_SECONDS (its moves settle one after another, a fast engine's every frame); never what is not
+whole. A save of a drag not yet released is marked as one: brought back, the drag
 is a step of its own that Undo removes, and the message says so.
 
 A save that fails (a full disk, a folder that cannot be written) is kept and tried again every RETRY_SECONDS, a newer
@@ -30,7 +31,7 @@ from .trainer import Trainer
 log = logging.getLogger(__name__)
 
 #: While training or dragging, a session writes at most this often (it writes at once when a step completes, and
-#: when training settles).
+#: when training settles with no drag held).
 AUTOSAVE_SECONDS = 2.0
 #: A failed save is tried again after this many seconds.
 RETRY_SECONDS = 1.0
@@ -169,7 +170,8 @@ class SessionAutosave:
         state = self.state
         if state.completed != self._completed:
             return True
-        return state.unsaved and (self.settled() or time.monotonic() - self._saved_at >= AUTOSAVE_SECONDS)
+        return state.unsaved and ((self.settled() and not state.gesture)
+                                  or time.monotonic() - self._saved_at >= AUTOSAVE_SECONDS)
 
     @property
     def armed(self) -> bool:
