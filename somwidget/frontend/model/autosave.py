@@ -133,6 +133,7 @@ class SessionAutosave:
         self.writer = Autosave(store, self._publish)
         self._saved_at = 0.0
         self._completed = -1  # state.completed at the latest save (-1: a new session's first state is due)
+        self._timer: threading.Timer | None = None  # a held drag settled: the turn that saves it, when it is due
 
     def snapshot(self) -> Saving:
         """What a save writes now (caller holds the Som's lock and the state lock, no intent queued)."""
@@ -197,12 +198,32 @@ class SessionAutosave:
             return
         with state.lock:
             if not self._due():
+                self._save_later()
                 return
         with state.som_lock, state.lock:
             if not self._due() or not self.quiet():
                 return  # an intent is on its way: the next turn saves with it
             saving = self._take()
         self.writer.submit(saving)
+
+    def _save_later(self) -> None:
+        """A held drag whose training settled is written AUTOSAVE_SECONDS after the last save: a turn then (a posted
+        call, nothing else) asks again, since a settled session has no turns of its own (caller holds the state
+        lock)."""
+        state = self.state
+        if not (state.unsaved and state.gesture and self.settled()) or self._timer is not None or self.trainer.closed:
+            return
+
+        def turn() -> None:
+            with state.lock:
+                self._timer = None
+            if not self.trainer.closed:
+                self.trainer.post(lambda: None)  # the training thread's turn after it saves (`if_due`)
+
+        delay = max(0.0, self._saved_at + AUTOSAVE_SECONDS - time.monotonic()) + 0.01
+        self._timer = threading.Timer(delay, turn)
+        self._timer.daemon = True
+        self._timer.start()
 
     def _take(self) -> Saving:
         """The state to save now (caller holds both locks), marked as saved."""
@@ -231,6 +252,9 @@ class SessionAutosave:
         state = self.state
         with state.lock:
             due = self.armed and (state.unsaved or state.completed != self._completed)
+            timer, self._timer = self._timer, None
+        if timer is not None:
+            timer.cancel()
         try:
             if due:
                 with state.som_lock:
