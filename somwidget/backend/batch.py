@@ -305,7 +305,7 @@ class BatchSom:
     def put(self, b: int, weights: ArrayLike, iteration: int, controls: ArrayLike,
             anchor: wp.array | None = None) -> None:
         """Variant b's weights (N, n), cycle s and controls (k, n) from now on, the others' unchanged; `anchor`: the
-        device weights (N vectors: a Som's `anchored_weights`) that `move(..., from_anchor=True)` goes back to. As
+        device weights (N vectors: those a Som's `anchor()` kept) that `move(..., from_anchor=True)` goes back to. As
         `load` for one variant: what a Som's state becomes when a batch holds it between steps."""
         b = checks.integer("variant", b, 0, self.n_variants - 1)
         w = np.asarray(weights)

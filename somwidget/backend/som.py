@@ -373,25 +373,6 @@ class Som:
         self._restart(s)
 
     @warp_exclusive
-    def moved_on(self, iteration: int) -> None:
-        """s is now `iteration`, no cycle run here: a batch ran this Som's cycles on its copy of the weights (the
-        studio's rooms, frontend/studio/batched.py), which come back by `restore` before anything reads them here.
-        The winners are found afresh."""
-        self._state.restart(checks.integer("iteration", iteration, 0, self.iterations))
-
-    @property
-    def anchor_restarts(self) -> int:
-        """Moves so far that restarted from the anchored weights (`set_controls(from_anchor=True)`): a batch holding
-        this Som's weights meanwhile makes the same restart in its copy."""
-        return self._state.anchor_restarts
-
-    @property
-    def anchored_weights(self) -> wp.array | None:
-        """The device array (N vectors) `anchor()` keeps (None before the first), for a batch to copy on the
-        device."""
-        return self._state.w_anchor
-
-    @warp_exclusive
     def winners(self) -> np.ndarray:
         """(k_eff,) the nearest neuron (metric-weighted) of each effective control for the current weights, in the
         order of `effective_controls`."""

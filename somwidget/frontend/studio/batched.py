@@ -5,12 +5,12 @@ While a room is held, its weights and cycle live in the batch's device arrays, n
 changed (its controls and cycle after a move, its weights back to the anchor's when a drag's move restarts from
 there: `BatchSom.move`), steps every held room of a batch to its own cycle in one launch, and reads every weight
 back in one transfer; each room's frame is its row of that copy (`host`). The Som keeps everything else (its
-controls, settings, anchor) and follows the cycle (`Som.moved_on`); its own weights are stale until the room is given
-back (`give_back`: its row of the last copy `restore`d into it), which happens before anything else reads or changes
-the Som: whoever takes the room's Som lock (an undo, a save, a preset switch, a setting: `RoomLock`) and any queued
-operation a batch cannot apply (`applies_in_batch`) gets the Som back first. A room given back is held again at its
-next round that steps it with alike rooms. The weights a batch reaches equal those of the Soms stepped apart (the
-same kernels' arithmetic; tests/studio/test_batched_rooms.py).
+controls, settings, anchor) and follows the cycle (its state's s, through `Som.parts`, the engine's internal API);
+its own weights are stale until the room is given back (`give_back`: its row of the last copy `restore`d into it),
+which happens before anything else reads or changes the Som: whoever takes the room's Som lock (an undo, a save, a
+preset switch, a setting: `RoomLock`) and any queued operation a batch cannot apply (`applies_in_batch`) gets the
+Som back first. A room given back is held again at its next round that steps it with alike rooms. The weights a
+batch reaches equal those of the Soms stepped apart (the same kernels' arithmetic; tests/studio/test_batched_rooms.py).
 """
 
 from __future__ import annotations
@@ -133,10 +133,11 @@ class BatchedRooms:
                 group = self._groups.setdefault(key, _Group())
                 slot = group.slot(som)
                 host = som.weights  # the anchor settled first
-                group.batch.put(slot, host, som.iteration, som.controls, som.anchored_weights)
-                self._loans[owner] = _Loan(key, som, slot, host, som.anchor_restarts)
+                state = som.parts.state
+                group.batch.put(slot, host, som.iteration, som.controls, state.w_anchor)
+                self._loans[owner] = _Loan(key, som, slot, host, state.anchor_restarts)
                 return
-            restarts = som.anchor_restarts
+            restarts = som.parts.state.anchor_restarts
             self._groups[key].batch.move(loan.slot, som.controls, som.iteration, from_anchor=restarts != loan.restarts)
             loan.restarts = restarts
 
@@ -154,7 +155,7 @@ class BatchedRooms:
         pending = group is not None and group.batch.forget(loan.slot)
         if group is not None:
             group.free.append(loan.slot)
-        if not pending and loan.som.anchor_restarts == loan.restarts:  # else its own anchor is its state
+        if not pending and loan.som.parts.state.anchor_restarts == loan.restarts:  # else its own anchor is its state
             loan.som.restore(loan.host, loan.som.iteration)
 
     def step(self, asks: list[tuple[object, int]]) -> dict:
@@ -186,7 +187,7 @@ class BatchedRooms:
                 seconds = time.perf_counter() - t
                 for owner, loan, _ in items:
                     loan.host = host[loan.slot]
-                    loan.som.moved_on(int(to[loan.slot]))
+                    loan.som.parts.state.restart(int(to[loan.slot]))  # s moved on, the winners found afresh
                     out[owner] = (int(to[loan.slot] - s[loan.slot]), seconds)
                 self.launches += 1
                 self.batched += len(items)
