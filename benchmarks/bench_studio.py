@@ -17,9 +17,10 @@ rooms (default)   A real studio (StudioServer: the front, and the rooms in its p
 engine            The engine alone, as the rooms step it (no server; numpy and warp only): R car rooms' Soms, each
                   round every room's control 0 moved (a local restart), 10 cycles stepped and its weights read back
                   (its frame); `own`: each Som by itself, one after another (the rooms unbatched); `studio`: the
-                  studio's rounds (studio/batched.py: every room's state into one BatchSom, one launch, each room's
-                  weights back into its Som, its frame read from it); `kernels`: the batched kernels alone (the
-                  states kept in the batch: controls up, one launch, every weight back in one copy). Round time
+                  studio's rounds (studio/batched.py: the rooms' states held in one BatchSom between rounds, each
+                  room's move applied to its Som and its controls and cycle put in, one launch, every weight back in
+                  one copy, each frame its row; one room steps alone, as the worker's loop steps it); `kernels`: the
+                  batched kernels alone (every state loaded, controls up, one launch, every weight back). Round time
                   median / p95 and whether R rooms keep 30 frames a second (p95 <= 33 ms).
 dask              A LocalCluster of two workers (processes): R rooms on its workers reached (a) through the front
                   relaying to the workers' own room servers (what the studio does), (b) as Dask actors (a move is an
@@ -257,14 +258,14 @@ def run_rooms(count: int, presets: tuple[str, ...], seconds: float, device: str,
 def run_engine(count: int, device: str, rounds: int) -> dict:
     """R car rooms' Soms (as the studio's rooms hold them), each round every room's control 0 moved (its local
     restart), 10 cycles stepped and its weights read back (its frame); three ways: each Som alone (`own`), the
-    studio's rounds (BatchedSteps: every room's state into one BatchSom, one launch, each room's weights back into its
-    Som, then its frame read from it: `studio`), and the batched kernels alone (the rooms' states kept in the batch:
-    one upload of the controls, one launch, one read-back of every weight: `kernels`)."""
+    studio's rounds (BatchedRooms: the states held in one BatchSom, each room's move applied to its Som and its
+    controls and cycle put in, one launch, one read-back of every weight, each frame its row: `studio`), and the
+    batched kernels alone (every state loaded, one launch, one read-back of every weight: `kernels`)."""
     import warp as wp
 
     from somwidget.backend import presets as _presets
     from somwidget.backend.batch import BatchSom
-    from somwidget.frontend.studio.batched import BatchedSteps
+    from somwidget.frontend.studio.batched import BatchedRooms
 
     preset = _presets.get_preset("car")
     som = preset.make_som(device=device)
@@ -309,17 +310,24 @@ def run_engine(count: int, device: str, rounds: int) -> dict:
     own_ms = timed(own)
     for s in soms:
         s.restore(settled, s.iterations)
-    steps = BatchedSteps()
+    batches = BatchedRooms()
+    key = batches.key(soms[0])
 
     def studio(controls):
         for b, s in enumerate(soms):
             s.set_controls(controls[b])
-        steps.step_together(soms, [10] * count)
-        for s in soms:
-            _ = s.weights
+            if count > 1:
+                batches.hold(b, s, key)
+        if count == 1:  # a room alone steps by itself (rounds.py)
+            soms[0].step(10)
+            _ = soms[0].weights
+            return
+        batches.step([(b, 10) for b in range(count)])
+        for b in range(count):
+            _ = batches.host(b)
 
     studio_ms = timed(studio)
-    assert count == 1 or steps.batched == count * rounds, (steps.batched, steps.alone)  # all in each round's launch
+    assert count == 1 or (batches.launches == rounds and batches.widest == count)  # all in each round's launch
     soms.clear()  # their memory goes before the batch is made
     batch = BatchSom(preset.topology, settled, moved(0), iterations=preset.iterations, l_start=preset.l_start,
                      l_end=preset.l_end, smoothing=preset.smoothing, reach=preset.reach,

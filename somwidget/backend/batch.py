@@ -26,7 +26,7 @@ import warp as wp
 from numpy.typing import ArrayLike
 
 from . import checks
-from .batch_kernels import GATHER, SEARCH, variants_kernel
+from .batch_kernels import GATHER, SEARCH, copy_rows, variants_kernel
 from .cycle_kernels import MAX_CONTROLS
 from .device import resolve, usable_cores, warp_exclusive, warp_lock
 from .schedule import BY_NAME, KEYS, SMOOTHING_RULES, TABLE_KEYS, learning_table
@@ -170,6 +170,10 @@ class BatchSom:
         self._keys = wp.zeros(B * 3 * k_eff if dev == "cpu" else 1, dtype=wp.uint64, device=dev)
         self._s = np.zeros(B, np.int64)
         self._cores = self._plan_cores(cpu_cores)
+        self._anchor: wp.array | None = None  # each variant's anchored weights (`put`), made at the first
+        self._to_anchor: set[int] = set()  # variants whose weights go back to their anchor's before the next step
+        self._controls_moved = False  # `_controls` changed since they went up
+        self._pool: ThreadPoolExecutor | None = None  # the CPU's threads for the variants' parts, made at the first
 
     # -- set-up -------------------------------------------------------------------------------------------
     def _effective(self, controls: np.ndarray) -> np.ndarray:
@@ -253,8 +257,10 @@ class BatchSom:
     @property
     @warp_exclusive
     def weights(self) -> np.ndarray:
-        """(B, N, n) float32 host copy."""
-        return self._w.numpy().reshape(self.n_variants, self.n_neurons, self.n_dims)
+        """(B, N, n) float32 host copy (one transfer from a GPU)."""
+        self._settle()
+        w = self._w.numpy().reshape(self.n_variants, self.n_neurons, self.n_dims)
+        return w.copy() if self.device == "cpu" else w  # from a GPU numpy() is a copy already
 
     def restart(self) -> None:
         """Every variant continues from its current weights at s0 = floor((1 - reach) S): the local restart that a
@@ -266,6 +272,7 @@ class BatchSom:
         """The start weights and s = 0: the whole schedule again."""
         with warp_lock:
             self._w.assign(self._start)
+        self._to_anchor.clear()
         self._s[:] = 0
 
     @warp_exclusive
@@ -289,7 +296,88 @@ class BatchSom:
         self._w.assign(np.ascontiguousarray(w, np.float32).reshape(B, N, n))
         self._controls = c.astype(np.float32)
         self._c.assign(self._effective(self._controls))
+        self._controls_moved = False
+        self._to_anchor.clear()
         self._s = s.astype(np.int64)
+
+    # -- one variant at a time (the studio's rooms: each keeps its variant between rounds) ------------------------
+    @warp_exclusive
+    def put(self, b: int, weights: ArrayLike, iteration: int, controls: ArrayLike,
+            anchor: wp.array | None = None) -> None:
+        """Variant b's weights (N, n), cycle s and controls (k, n) from now on, the others' unchanged; `anchor`: the
+        device weights (N vectors: those a Som's `anchor()` kept) that `move(..., from_anchor=True)` goes back to. As
+        `load` for one variant: what a Som's state becomes when a batch holds it between steps."""
+        b = checks.integer("variant", b, 0, self.n_variants - 1)
+        w = np.asarray(weights)
+        if w.shape != (self.n_neurons, self.n_dims):
+            raise ValueError(f"weights: expected shape {(self.n_neurons, self.n_dims)}, got {w.shape}")
+        self._w[b].assign(np.ascontiguousarray(checks.finite_array("weights", w, 2), np.float32))
+        self._to_anchor.discard(b)
+        if anchor is not None:
+            if anchor.shape != (self.n_neurons,):
+                raise ValueError(f"anchor: expected {self.n_neurons} weight vectors, got shape {anchor.shape}")
+            if self._anchor is None:
+                self._anchor = wp.empty_like(self._w)
+            wp.copy(self._anchor[b], anchor)
+        self.move(b, checks.finite_array("controls", controls, 2), iteration)
+
+    def move(self, b: int, controls: np.ndarray, iteration: int, from_anchor: bool = False) -> None:
+        """Variant b's controls (k, n) and cycle s from now on (its Som's `set_controls`: a restart), with
+        `from_anchor` from the weights its `put` anchored. They reach the device with the next step, the controls
+        of every variant moved in one copy."""
+        row = self._controls[b]
+        if controls.shape != row.shape:
+            raise ValueError(f"controls: expected shape {row.shape}, got {controls.shape}")
+        if not np.array_equal(controls, row):
+            row[:] = controls
+            self._controls_moved = True
+        if not 0 <= iteration <= self._iterations[b]:
+            raise ValueError(f"iteration: expected 0 to {self._iterations[b]}, got {iteration}")
+        self._s[b] = iteration
+        if from_anchor:
+            if self._anchor is None:
+                raise ValueError(f"variant {b}: a restart from the anchor, but `put` was given none")
+            self._to_anchor.add(b)
+
+    def forget(self, b: int) -> bool:
+        """Variant b is no longer used (its state went back to its Som): a restart from its anchor that `move` left
+        for the next step is dropped; whether there was one."""
+        pending = b in self._to_anchor
+        self._to_anchor.discard(b)
+        return pending
+
+    @warp_exclusive
+    def take_over(self, other: BatchSom) -> None:
+        """Every variant of `other` (a batch of this mesh and schedule with at most as many variants) as the first of
+        this batch's: a studio's batch grown for more rooms."""
+        B = other.n_variants
+        if B > self.n_variants or other.n_neurons != self.n_neurons or other.n_dims != self.n_dims:
+            raise ValueError(f"take_over: {B} variants of {other.n_neurons} x {other.n_dims} do not fit "
+                             f"{self.n_variants} of {self.n_neurons} x {self.n_dims}")
+        other._settle()
+        count = B * self.n_neurons
+        wp.copy(self._w, other._w, count=count)
+        if other._anchor is not None:
+            if self._anchor is None:
+                self._anchor = wp.empty_like(self._w)
+            wp.copy(self._anchor, other._anchor, count=count)
+        self._controls[:B] = other._controls
+        self._s[:B] = other._s
+        self._controls_moved = True
+
+    def _settle(self) -> None:
+        """What `move` left for the device: the moved controls up (one copy), the weights of the variants restarted
+        from their anchor back to it (one launch)."""
+        if self._controls_moved:
+            self._c.assign(self._effective(self._controls))
+            self._controls_moved = False
+        if self._to_anchor:
+            rows = wp.array(sorted(self._to_anchor), dtype=wp.int32, device=self.device)
+            self._to_anchor.clear()
+            width = self.n_neurons * self.n_dims
+            flat = [wp.array(ptr=a.ptr, dtype=wp.float32, shape=(self.n_variants, width), device=self.device)
+                    for a in (self._w, self._anchor)]
+            wp.launch(copy_rows, dim=(rows.shape[0], width), inputs=[flat[0], flat[1], rows], device=self.device)
 
     # -- training -----------------------------------------------------------------------------------------
     def step_to(self, to: ArrayLike) -> int:
@@ -300,6 +388,8 @@ class BatchSom:
             raise ValueError(f"to: expected {self.n_variants} whole numbers (each variant's last cycle), got {to!r}")
         to = np.clip(to.astype(np.int64), self._s, self._iterations)
         ran = int((to - self._s).max(initial=0))
+        with warp_lock:
+            self._settle()
         if ran:
             self._launch(to)
         return ran
@@ -309,6 +399,8 @@ class BatchSom:
         n = checks.integer("n", n, 0)
         to = np.minimum(self._s + n, self._iterations)
         ran = int((to - self._s).max(initial=0))
+        with warp_lock:
+            self._settle()
         if ran:
             self._launch(to)
         return ran
@@ -339,8 +431,9 @@ class BatchSom:
             if len(parts) == 1:
                 run(parts[0])
             else:
-                with ThreadPoolExecutor(len(parts), thread_name_prefix="som-variants") as pool:
-                    list(pool.map(run, parts))
+                if self._pool is None:  # kept: a round of a studio's rooms launches every frame
+                    self._pool = ThreadPoolExecutor(self._cores, thread_name_prefix="som-variants")
+                list(self._pool.map(run, parts))
         else:
             shape = cuda_shape(self.n_neurons)
             kernel = self._kernel(True, shape)

@@ -242,3 +242,12 @@ def variants_kernel(n_dims: int, pairs: bool, cuda: bool, threads: int = 1024, m
                 steps.smooth(weights, moved, b, t, threads, offsets, neighbors, lam * mask[0])
 
     return train_variants
+
+
+@wp.kernel
+def copy_rows(dest: wp.array2d(dtype=wp.float32), src: wp.array2d(dtype=wp.float32), rows: wp.array(dtype=wp.int32)):
+    """dest[r] = src[r] for each r of `rows` (a variant's weights back to those its anchor kept: one launch for every
+    variant whose controls moved from its anchor this round)."""
+    i, j = wp.tid()
+    r = rows[i]
+    dest[r, j] = src[r, j]

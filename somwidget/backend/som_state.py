@@ -46,6 +46,7 @@ class SomState:
         self.w_anchor: wp.array | None = None
         self.anchor_pending = False  # the next run starts by copying the anchor back (set_controls(from_anchor=True))
         self.anchor_version = 0  # counts `anchor()` calls
+        self.anchor_restarts = 0  # counts restarts from the anchor (`from_anchor(True)`)
         # The effective controls (a fixed-size buffer: captured graphs keep its pointer) and the cycle counters (CUDA:
         # two that the kernels pass on, ping-pong; CPU: one per core; a 64-byte line each, no false sharing between
         # cores), in one device block. The host writes them into `staging`: on the CPU that is the block itself; on
@@ -164,6 +165,7 @@ class SomState:
         """The next run starts from the anchored weights (`on`) or from the latest ones. CUDA copies them back as a
         node of the run's first graph; the CPU copies them now."""
         self.anchor_pending = on
+        self.anchor_restarts += int(on)
         if on and self.device == "cpu":
             self.settle_anchor()
 

@@ -16,22 +16,19 @@ NEUTRAL_GREY = (0.72, 0.72, 0.72)
 
 
 def hsv_to_rgb(h, s, v) -> np.ndarray:
-    """HSV -> RGB for arrays of equal shape (h taken mod 1, s and v clipped to [0, 1]); returns (..., 3) float32."""
+    """HSV -> RGB for arrays of equal shape (h taken mod 1, s and v clipped to [0, 1]); returns (..., 3) float32.
+    Channel n of (r, g, b) is v (1 - s ramp(k)), k = (n' + 6 h) mod 6 for n' = 5, 3, 1 and ramp(k) =
+    clip(min(k, 4 - k), 0, 1): the sextants' table without a branch (a frame's colours: a few numpy calls)."""
     h = np.mod(np.asarray(h, np.float64), 1.0)
     s = np.clip(np.asarray(s, np.float64), 0.0, 1.0)
     v = np.clip(np.asarray(v, np.float64), 0.0, 1.0)
     h, s, v = np.broadcast_arrays(h, s, v)
-    h6 = h * 6.0
-    sector = np.floor(h6)
-    f = h6 - sector
-    sector = sector.astype(np.int64) % 6  # h mod 1 can round to 1.0 for tiny negative h: sector 6 == 0
-    p = v * (1.0 - s)
-    q = v * (1.0 - s * f)
-    t = v * (1.0 - s * (1.0 - f))
-    r = np.choose(sector, [v, q, p, p, t, v])
-    g = np.choose(sector, [t, v, v, q, p, p])
-    b = np.choose(sector, [p, p, t, v, v, q])
-    return np.clip(np.stack([r, g, b], axis=-1), 0.0, 1.0).astype(np.float32)
+    k = np.mod(_CHANNEL_OFFSETS + 6.0 * h[..., None], 6.0)
+    ramp = np.clip(np.minimum(k, 4.0 - k), 0.0, 1.0)
+    return np.clip(v[..., None] * (1.0 - s[..., None] * ramp), 0.0, 1.0).astype(np.float32)
+
+
+_CHANNEL_OFFSETS = np.array([5.0, 3.0, 1.0])
 
 
 #: Control colours for layouts without colour dims (the nodes are all grey there, the controls need not be).

@@ -2,8 +2,9 @@
 that recovery.py can bring back a stopped session, however it stopped.
 
 When a session writes (`SessionAutosave`): at once when a step completes (a drag released, a control added, a
-setting, a reset, an undo...), and while training goes on or a drag is held, when training settles or every
-AUTOSAVE_SECONDS; never what is not whole. A save of a drag not yet released is marked as one: brought back, the drag
+setting, a reset, an undo...); while training goes on, when training settles or every AUTOSAVE_SECONDS; while a drag
+is held, every AUTOSAVE_SECONDS (its moves settle one after another, a fast engine's every frame); never what is not
+whole. A save of a drag not yet released is marked as one: brought back, the drag
 is a step of its own that Undo removes, and the message says so.
 
 A save that fails (a full disk, a folder that cannot be written) is kept and tried again every RETRY_SECONDS, a newer
@@ -30,7 +31,7 @@ from .trainer import Trainer
 log = logging.getLogger(__name__)
 
 #: While training or dragging, a session writes at most this often (it writes at once when a step completes, and
-#: when training settles).
+#: when training settles with no drag held).
 AUTOSAVE_SECONDS = 2.0
 #: A failed save is tried again after this many seconds.
 RETRY_SECONDS = 1.0
@@ -132,6 +133,7 @@ class SessionAutosave:
         self.writer = Autosave(store, self._publish)
         self._saved_at = 0.0
         self._completed = -1  # state.completed at the latest save (-1: a new session's first state is due)
+        self._timer: threading.Timer | None = None  # a held drag settled: the turn that saves it, when it is due
 
     def snapshot(self) -> Saving:
         """What a save writes now (caller holds the Som's lock and the state lock, no intent queued)."""
@@ -169,7 +171,8 @@ class SessionAutosave:
         state = self.state
         if state.completed != self._completed:
             return True
-        return state.unsaved and (self.settled() or time.monotonic() - self._saved_at >= AUTOSAVE_SECONDS)
+        return state.unsaved and ((self.settled() and not state.gesture)
+                                  or time.monotonic() - self._saved_at >= AUTOSAVE_SECONDS)
 
     @property
     def armed(self) -> bool:
@@ -195,12 +198,32 @@ class SessionAutosave:
             return
         with state.lock:
             if not self._due():
+                self._save_later()
                 return
         with state.som_lock, state.lock:
             if not self._due() or not self.quiet():
                 return  # an intent is on its way: the next turn saves with it
             saving = self._take()
         self.writer.submit(saving)
+
+    def _save_later(self) -> None:
+        """A held drag whose training settled is written AUTOSAVE_SECONDS after the last save: a turn then (a posted
+        call, nothing else) asks again, since a settled session has no turns of its own (caller holds the state
+        lock)."""
+        state = self.state
+        if not (state.unsaved and state.gesture and self.settled()) or self._timer is not None or self.trainer.closed:
+            return
+
+        def turn() -> None:
+            with state.lock:
+                self._timer = None
+            if not self.trainer.closed:
+                self.trainer.post(lambda: None)  # the training thread's turn after it saves (`if_due`)
+
+        delay = max(0.0, self._saved_at + AUTOSAVE_SECONDS - time.monotonic()) + 0.01
+        self._timer = threading.Timer(delay, turn)
+        self._timer.daemon = True
+        self._timer.start()
 
     def _take(self) -> Saving:
         """The state to save now (caller holds both locks), marked as saved."""
@@ -229,6 +252,9 @@ class SessionAutosave:
         state = self.state
         with state.lock:
             due = self.armed and (state.unsaved or state.completed != self._completed)
+            timer, self._timer = self._timer, None
+        if timer is not None:
+            timer.cancel()
         try:
             if due:
                 with state.som_lock:

@@ -163,17 +163,20 @@ class FrameStream:
         self._latest: Frame | None = None
         self._seq = 0
         self._times: list[float] = []
+        self._control_colours: tuple = ((), None)  # (key, (control colours, effective colours)): `_colours_of`
 
     def make(self, som, preset: Preset, generation: int, *, cycles: int, cycle_time: float,
-             status: Callable[[], dict]) -> Frame:
+             status: Callable[[], dict], weights: np.ndarray | None = None) -> Frame:
         """A frame of `som` now. `status()` gives what the session knows besides the Som (paused, held, applied,
-        history, control_ids); it is read under the session's lock, together with the frame's number."""
+        history, control_ids); it is read under the session's lock, together with the frame's number. `weights`: the
+        Som's weights where they are held elsewhere (a batch: a studio's room), else read from it."""
         layout = preset.layout
-        w = np.asarray(som.weights, dtype=np.float32)
+        w = np.asarray(som.weights if weights is None else weights, dtype=np.float32)
         controls = np.asarray(som.controls, dtype=np.float32)
         eff = np.asarray(som.effective_controls, dtype=np.float32)
         pos = w if layout.position == (0, 1, 2) and w.shape[1] == 3 else _presets.positions_of(w, layout)
         cpos = _presets.positions_of(controls, layout)
+        control_colours, effective_colours = self._colours_of(controls, eff, layout)
         epos = _presets.positions_of(eff, layout)
         with self._lock:
             self._seq += 1
@@ -185,13 +188,24 @@ class FrameStream:
             seq=seq, generation=generation, iteration=s, iterations=S, running=(not paused and not held and s < S),
             paused=paused, weights=_readonly(w), positions=_readonly(pos),
             colours=_readonly(_node_colours(w, layout)), controls=_readonly(controls),
-            control_colours=_readonly(_presets.colours_of(controls, layout)), effective_controls=_readonly(eff),
-            effective_colours=_readonly(_presets.colours_of(eff, layout)), control_positions=_readonly(cpos),
+            control_colours=control_colours, effective_controls=_readonly(eff),
+            effective_colours=effective_colours, control_positions=_readonly(cpos),
             effective_positions=_readonly(epos), cycle_time=float(cycle_time), step_cycles=int(cycles),
             preset=preset, applied=st["applied"], held=held, history=st["history"],
             control_ids=tuple(st["control_ids"]), radii=_readonly(np.asarray(som.radii, np.float32)),
             strokes=tuple(int(n) for n in som.strokes),
             group=st.get("group", "none"))
+
+    def _colours_of(self, controls: np.ndarray, eff: np.ndarray, layout) -> tuple[np.ndarray, np.ndarray]:
+        """The controls' and their copies' colours (read-only), made again only when their colour dims changed (a
+        drag's frames move positions only). Caller: `make`, under the Som's lock."""
+        dims = list(layout.colour)
+        key = (layout, controls.shape, eff.shape, controls[:, dims].tobytes(), eff[:, dims].tobytes())
+        kept_key, kept = self._control_colours
+        if kept is None or kept_key != key:
+            kept = (_readonly(_presets.colours_of(controls, layout)), _readonly(_presets.colours_of(eff, layout)))
+            self._control_colours = (key, kept)
+        return kept
 
     def again(self, frame: Frame, **changes) -> Frame:
         """`frame` once more under a new number, with `changes` (after a failure that could make no new one)."""

@@ -11,6 +11,10 @@ until the next operation. The caller of an intent never waits for a training ste
 
 A caller that must not wait even for the Som's lock (a server's event loop) posts its intents instead (`post`): the
 thread runs them in order between two turns, where nothing else holds the lock.
+
+A driver (a studio worker's stepping loop, studio/rounds.py) may run the turns of many sessions from one thread
+instead: `start` then hands the session to it, and it calls `run_calls`, `prepare` (the operations applied, the
+cycles wanted), steps them (with other sessions' in one launch), then `end_step` (the frame) and `after_turn`.
 """
 
 from __future__ import annotations
@@ -71,8 +75,12 @@ class Trainer:
         self.calls: collections.deque = collections.deque()  # (call, Future): posted, run between two turns
         self.posted = 0  # calls posted so far
         self.ran = 0  # calls run so far
-        #: How the Som steps k cycles: alone, or (a studio's rooms) in one launch with other rooms' (studio/batched.py)
-        self.stepper: Callable[[object, int], int] = step_alone
+        #: The loop that runs this session's turns with others' (studio/rounds.py); None: a thread of its own
+        self.driver = None
+        #: Called with the operations `drain` takes, before it applies them (a studio's room: its Som's state back from
+        #: the batch that holds it, unless the batch can apply them too: studio/batched.py)
+        self.before_apply: Callable[[list[Operation]], None] | None = None
+        self._pace_now = self.pace  # the pace `prepare` chose
 
     # -- lifetime ----------------------------------------------------------------------------------------------
     def start(self) -> None:
@@ -80,6 +88,9 @@ class Trainer:
             if self.closed:
                 raise RuntimeError("session is closed")
             if self.thread is not None:
+                return
+            if self.driver is not None:
+                self.thread = self.driver.add(self)
                 return
             self.thread = threading.Thread(target=self._run, name="somwidget-session", daemon=True)
             self.thread.start()
@@ -91,7 +102,10 @@ class Trainer:
             self.closed = True
             self.state.wake.notify_all()
         t = self.thread
-        if t is not None and t is not threading.current_thread():
+        if self.driver is not None and t is not None:
+            self.driver.remove(self)
+            self._fail_calls("session is closed")
+        elif t is not None and t is not threading.current_thread():
             t.join(timeout)
         return not already
 
@@ -108,20 +122,25 @@ class Trainer:
                 self.calls.append((call, future))
                 self.posted += 1
                 self.state.wake.notify_all()
+                self._poke()
                 return future
         _run(call, future)
         return future
 
-    def _run_calls(self) -> None:
+    def _poke(self) -> None:
+        if self.driver is not None:
+            self.driver.poke()
+
+    def run_calls(self) -> bool:
         """The posted calls, in order (on the training thread, holding no lock); then a moment for the threads that
-        wait on them (their replies go out before the next step)."""
+        wait on them (their replies go out before the next step). Whether any ran."""
         ran = False
         while True:
             with self.state.wake:
                 if not self.calls:
                     if ran:
                         time.sleep(0)
-                    return
+                    return ran
                 call, future = self.calls.popleft()
             ran = True
             _run(call, future)
@@ -163,6 +182,7 @@ class Trainer:
             self.ops.append(entry)
         self.busy = True
         self.state.wake.notify_all()
+        self._poke()
 
     def discard_queued(self) -> None:
         """Forget the queued operations, as handled (caller holds both locks: they belonged to a mesh that goes)."""
@@ -177,6 +197,8 @@ class Trainer:
             if ops:  # handled from here on, whatever happens: every later frame is made after them
                 self.applied = max(self.applied, ops[-1][1])
                 state.unsaved = True
+        if ops and self.before_apply is not None:
+            self.before_apply([op for op, _ in ops])
         for i, (op, _number) in enumerate(ops):
             self._apply(op, ops[i + 1:])
         return bool(ops)
@@ -208,6 +230,10 @@ class Trainer:
         state = self.state
         return not state.paused and not state.hold and state.som.iteration < state.som.iterations
 
+    def has_work(self) -> bool:
+        """Calls, operations or cycles wait (caller holds state.lock)."""
+        return bool(self.calls or self.ops) or self.should_step()
+
     # -- the thread --------------------------------------------------------------------------------------------
     def _run(self) -> None:
         state = self.state
@@ -235,7 +261,7 @@ class Trainer:
                     wake.notify_all()
                     break
                 self.busy = True
-            self._run_calls()
+            self.run_calls()
             with wake:
                 idle = not self.ops and not self.should_step()
             if idle:  # a call may have completed a step that trains nothing (a bare release): the autosave's turn
@@ -262,28 +288,48 @@ class Trainer:
             self.frames.publish(frame)
 
     def _apply_and_step(self) -> Frame:
+        with self.state.som_lock:
+            k = self.prepare()
+            cycles, t = 0, time.perf_counter()
+            if k:
+                cycles = step_alone(self.state.som, k)
+            return self.end_step(cycles, time.perf_counter() - t)
+
+    def prepare(self) -> int:
+        """A turn's first half (caller holds state.som_lock): the queued operations applied; the cycles to step now
+        (0: none, a frame only), sized by the pace."""
         state = self.state
-        with state.som_lock:
-            drained = self.drain()
-            som = state.som
-            cycles = 0
-            with state.lock:
-                stepping = self.should_step()
-                dragging = state.gesture
-            if stepping:
-                pace = self.restart_pace if som.iteration < self._stepped_to else self.pace
-                k = pace.cycles
-                if drained and not dragging:  # a fresh intent: a short first step gets the change out sooner
-                    k = max(1, k // 4)
-                k = max(1, min(k, som.iterations - som.iteration))
-                t = time.perf_counter()
-                cycles = self.stepper(som, k)
-                dt = time.perf_counter() - t
-                if cycles > 0:
-                    pace.tune(dt / cycles, self.step_fraction / self.frame_rate)
-                    state.unsaved = True
-            self._stepped_to = som.iteration
-            return self.make_frame(cycles)
+        drained = self.drain()
+        som = state.som
+        with state.lock:
+            stepping = self.should_step()
+            dragging = state.gesture
+        if not stepping:
+            return 0
+        pace = self._pace_now = self.restart_pace if som.iteration < self._stepped_to else self.pace
+        k = pace.cycles
+        if drained and not dragging:  # a fresh intent: a short first step gets the change out sooner
+            k = max(1, k // 4)
+        return max(1, min(k, som.iterations - som.iteration))
+
+    def end_step(self, cycles: int, seconds: float, weights=None) -> Frame:
+        """A turn's second half (caller holds state.som_lock): `cycles` ran in `seconds`; the frame of the Som now
+        (`weights`: its weights, where a batch holds them: studio/batched.py)."""
+        if cycles > 0:
+            self._pace_now.tune(seconds / cycles, self.step_fraction / self.frame_rate)
+            with self.state.lock:
+                self.state.unsaved = True
+        self._stepped_to = self.state.som.iteration
+        return self.make_frame(cycles) if weights is None else self.make_frame(cycles, weights)
+
+    def publish(self, frame: Frame | None) -> None:
+        if frame is not None:
+            self.frames.publish(frame)
+
+    def fail_turn(self, exc: BaseException) -> None:
+        """A turn that failed (a driver's launch): pause, show why, publish a frame. Never raises."""
+        log.error("training step failed: %s", exc)
+        self.publish(self._error_frame(f"training failed: {exc}"))
 
     def _error_frame(self, message: str) -> Frame | None:
         """After a failed step: pause, show `message`, and return a frame to publish. Never raises."""

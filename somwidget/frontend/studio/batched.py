@@ -1,17 +1,16 @@
-"""The rooms of one worker stepped together: rooms whose Soms share a topology, a schedule and point controls step in
-one batched launch a round (backend/batch.py: BatchSom, the variants' kernels), the others by themselves.
+"""Rooms' Soms held in batches between rounds: alike rooms (a topology, a schedule, point controls) are variants of one
+BatchSom (backend/batch.py, the variants' kernels) stepped in one launch a round by the worker's loop (rounds.py).
 
-Each room's training thread asks for its step as it would step alone (`BatchedSteps.step`, the trainer's
-`stepper`); the first to ask leads a round: it waits up to `window` seconds for the other rooms that stepped lately,
-then for each group of alike Soms loads their weights, cycles and controls into one BatchSom, steps each to its own
-cycle (a room's pace sets its cycles) in one launch, and puts each room's weights back (`Som.restore`: the same
-state a step of its own leaves, but for the winners, which its next step finds afresh from the same weights). A Som
-alone in its group, or one the kernels do not take (radii, strokes, a radial group, the Taubin rule, a mesh past the
-batch's size), steps by itself. Every room's thread waits for the round it joined; a failure reaches each of them.
-
-In one process every Warp call is serialised (backend.device.warp_lock), so stepping rooms apart costs a launch and
-two copies a room a frame; batched, a round costs one launch and the copies, whatever the number of rooms
-(bench_studio.py --mode engine measures both).
+While a room is held, its weights and cycle live in the batch's device arrays, not its Som: a round puts in only what
+changed (its controls and cycle after a move, its weights back to the anchor's when a drag's move restarts from
+there: `BatchSom.move`), steps every held room of a batch to its own cycle in one launch, and reads every weight
+back in one transfer; each room's frame is its row of that copy (`host`). The Som keeps everything else (its
+controls, settings, anchor) and follows the cycle (its state's s, through `Som.parts`, the engine's internal API);
+its own weights are stale until the room is given back (`give_back`: its row of the last copy `restore`d into it),
+which happens before anything else reads or changes the Som: whoever takes the room's Som lock (an undo, a save, a
+preset switch, a setting: `RoomLock`) and any queued operation a batch cannot apply (`applies_in_batch`) gets the
+Som back first. A room given back is held again at its next round that steps it with alike rooms. The weights a
+batch reaches equal those of the Soms stepped apart (the same kernels' arithmetic; tests/studio/test_batched_rooms.py).
 """
 
 from __future__ import annotations
@@ -19,17 +18,13 @@ from __future__ import annotations
 import threading
 import time
 import weakref
+from dataclasses import dataclass
 
 import numpy as np
 
 from ...backend.batch import MAX_BATCH_NEURONS, BatchSom
 from ...backend.som import Som
-from ..model.trainer import step_alone
-
-#: How long a round's leader waits for the rooms that stepped lately (s).
-WINDOW = 0.002
-#: A room that stepped within this many seconds is waited for by the next round.
-RECENT = 0.25
+from ..model.operations import Grab, Publish, Release, SetControls
 
 
 def _topology_key(topology, cache: dict) -> tuple:
@@ -57,128 +52,186 @@ def batch_key(som, cache: dict) -> tuple | None:
             som.metric_weights.tobytes(), som.iterations, som.l_start, som.l_end, som.smoothing, som.reach)
 
 
-class _Ask:
-    __slots__ = ("som", "cycles", "key", "ran", "error", "done")
+def applies_in_batch(op) -> bool:
+    """Whether a batch holding a room's state applies `op` as its Som would: a move of point controls (from the
+    latest weights or the drag's anchor), a grab or release (point controls bind nothing), a frame to publish."""
+    if isinstance(op, SetControls):
+        return not op.keep and op.rest is None and not np.any(op.radii)
+    return isinstance(op, (Grab, Release, Publish))
 
-    def __init__(self, som, cycles: int, key):
-        self.som, self.cycles, self.key = som, cycles, key
-        self.ran, self.error, self.done = 0, None, threading.Event()
+
+@dataclass
+class _Loan:
+    """A room held by a batch: its Som, its variant, its weights as the last round left them, and the Som's count of
+    restarts from its anchor that the batch has made too."""
+
+    key: tuple
+    som: Som
+    slot: int
+    host: np.ndarray
+    restarts: int
 
 
-class BatchedSteps:
-    """The stepper of one worker's rooms (see the module's docstring). `launches`, `batched`: batched launches made
-    and the room steps they took; `alone`: room steps run by themselves."""
+class _Group:
+    """One BatchSom of alike rooms, a variant a room; its size doubles as rooms join."""
 
-    def __init__(self, window: float = WINDOW, recent: float = RECENT):
-        self.window, self.recent = window, recent
-        self._cond = threading.Condition()
-        self._asks: list[_Ask] = []
-        self._leading = False
-        self._round = threading.Lock()  # one round at a time uses the batches
-        self._recent: dict[int, float] = {}  # id(som) -> when it last asked
+    def __init__(self) -> None:
+        self.batch: BatchSom | None = None
+        self.free: list[int] = []
+
+    def slot(self, som: Som) -> int:
+        if not self.free:
+            self._grow(som)
+        return self.free.pop()
+
+    def _grow(self, som: Som) -> None:
+        old = self.batch
+        size = 2 if old is None else 2 * old.n_variants
+        batch = BatchSom(som.topology, som.start_weights, np.repeat(som.controls[None], size, axis=0),
+                         iterations=som.iterations, l_start=som.l_start, l_end=som.l_end, smoothing=som.smoothing,
+                         reach=som.reach, smooth_dims=som.smooth_dims, metric_weights=som.metric_weights,
+                         mirror=som.mirror, device=som.device)
+        if old is not None:
+            batch.take_over(old)
+        first = 0 if old is None else old.n_variants
+        self.free = list(range(size - 1, first - 1, -1)) + self.free
+        self.batch = batch
+
+
+class BatchedRooms:
+    """The batches of one worker's rooms and which room each holds (see the module's docstring); rooms are named by
+    an owner (their trainer). `launches`, `batched`: launches made and the room steps they took; `widest`: the most
+    rooms one launch stepped."""
+
+    def __init__(self) -> None:
+        self._lock = threading.RLock()  # the batches; never held while waiting for a room's Som lock
+        self._groups: dict[tuple, _Group] = {}
+        self._loans: dict[object, _Loan] = {}
         self._topologies: dict = {}
-        self._batches: dict[tuple, BatchSom] = {}
-        self.launches = self.batched = self.alone = 0
+        self.launches = self.batched = self.widest = 0
 
-    def step(self, som, cycles: int) -> int:
-        """Step `som` `cycles` cycles, in a launch with other rooms' alike Soms where any ask meanwhile; the cycles
-        it ran. Called by a room's training thread holding that room's Som lock."""
-        key = batch_key(som, self._topologies)
-        if key is None:
-            self.alone += 1
-            return step_alone(som, cycles)
-        ask = _Ask(som, cycles, key)
-        now = time.monotonic()
-        with self._cond:
-            self._recent[id(som)] = now
-            self._asks.append(ask)
-            self._cond.notify_all()
-            lead = not self._leading
-            self._leading = self._leading or lead
-            if lead:  # wait for the rooms that stepped lately (or the window's end)
-                expected = sum(1 for t in self._recent.values() if now - t <= self.recent)
-                deadline = now + self.window
-                while len(self._asks) < expected and (left := deadline - time.monotonic()) > 0:
-                    self._cond.wait(left)
-                asks, self._asks, self._leading = self._asks, [], False
-                self._recent = {i: t for i, t in self._recent.items() if now - t <= self.recent}
-        if lead:
-            with self._round:
-                self._run(asks)
-        else:
-            ask.done.wait()
-        if ask.error is not None:
-            raise ask.error
-        return ask.ran
+    def key(self, som) -> tuple | None:
+        return batch_key(som, self._topologies)
 
-    def step_together(self, soms, cycles) -> list[int]:
-        """One round from this thread: step each Som its cycles, alike ones in one launch (none of them may be
-        stepping elsewhere meanwhile); the cycles each ran. What a round of the rooms' threads does, for benchmarks."""
-        asks = [_Ask(som, int(k), batch_key(som, self._topologies)) for som, k in zip(soms, cycles)]
-        with self._round:
-            self._run(asks)
-        for ask in asks:
-            if ask.error is not None:
-                raise ask.error
-        return [ask.ran for ask in asks]
+    def holds(self, owner) -> bool:
+        return owner in self._loans
+
+    def host(self, owner) -> np.ndarray:
+        """The weights of a held room as its batch's last round (or its lending) left them."""
+        return self._loans[owner].host
+
+    def hold(self, owner, som: Som, key: tuple) -> None:
+        """Before a round steps the room (caller holds its Som lock): held already, its moved controls and cycle go
+        in (from the anchor where its Som restarted from there); else its state goes into a free variant of its
+        group's batch (the room's Som changed: the old one is given back first)."""
+        with self._lock:
+            loan = self._loans.get(owner)
+            if loan is not None and (loan.som is not som or loan.key != key):
+                self._give_back(owner)
+                loan = None
+            if loan is None:
+                group = self._groups.setdefault(key, _Group())
+                slot = group.slot(som)
+                host = som.weights  # the anchor settled first
+                state = som.parts.state
+                group.batch.put(slot, host, som.iteration, som.controls, state.w_anchor)
+                self._loans[owner] = _Loan(key, som, slot, host, state.anchor_restarts)
+                return
+            restarts = som.parts.state.anchor_restarts
+            self._groups[key].batch.move(loan.slot, som.controls, som.iteration, from_anchor=restarts != loan.restarts)
+            loan.restarts = restarts
+
+    def give_back(self, owner) -> None:
+        """The room's Som gets its state back (caller holds its Som lock, or it has no round any more)."""
+        if owner in self._loans:
+            with self._lock:
+                self._give_back(owner)
+
+    def _give_back(self, owner) -> None:
+        loan = self._loans.pop(owner, None)
+        if loan is None:
+            return
+        group = self._groups.get(loan.key)
+        pending = group is not None and group.batch.forget(loan.slot)
+        if group is not None:
+            group.free.append(loan.slot)
+        if not pending and loan.som.parts.state.anchor_restarts == loan.restarts:  # else its own anchor is its state
+            loan.som.restore(loan.host, loan.som.iteration)
+
+    def step(self, asks: list[tuple[object, int]]) -> dict:
+        """One launch a batch: each held room (owner, cycles) stepped its cycles (none past S); for each owner
+        (cycles run, seconds its launch took) or the exception its launch raised (its room given back as it was)."""
+        out: dict = {}
+        with self._lock:
+            groups: dict[tuple, list] = {}
+            for owner, cycles in asks:
+                loan = self._loans.get(owner)
+                if loan is not None:  # else given back since it was held: it steps next round
+                    groups.setdefault(loan.key, []).append((owner, loan, cycles))
+            for key, items in groups.items():
+                batch = self._groups[key].batch
+                s = batch.iteration
+                to = s.copy()
+                for _, loan, cycles in items:
+                    to[loan.slot] = min(s[loan.slot] + cycles, int(batch.iterations[loan.slot]))
+                t = time.perf_counter()
+                try:
+                    batch.step_to(to)
+                    host = batch.weights
+                except Exception as exc:  # each room's turn reports it; the rooms go back as they were
+                    for owner, _, _ in items:
+                        self._give_back(owner)
+                        out[owner] = exc
+                    self._groups.pop(key, None)
+                    continue
+                seconds = time.perf_counter() - t
+                for owner, loan, _ in items:
+                    loan.host = host[loan.slot]
+                    loan.som.parts.state.restart(int(to[loan.slot]))  # s moved on, the winners found afresh
+                    out[owner] = (int(to[loan.slot] - s[loan.slot]), seconds)
+                self.launches += 1
+                self.batched += len(items)
+                self.widest = max(self.widest, len(items))
+        return out
 
     def forget(self) -> None:
-        """Drop the batches kept (rooms parked: their memory goes too)."""
-        with self._round:
-            self._batches.clear()
-
-    def _run(self, asks: list[_Ask]) -> None:
-        groups: dict[tuple, list[_Ask]] = {}
-        for ask in asks:
-            groups.setdefault(ask.key, []).append(ask)
-        for key, group in groups.items():
-            try:
-                if key is None or len(group) == 1:
-                    for ask in group:
-                        self.alone += 1
-                        ask.ran = step_alone(ask.som, ask.cycles)
-                else:
-                    self._launch(key, group)
-            except Exception as exc:  # each room's thread reports it as its step's failure
-                for ask in group:
-                    ask.error = exc
-            finally:
-                for ask in group:
-                    ask.done.set()
-
-    def _launch(self, key: tuple, group: list[_Ask]) -> None:
-        """One launch for the group: their states in, each stepped to its own cycle, their weights back."""
-        soms = [ask.som for ask in group]
-        batch = self._batch(key, soms[0], len(soms))
-        size = batch.n_variants
-        weights = np.empty((size, soms[0].n_neurons, soms[0].n_dims), np.float32)
-        controls = np.empty((size,) + soms[0].controls.shape, np.float32)
-        s = np.zeros(size, np.int64)
-        for b, som in enumerate(soms):
-            weights[b], controls[b], s[b] = som.weights, som.controls, som.iteration
-        weights[len(soms):], controls[len(soms):] = weights[0], controls[0]  # slots not used this round: no cycles
-        to = s.copy()
-        to[:len(soms)] = np.minimum(s[:len(soms)] + [ask.cycles for ask in group], soms[0].iterations)
-        batch.load(weights, s, controls)
-        batch.step_to(to)
-        out = batch.weights
-        for b, ask in enumerate(group):
-            ask.som.restore(out[b], int(to[b]))
-            ask.ran = int(to[b] - s[b])
-        self.launches += 1
-        self.batched += len(group)
-
-    def _batch(self, key: tuple, som: Som, count: int) -> BatchSom:
-        """The group's BatchSom, made for at least `count` rooms (its slots doubling as rooms join)."""
-        batch = self._batches.get(key)
-        if batch is None or batch.n_variants < count:
-            size = 1 << max(1, (count - 1).bit_length())
-            batch = BatchSom(som.topology, som.weights, np.repeat(som.controls[None], size, axis=0),
-                             iterations=som.iterations, l_start=som.l_start, l_end=som.l_end,
-                             smoothing=som.smoothing, reach=som.reach, smooth_dims=som.smooth_dims,
-                             metric_weights=som.metric_weights, mirror=som.mirror, device=som.device)
-            self._batches[key] = batch
-        return batch
+        """Drop the batches (every room parked: their memory goes too)."""
+        with self._lock:
+            for owner in list(self._loans):
+                self._give_back(owner)
+            self._groups.clear()
 
 
-__all__ = ["BatchedSteps", "batch_key"]
+class RoomLock:
+    """A room's Som lock (its state's `som_lock`) while a batch may hold its Som's state: whoever takes it gets the
+    Som with its state given back first; the rounds' own turns (`turn`) take it as it is."""
+
+    def __init__(self, lock, give_back) -> None:
+        self._lock = lock
+        self._give_back = give_back
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        if not self._lock.acquire(blocking, timeout):
+            return False
+        try:
+            self._give_back()
+        except BaseException:
+            self._lock.release()
+            raise
+        return True
+
+    def release(self) -> None:
+        self._lock.release()
+
+    def turn(self, blocking: bool = True) -> bool:
+        """Taken for a round's turn: the Som stays lent."""
+        return self._lock.acquire(blocking)
+
+    def __enter__(self) -> bool:
+        return self.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self._lock.release()
+
+
+__all__ = ["BatchedRooms", "RoomLock", "applies_in_batch", "batch_key"]

@@ -34,8 +34,9 @@ from ..model import Session
 from ..model.readback import read_folder
 from ..model.store import LOCK, SessionStore, set_aside
 from ..web.hub import ViewHub
-from .batched import BatchedSteps
+from .batched import BatchedRooms
 from .limits import StudioFull, StudioLimits, check_new_room, device_used_bytes, resident_bytes, room_name
+from .rounds import Rounds
 from .thumbs import public_shape, shape_of, thumbnail
 
 log = logging.getLogger(__name__)
@@ -149,7 +150,8 @@ class Rooms:
         self._rooms: dict[str, Room] = {}
         self._lock = threading.Lock()
         self._closed = False
-        self.steps = BatchedSteps()  # alike rooms stepped in one launch (batched.py)
+        self.batches = BatchedRooms()  # alike rooms held in one batch, stepped in one launch (batched.py)
+        self.rounds = Rounds(self.batches, self.frame_rate)  # one loop steps every room (rounds.py)
 
     # -- the rooms --------------------------------------------------------------------------------------------
     def known(self) -> list[RoomRecord]:
@@ -233,8 +235,9 @@ class Rooms:
                 "origin": "studio", "_store": store}
 
     def _start(self, room: Room, session: Session) -> None:
-        """Make `session` the room's and start it, stepped with the worker's alike rooms (caller holds room.lock)."""
-        session.trainer.stepper = self.steps.step
+        """Make `session` the room's and start it, its turns run by the worker's loop with the other rooms' (caller
+        holds room.lock)."""
+        session.trainer.driver = self.rounds
         session.start()
         room.session = session
         room._applied = session.frame.applied
@@ -324,7 +327,7 @@ class Rooms:
             room.record.write(room.folder)
         del session, hub
         if not self.live():
-            self.steps.forget()
+            self.batches.forget()
         release_memory()
         log.info("studio: room %s parked on %s", name, self.label)
         return True
@@ -358,6 +361,7 @@ class Rooms:
         self._closed = True
         for room in self.live():
             self.park(room.name, force=True)
+        self.rounds.stop()
 
 
 def _moved_to(reading, aside: Path) -> None:
