@@ -193,11 +193,6 @@ class Som:
         self._schedule.values = Schedule.of(self._schedule.values, reach=value)
 
     @property
-    def d_max(self) -> int:
-        """The largest hop distance the learning table covers (the mesh's grid diameter)."""
-        return self._schedule.d_max
-
-    @property
     def restart_iteration(self) -> int:
         """s0, where the next local restart begins."""
         return self._schedule.restart_iteration()
@@ -310,16 +305,14 @@ class Som:
     def set_controls(self, controls: ArrayLike, radii: ArrayLike | None = None, *, strokes: Sequence[int] | None = None,
                      from_anchor: bool = False, reach: float | None = None) -> None:
         """New controls (any count k), their radii (None: kept where the count stays, else all 0) and strokes (None:
-        kept where the count stays, else every control alone); the schedule
-        restarts at s0 from the latest weights (local follow), or with `from_anchor` from the weights `anchor()` kept
-        (each frame of a drag restarts from the shape the drag began with: on CUDA the copy back is a node of the
-        run's first graph, not a call of its own). `reach`: this restart's own (None: the Som's `reach`; a long move
-        of a point control takes a wider one, schedule.reach_for_move)."""
+        kept where the count stays, else every control alone); the schedule restarts at s0 from the latest weights
+        (local follow), or with `from_anchor` from the weights `anchor()` kept (a drag's frames restart from its start
+        shape; on CUDA the copy back is a node of the run's first graph). `reach`: this restart's (None: the Som's;
+        a long move of a point control takes a wider one, schedule.reach_for_move)."""
         state = self._state
         if from_anchor and state.w_anchor is None:
             raise ValueError("set_controls: from_anchor needs anchor() first (no weights are kept)")
-        if reach is not None:
-            reach = BY_NAME["reach"].check(reach)
+        reach = None if reach is None else BY_NAME["reach"].check(reach)
         new = self._controls.moved(controls, radii, strokes)
         self._end_growth()
         state.from_anchor(from_anchor)

@@ -69,8 +69,9 @@ def test_a_long_move_restarts_as_wide_as_it_moved(car):
     target = car.controls[NOSE][:3] + np.float32([0.3, 0.0, 0.0])
     car.move_control(NOSE, target)
     assert car.wait_applied(10)
-    reach = reach_for_move(0.08, 0.3 / median, car.modelling.som.d_max)
-    assert reach == pytest.approx(1.5 * 0.3 / median / sigma_of(car.modelling.som.d_max), rel=0.02) and reach > 0.09
+    d_max = int(car.preset.topology.d_max)
+    reach = reach_for_move(0.08, 0.3 / median, d_max)
+    assert reach == pytest.approx(1.5 * 0.3 / median / sigma_of(d_max), rel=0.02) and reach > 0.09
     assert car.frame.iteration == int(np.floor((1 - reach) * 1000))
     car.move_control(NOSE, target + np.float32([0.01, 0.0, 0.0]))
     assert car.wait_applied(10)

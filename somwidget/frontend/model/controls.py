@@ -93,7 +93,7 @@ class ControlEdits:
         edge = median_edge(self.frames.latest.positions, edges[::max(1, len(edges) // MEDIAN_EDGES)])
         if not moved or not edge:
             return None
-        return schedule.reach_for_move(float(state.params["reach"]), moved / edge, state.som.d_max)
+        return schedule.reach_for_move(float(state.params["reach"]), moved / edge, int(state.preset.topology.d_max))
 
     @property
     def radii(self) -> np.ndarray:
