@@ -45,8 +45,10 @@ ACTIONS: tuple[Action, ...] = (
     Action("toggle_training", "Train", "play", "Train or pause the map"),
     Action("undo", "Undo", "undo", "Undo the last step (a drag, a setting, a preset...); Ctrl+Z"),
     Action("redo", "Redo", "redo", "Redo the step undone last; Ctrl+Shift+Z"),
-    Action("reset", "Reset", "restore", "Back to the start mesh; the whole schedule runs again (the controls stay)"),
-    Action("reload_preset", "Reload", "reload", "This preset again as it starts: its own controls and start mesh"),
+    Action("reset", "Reset", "restore", "Back to the start mesh and the whole schedule runs again; your controls "
+                                        "stay where they are (the preset's own controls: Reload)"),
+    Action("reload_preset", "Reload", "reload", "Reload this preset as it starts: its own controls and start mesh "
+                                                "(one undo step); choosing it again in the menu does the same"),
     Action("refine", "Refine", "vector-triangle", "Subdivide the clay, its shape kept: every face split in four "
                                                   "(one undo step)"),
 )
@@ -69,6 +71,24 @@ EXPORT_CHOICES: tuple[tuple[str, str], ...] = (
 #: What a panel shows beside the gaps of the controls table.
 GAP_HELP = ("The distance from each control (and its mirrored copy) to its nearest node: small when the clay has "
             "reached the control.")
+
+
+#: A control farther than this share of the clay's size (`clay_size`) from its nearest node is off the clay: the
+#: controls table marks its gap and the view draws a thin line from it to that node (transport/display.py sends the
+#: distance as the topology's `off_clay_gap`).
+OFF_CLAY = 0.03
+#: A coordinate within this share of the clay's size of zero is shown as 0 (float noise such as 3.69e-17).
+ZERO_SHARE = 1e-6
+
+
+def clay_size(preset) -> float:
+    """The clay's size: its start mesh's bounding diagonal (what a radius and a gap are measured against)."""
+    return metrics.bounding_diagonal(preset.weights[:, list(preset.layout.position)]) or 1.0
+
+
+def coordinate_text(x: float, size: float) -> str:
+    """A coordinate as the controls table shows it: 3 significant digits, 0 within ZERO_SHARE x `size` of zero."""
+    return "0" if abs(x) < ZERO_SHARE * size else f"{x:.3g}"
 
 
 def fmt(x: float | None, digits: int = 3) -> str:
@@ -227,11 +247,13 @@ class PanelModel:
         """One row per control, a stroke's samples in one row: its index (a stroke's first sample's), its stable id
         (the number the views show), colour ('#rrggbb'), position ("x, y, z"; a stroke's first sample's: typed, the
         whole stroke moves by as much), its other features' values (the dims that are neither position nor colour,
-        `other_dims`; "" when there are none), gap text (original / mirror; a stroke's largest), radius and `samples`
-        (1, or a stroke's count). Position and features are written as a panel's field takes them back."""
+        `other_dims`; "" when there are none), gap text (original / mirror; a stroke's largest), `off` (a gap over
+        OFF_CLAY of the clay's size), radius and `samples` (1, or a stroke's count). Position and features are written
+        as a panel's field takes them back (a coordinate within ZERO_SHARE of the size of zero as 0)."""
         k, gaps = frame.n_controls, frame.gaps
         colours = frame.control_display_colours[:k]
         others = other_dims(frame.preset.layout) if frame.preset is not None else ()
+        size = clay_size(frame.preset) if frame.preset is not None else 1.0
         ids = frame.control_ids if len(frame.control_ids) == k else tuple(range(k))
         runs = frame.strokes if sum(frame.strokes) == k else (1,) * k
         rows, i = [], 0
@@ -242,9 +264,10 @@ class PanelModel:
                 g.append(max(float(gaps[k + j]) for j in run))
             radius = float(frame.radii[i]) if i < len(frame.radii) else 0.0
             rows.append({"i": i, "id": int(ids[i]), "samples": n, "colour": hex_colour(colours[i]),
-                         "position": ", ".join(f"{x:.3g}" for x in frame.control_positions[i]),
+                         "position": ", ".join(coordinate_text(float(x), size) for x in frame.control_positions[i]),
                          "features": ", ".join(f"{float(frame.controls[i, d]):.3g}" for d in others),
-                         "gap": " / ".join(f"{x:.3f}" for x in g), "radius": round(radius, 4)})
+                         "gap": " / ".join(f"{x:.3f}" for x in g), "off": bool(g) and max(g) > OFF_CLAY * size,
+                         "radius": round(radius, 4)})
             i += n
         return rows
 
@@ -309,8 +332,7 @@ class PanelModel:
     @property
     def size(self) -> float:
         """The clay's size: its start mesh's bounding diagonal (what a radius is measured against)."""
-        preset = self.session.preset
-        return metrics.bounding_diagonal(preset.weights[:, list(preset.layout.position)]) or 1.0
+        return clay_size(self.session.preset)
 
     def group_choices(self) -> list[tuple[str, str]]:
         """(label, spec) of the symmetry groups a panel offers, the one in effect among them."""
@@ -380,4 +402,5 @@ class PanelModel:
         return None if error is None else f"variants: {error}"
 
 
-__all__ = ["PanelModel", "ACTIONS", "Action", "EXPORT_CHOICES", "GAP_HELP", "RADIUS_HELP", "REACH_HELP", "fmt"]
+__all__ = ["PanelModel", "ACTIONS", "Action", "EXPORT_CHOICES", "GAP_HELP", "OFF_CLAY", "RADIUS_HELP", "REACH_HELP",
+           "clay_size", "fmt"]

@@ -16,6 +16,7 @@ from ...backend import io as _io
 from ...backend import presets as _presets
 from ...backend.refine import cluster_on_grid
 from ...backend.symmetry import Symmetry
+from ..model.panel import OFF_CLAY, clay_size
 from .messages import TopologyMessage
 
 #: Most display vertices a frame streams whole: 32,768 x 15 bytes = 0.5 MB a frame, 15 MB/s at 30 frames/s, which a
@@ -149,5 +150,6 @@ def topology_message(session, frame) -> TopologyMessage:
         display=geo["display"], n_vertices=int(geo["n_vertices"]), n_nodes=int(session.topology.n_vertices),
         triangles=geo["triangles"].ravel().tolist(), segments=geo["segments"].ravel().tolist(),
         points=bool(geo["points"]), bounds={"min": [float(x) for x in lo], "max": [float(x) for x in hi]},
-        control_radius=0.035 * span, colour_space=session.layout.colour_space,
+        control_radius=0.035 * span, off_clay_gap=OFF_CLAY * clay_size(session.preset),
+        colour_space=session.layout.colour_space,
         feature_names=list(session.layout.names))

@@ -170,7 +170,9 @@ class TopologyMessage(ServerMessage):
     mesh). `n_vertices`: display vertices in each frame (N nodes; 2N for "lines": roots then tips); `triangles`: a
     flat triangle list over them (faces fanned; quads for "lines"); `segments`: a flat segment list (mesh edges;
     root -> tip for "lines"); `points`: draw each vertex as a point; `bounds`: {"min": [x, y, z], "max": [...]} of the
-    start mesh and controls; `control_radius`: a control's drawn radius; `parameters`: the settings a "set" may name.
+    start mesh and controls; `control_radius`: a control's drawn radius; `off_clay_gap`: the distance (model units)
+    beyond which a control is off the clay and the view draws a line from it to its nearest node (OFF_CLAY of the
+    clay's size, model/panel.py; 0: no lines); `parameters`: the settings a "set" may name.
     The fields after `parameters` are the view's own: its client id (None over the notebook's comm) and the
     controls as a `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates), `n_controls`
     and `n_effective` (originals, then mirrored copies)."""
@@ -189,6 +191,7 @@ class TopologyMessage(ServerMessage):
     up_axis: int = 2
     bounds: dict[str, list[float]]
     control_radius: float
+    off_clay_gap: float = 0.0
     colour_space: str
     feature_names: list[str]
     max_coordinate: float = MAX_COORDINATE

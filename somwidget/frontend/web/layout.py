@@ -11,7 +11,7 @@ from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
 from ...backend.schedule import BY_NAME, SECTIONS, Setting
-from ..model.panel import GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
+from ..model.panel import ACTIONS, GAP_HELP, OFF_CLAY, RADIUS_HELP, PanelModel, slider_digits
 from ..model.variants import VARIANTS_HELP
 from .state_guard import state_key
 
@@ -89,6 +89,22 @@ if (!window.somwidgetMount) {
 """
 
 
+#: What each panel action's button says it does (model/panel.py, ACTIONS).
+HELP = {a.name: a.help for a in ACTIONS}
+#: Milliseconds a pointer rests on a button before its tooltip shows (a native `title` takes a second or more over a
+#: Vuetify button, and a person who waited two seconds saw none).
+TOOLTIP_DELAY = 250
+
+
+def _button(help_text, *args, **props) -> None:
+    """A VBtn with a Vuetify tooltip (shown on hover after TOOLTIP_DELAY ms) saying what it does: `help_text` a
+    string or a state binding ("expr",). The tooltip hangs on a span around the button, so that a disabled button
+    (which takes no pointer events) says what it would do too."""
+    with v3.VTooltip(text=help_text, location="bottom", open_delay=TOOLTIP_DELAY, max_width=320):
+        with html.Template(v_slot_activator="{ props }"), html.Span(v_bind="props", classes="d-inline-block"):
+            v3.VBtn(*args, **props)
+
+
 def build_page(server, panel: PanelModel):
     """The page: a toolbar (iteration, Train / Pause, Undo, Redo, Reset), the panel in a drawer, and the element the
     clay view mounts into (#clay-view). Returns trame's layout."""
@@ -98,15 +114,15 @@ def build_page(server, panel: PanelModel):
             v3.VSpacer()
             html.Div("{{ stats.iteration }} / {{ stats.S }}", classes="mr-3 text-body-2", id="iteration-label")
             # says what a press does: Pause (training), Resume (stopped part way), Train (settled)
-            v3.VBtn("{{ stats.train_label }}", id="train-button", click="trigger('toggle_training')",
-                    title=("stats.train_help",), prepend_icon=("stats.running ? 'mdi-pause' : 'mdi-play'",),
+            _button(("stats.train_help",), "{{ stats.train_label }}", id="train-button",
+                    click="trigger('toggle_training')",
+                    prepend_icon=("stats.running ? 'mdi-pause' : 'mdi-play'",), variant="tonal", classes="mr-2")
+            _button(HELP["undo"], icon="mdi-undo", id="undo-button", click="trigger('undo')",
+                    disabled=("!stats.can_undo",), variant="text")
+            _button(HELP["redo"], icon="mdi-redo", id="redo-button", click="trigger('redo')",
+                    disabled=("!stats.can_redo",), variant="text", classes="mr-2")
+            _button(HELP["reset"], "Reset", id="reset-button", click="trigger('reset')", prepend_icon="mdi-restore",
                     variant="tonal", classes="mr-2")
-            v3.VBtn(icon="mdi-undo", id="undo-button", click="trigger('undo')", disabled=("!stats.can_undo",),
-                    title="Undo (Ctrl+Z)", variant="text")
-            v3.VBtn(icon="mdi-redo", id="redo-button", click="trigger('redo')", disabled=("!stats.can_redo",),
-                    title="Redo (Ctrl+Shift+Z)", variant="text", classes="mr-2")
-            v3.VBtn("Reset", id="reset-button", click="trigger('reset')", prepend_icon="mdi-restore",
-                    variant="tonal", classes="mr-2", title="Back to the start mesh; the whole schedule runs again")
         with layout.drawer as drawer:
             drawer.width = 390
             _panel(panel)
@@ -130,6 +146,11 @@ def _revision_key(name: str, row: str = "''") -> str:
 
 #: The controls table's cells: little padding, so that position, gap and radius fit the drawer's width.
 _TIGHT = "padding: 0 3px"
+#: The gap cell of a control off the clay (its gap over OFF_CLAY of the clay's size): a quiet amber mark.
+_OFF_CLAY_STYLE = "background: #fff1c2; color: #7a4a00; font-weight: 600; border-radius: 3px"
+OFF_CLAY_HELP = (f"Off the clay: farther than {OFF_CLAY:.0%} of the size of the clay from its nearest node (the view "
+                 "draws a thin line to that node). It pulls that node while the map trains: press Train, or drag "
+                 "the control onto the clay.")  # no quotes: it goes into a Vue binding
 
 
 def _on_enter_or_change(handler: str) -> list[str]:
@@ -170,14 +191,16 @@ def _panel(panel: PanelModel) -> None:
 
         # preset and files
         with html.Div(classes="d-flex align-center mb-1"):
+            # the preset in use chosen again: it reloads (the menu reports no change of its value, its item's click
+            # does)
             v3.VSelect(v_model=("preset_name",), items=("preset_items",), label="Preset", density="compact",
-                       hide_details=True, id="preset-select", disabled=("busy",))
-            v3.VBtn(icon="mdi-reload", variant="text", size="small", id="reload-preset",
-                    click="trigger('reload_preset')", disabled=("busy",),
-                    title="This preset again as it starts: its own controls and start mesh")
-            v3.VBtn("Refine", variant="tonal", size="small", id="refine", click="trigger('refine')",
-                    disabled=("busy",), prepend_icon="mdi-vector-triangle", classes="ml-1",
-                    title="Subdivide the clay, its shape kept: every face split in four (one undo step)")
+                       hide_details=True, id="preset-select", disabled=("busy",),
+                       item_props=("(item) => ({ onClick: () => item.value === preset_name && !busy "
+                                   "&& trigger('reload_preset') })",))
+            _button(HELP["reload_preset"], icon="mdi-reload", variant="text", size="small", id="reload-preset",
+                    click="trigger('reload_preset')", disabled=("busy",))
+            _button(HELP["refine"], "Refine", variant="tonal", size="small", id="refine", click="trigger('refine')",
+                    disabled=("busy",), prepend_icon="mdi-vector-triangle", classes="ml-1")
         html.Div("{{ preset_description }}", classes="text-caption mb-2")
         v3.VBtn("Decimate and load", v_if="decimate_offer", size="small", variant="tonal", color="primary",
                 id="decimate-upload", prepend_icon="mdi-vector-polyline-minus", classes="mb-2",
@@ -233,9 +256,9 @@ def _panel(panel: PanelModel) -> None:
                           style="max-width: 80px", title="Every control's radius of influence at once: type it and "
                                                          "press Enter (model units; 0: the paper's point controls)",
                           raw_attrs=_on_enter_or_change("trigger('set_radius', [null, $event.target.value])"))
-            v3.VBtn(icon="mdi-plus", size="small", variant="text", click="trigger('add_control')",
-                    id="add-control", title="Add a control on the clay, where it is farthest from the others (it "
-                                            "moves nothing until dragged); or double-click the clay in the view")
+            _button("Add a control on the clay, where it is farthest from the others (it moves nothing until "
+                    "dragged); or double-click the clay in the view", icon="mdi-plus", size="small", variant="text",
+                    click="trigger('add_control')", id="add-control")
         with v3.VTable(density="compact", id="controls-table"):
             with html.Tbody():
                 with html.Tr(v_for="c in controls_ui", key=_revision_key("radius", "c.id")):
@@ -264,7 +287,10 @@ def _panel(panel: PanelModel) -> None:
                                              "Enter'",),
                                       raw_attrs=_on_enter_or_change(
                                           "trigger('set_features', [c.i, $event.target.value])"))
-                    html.Td("{{ c.gap }}", classes="text-caption gap-cell", style=_TIGHT)
+                    # a gap over OFF_CLAY of the clay's size: marked, as the view's line from the control to the clay
+                    html.Td("{{ c.gap }}", classes=("'text-caption gap-cell' + (c.off ? ' gap-off' : '')",),
+                            style=(f"'{_TIGHT}' + (c.off ? '; {_OFF_CLAY_STYLE}' : '')",),
+                            title=(f"c.off ? '{OFF_CLAY_HELP}' : ''",))
                     with html.Td(style=f"{_TIGHT}; width: 60px"):
                         v3.VTextField(model_value=("c.radius",), density="compact", type="number", variant="plain",
                                       hide_details=True, classes="radius-cell", min=0, step=0.05,
@@ -272,8 +298,9 @@ def _panel(panel: PanelModel) -> None:
                                       raw_attrs=_on_enter_or_change(
                                           "trigger('set_radius', [c.i, $event.target.value])"))
                     with html.Td(style=_TIGHT):
-                        v3.VBtn(icon="mdi-close", size="x-small", variant="text",
-                                click="trigger('remove_control', [c.i])", title="Remove")
+                        _button("Remove this control (the others keep their numbers; Undo brings it back)",
+                                icon="mdi-close", size="x-small", variant="text", classes="remove-control",
+                                click="trigger('remove_control', [c.i])")
 
         # design variants
         html.Div("Variants", classes="text-subtitle-2 mt-2", title=VARIANTS_HELP)
@@ -291,8 +318,10 @@ def _panel(panel: PanelModel) -> None:
                 v3.VChip(name, value=name, size="small", filter=True, variant="outlined",
                          title=f"vary {name} around its value")
         with html.Div(classes="d-flex align-center ga-2 mb-1"):
-            v3.VBtn("Sweep", size="small", variant="tonal", prepend_icon="mdi-view-grid-plus", id="sweep",
-                    click="trigger('sweep_variants')", disabled=("busy",))
+            _button("Train this many variants of the design at once, the controls jittered and the chosen settings "
+                    "varied; click a thumbnail to take it", "Sweep", size="small", variant="tonal",
+                    prepend_icon="mdi-view-grid-plus", id="sweep", click="trigger('sweep_variants')",
+                    disabled=("busy",))
             v3.VProgressLinear(model_value=("variants_progress",), height=4, color="primary",
                                v_if="variants_gallery.length || busy", id="variants-progress")
         with html.Div(classes="d-flex flex-wrap ga-1 mb-2", id="variants-gallery"):
@@ -312,12 +341,12 @@ def _panel(panel: PanelModel) -> None:
                        hide_details=True, id="export-format", style="min-width: 190px; max-width: 240px",
                        title="What the next tool reads: STL for 3-D printing, .3dm for Rhino, glTF / GLB for "
                              "Blender and game engines (the controls as named nodes)")
-            v3.VBtn("Export", size="small", variant="tonal", prepend_icon="mdi-download", id="export-mesh",
-                    title="Download the clay in the chosen format",
+            _button("Download the clay in the chosen format, named after the session and the time", "Export",
+                    size="small", variant="tonal", prepend_icon="mdi-download", id="export-mesh",
                     click=f"utils.download(export_stem + {STAMP} + '.' + export_format, trigger('export_mesh', "
                           "[export_format]), export_mimes[export_format])")
-            v3.VBtn("Save session", size="small", variant="tonal", prepend_icon="mdi-content-save",
-                    id="save-session",
+            _button("Download the whole session (clay, controls, settings) as a .npz to load again later",
+                    "Save session", size="small", variant="tonal", prepend_icon="mdi-content-save", id="save-session",
                     click=f"utils.download(export_stem + {STAMP} + '.npz', trigger('save_session'), "
                           "'application/octet-stream')")
         v3.VFileInput(v_model=("session_upload",), label="Load a session (.npz)", density="compact",

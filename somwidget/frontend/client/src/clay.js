@@ -5,6 +5,7 @@
 // own (x forward, y sideways, z up): `worldToModel` / `modelToWorld` convert.
 
 import * as THREE from 'three';
+import { Tethers } from './tethers.js';
 
 const HELD = new THREE.Color(0xff2020);
 const WIREFRAME_LIMIT = 16384; // display vertices above which a surface has no wireframe to show (display.js)
@@ -88,6 +89,8 @@ export class Clay {
     this.radii = []; // each control's radius of influence (model units), from the topology and "controls" messages
     this.strokes = []; // the runs of controls that act as one (a stroke's samples)
     this.pixelSize = null; // (world point) => world units a screen pixel spans there (null: no floor, a headset)
+    this.tethers = new Tethers(); // a line from each control off the clay to its nearest node
+    this.content.add(this.tethers.lines);
   }
 
   get ready() {
@@ -166,6 +169,7 @@ export class Clay {
     this.centre = lo.clone().add(hi).multiplyScalar(0.5);
     this.radius = Math.max(hi.distanceTo(lo) / 2, 1e-6);
     this.controlRadius = t.control_radius;
+    this.tethers.setLimit(t.off_clay_gap);
     this.content.position.copy(this.centre).multiplyScalar(-1);
   }
 
@@ -342,6 +346,20 @@ export class Clay {
       d.instanceMatrix.needsUpdate = true;
       if (d.instanceColor) d.instanceColor.needsUpdate = true;
     }
+    this.refreshTethers();
+  }
+
+  // The lines from the controls off the clay (a stroke as one) to their nearest nodes, where the controls are drawn.
+  refreshTethers() {
+    const t = this.topology;
+    const runs = [];
+    for (let i = 0; i < this.k;) {
+      const run = this.runOf(i);
+      runs.push(run);
+      i = Math.max(i + 1, run[run.length - 1] + 1);
+    }
+    this.tethers.update(t && this.lastFrame ? this.positionAttr.array : null, t ? Math.min(t.n_nodes, t.n_vertices) : 0,
+      runs, (i) => this.controlAnchors[i]?.position.toArray());
   }
 
   // The model radius that `px` screen pixels make at anchor m (0 without a camera to measure: a headset).

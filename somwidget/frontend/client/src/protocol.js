@@ -89,10 +89,12 @@ export const FRAME_MESSAGE = 'frame';
  * mesh). `n_vertices`: display vertices in each frame (N nodes; 2N for "lines": roots then tips); `triangles`: a
  * flat triangle list over them (faces fanned; quads for "lines"); `segments`: a flat segment list (mesh edges;
  * root -> tip for "lines"); `points`: draw each vertex as a point; `bounds`: {"min": [x, y, z], "max": [...]} of
- * the start mesh and controls; `control_radius`: a control's drawn radius; `parameters`: the settings a "set"
- * may name. The fields after `parameters` are the view's own: its client id (None over the notebook's comm) and
- * the controls as a `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates),
- * `n_controls` and `n_effective` (originals, then mirrored copies).
+ * the start mesh and controls; `control_radius`: a control's drawn radius; `off_clay_gap`: the distance (model
+ * units) beyond which a control is off the clay and the view draws a line from it to its nearest node (OFF_CLAY
+ * of the clay's size, model/panel.py; 0: no lines); `parameters`: the settings a "set" may name. The fields
+ * after `parameters` are the view's own: its client id (None over the notebook's comm) and the controls as a
+ * `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates), `n_controls` and
+ * `n_effective` (originals, then mirrored copies).
  * @typedef {object} TopologyMessage
  * @property {'topology'} type
  * @property {number} protocol
@@ -108,6 +110,7 @@ export const FRAME_MESSAGE = 'frame';
  * @property {number} up_axis
  * @property {Object<string, number[]>} bounds
  * @property {number} control_radius
+ * @property {number} off_clay_gap
  * @property {string} colour_space
  * @property {string[]} feature_names
  * @property {number} max_coordinate

@@ -384,6 +384,7 @@ export class ClayView {
       radiusDisc: { ...this.disc.describe(), px: this.disc.disc.visible
         ? this.disc.disc.scale.x / this.pixelSize(this.disc.disc.position) : 0 }, newRadius: this.radius.newRadius, keptPlace: s.kept,
       numbered: Array.from({ length: clay.kEff }, (_, j) => clay.numbered(j)),
+      tethers: clay.tethers.describe(), // the lines from controls off the clay: {control, node, gap}
       presence: this.presence.describe(),
       size: [this.renderer.domElement.clientWidth, this.renderer.domElement.clientHeight],
     };
