@@ -1,15 +1,13 @@
-"""The wire messages between a session and its views, declared once: one dataclass per message, what a server sends
-every view and what it accepts from one. Validation, the Python encoders and the browser's side
-(client/src/protocol.js, written by `python -m somwidget.frontend.transport.codegen`) are derived from these classes.
+"""The wire messages between a session and its views, declared once, one dataclass each. Validation, the Python
+encoders and client/src/protocol.js (`python -m somwidget.frontend.transport.codegen`) are derived from them.
 
 One protocol for every view: the web app's and the XR page over the websocket /view/ws (web/hub.py; /xr/ws is its
 old name), the notebook widget over the kernel's comm (notebook/widget.py); both through one `ViewConnection`
 (connection.py). Field types and bounds are the wire field types of fields.py.
 
-Server -> client: a `TopologyMessage` once per connection and again whenever the session's generation changes (a new
-preset or mesh); then binary frames (`FrameHeader` and FRAME_ARRAYS below: the latest state, a slow view skips
-frames, never lags); then, as things happen, the other `ServerMessage`s. Over the notebook's comm a frame is a
-`FrameMessage` whose one binary buffer is the frame.
+Server -> client: a `TopologyMessage` once per connection and again at a new preset or mesh; then binary frames
+(`FrameHeader` and FRAME_ARRAYS below: the latest state; a slow view skips frames, never lags); then, as things
+happen, the other `ServerMessage`s. Over the notebook's comm a frame is a `FrameMessage` whose one buffer is the frame.
 
 Client -> server: JSON text, one `Intent` per message, at most MAX_MESSAGE_BYTES bytes. Anything else is refused with
 an `ErrorMessage` sent back (and logged) and changes nothing: binary messages, messages over the size limit, text
@@ -170,9 +168,8 @@ class TopologyMessage(ServerMessage):
     mesh). `n_vertices`: display vertices in each frame (N nodes; 2N for "lines": roots then tips); `triangles`: a
     flat triangle list over them (faces fanned; quads for "lines"); `segments`: a flat segment list (mesh edges;
     root -> tip for "lines"); `points`: draw each vertex as a point; `bounds`: {"min": [x, y, z], "max": [...]} of the
-    start mesh and controls; `control_radius`: a control's drawn radius; `off_clay_gap`: the distance (model units)
-    beyond which a control is off the clay and the view draws a line from it to its nearest node (OFF_CLAY of the
-    clay's size, model/panel.py; 0: no lines); `parameters`: the settings a "set" may name.
+    start mesh and controls; `control_radius`: a control's drawn radius; `off_clay_gap`: past this distance from the
+    clay a control gets a line to its nearest node (0: none); `parameters`: the settings a "set" may name.
     The fields after `parameters` are the view's own: its client id (None over the notebook's comm) and the
     controls as a `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates), `n_controls`
     and `n_effective` (originals, then mirrored copies)."""

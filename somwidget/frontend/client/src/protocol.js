@@ -89,12 +89,11 @@ export const FRAME_MESSAGE = 'frame';
  * mesh). `n_vertices`: display vertices in each frame (N nodes; 2N for "lines": roots then tips); `triangles`: a
  * flat triangle list over them (faces fanned; quads for "lines"); `segments`: a flat segment list (mesh edges;
  * root -> tip for "lines"); `points`: draw each vertex as a point; `bounds`: {"min": [x, y, z], "max": [...]} of
- * the start mesh and controls; `control_radius`: a control's drawn radius; `off_clay_gap`: the distance (model
- * units) beyond which a control is off the clay and the view draws a line from it to its nearest node (OFF_CLAY
- * of the clay's size, model/panel.py; 0: no lines); `parameters`: the settings a "set" may name. The fields
- * after `parameters` are the view's own: its client id (None over the notebook's comm) and the controls as a
- * `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates), `n_controls` and
- * `n_effective` (originals, then mirrored copies).
+ * the start mesh and controls; `control_radius`: a control's drawn radius; `off_clay_gap`: past this distance
+ * from the clay a control gets a line to its nearest node (0: none); `parameters`: the settings a "set" may
+ * name. The fields after `parameters` are the view's own: its client id (None over the notebook's comm) and the
+ * controls as a `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates),
+ * `n_controls` and `n_effective` (originals, then mirrored copies).
  * @typedef {object} TopologyMessage
  * @property {'topology'} type
  * @property {number} protocol
