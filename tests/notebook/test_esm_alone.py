@@ -10,6 +10,8 @@ import helpers
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS
 
+from somwidget.frontend.model.panel import ACTION_HELP
+
 pytestmark = pytest.mark.browser
 
 #: A stand-in for anywidget's model: traits in a map, messages recorded.
@@ -25,7 +27,8 @@ LOAD = """async ([esm, traits]) => {
   mod.render({ model, el });
   await new Promise((r) => setTimeout(r, 500));
   return { sent, html: el.innerHTML.length, canvas: !!el.querySelector('canvas'),
-           inputs: el.querySelectorAll('input, select, button').length };
+           inputs: el.querySelectorAll('input, select, button').length,
+           buttons: Object.fromEntries([...el.querySelectorAll('button')].map((b) => [b.textContent, b.title])) };
 }"""
 
 
@@ -40,7 +43,8 @@ def test_the_modules_load_from_their_esm_without_jupyter(tmp_path):
     try:
         panel = w.panel
         panel_traits = {k: getattr(panel, k) for k in ("fields", "sections", "values", "status", "presets",
-                                                        "groups", "features", "controls", "exports", "error")}
+                                                        "groups", "features", "controls", "exports", "actions",
+                                                        "error")}
         with helpers.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
             try:
@@ -50,6 +54,10 @@ def test_the_modules_load_from_their_esm_without_jupyter(tmp_path):
                 assert view["canvas"] and {"type": "hello"} in [{"type": m.get("type")} for m in view["sent"]], view
                 shown = page.evaluate(LOAD, [panel._esm, panel_traits])
                 assert shown["inputs"] > 20, shown  # every declared field, the buttons, the menus
+                # the buttons say what they do in the web page's words (model/panel.py ACTIONS)
+                for name in ("reset", "reload_preset", "undo", "refine"):
+                    label, words = panel.actions[name]
+                    assert shown["buttons"].get(label) == ACTION_HELP[name], (name, shown["buttons"])
             finally:
                 browser.close()
     finally:

@@ -73,3 +73,14 @@ def test_all_radii_follows_a_preset_switch_and_a_group_change_is_told(panel):
     assert session.n_controls == 6 and session.wait_applied(30)
     panel.refresh()
     assert "6 controls (12 with their copies)" in panel.status.value
+
+
+def test_the_buttons_say_what_they_do_in_the_web_pages_words(panel):
+    """A person moving between the notebook and the web page reads the same tooltip on each button."""
+    from somwidget.frontend.model.panel import ACTION_HELP
+
+    assert panel.reset_button.tooltip == ACTION_HELP["reset"]
+    assert "controls stay" in panel.reset_button.tooltip
+    assert panel.reload_button.tooltip == ACTION_HELP["reload_preset"]
+    assert panel.undo_button.tooltip == ACTION_HELP["undo"] and "Ctrl+Z" in panel.undo_button.tooltip
+    assert panel.refine_button.tooltip == ACTION_HELP["refine"]

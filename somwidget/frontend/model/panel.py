@@ -53,6 +53,8 @@ ACTIONS: tuple[Action, ...] = (
                                                   "(one undo step)"),
 )
 ACTION_NAMES = tuple(a.name for a in ACTIONS)
+#: What each action's button says it does (the tooltip in every panel).
+ACTION_HELP = {a.name: a.help for a in ACTIONS}
 #: The run button's tooltip for each of its labels (PanelModel.train_label).
 TRAIN_HELP = {"Pause": "Pause the training",
               "Resume": "Go on with the schedule from where it stopped",
@@ -402,5 +404,5 @@ class PanelModel:
         return None if error is None else f"variants: {error}"
 
 
-__all__ = ["PanelModel", "ACTIONS", "Action", "EXPORT_CHOICES", "GAP_HELP", "OFF_CLAY", "RADIUS_HELP", "REACH_HELP",
-           "clay_size", "fmt"]
+__all__ = ["PanelModel", "ACTIONS", "ACTION_HELP", "Action", "EXPORT_CHOICES", "GAP_HELP", "OFF_CLAY", "RADIUS_HELP",
+           "REACH_HELP", "clay_size", "fmt"]

@@ -79,22 +79,24 @@ function render({ model, el: host }) {
   const title = el('div');
   const preset = el('select', { title: 'Load a preset (one undo step)' });
   preset.addEventListener('change', () => send({ type: 'preset', name: preset.value }));
-  const button = (label, name, help) => {
+  const actions = model.get('actions'); // name -> [label, help], the same words as the web page's tooltips
+  const button = (name) => {
+    const [label, help] = actions[name];
     const b = el('button', { textContent: label, title: help });
     b.addEventListener('click', () => send({ type: 'action', name }));
     return b;
   };
-  const train = button('Train', 'toggle_training', 'Train or pause the map');
-  const undo = button('Undo', 'undo', 'Undo the last step');
-  const redo = button('Redo', 'redo', 'Redo the step undone last');
+  const train = button('toggle_training');
+  const undo = button('undo');
+  const redo = button('redo');
   const status = el('div', { className: 'status' });
   const progress = el('progress', { max: 1, value: 0 });
   const error = el('div', { className: 'error', role: 'alert' });
   root.append(title,
     el('div', { className: 'row' }, [el('label', {}, [el('span', { textContent: 'preset' }), preset]),
-      button('Reload', 'reload_preset', 'This preset again as it starts'),
-      button('Refine', 'refine', 'Subdivide the clay, its shape kept (one undo step)')]),
-    el('div', { className: 'row' }, [train, undo, redo, button('Reset', 'reset', 'Back to the start mesh')]),
+      button('reload_preset'),
+      button('refine')]),
+    el('div', { className: 'row' }, [train, undo, redo, button('reset')]),
     progress, status, error);
 
   const sections = model.get('sections');

@@ -28,7 +28,7 @@ import ipywidgets as widgets
 from ...backend import presets as _presets
 from ...backend.schedule import BY_NAME, SECTIONS, Setting
 from ..model import Frame, Session
-from ..model.panel import EXPORT_CHOICES, GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
+from ..model.panel import ACTION_HELP, EXPORT_CHOICES, GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
 from .variants import VariantsSection
 
 log = logging.getLogger(__name__)
@@ -81,18 +81,16 @@ class Panel(widgets.VBox):
         self.title = widgets.HTML(layout=_fluid())
         self.preset = widgets.Dropdown(description="preset", style=style, layout=_fluid("1 1 190px"))
         self.reload_button = widgets.Button(icon="rotate-left", layout=widgets.Layout(width="36px", min_width="36px"),
-                                            tooltip="This preset again as it starts: its own controls and start mesh")
+                                            tooltip=ACTION_HELP["reload_preset"])
         self.train_button = widgets.Button(description="Pause", icon="pause", layout=_button())
         self.reset_button = widgets.Button(description="Reset", icon="refresh", layout=_button(),
-                                           tooltip="Back to the start mesh, the whole schedule again (the controls "
-                                                   "stay)")
+                                           tooltip=ACTION_HELP["reset"])
         self.undo_button = widgets.Button(description="Undo", icon="undo", layout=_button(),
-                                          tooltip="Undo the last step (a drag, a setting, a preset...)")
+                                          tooltip=ACTION_HELP["undo"])
         self.redo_button = widgets.Button(description="Redo", icon="repeat", layout=_button(),
-                                          tooltip="Redo the step undone last")
+                                          tooltip=ACTION_HELP["redo"])
         self.refine_button = widgets.Button(description="Refine", icon="th", layout=_button(),
-                                            tooltip="Subdivide the clay, its shape kept: every face split in four "
-                                                    "(one undo step)")
+                                            tooltip=ACTION_HELP["refine"])
         self.progress = widgets.IntProgress(min=0, max=1, value=0, description="progress", style=style,
                                             layout=wide)
         self.status = widgets.HTML(layout=_fluid())

@@ -11,7 +11,7 @@ from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
 from ...backend.schedule import BY_NAME, SECTIONS, Setting
-from ..model.panel import ACTIONS, GAP_HELP, OFF_CLAY, RADIUS_HELP, PanelModel, slider_digits
+from ..model.panel import ACTION_HELP, GAP_HELP, OFF_CLAY, RADIUS_HELP, PanelModel, slider_digits
 from ..model.variants import VARIANTS_HELP
 from .state_guard import state_key
 
@@ -89,8 +89,6 @@ if (!window.somwidgetMount) {
 """
 
 
-#: What each panel action's button says it does (model/panel.py, ACTIONS).
-HELP = {a.name: a.help for a in ACTIONS}
 #: Milliseconds a pointer rests on a button before its tooltip shows (a native `title` takes a second or more over a
 #: Vuetify button, and a person who waited two seconds saw none).
 TOOLTIP_DELAY = 250
@@ -117,12 +115,12 @@ def build_page(server, panel: PanelModel):
             _button(("stats.train_help",), "{{ stats.train_label }}", id="train-button",
                     click="trigger('toggle_training')",
                     prepend_icon=("stats.running ? 'mdi-pause' : 'mdi-play'",), variant="tonal", classes="mr-2")
-            _button(HELP["undo"], icon="mdi-undo", id="undo-button", click="trigger('undo')",
+            _button(ACTION_HELP["undo"], icon="mdi-undo", id="undo-button", click="trigger('undo')",
                     disabled=("!stats.can_undo",), variant="text")
-            _button(HELP["redo"], icon="mdi-redo", id="redo-button", click="trigger('redo')",
+            _button(ACTION_HELP["redo"], icon="mdi-redo", id="redo-button", click="trigger('redo')",
                     disabled=("!stats.can_redo",), variant="text", classes="mr-2")
-            _button(HELP["reset"], "Reset", id="reset-button", click="trigger('reset')", prepend_icon="mdi-restore",
-                    variant="tonal", classes="mr-2")
+            _button(ACTION_HELP["reset"], "Reset", id="reset-button", click="trigger('reset')",
+                    prepend_icon="mdi-restore", variant="tonal", classes="mr-2")
         with layout.drawer as drawer:
             drawer.width = 390
             _panel(panel)
@@ -197,10 +195,10 @@ def _panel(panel: PanelModel) -> None:
                        hide_details=True, id="preset-select", disabled=("busy",),
                        item_props=("(item) => ({ onClick: () => item.value === preset_name && !busy "
                                    "&& trigger('reload_preset') })",))
-            _button(HELP["reload_preset"], icon="mdi-reload", variant="text", size="small", id="reload-preset",
+            _button(ACTION_HELP["reload_preset"], icon="mdi-reload", variant="text", size="small", id="reload-preset",
                     click="trigger('reload_preset')", disabled=("busy",))
-            _button(HELP["refine"], "Refine", variant="tonal", size="small", id="refine", click="trigger('refine')",
-                    disabled=("busy",), prepend_icon="mdi-vector-triangle", classes="ml-1")
+            _button(ACTION_HELP["refine"], "Refine", variant="tonal", size="small", id="refine",
+                    click="trigger('refine')", disabled=("busy",), prepend_icon="mdi-vector-triangle", classes="ml-1")
         html.Div("{{ preset_description }}", classes="text-caption mb-2")
         v3.VBtn("Decimate and load", v_if="decimate_offer", size="small", variant="tonal", color="primary",
                 id="decimate-upload", prepend_icon="mdi-vector-polyline-minus", classes="mb-2",
