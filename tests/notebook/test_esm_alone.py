@@ -42,8 +42,8 @@ def test_the_modules_load_from_their_esm_without_jupyter(tmp_path):
     w = show(session, panel="anywidget")
     try:
         panel = w.panel
-        panel_traits = {k: getattr(panel, k) for k in ("fields", "sections", "values", "status", "presets",
-                                                        "groups", "features", "controls", "exports", "actions",
+        panel_traits = {k: getattr(panel, k) for k in ("fields", "sections", "values", "status", "presets", "groups",
+                                                        "features", "controls", "exports", "actions", "off_clay",
                                                         "error")}
         with helpers.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)

@@ -84,3 +84,19 @@ def test_the_buttons_say_what_they_do_in_the_web_pages_words(panel):
     assert panel.reload_button.tooltip == ACTION_HELP["reload_preset"]
     assert panel.undo_button.tooltip == ACTION_HELP["undo"] and "Ctrl+Z" in panel.undo_button.tooltip
     assert panel.refine_button.tooltip == ACTION_HELP["refine"]
+
+
+def test_a_control_off_the_clay_has_its_gap_marked_as_on_the_web_page(panel):
+    """The web page marks the gap cell of a control farther than 3% of the size from the clay; so does the notebook."""
+    from somwidget.frontend.model.panel import OFF_CLAY_STYLE
+
+    session = panel.session
+    session.pause()
+    panel.refresh()
+    assert OFF_CLAY_STYLE not in panel.controls_html.value  # the preset's controls sit on the clay
+    session.move_control(2, [0.0, 0.0, 2.5])  # far above the sphere, paused: nothing follows it
+    assert session.wait_applied(30)
+    panel.refresh()
+    rows = panel.controls_html.value.split("<tr>")[2:]  # after the header
+    marked = [r for r in rows if OFF_CLAY_STYLE in r]
+    assert len(marked) == 1 and re.match(r"<td[^>]*>2<", marked[0]), marked

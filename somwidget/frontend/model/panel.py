@@ -79,6 +79,11 @@ GAP_HELP = ("The distance from each control (and its mirrored copy) to its neare
 #: controls table marks its gap and the view draws a thin line from it to that node (transport/display.py sends the
 #: distance as the topology's `off_clay_gap`).
 OFF_CLAY = 0.03
+#: The gap cell of a control off the clay, in every panel: a quiet amber mark, and what it means.
+OFF_CLAY_STYLE = "background: #fff1c2; color: #7a4a00; font-weight: 600; border-radius: 3px"
+OFF_CLAY_HELP = (f"Off the clay: farther than {OFF_CLAY:.0%} of the size of the clay from its nearest node (the view "
+                 "draws a thin line to that node). It pulls that node while the map trains: press Train, or drag "
+                 "the control onto the clay.")  # no quotes: it goes into a Vue binding
 #: A coordinate within this share of the clay's size of zero is shown as 0 (float noise such as 3.69e-17).
 ZERO_SHARE = 1e-6
 
@@ -404,5 +409,5 @@ class PanelModel:
         return None if error is None else f"variants: {error}"
 
 
-__all__ = ["PanelModel", "ACTIONS", "ACTION_HELP", "Action", "EXPORT_CHOICES", "GAP_HELP", "OFF_CLAY", "RADIUS_HELP",
-           "REACH_HELP", "clay_size", "fmt"]
+__all__ = ["PanelModel", "ACTIONS", "ACTION_HELP", "Action", "EXPORT_CHOICES", "GAP_HELP", "OFF_CLAY", "OFF_CLAY_HELP",
+           "OFF_CLAY_STYLE", "RADIUS_HELP", "REACH_HELP", "clay_size", "fmt"]

@@ -24,7 +24,15 @@ import traitlets
 
 from ...backend.schedule import SECTIONS
 from ..model import Frame, Session
-from ..model.panel import ACTION_NAMES, ACTIONS, EXPORT_CHOICES, PanelModel, slider_digits
+from ..model.panel import (
+    ACTION_NAMES,
+    ACTIONS,
+    EXPORT_CHOICES,
+    OFF_CLAY_HELP,
+    OFF_CLAY_STYLE,
+    PanelModel,
+    slider_digits,
+)
 from .panel import PANEL_HZ, PRESET_LABELS
 
 log = logging.getLogger(__name__)
@@ -55,6 +63,7 @@ class PanelWidget(anywidget.AnyWidget):
     controls = traitlets.List().tag(sync=True)
     exports = traitlets.List().tag(sync=True)
     actions = traitlets.Dict().tag(sync=True)  # name -> [label, help] (model/panel.py ACTIONS)
+    off_clay = traitlets.List().tag(sync=True)  # the gap cell's mark for a control off the clay: [style, words]
     error = traitlets.Unicode("").tag(sync=True)
 
     def __init__(self, session: Session, refresh_hz: float = PANEL_HZ, auto_refresh: bool = True) -> None:
@@ -63,7 +72,8 @@ class PanelWidget(anywidget.AnyWidget):
         super().__init__(_esm=ESM.read_text(encoding="utf-8"), fields=declared_fields(self.model),
                          sections={k: list(v) for k, v in SECTIONS.items()},
                          exports=[[label, ext] for ext, label in EXPORT_CHOICES],
-                         actions={a.name: [a.label, a.help] for a in ACTIONS})
+                         actions={a.name: [a.label, a.help] for a in ACTIONS},
+                         off_clay=[OFF_CLAY_STYLE, OFF_CLAY_HELP])
         self.refresh_hz = float(refresh_hz)
         self._latest: Frame | None = None
         self._wake = threading.Event()

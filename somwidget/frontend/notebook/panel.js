@@ -182,6 +182,9 @@ function render({ model, el: host }) {
       cells[0].style.color = c.colour;
       setValue(cells[1].firstChild, c.position);
       cells[2].textContent = c.gap;
+      const [offStyle, offWords] = model.get('off_clay'); // a control off the clay: the web page's amber mark
+      cells[2].style.cssText = c.off ? offStyle : '';
+      cells[2].title = c.off ? offWords : '';
       setValue(cells[3].firstChild, c.radius);
     });
   };

@@ -28,7 +28,16 @@ import ipywidgets as widgets
 from ...backend import presets as _presets
 from ...backend.schedule import BY_NAME, SECTIONS, Setting
 from ..model import Frame, Session
-from ..model.panel import ACTION_HELP, EXPORT_CHOICES, GAP_HELP, RADIUS_HELP, PanelModel, slider_digits
+from ..model.panel import (
+    ACTION_HELP,
+    EXPORT_CHOICES,
+    GAP_HELP,
+    OFF_CLAY_HELP,
+    OFF_CLAY_STYLE,
+    RADIUS_HELP,
+    PanelModel,
+    slider_digits,
+)
 from .variants import VariantsSection
 
 log = logging.getLogger(__name__)
@@ -462,12 +471,17 @@ def _set(widget, value) -> None:
     widget.value = value
 
 
+#: The gap cell of a control off the clay: the web page's amber mark and its words.
+_OFF_MARK = f' style="{OFF_CLAY_STYLE}" title="{_html.escape(OFF_CLAY_HELP)}"'
+
+
 def _controls_table(rows: list[dict]) -> str:
     """The panel model's control rows as a small HTML table."""
     cells = [f'<tr><td title="{"a stroke: its samples act as one" if r["samples"] > 1 else ""}">{r["id"]}'
              f'{"~" if r["samples"] > 1 else ""}</td><td><span style="display:inline-block;width:12px;height:12px;'
              f'background:{r["colour"]};border:1px solid #888"></span></td><td>{r["position"]}</td>'
-             f'<td class="somwidget-gap">{r["gap"]}</td><td class="somwidget-radius">{r["radius"]:.3g}</td></tr>'
+             f'<td class="somwidget-gap"{_OFF_MARK if r["off"] else ""}>{r["gap"]}</td>'
+             f'<td class="somwidget-radius">{r["radius"]:.3g}</td></tr>'
              for r in rows]
     return ('<table style="font-size:11px;line-height:1.2"><tr><th>#</th><th></th><th>x, y, z</th><th>gap</th>'
             '<th title="radius of influence">radius</th></tr>' + "".join(cells) + "</table>")

@@ -11,7 +11,7 @@ from trame.widgets import client, html
 from trame.widgets import vuetify3 as v3
 
 from ...backend.schedule import BY_NAME, SECTIONS, Setting
-from ..model.panel import ACTION_HELP, GAP_HELP, OFF_CLAY, RADIUS_HELP, PanelModel, slider_digits
+from ..model.panel import ACTION_HELP, GAP_HELP, OFF_CLAY_HELP, OFF_CLAY_STYLE, RADIUS_HELP, PanelModel, slider_digits
 from ..model.variants import VARIANTS_HELP
 from .state_guard import state_key
 
@@ -144,11 +144,6 @@ def _revision_key(name: str, row: str = "''") -> str:
 
 #: The controls table's cells: little padding, so that position, gap and radius fit the drawer's width.
 _TIGHT = "padding: 0 3px"
-#: The gap cell of a control off the clay (its gap over OFF_CLAY of the clay's size): a quiet amber mark.
-_OFF_CLAY_STYLE = "background: #fff1c2; color: #7a4a00; font-weight: 600; border-radius: 3px"
-OFF_CLAY_HELP = (f"Off the clay: farther than {OFF_CLAY:.0%} of the size of the clay from its nearest node (the view "
-                 "draws a thin line to that node). It pulls that node while the map trains: press Train, or drag "
-                 "the control onto the clay.")  # no quotes: it goes into a Vue binding
 
 
 def _on_enter_or_change(handler: str) -> list[str]:
@@ -287,7 +282,7 @@ def _panel(panel: PanelModel) -> None:
                                           "trigger('set_features', [c.i, $event.target.value])"))
                     # a gap over OFF_CLAY of the clay's size: marked, as the view's line from the control to the clay
                     html.Td("{{ c.gap }}", classes=("'text-caption gap-cell' + (c.off ? ' gap-off' : '')",),
-                            style=(f"'{_TIGHT}' + (c.off ? '; {_OFF_CLAY_STYLE}' : '')",),
+                            style=(f"'{_TIGHT}' + (c.off ? '; {OFF_CLAY_STYLE}' : '')",),
                             title=(f"c.off ? '{OFF_CLAY_HELP}' : ''",))
                     with html.Td(style=f"{_TIGHT}; width: 60px"):
                         v3.VTextField(model_value=("c.radius",), density="compact", type="number", variant="plain",
