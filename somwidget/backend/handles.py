@@ -38,6 +38,11 @@ from .som_state import KEY_NONE, SomState
 TAUBIN_MOST = 0.7
 #: The clamp's box is grown by this share of the start's size beyond the largest radius.
 BOX_MARGIN = 0.01
+#: Meshes of up to this many nodes bind a patch in one launch, a block of up to FLOOD_THREADS threads a handle row
+#: (its rounds behind a barrier); larger ones launch a round at a time over every node (BENCHMARKS.md, "Handles in
+#: the engine").
+FLOOD_IN_BLOCKS_MOST = 16384
+FLOOD_THREADS = 512
 
 
 def members_of(controls: Controls) -> np.ndarray:
@@ -66,6 +71,7 @@ class Handles:
         self._lo, self._hi = start.min(axis=0), start.max(axis=0)
         self.size = bounding_diagonal(start[:, model.position_dims]) or 1.0
         self._box_for: tuple[np.ndarray, np.ndarray] | None = None
+        self._radii_for: np.ndarray | None = None  # the radii the device holds (member by member)
         position = np.zeros(model.n_dims, np.float32)
         position[model.position_dims] = 1.0
         self.position = vec(*position.tolist())
@@ -122,6 +128,7 @@ class Handles:
         self.members = wp.zeros(slots, dtype=vec, device=dev)
         self.probe = wp.zeros(slots, dtype=vec, device=dev)  # members where a grab searches
         self.radius = wp.zeros(slots, dtype=wp.float32, device=dev)
+        self._radii_for = None
         self.live_dev = wp.zeros(slots, dtype=wp.int32, device=dev)
         self.winners = wp.zeros(slots, dtype=wp.int32, device=dev)
         self.places = wp.zeros(slots, dtype=vec, device=dev)
@@ -141,14 +148,23 @@ class Handles:
             self.grow(controls.effective())
 
     def upload(self, controls: Controls) -> None:
-        """The members, radii and box on the device for these controls (if they are not there yet)."""
+        """The members and radii on the device for these controls (if they are not there yet: a move uploads only
+        the members)."""
         if controls is not self.controls:
             self.adopt(controls)
         if self._uploaded is not controls:
             self.grow(controls.effective())
             self.members.assign(members_of(controls))
-            self.radius.assign(np.repeat(controls.radii.astype(np.float32), controls.order))
+            self._upload_radii(controls)
             self._uploaded = controls
+
+    def _upload_radii(self, controls: Controls) -> None:
+        if self._radii_for is None or not np.array_equal(controls.radii, self._radii_for):
+            self.radius.assign(np.repeat(controls.radii.astype(np.float32), controls.order))
+            self._radii_for = controls.radii.copy()
+
+    def upload_box(self) -> None:
+        """The clamp's box on the device (if it changed since): only Taubin's steps read it."""
         box = self.box_values()
         if self._box_for is None or not all(np.array_equal(a, b) for a, b in zip(box, self._box_for)):
             self.box.assign(np.stack(box).astype(np.float32))
@@ -235,7 +251,7 @@ class Handles:
         model, kern, dev = self.model, self.kernels, self.model.device
         state.settle_anchor()
         slots = self._slots(controls)
-        self.radius.assign(np.repeat(radii.radii.astype(np.float32), radii.order))
+        self._upload_radii(radii)
         self._uploaded = None  # (the members of the new controls still go up)
         self.probe.assign(members_of(at))
         self.keys.fill_(KEY_NONE)
@@ -255,10 +271,19 @@ class Handles:
         self.reanchor(state)
 
     def bind_patches(self, state: SomState) -> None:
-        """The patches of the rows marked in `rebind`, from the weights now (changed[0] must be 1): seeded with their
-        winners, then flooded while a round joins a node. Launched, or recorded into a captured graph."""
+        """The patches of the rows marked in `rebind`, from the weights now: seeded with their winners, then flooded
+        while a round joins a node; one launch of a block a row (`flood_block`) on the CPU and on meshes of up to
+        FLOOD_IN_BLOCKS_MOST nodes, else a launch a round in a conditional loop (changed[0] must be 1). Launched, or
+        recorded into a captured graph."""
         model, kern, dev = self.model, self.kernels, self.model.device
-        rows = (self.n_rows, model.n_neurons)
+        n = model.n_neurons
+        if dev == "cpu" or n <= FLOOD_IN_BLOCKS_MOST:
+            threads = 1 if dev == "cpu" else min(FLOOD_THREADS, 32 * -(-n // 32))
+            wp.launch(kern.flood_block, dim=self.n_rows * threads, block_dim=threads, device=dev,
+                      inputs=[state.w, self.rebind, self.slot_of_row, self.winners, self.radius, self.position,
+                              model.offsets, model.neighbors, self.patch])
+            return
+        rows = (self.n_rows, n)
         wp.launch(kern.seed, dim=rows, device=dev, inputs=[self.rebind, self.slot_of_row, self.winners, self.patch])
 
         def round_():

@@ -23,7 +23,7 @@ import warp as wp
 
 from .closed_parts import closed_parts, no_closed_parts
 from .handles import TAUBIN_MOST, Handles
-from .shaping_kernels import FIND_STRETCH, count_down
+from .shaping_kernels import FIND_STRETCH
 from .smoothing_kernels import smoothing_steps
 from .som_controls import Controls
 from .som_model import SomModel, mask_of
@@ -84,6 +84,7 @@ class ShapingPath:
         plan = (points, live, tuple(steps), taubin)
         if taubin:
             self._closed()  # (made before a capture: a graph must not allocate)
+            h.upload_box()
         if points and self._counter_s != state.s:
             self.counter.assign(np.array([state.s, state.s], np.int32))
             self._counter_s, self._parity = state.s, 0
@@ -121,8 +122,7 @@ class ShapingPath:
 
             def cycle() -> None:
                 self._step_places(model, state)
-                wp.launch(count_down, dim=1, device=dev, inputs=[h.stepped, self.left, self.going])
-                self._carry(model, state)
+                self._carry(model, state, counting=True)
 
             wp.capture_while(self.going, cycle)
             return
@@ -151,12 +151,13 @@ class ShapingPath:
                           h.changed])
         wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
 
-    def _carry(self, model: SomModel, state: SomState) -> None:
-        """Step 3 (b): every held node onto its target (clears `stepped` for the next cycle)."""
+    def _carry(self, model: SomModel, state: SomState, counting: bool = False) -> None:
+        """Step 3 (b): every held node onto its target (clears `stepped` for the next cycle); `counting`: in a
+        carry-only run's loop, the cycle counted and whether the loop goes on."""
         h = self.handles
         wp.launch(h.kernels.carry, dim=model.n_neurons, device=model.device,
                   inputs=[h.slot_of_row, h.group_start, h.live_dev, h.patch, h.places, h.winner_anchors, h.anchors,
-                          state.w, h.held_nodes, h.stepped])
+                          state.w, h.held_nodes, h.stepped, int(counting), self.left, self.going])
 
     def _smooth(self, model: SomModel, state: SomState, pulls: list, parts, taubin: bool) -> None:
         """Step 4: the smoothing steps on the free nodes; with Taubin's rule the volume of each closed part put back
