@@ -71,7 +71,8 @@ class Handles:
         self._lo, self._hi = start.min(axis=0), start.max(axis=0)
         self.size = bounding_diagonal(start[:, model.position_dims]) or 1.0
         self._box_for: tuple[np.ndarray, np.ndarray] | None = None
-        self._radii_for: np.ndarray | None = None  # the radii the device holds (member by member)
+        self._radii_for: np.ndarray | None = None  # the radii whose members' radii the device holds
+        self._grown: Controls | None = None  # the controls the box last took
         position = np.zeros(model.n_dims, np.float32)
         position[model.position_dims] = 1.0
         self.position = vec(*position.tolist())
@@ -126,6 +127,10 @@ class Handles:
         self.point_controls = wp.array(point.astype(np.int32), dtype=wp.int32, device=dev)
         self.point_slot_list = ints(self.point_slots)
         self.members = wp.zeros(slots, dtype=vec, device=dev)
+        self._members_host = None if dev == "cpu" else wp.zeros(slots, dtype=vec, device="cpu", pinned=True)
+        self._members_sent = None if dev == "cpu" else wp.Event(dev)
+        self._members_busy = False
+        self._members_staged = (self.members if dev == "cpu" else self._members_host).numpy()
         self.probe = wp.zeros(slots, dtype=vec, device=dev)  # members where a grab searches
         self.radius = wp.zeros(slots, dtype=wp.float32, device=dev)
         self._radii_for = None
@@ -146,6 +151,7 @@ class Handles:
         self.controls = controls
         if controls.radii.any() or controls.symmetry is not None:
             self.grow(controls.effective())
+            self._grown = controls
 
     def upload(self, controls: Controls) -> None:
         """The members and radii on the device for these controls (if they are not there yet: a move uploads only
@@ -153,15 +159,32 @@ class Handles:
         if controls is not self.controls:
             self.adopt(controls)
         if self._uploaded is not controls:
-            self.grow(controls.effective())
-            self.members.assign(members_of(controls))
+            if self._grown is not controls:
+                self.grow(controls.effective())
+            self._upload_members(members_of(controls))
             self._upload_radii(controls)
             self._uploaded = controls
 
+    def _upload_members(self, members: np.ndarray) -> None:
+        """The members into `members`: on CUDA through pinned memory in an asynchronous copy (waiting first, should
+        the last one still read it), as the paper's controls go up (SomState.set_cycle)."""
+        if self._members_sent is None:
+            self._members_staged[:] = members
+            return
+        if self._members_busy:
+            wp.synchronize_event(self._members_sent)
+        self._members_staged[:] = members
+        wp.copy(self.members, self._members_host)
+        wp.record_event(self._members_sent)
+        self._members_busy = True
+
     def _upload_radii(self, controls: Controls) -> None:
+        """The radii, member by member (only when they changed: a move keeps the radii array)."""
+        if controls.radii is self._radii_for:
+            return
         if self._radii_for is None or not np.array_equal(controls.radii, self._radii_for):
             self.radius.assign(np.repeat(controls.radii.astype(np.float32), controls.order))
-            self._radii_for = controls.radii.copy()
+        self._radii_for = controls.radii
 
     def upload_box(self) -> None:
         """The clamp's box on the device (if it changed since): only Taubin's steps read it."""

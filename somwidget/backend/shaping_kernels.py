@@ -383,6 +383,6 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     for source in (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32)):
         wp.overload(move_points, {"distances": source})
     return SimpleNamespace(vec=vec, find=find, move_points=move_points, advance=advance, bind=bind, seed=seed,
-                           flood=flood, flood_block=flood_block, reanchor=reanchor, carry=carry, smooth_free=smooth_free,
-                           part_volumes=part_volumes, volume_gradient=volume_gradient, put_back=put_back,
-                           copy_weights=copy_weights)
+                           flood=flood, flood_block=flood_block, reanchor=reanchor, carry=carry,
+                           smooth_free=smooth_free, part_volumes=part_volumes, volume_gradient=volume_gradient,
+                           put_back=put_back, copy_weights=copy_weights)

@@ -22,6 +22,7 @@ import numpy as np
 import warp as wp
 
 from .closed_parts import closed_parts, no_closed_parts
+from .cycle_kernels import LONGEST_GRAPH
 from .handles import TAUBIN_MOST, Handles
 from .shaping_kernels import FIND_STRETCH
 from .smoothing_kernels import smoothing_steps
@@ -72,29 +73,44 @@ class ShapingPath:
         return self._parts
 
     # -- a run ------------------------------------------------------------------------------------------------------
+    def _plan(self, controls: Controls, schedule: SomSchedule) -> tuple:
+        """(point members, a live binding, the smoothing steps, Taubin's rule) of a run of these controls (whose
+        members and radii go up first)."""
+        h = self.handles
+        h.upload(controls)
+        steps = capped_steps(schedule)
+        return len(h.point_slots) > 0, bool(h.live.any()), tuple(steps), schedule.rule == "taubin" and bool(steps)
+
+    def most_cycles(self, controls: Controls, schedule: SomSchedule) -> int | None:
+        """The most cycles one `run` takes: any number (None) for a run of nothing but handles (one graph for every
+        length: a conditional loop that counts its cycles on the device), else cycle_kernels.LONGEST_GRAPH."""
+        points, live, steps, _ = self._plan(controls, schedule)
+        return None if live and not points and not steps and self.captured else LONGEST_GRAPH
+
     def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
         """`cycles` cycles from s of the shaping rules."""
         state.settle_anchor()
         h = self.handles
-        h.upload(controls)
-        steps = capped_steps(schedule)
-        points = len(h.point_slots) > 0
-        live = bool(h.live.any())
-        taubin = schedule.rule == "taubin" and bool(steps)
-        plan = (points, live, tuple(steps), taubin)
+        plan = self._plan(controls, schedule)
+        points, live, steps, taubin = plan
         if taubin:
             self._closed()  # (made before a capture: a graph must not allocate)
             h.upload_box()
         if points and self._counter_s != state.s:
             self.counter.assign(np.array([state.s, state.s], np.int32))
             self._counter_s, self._parity = state.s, 0
+        if live and not points and not steps:
+            self.left.fill_(cycles)  # (the carry-only loop's count: one graph for every length)
+            cycles_key = 0
+        else:
+            cycles_key = cycles
         if points or live or steps:
             if self.captured and not (model.rows and points):
                 setup = (h.version, schedule.version, model.smooth_dims)
                 if setup != self._setup:
                     self.graphs.clear()
                     self._setup = setup
-                graph = self.graphs.get((cycles, self._parity, *plan), lambda: self._record(
+                graph = self.graphs.get((cycles_key, self._parity, *plan), lambda: self._record(
                     model, state, schedule, cycles, self._parity, plan, fetch=False))
                 wp.capture_launch(graph)
             else:
@@ -117,8 +133,7 @@ class ShapingPath:
         volume = parts is not None and parts.count > 0
         stretches = max(1, math.ceil(n / FIND_STRETCH))
         if live and not points and not steps:  # carry only: the cycles after the places arrived change nothing
-            self.left.fill_(cycles)
-            self.going.fill_(1)
+            self.going.fill_(1)  # (left[0]: the run's cycles, filled by `run` before the graph's launch)
 
             def cycle() -> None:
                 self._step_places(model, state)
