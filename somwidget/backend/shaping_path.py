@@ -5,13 +5,14 @@ paper's paths and gives their results bit for bit.
 
 A run of cycles is captured as a graph (on the CPU too, where Warp replays it without Python) and replayed: a cycle
 is the point members' search and move (when there are point controls), the handles' step, binding again and carry
-(when a binding lives; binding again is a conditional node, and its flood a conditional loop, so a cycle whose
-bindings stand still costs two small launches; with nothing else in the cycle, the run is a conditional loop that
-stops at the first cycle in which no place stepped, as every later cycle would carry to the same places), and the
-smoothing of the free nodes with the volume put back and the
-clamp (with smoothing). The cycle s reaches the point members' move through a device counter (two, passed on in
-turn), so one graph serves every s. Past the dense table, point members need their winners' distance rows fetched
-by the host each cycle: those cycles are launched one by one.
+(when a binding lives; binding again is a conditional node: the flood in one launch of a block a handle row, or on
+big meshes a conditional loop of a launch a round, so a cycle whose bindings stand still costs two small launches),
+and the smoothing of the free nodes with the volume put back and the clamp (with smoothing). With nothing but
+handles, the run is one conditional loop, whatever its length (the carry counts the cycles on the device), that stops
+at the first cycle in which no place stepped, as every later cycle would carry to the same places. The cycle s
+reaches the point members' move through a device counter (two, passed on in turn), so one graph serves every s. Past
+the dense table, point members need their winners' distance rows fetched by the host each cycle: those cycles are
+launched one by one.
 """
 
 from __future__ import annotations
