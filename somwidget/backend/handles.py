@@ -47,6 +47,8 @@ FLOOD_THREADS = 512
 
 def members_of(controls: Controls) -> np.ndarray:
     """(k G, n) float32: member g of control c (its image under the group's map g) at slot c G + g."""
+    if controls.order == 1:
+        return np.ascontiguousarray(controls.values, np.float32)
     maps = controls.group_maps()
     grouped = np.einsum("gij,kj->kgi", maps, controls.values.astype(np.float64))
     return np.ascontiguousarray(grouped.reshape(-1, controls.values.shape[1]), np.float32)
@@ -230,8 +232,8 @@ class Handles:
         grabbed at its old place and released at once; then `new` are the controls."""
         old = self.controls
         self.end_released(state)
-        if old is not None and new.radii.any() and len(new.values) == len(old.values) and new.order == old.order and (
-                np.array_equal(new.radii > 0, old.radii > 0)):
+        if old is not None and len(new.values) == len(old.values) and new.order == old.order and (
+                new.radii is old.radii or np.array_equal(new.radii > 0, old.radii > 0)) and new.radii.any():
             moved = np.any(new.values != old.values, axis=1) & (new.radii > 0)
             typed = [int(i) for i in np.flatnonzero(moved) if int(i) not in self.held]
             if typed:
@@ -240,9 +242,11 @@ class Handles:
 
     def end_released(self, state: SomState) -> None:
         """A restart, or the run at S: every binding no hand holds ends."""
-        if self.live.any() and self.controls is not None:
-            let_go = [c for c in range(len(self.controls.values)) if c not in self.held]
-            self._end(let_go, state)
+        if self.controls is not None:
+            live = np.flatnonzero(self.live.reshape(-1, self.order).any(axis=1)).tolist()  # (slot c G + g)
+            let_go = [c for c in live if c not in self.held]
+            if let_go:
+                self._end(let_go, state)
 
     def end_all(self, state: SomState) -> None:
         """Every binding ends and every hold is let go (new weights, another group, a reset)."""
