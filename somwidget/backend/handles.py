@@ -38,10 +38,17 @@ from .som_state import KEY_NONE, SomState
 TAUBIN_MOST = 0.7
 #: The clamp's box is grown by this share of the start's size beyond the largest radius.
 BOX_MARGIN = 0.01
+#: Meshes of up to this many nodes bind a patch in one launch, a block of up to FLOOD_THREADS threads a handle row
+#: (its rounds behind a barrier); larger ones launch a round at a time over every node (BENCHMARKS.md, "Handles in
+#: the engine").
+FLOOD_IN_BLOCKS_MOST = 16384
+FLOOD_THREADS = 512
 
 
 def members_of(controls: Controls) -> np.ndarray:
     """(k G, n) float32: member g of control c (its image under the group's map g) at slot c G + g."""
+    if controls.order == 1:
+        return np.ascontiguousarray(controls.values, np.float32)
     maps = controls.group_maps()
     grouped = np.einsum("gij,kj->kgi", maps, controls.values.astype(np.float64))
     return np.ascontiguousarray(grouped.reshape(-1, controls.values.shape[1]), np.float32)
@@ -66,6 +73,8 @@ class Handles:
         self._lo, self._hi = start.min(axis=0), start.max(axis=0)
         self.size = bounding_diagonal(start[:, model.position_dims]) or 1.0
         self._box_for: tuple[np.ndarray, np.ndarray] | None = None
+        self._radii_for: np.ndarray | None = None  # the radii whose members' radii the device holds
+        self._grown: Controls | None = None  # the controls the box last took
         position = np.zeros(model.n_dims, np.float32)
         position[model.position_dims] = 1.0
         self.position = vec(*position.tolist())
@@ -120,8 +129,13 @@ class Handles:
         self.point_controls = wp.array(point.astype(np.int32), dtype=wp.int32, device=dev)
         self.point_slot_list = ints(self.point_slots)
         self.members = wp.zeros(slots, dtype=vec, device=dev)
+        self._members_host = None if dev == "cpu" else wp.zeros(slots, dtype=vec, device="cpu", pinned=True)
+        self._members_sent = None if dev == "cpu" else wp.Event(dev)
+        self._members_busy = False
+        self._members_staged = (self.members if dev == "cpu" else self._members_host).numpy()
         self.probe = wp.zeros(slots, dtype=vec, device=dev)  # members where a grab searches
         self.radius = wp.zeros(slots, dtype=wp.float32, device=dev)
+        self._radii_for = None
         self.live_dev = wp.zeros(slots, dtype=wp.int32, device=dev)
         self.winners = wp.zeros(slots, dtype=wp.int32, device=dev)
         self.places = wp.zeros(slots, dtype=vec, device=dev)
@@ -139,16 +153,43 @@ class Handles:
         self.controls = controls
         if controls.radii.any() or controls.symmetry is not None:
             self.grow(controls.effective())
+            self._grown = controls
 
     def upload(self, controls: Controls) -> None:
-        """The members, radii and box on the device for these controls (if they are not there yet)."""
+        """The members and radii on the device for these controls (if they are not there yet: a move uploads only
+        the members)."""
         if controls is not self.controls:
             self.adopt(controls)
         if self._uploaded is not controls:
-            self.grow(controls.effective())
-            self.members.assign(members_of(controls))
-            self.radius.assign(np.repeat(controls.radii.astype(np.float32), controls.order))
+            if self._grown is not controls:
+                self.grow(controls.effective())
+            self._upload_members(members_of(controls))
+            self._upload_radii(controls)
             self._uploaded = controls
+
+    def _upload_members(self, members: np.ndarray) -> None:
+        """The members into `members`: on CUDA through pinned memory in an asynchronous copy (waiting first, should
+        the last one still read it), as the paper's controls go up (SomState.set_cycle)."""
+        if self._members_sent is None:
+            self._members_staged[:] = members
+            return
+        if self._members_busy:
+            wp.synchronize_event(self._members_sent)
+        self._members_staged[:] = members
+        wp.copy(self.members, self._members_host)
+        wp.record_event(self._members_sent)
+        self._members_busy = True
+
+    def _upload_radii(self, controls: Controls) -> None:
+        """The radii, member by member (only when they changed: a move keeps the radii array)."""
+        if controls.radii is self._radii_for:
+            return
+        if self._radii_for is None or not np.array_equal(controls.radii, self._radii_for):
+            self.radius.assign(np.repeat(controls.radii.astype(np.float32), controls.order))
+        self._radii_for = controls.radii
+
+    def upload_box(self) -> None:
+        """The clamp's box on the device (if it changed since): only Taubin's steps read it."""
         box = self.box_values()
         if self._box_for is None or not all(np.array_equal(a, b) for a, b in zip(box, self._box_for)):
             self.box.assign(np.stack(box).astype(np.float32))
@@ -191,8 +232,8 @@ class Handles:
         grabbed at its old place and released at once; then `new` are the controls."""
         old = self.controls
         self.end_released(state)
-        if old is not None and new.radii.any() and len(new.values) == len(old.values) and new.order == old.order and (
-                np.array_equal(new.radii > 0, old.radii > 0)):
+        if old is not None and len(new.values) == len(old.values) and new.order == old.order and (
+                new.radii is old.radii or np.array_equal(new.radii > 0, old.radii > 0)) and new.radii.any():
             moved = np.any(new.values != old.values, axis=1) & (new.radii > 0)
             typed = [int(i) for i in np.flatnonzero(moved) if int(i) not in self.held]
             if typed:
@@ -201,9 +242,11 @@ class Handles:
 
     def end_released(self, state: SomState) -> None:
         """A restart, or the run at S: every binding no hand holds ends."""
-        if self.live.any() and self.controls is not None:
-            let_go = [c for c in range(len(self.controls.values)) if c not in self.held]
-            self._end(let_go, state)
+        if self.controls is not None:
+            live = np.flatnonzero(self.live.reshape(-1, self.order).any(axis=1)).tolist()  # (slot c G + g)
+            let_go = [c for c in live if c not in self.held]
+            if let_go:
+                self._end(let_go, state)
 
     def end_all(self, state: SomState) -> None:
         """Every binding ends and every hold is let go (new weights, another group, a reset)."""
@@ -235,7 +278,7 @@ class Handles:
         model, kern, dev = self.model, self.kernels, self.model.device
         state.settle_anchor()
         slots = self._slots(controls)
-        self.radius.assign(np.repeat(radii.radii.astype(np.float32), radii.order))
+        self._upload_radii(radii)
         self._uploaded = None  # (the members of the new controls still go up)
         self.probe.assign(members_of(at))
         self.keys.fill_(KEY_NONE)
@@ -255,10 +298,19 @@ class Handles:
         self.reanchor(state)
 
     def bind_patches(self, state: SomState) -> None:
-        """The patches of the rows marked in `rebind`, from the weights now (changed[0] must be 1): seeded with their
-        winners, then flooded while a round joins a node. Launched, or recorded into a captured graph."""
+        """The patches of the rows marked in `rebind`, from the weights now: seeded with their winners, then flooded
+        while a round joins a node; one launch of a block a row (`flood_block`) on the CPU and on meshes of up to
+        FLOOD_IN_BLOCKS_MOST nodes, else a launch a round in a conditional loop (changed[0] must be 1). Launched, or
+        recorded into a captured graph."""
         model, kern, dev = self.model, self.kernels, self.model.device
-        rows = (self.n_rows, model.n_neurons)
+        n = model.n_neurons
+        if dev == "cpu" or n <= FLOOD_IN_BLOCKS_MOST:
+            threads = 1 if dev == "cpu" else min(FLOOD_THREADS, 32 * -(-n // 32))
+            wp.launch(kern.flood_block, dim=self.n_rows * threads, block_dim=threads, device=dev,
+                      inputs=[state.w, self.rebind, self.slot_of_row, self.winners, self.radius, self.position,
+                              model.offsets, model.neighbors, self.patch])
+            return
+        rows = (self.n_rows, n)
         wp.launch(kern.seed, dim=rows, device=dev, inputs=[self.rebind, self.slot_of_row, self.winners, self.patch])
 
         def round_():

@@ -10,10 +10,10 @@ own in `patch` (R, N) for each member: the member's binding, -1 where a node is 
      rates from the same W_v and scaled by 1 / max(1, their sum) when it has copies;
   3. the handles: `advance` steps each live binding's place p towards its member by at most STEP r (the straight
      length on the position dims) and marks it for binding again; then, if any moved, `seed` and `flood` (repeated
-     while it joins a node) bind the patch again: the nodes joined to the winner u through nodes whose straight
-     distance from W_u is below r, each weighted w = (1 - t^2)^2, t = |W_v - W_u| / r; and `reanchor` takes every
-     anchor again (A_v = W_v, a_u = W_u). `carry` puts every bound node on its target
-     T_v = A_v + (1 - prod_b (1 - w_bv)) sum_b w_bv (p_b - a_u,b) / sum_b w_bv;
+     while it joins a node; `flood_block` does both in one launch) bind the patch again: the nodes joined to the
+     winner u through nodes whose straight distance from W_u is below r, each weighted w = (1 - t^2)^2, t = |W_v -
+     W_u| / r; and `reanchor` takes every anchor again (A_v = W_v, a_u = W_u). `carry` puts every bound node on its
+     target T_v = A_v + (1 - prod_b (1 - w_bv)) sum_b w_bv (p_b - a_u,b) / sum_b w_bv;
   4. `smooth_free`: lambda's (and with Taubin's rule mu's) Jacobi step of the uniform Laplacian on the nodes no binding
      holds; with Taubin's rule `part_volumes` before and after, `volume_gradient` and `put_back` move the free nodes
      of each closed part along the volume's gradient by what the steps took, then clamp every node into the box.
@@ -25,7 +25,7 @@ from typing import Any
 
 import warp as wp
 
-from .primitives import FLOAT_MAX, INDEX_MASK, UNREACHABLE, winner_key
+from .primitives import FLOAT_MAX, INDEX_MASK, UNREACHABLE, sync_block_any, winner_key
 from .smoothing_kernels import smoothed
 
 #: Neurons one thread of `find` scans for one member.
@@ -77,18 +77,6 @@ def corner(w: Any) -> wp.vec3d:
 def clear_flag(flag: wp.array(dtype=wp.int32)):
     """flag[0] = 0, as a kernel: a conditional node's body holds kernels (a memset there needs a newer CUDA)."""
     flag[0] = 0
-
-
-@wp.kernel(enable_backward=False)
-def count_down(stepped: wp.array(dtype=wp.int32), left: wp.array(dtype=wp.int32), going: wp.array(dtype=wp.int32)):
-    """A run of carry-only cycles (shaping_path): one cycle fewer left (left[0]), and going[0] = 1 while a place
-    stepped in this cycle and cycles are left. A cycle in which no place stepped carries its patches to where the
-    cycle before did: every later one would too, so the run stops there."""
-    n = left[0] - 1
-    left[0] = n
-    going[0] = 0
-    if stepped[0] != 0 and n > 0:
-        going[0] = 1
 
 
 @functools.cache
@@ -221,6 +209,43 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                     changed[0] = 1
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def flood_block(weights: wp.array(dtype=vec), rebind: wp.array(dtype=wp.int32),
+                    slot_of_row: wp.array(dtype=wp.int32), winners: wp.array(dtype=wp.int32),
+                    radius: wp.array(dtype=wp.float32), position: vec, offsets: wp.array(dtype=wp.int32),
+                    neighbors: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32)):
+        """`seed` and every round of `flood` in one launch, a block per handle row (its threads share the nodes out,
+        a barrier between rounds, until a round joins no node): the same patch, since the flood's end (the nodes
+        joined to u inside the ball) does not depend on the order nodes join in. On the CPU a block is one thread,
+        whose rounds are sweeps in index order (a node joins in the sweep that reaches its neighbour)."""
+        i = wp.tid()
+        threads = wp.block_dim()
+        r = i // threads
+        t = i - r * threads
+        if r < patch.shape[0]:
+            if rebind[r] != 0:
+                j = slot_of_row[r]
+                u = winners[j]
+                n = patch.shape[1]
+                for v in range(t, n, threads):
+                    patch[r, v] = wp.where(v == u, wp.float32(1.0), wp.float32(-1.0))
+                centre = weights[u]
+                reach = radius[j]
+                joining = int(1)
+                while sync_block_any(joining) != 0:
+                    joining = int(0)
+                    for v in range(t, n, threads):
+                        if patch[r, v] < wp.float32(0.0):
+                            d = wp.length(wp.cw_mul(weights[v] - centre, position))
+                            if d < reach:
+                                joined = int(0)
+                                for e in range(offsets[v], offsets[v + 1]):
+                                    if patch[r, neighbors[e]] >= wp.float32(0.0):
+                                        joined = 1
+                                if joined != 0:
+                                    patch[r, v] = falloff(d, reach)
+                                    joining = int(1)
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def reanchor(weights: wp.array(dtype=vec), live: wp.array(dtype=wp.int32), winners: wp.array(dtype=wp.int32),
                  anchors: wp.array(dtype=vec), winner_anchors: wp.array(dtype=vec)):
         """Every anchor taken again from the weights: A_v = W_v, and each live binding's a_u = W_u (a thread per
@@ -236,12 +261,20 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     def carry(slot_of_row: wp.array(dtype=wp.int32), group_start: wp.array(dtype=wp.int32),
               live: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32), places: wp.array(dtype=vec),
               winner_anchors: wp.array(dtype=vec), anchors: wp.array(dtype=vec), weights: wp.array(dtype=vec),
-              held: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32)):
+              held: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32), counting: int,
+              left: wp.array(dtype=wp.int32), going: wp.array(dtype=wp.int32)):
         """Step 3 (b) for node v: onto its target when a live binding holds it (held[v] = 1), else left (0); a group
         of rows (a stroke's samples, one copy) counts as one binding, its weight their largest, its displacement their
-        weighted mean. Thread 0 clears `stepped` for the next cycle's `advance` (read by then)."""
+        weighted mean. Thread 0 clears `stepped` for the next cycle's `advance` (read by then); with `counting`, a
+        carry-only run's loop (shaping_path), it first counts the cycle: one fewer left (left[0]), and going[0] = 1
+        while a place stepped in it and cycles are left (a cycle in which no place stepped carries its patches to
+        where the cycle before did: every later one would too, so the run stops there)."""
         v = wp.tid()
         if v == 0:
+            if counting != 0:
+                n = left[0] - 1
+                left[0] = n
+                going[0] = wp.where(stepped[0] != 0 and n > 0, 1, 0)
             stepped[0] = 0
         num = vec()
         den = wp.float32(0.0)
@@ -350,6 +383,6 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     for source in (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32)):
         wp.overload(move_points, {"distances": source})
     return SimpleNamespace(vec=vec, find=find, move_points=move_points, advance=advance, bind=bind, seed=seed,
-                           flood=flood, reanchor=reanchor, carry=carry, smooth_free=smooth_free,
-                           part_volumes=part_volumes, volume_gradient=volume_gradient, put_back=put_back,
-                           copy_weights=copy_weights)
+                           flood=flood, flood_block=flood_block, reanchor=reanchor, carry=carry,
+                           smooth_free=smooth_free, part_volumes=part_volumes, volume_gradient=volume_gradient,
+                           put_back=put_back, copy_weights=copy_weights)

@@ -5,13 +5,14 @@ paper's paths and gives their results bit for bit.
 
 A run of cycles is captured as a graph (on the CPU too, where Warp replays it without Python) and replayed: a cycle
 is the point members' search and move (when there are point controls), the handles' step, binding again and carry
-(when a binding lives; binding again is a conditional node, and its flood a conditional loop, so a cycle whose
-bindings stand still costs two small launches; with nothing else in the cycle, the run is a conditional loop that
-stops at the first cycle in which no place stepped, as every later cycle would carry to the same places), and the
-smoothing of the free nodes with the volume put back and the
-clamp (with smoothing). The cycle s reaches the point members' move through a device counter (two, passed on in
-turn), so one graph serves every s. Past the dense table, point members need their winners' distance rows fetched
-by the host each cycle: those cycles are launched one by one.
+(when a binding lives; binding again is a conditional node: the flood in one launch of a block a handle row, or on
+big meshes a conditional loop of a launch a round, so a cycle whose bindings stand still costs two small launches),
+and the smoothing of the free nodes with the volume put back and the clamp (with smoothing). With nothing but
+handles, the run is one conditional loop, whatever its length (the carry counts the cycles on the device), that stops
+at the first cycle in which no place stepped, as every later cycle would carry to the same places. The cycle s
+reaches the point members' move through a device counter (two, passed on in turn), so one graph serves every s. Past
+the dense table, point members need their winners' distance rows fetched by the host each cycle: those cycles are
+launched one by one.
 """
 
 from __future__ import annotations
@@ -22,8 +23,9 @@ import numpy as np
 import warp as wp
 
 from .closed_parts import closed_parts, no_closed_parts
+from .cycle_kernels import LONGEST_GRAPH
 from .handles import TAUBIN_MOST, Handles
-from .shaping_kernels import FIND_STRETCH, count_down
+from .shaping_kernels import FIND_STRETCH
 from .smoothing_kernels import smoothing_steps
 from .som_controls import Controls
 from .som_model import SomModel, mask_of
@@ -72,28 +74,44 @@ class ShapingPath:
         return self._parts
 
     # -- a run ------------------------------------------------------------------------------------------------------
+    def _plan(self, controls: Controls, schedule: SomSchedule) -> tuple:
+        """(point members, a live binding, the smoothing steps, Taubin's rule) of a run of these controls (whose
+        members and radii go up first)."""
+        h = self.handles
+        h.upload(controls)
+        steps = capped_steps(schedule)
+        return len(h.point_slots) > 0, bool(h.live.any()), tuple(steps), schedule.rule == "taubin" and bool(steps)
+
+    def most_cycles(self, controls: Controls, schedule: SomSchedule) -> int | None:
+        """The most cycles one `run` takes: any number (None) for a run of nothing but handles (one graph for every
+        length: a conditional loop that counts its cycles on the device), else cycle_kernels.LONGEST_GRAPH."""
+        points, live, steps, _ = self._plan(controls, schedule)
+        return None if live and not points and not steps and self.captured else LONGEST_GRAPH
+
     def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
         """`cycles` cycles from s of the shaping rules."""
         state.settle_anchor()
         h = self.handles
-        h.upload(controls)
-        steps = capped_steps(schedule)
-        points = len(h.point_slots) > 0
-        live = bool(h.live.any())
-        taubin = schedule.rule == "taubin" and bool(steps)
-        plan = (points, live, tuple(steps), taubin)
+        plan = self._plan(controls, schedule)
+        points, live, steps, taubin = plan
         if taubin:
             self._closed()  # (made before a capture: a graph must not allocate)
+            h.upload_box()
         if points and self._counter_s != state.s:
             self.counter.assign(np.array([state.s, state.s], np.int32))
             self._counter_s, self._parity = state.s, 0
+        if live and not points and not steps:
+            self.left.fill_(cycles)  # (the carry-only loop's count: one graph for every length)
+            cycles_key = 0
+        else:
+            cycles_key = cycles
         if points or live or steps:
             if self.captured and not (model.rows and points):
                 setup = (h.version, schedule.version, model.smooth_dims)
                 if setup != self._setup:
                     self.graphs.clear()
                     self._setup = setup
-                graph = self.graphs.get((cycles, self._parity, *plan), lambda: self._record(
+                graph = self.graphs.get((cycles_key, self._parity, *plan), lambda: self._record(
                     model, state, schedule, cycles, self._parity, plan, fetch=False))
                 wp.capture_launch(graph)
             else:
@@ -116,13 +134,11 @@ class ShapingPath:
         volume = parts is not None and parts.count > 0
         stretches = max(1, math.ceil(n / FIND_STRETCH))
         if live and not points and not steps:  # carry only: the cycles after the places arrived change nothing
-            self.left.fill_(cycles)
-            self.going.fill_(1)
+            self.going.fill_(1)  # (left[0]: the run's cycles, filled by `run` before the graph's launch)
 
             def cycle() -> None:
                 self._step_places(model, state)
-                wp.launch(count_down, dim=1, device=dev, inputs=[h.stepped, self.left, self.going])
-                self._carry(model, state)
+                self._carry(model, state, counting=True)
 
             wp.capture_while(self.going, cycle)
             return
@@ -151,12 +167,13 @@ class ShapingPath:
                           h.changed])
         wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
 
-    def _carry(self, model: SomModel, state: SomState) -> None:
-        """Step 3 (b): every held node onto its target (clears `stepped` for the next cycle)."""
+    def _carry(self, model: SomModel, state: SomState, counting: bool = False) -> None:
+        """Step 3 (b): every held node onto its target (clears `stepped` for the next cycle); `counting`: in a
+        carry-only run's loop, the cycle counted and whether the loop goes on."""
         h = self.handles
         wp.launch(h.kernels.carry, dim=model.n_neurons, device=model.device,
                   inputs=[h.slot_of_row, h.group_start, h.live_dev, h.patch, h.places, h.winner_anchors, h.anchors,
-                          state.w, h.held_nodes, h.stepped])
+                          state.w, h.held_nodes, h.stepped, int(counting), self.left, self.going])
 
     def _smooth(self, model: SomModel, state: SomState, pulls: list, parts, taubin: bool) -> None:
         """Step 4: the smoothing steps on the free nodes; with Taubin's rule the volume of each closed part put back

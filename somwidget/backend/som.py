@@ -414,8 +414,9 @@ class Som:
         parts = self.parts
         path = parts.next_path()
         done = 0
+        most = path.most_cycles(parts.controls, parts.schedule) if path is parts.shaping else LONGEST_GRAPH
         while done < n:
-            chunk = min(LONGEST_GRAPH, 1 << ((n - done).bit_length() - 1))
+            chunk = n - done if most is None else min(most, 1 << ((n - done).bit_length() - 1))
             path.run(parts.model, parts.state, parts.controls, parts.schedule, chunk)
             done += chunk
         if n and self._state.s >= self.iterations:
