@@ -409,8 +409,7 @@ class Som:
     @warp_exclusive
     def step(self, n: int = 1) -> int:
         """Run up to n cycles (stopping at S); returns how many ran."""
-        n = checks.integer("n", n, 0)
-        n = min(n, self.iterations - self._state.s)
+        n = min(checks.integer("n", n, 0), self.iterations - self._state.s)
         parts = self.parts
         path = parts.next_path()
         done = 0
