@@ -159,3 +159,73 @@ def test_the_preset_menu_shows_every_preset_without_scrolling(page, server):
     assert any(t.startswith("Tube") for t in labels) and any(t.startswith("Bowl") for t in labels), labels
     shot(page, "trial3-preset-menu", "body")
     page.keyboard.press("Escape")
+
+
+def test_an_orbit_stopped_by_the_ground_says_so_once_a_drag(page):
+    """Key 3 (Left: the camera level with the ground), then a drag upward on empty space (the camera would go under
+    the ground): the view does not turn, and a hint says why and what looks from below, once for the drag."""
+    press_key_in_view(page, "3")
+    v0 = view(page)
+    assert v0["hint"] is None
+    box = page.locator("#clay-view canvas").bounding_box()
+    start = (box["x"] + 60, box["y"] + box["height"] - 80)  # empty space: no clay, no control
+    assert page.evaluate(f"() => {VIEW}.surfaceAt({start[0]}, {start[1]})") is None
+    drag(page, start, (0, -150), steps=15)
+    v = view(page)
+    np.testing.assert_allclose(v["camera"], v0["camera"], atol=1e-6)  # the view did not turn
+    hint = page.locator("#clay-view .somview-hint")
+    assert hint.is_visible() and hint.inner_text() == "The camera stays above the ground: 6 looks from below"
+    assert v["hint"] == hint.inner_text() and v["desktop"]["groundStops"] == 1  # once for the drag
+    shot(page, "trial3-ground-hint")
+    drag(page, start, (0, 150), steps=6)  # downward: the camera rises, no hint more
+    assert view(page)["desktop"]["groundStops"] == 1
+    page.wait_for_timeout(3200)
+    assert not hint.is_visible()
+
+
+def test_after_a_revolve_the_copies_are_lines_and_the_disc_is_the_default_rim(page, server):
+    """Key 3, Revolve, a vase profile drawn beside the bowl's axis: the profile keeps its spheres, each of its 15
+    copies is one thin line (no ghost sphere per sample); the disc under the cursor shows the default radius (the
+    controls' own, the preset's) as a rim only, filled once the person chooses a radius with ]."""
+    press_key_in_view(page, "3")
+    steps = server.idle()["session"]["history"][0]
+    page.locator(".somview-revolve").click()
+    profile = [[0.3, 0.0, -0.9], [0.6, 0.0, -0.5], [0.75, 0.0, 0.0], [0.5, 0.0, 0.4], [0.7, 0.0, 0.8]]
+    dense = [np.add(a, t * np.subtract(b, a)) for a, b in zip(profile[:-1], profile[1:]) for t in np.linspace(0, 1, 8,
+                                                                                                          endpoint=False)]
+    at = [model_screen(page, p) for p in [*dense, profile[-1]]]
+    page.mouse.move(*at[0])
+    page.mouse.down()
+    for p in at[1:]:
+        page.mouse.move(*p, steps=2)
+    page.mouse.up()
+    st = server.wait(lambda s: s["session"]["history"][0] == steps + 1 and s["session"]["pending_intents"] == 0,
+                     what="the revolve")
+    n = st["session"]["strokes"][0]
+    assert len(st["session"]["strokes"]) == 1 and n >= 4 and len(st["session"]["controls"]) == n
+    page.wait_for_function(f"() => {VIEW}.describe().kEff === {16 * n}", timeout=10000)
+    page.wait_for_timeout(400)
+    v = view(page)
+    assert v["ghostSpheres"] == 0 and v["strokeCopyLines"] == 15, (v["ghostSpheres"], v["strokeCopyLines"])
+    # what the person sees: the stroke's own spheres, and no ghost sphere drawn (their draw holds nothing visible)
+    drawn = page.evaluate(f"""() => {{ const c = {VIEW}.clay; const d = c.controlDraws[1];
+        const m = new ({VIEW}.clay.content.matrix.constructor)(); let shown = 0;
+        for (let a = 0; a < d.count; a++) {{ d.getMatrixAt(a, m); if (m.determinant() !== 0) shown += 1; }}
+        return [c.controlDraws[0].count, shown, c.strokeCopies.lines.visible,
+                c.strokeCopies.lines.geometry.drawRange.count]; }}""")
+    assert drawn[0] == n and drawn[1] == 0 and drawn[2] and drawn[3] == 15 * 2 * (n - 1), drawn
+    # the disc under the cursor: the default radius, its rim alone
+    default = float(np.median(st["session"]["radii"]))
+    box = page.locator("#clay-view canvas").bounding_box()
+    spot = next(p for p in (model_screen(page, [0.0, -0.2, z]) for z in (0.0, 0.2, -0.3, 0.4))
+                if page.evaluate(f"() => {VIEW}.surfaceAt({p[0]}, {p[1]})") is not None)
+    assert box["x"] < spot[0] < box["x"] + box["width"]
+    page.mouse.move(*spot)
+    page.wait_for_timeout(300)
+    d = view(page)["radiusDisc"]
+    assert d["of"] == "new" and d["shown"] and not d["filled"] and d["radius"] == pytest.approx(default, rel=1e-4), d
+    shot(page, "trial3-revolved")
+    page.keyboard.press("BracketLeft")
+    page.wait_for_timeout(200)
+    d = view(page)["radiusDisc"]
+    assert d["filled"] and d["radius"] == pytest.approx(default / 1.1, rel=1e-3), d

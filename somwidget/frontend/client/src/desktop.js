@@ -2,7 +2,7 @@
 // (handle.js), the Stroke or Revolve tool while it is on (stroke.js, revolve.js), a control (before the clay: a
 // control lying on the surface is taken even where the clay shows in front of part of it, and a small one within
 // PICKED_PX of it; a control the clay hides is not; a placed control before its ghosts), else the orbit (camera.js:
-// drag to orbit, right-drag to pan). A drag moves the control on the plane facing the camera (a radial copy seen
+// drag to orbit, right-drag to pan; an orbit stopped by the ground says so). A drag moves the control on the plane facing the camera (a radial copy seen
 // nearly side-on: in its meridian plane; with Shift along the model axis closest to the motion only). A click on
 // a control selects it (its handle shows), a double click on the clay adds a control there (the radius the disc
 // shows), the wheel over a control sets its radius (radius.js) and elsewhere zooms towards the cursor; Alt+wheel
@@ -45,9 +45,10 @@ export class Desktop {
     this.revolveTool = false; // a profile drawn beside the axis lathes the clay
     this.hovered = null; // the effective control under the pointer
     this.pointer = null; // the last pointer event over the view (null: the pointer is elsewhere)
+    this.onGroundStop = null; // an orbit drag upward met the ground (the view says so)
     this.onEscape = null; // after Escape's own work (a notebook: the focus goes back to it, keys.js focusHost)
     this.stats = { drags: 0, moves: 0, adds: 0, removes: 0, strokes: 0, revolves: 0, radii: 0, hiddenPresses: 0,
-      keys: 0, undos: 0, redos: 0 };
+      keys: 0, undos: 0, redos: 0, groundStops: 0 };
     const el = renderer.domElement;
     el.tabIndex = 0; // keys go to the view that has the focus
     el.dataset.lmSuppressShortcuts = 'true'; // JupyterLab leaves its own keys to the view while it has the focus
@@ -218,6 +219,7 @@ export class Desktop {
     }
     if (!this.drag) {
       if (ev.buttons || this.handle.held) { // orbiting, panning or moving by the handle
+        if (ev.buttons === 1 && this.groundStops(ev)) this.onGroundStop?.();
         this.showDisc(ev);
         return;
       }
@@ -238,6 +240,18 @@ export class Desktop {
     }
     this.grabs.update(this.drag.i, this.clay.unmap(this.drag.copy, model)); // a copy's point, mapped back
     this.stats.moves += 1;
+  }
+
+  // Whether an orbit drag upward is stopped by the ground (the camera at the orbit's lowest, camera.js), once a drag.
+  groundStops(ev) {
+    const press = this.press;
+    if (!press || press.control !== null || press.grounded || this.handle.held || this.drawTool) return false;
+    const upward = ev.clientY < (press.lastY ?? press.y);
+    press.lastY = ev.clientY;
+    const orbit = this.rig.orbit;
+    press.grounded = upward && orbit.maxPolarAngle < Math.PI - 1e-6 && orbit.getPolarAngle() >= orbit.maxPolarAngle - 1e-3;
+    if (press.grounded) this.stats.groundStops += 1;
+    return press.grounded;
   }
 
   up(ev) {
