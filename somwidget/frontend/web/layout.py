@@ -124,6 +124,7 @@ def build_page(server, panel: PanelModel):
         with layout.drawer as drawer:
             drawer.width = 390
             _panel(panel)
+        client.Style(TABLE_FIELDS_CSS)
         client.Script(SHORTCUTS_JS)
         client.Script(MOUNT_VIEW_JS)
         client.Script(RECONNECT_JS)
@@ -141,6 +142,16 @@ def _revision_key(name: str, row: str = "''") -> str:
     value in effect replaces a refused one a person typed."""
     return f"{row} + ':' + (field_revs['{name}'] || 0)"
 
+
+#: The controls table's typed cells (position, features, radius) look like fields: a faint outline, a text cursor, a
+#: focus ring in the theme's colour. Outlines take no room: the table keeps its width in the drawer.
+TABLE_FIELDS_CSS = """
+#controls-table .v-field { outline: 1px solid rgba(0, 0, 0, 0.22); outline-offset: -2px; border-radius: 3px;
+  cursor: text; }
+#controls-table .v-field:hover { outline-color: rgba(0, 0, 0, 0.5); }
+#controls-table .v-field.v-field--focused { outline: 2px solid rgb(var(--v-theme-primary)); }
+#controls-table .v-field input { cursor: text; padding-left: 4px; padding-right: 4px; }
+"""
 
 #: The controls table's cells: little padding, so that position, gap and radius fit the drawer's width.
 _TIGHT = "padding: 0 3px"
@@ -188,6 +199,8 @@ def _panel(panel: PanelModel) -> None:
             # does)
             v3.VSelect(v_model=("preset_name",), items=("preset_items",), label="Preset", density="compact",
                        hide_details=True, id="preset-select", disabled=("busy",),
+                       # every preset in sight at once (a 900 px high window shows them all, none below a fold)
+                       menu_props=("{ maxHeight: 'calc(100vh - 100px)' }",), list_props=("{ density: 'compact' }",),
                        item_props=("(item) => ({ onClick: () => item.value === preset_name && !busy "
                                    "&& trigger('reload_preset') })",))
             _button(ACTION_HELP["reload_preset"], icon="mdi-reload", variant="text", size="small", id="reload-preset",

@@ -5,6 +5,7 @@
 // own (x forward, y sideways, z up): `worldToModel` / `modelToWorld` convert.
 
 import * as THREE from 'three';
+import { StrokeCopies, strokeCopy } from './strokecopies.js';
 import { Tethers } from './tethers.js';
 
 const HELD = new THREE.Color(0xff2020);
@@ -91,6 +92,8 @@ export class Clay {
     this.pixelSize = null; // (world point) => world units a screen pixel spans there (null: no floor, a headset)
     this.tethers = new Tethers(); // a line from each control off the clay to its nearest node
     this.content.add(this.tethers.lines);
+    this.strokeCopies = new StrokeCopies(); // a stroke's copies: a line each, not spheres
+    this.content.add(this.strokeCopies.lines);
   }
 
   get ready() {
@@ -268,6 +271,7 @@ export class Clay {
       m.userData.mirror = j >= this.k; // a copy (the group's image of a control), drawn translucent
       m.userData.copy = this.copyOf(j); // the map that makes it: 0 for an original
       m.userData.original = this.originalOf(j);
+      m.userData.quiet = strokeCopy(this, j); // drawn as part of its copy's line (strokecopies.js)
     }
     this.lastFrame = f;
     this.refreshControls();
@@ -337,6 +341,7 @@ export class Clay {
       const grow = (held ? (ghost ? 1.35 : 1.6) : hovered ? 1.3 : 1.0) * (ghost ? GHOST_SIZE : 1.0);
       m.scale.setScalar(Math.max(this.controlRadius * grow, this.floorAt(m, ghost ? DRAWN_PX.ghost : DRAWN_PX.control)));
       m.updateMatrix();
+      if (m.userData.quiet) m.matrix.makeScale(0, 0, 0); // no sphere: its copy's line shows it
       const [d, at] = j < this.k ? [this.controlDraws[0], j] : [this.controlDraws[1], j - this.k];
       if (!d || at >= d.count) continue;
       d.setMatrixAt(at, m.matrix);
@@ -347,6 +352,7 @@ export class Clay {
       if (d.instanceColor) d.instanceColor.needsUpdate = true;
     }
     this.refreshTethers();
+    this.strokeCopies.update(this);
   }
 
   // The lines from the controls off the clay (a stroke as one) to their nearest nodes, where the controls are drawn.

@@ -1,8 +1,9 @@
 // Mouse, touch and keys on a flat screen. A press goes to what is visible under it: the selected control's handle
-// (handle.js), the Stroke or Revolve tool while it is on (stroke.js, revolve.js), a control (before the clay: a control lying on the
-// surface is taken even where the clay shows in front of part of it, and a small one within PICKED_PX of it; a
-// control the clay hides is not), else the orbit (camera.js: drag to orbit, right-drag to pan). A drag moves the
-// control on the plane facing the camera (with Shift along the model axis closest to the motion only). A click on
+// (handle.js), the Stroke or Revolve tool while it is on (stroke.js, revolve.js), a control (before the clay: a
+// control lying on the surface is taken even where the clay shows in front of part of it, and a small one within
+// PICKED_PX of it; a control the clay hides is not; a placed control before its ghosts), else the orbit (camera.js:
+// drag to orbit, right-drag to pan; an orbit stopped by the ground says so). A drag moves the control on the plane facing the camera (a radial copy seen
+// nearly side-on: in its meridian plane; with Shift along the model axis closest to the motion only). A click on
 // a control selects it (its handle shows), a double click on the clay adds a control there (the radius the disc
 // shows), the wheel over a control sets its radius (radius.js) and elsewhere zooms towards the cursor; Alt+wheel
 // sets the radius the disc under the cursor shows (the control's, or a new control's). The keys: keys.js.
@@ -16,6 +17,7 @@ import { intents } from './protocol.js';
 const PAD = 1.2; // a control is hit within this many times its drawn radius
 const CLICK_PX = 4; // a press and release closer than this is a click
 const KEY_NOTCH = 100; // [ and ] turn a radius as one wheel notch does
+const MERIDIAN_FACING = (30 * Math.PI) / 180; // a radial copy faced this near its meridian plane is dragged in it
 
 export class Desktop {
   // rig: the CameraRig; handle: the Handle; radius: the RadiusBall; stroke: the StrokeDraw; guide: the RevolveGuide;
@@ -43,9 +45,10 @@ export class Desktop {
     this.revolveTool = false; // a profile drawn beside the axis lathes the clay
     this.hovered = null; // the effective control under the pointer
     this.pointer = null; // the last pointer event over the view (null: the pointer is elsewhere)
+    this.onGroundStop = null; // an orbit drag upward met the ground (the view says so)
     this.onEscape = null; // after Escape's own work (a notebook: the focus goes back to it, keys.js focusHost)
     this.stats = { drags: 0, moves: 0, adds: 0, removes: 0, strokes: 0, revolves: 0, radii: 0, hiddenPresses: 0,
-      keys: 0, undos: 0, redos: 0 };
+      keys: 0, undos: 0, redos: 0, groundStops: 0 };
     const el = renderer.domElement;
     el.tabIndex = 0; // keys go to the view that has the focus
     el.dataset.lmSuppressShortcuts = 'true'; // JupyterLab leaves its own keys to the view while it has the focus
@@ -86,7 +89,7 @@ export class Desktop {
   // The control under the pointer that the person can see, picked before the clay: of the controls the ray passes
   // within their pick radius and the clay does not hide (picking.js: one lying on the surface shows, also where the
   // clay covers part of its sphere), one whose drawn sphere the ray meets wins (the nearest), else the one it passes
-  // closest (for its size). {index, distance} or null; `hidden` counts a press that met only hidden controls.
+  // closest (for its size); a placed control within its pick radius wins over any ghost. {index, distance} or null; `hidden` counts a press that met only hidden controls.
   visibleControl(raycaster, hidden = null) {
     const candidates = controlsAlong(this.clay, raycaster, PAD);
     if (!candidates.length) return null;
@@ -95,9 +98,12 @@ export class Desktop {
       if (hidden) hidden.count += 1;
       return null;
     }
-    const onSphere = seen.filter((c) => c.off <= c.drawn).sort((a, b) => a.along - b.along);
-    const best = onSphere[0] || seen.sort((a, b) => a.off / a.reach - b.off / b.reach
-      || Number(a.ghost) - Number(b.ghost))[0];
+    // a control the person placed within its pick radius wins over the ghosts (a radial group's copies lie just
+    // beside it on screen, in front of it or behind it)
+    const placed = seen.filter((c) => !c.ghost);
+    const pool = placed.length ? placed : seen;
+    const onSphere = pool.filter((c) => c.off <= c.drawn).sort((a, b) => a.along - b.along);
+    const best = onSphere[0] || pool.sort((a, b) => a.off / a.reach - b.off / b.reach)[0];
     return { index: best.index, distance: best.along };
   }
 
@@ -172,8 +178,9 @@ export class Desktop {
   beginDrag(j, ev) {
     const i = this.clay.originalOf(j);
     const centre = this.clay.controlWorld(j);
-    const normal = this.rig.camera.getWorldDirection(new THREE.Vector3());
-    const plane = new THREE.Plane().setFromNormalAndCoplanarPoint(normal, centre);
+    const facing = this.rig.camera.getWorldDirection(new THREE.Vector3());
+    const plane = this.meridianPlane(j, centre, facing)
+      || new THREE.Plane().setFromNormalAndCoplanarPoint(facing, centre);
     const onPlane = this.raycaster.ray.intersectPlane(plane, new THREE.Vector3()) || centre.clone();
     this.drag = { i, j, copy: this.clay.copyOf(j), plane, offset: centre.clone().sub(onPlane), pointer: ev.pointerId,
       start: this.clay.worldToModel(centre) };
@@ -182,6 +189,24 @@ export class Desktop {
     this.grabs.begin(i);
     this.stats.drags += 1;
     this.onDragStart?.();
+  }
+
+  // A radial copy faced within MERIDIAN_FACING of its meridian plane (the plane holding the group's axis and the
+  // copy) is dragged in that plane, so the ring keeps its angles; null for an original, a mirror copy, or a copy seen
+  // at a slant (or on the axis).
+  meridianPlane(j, centre, facing) {
+    const m = /^radial-\d+-([xyz])/.exec(this.clay.group || '');
+    if (!m || this.clay.copyOf(j) === 0) return null;
+    const unit = [0, 0, 0];
+    unit['xyz'.indexOf(m[1])] = 1;
+    const origin = this.clay.modelToWorld([0, 0, 0]);
+    const axis = this.clay.modelToWorld(unit).sub(origin).normalize();
+    const out = centre.clone().sub(origin);
+    const normal = axis.clone().cross(out.addScaledVector(axis, -out.dot(axis)));
+    if (normal.length() < 1e-6 * this.clay.worldRadius) return null;
+    normal.normalize();
+    if (Math.abs(normal.dot(facing)) < Math.cos(MERIDIAN_FACING)) return null;
+    return new THREE.Plane().setFromNormalAndCoplanarPoint(normal, centre);
   }
 
   move(ev) {
@@ -194,6 +219,7 @@ export class Desktop {
     }
     if (!this.drag) {
       if (ev.buttons || this.handle.held) { // orbiting, panning or moving by the handle
+        if (ev.buttons === 1 && this.groundStops(ev)) this.onGroundStop?.();
         this.showDisc(ev);
         return;
       }
@@ -214,6 +240,18 @@ export class Desktop {
     }
     this.grabs.update(this.drag.i, this.clay.unmap(this.drag.copy, model)); // a copy's point, mapped back
     this.stats.moves += 1;
+  }
+
+  // Whether an orbit drag upward is stopped by the ground (the camera at the orbit's lowest, camera.js), once a drag.
+  groundStops(ev) {
+    const press = this.press;
+    if (!press || press.control !== null || press.grounded || this.handle.held || this.drawTool) return false;
+    const upward = ev.clientY < (press.lastY ?? press.y);
+    press.lastY = ev.clientY;
+    const orbit = this.rig.orbit;
+    press.grounded = upward && orbit.maxPolarAngle < Math.PI - 1e-6 && orbit.getPolarAngle() >= orbit.maxPolarAngle - 1e-3;
+    if (press.grounded) this.stats.groundStops += 1;
+    return press.grounded;
   }
 
   up(ev) {

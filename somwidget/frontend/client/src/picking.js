@@ -16,6 +16,7 @@ export function controlsAlong(clay, raycaster, pad = 1.5) {
   const w = new THREE.Vector3();
   for (let j = 0; j < clay.kEff; j++) {
     const m = clay.controlAnchors[j];
+    if (m.userData.quiet) continue; // a stroke's copy, drawn as a line: not taken
     clay.controlWorld(j, w);
     const along = w.clone().sub(ray.origin).dot(ray.direction);
     if (along < 0) continue;
@@ -73,6 +74,7 @@ export function nearestControl(clay, worldPoint, maxDistance) {
   let best = null;
   const w = new THREE.Vector3();
   for (let j = 0; j < clay.kEff; j++) {
+    if (clay.controlAnchors[j]?.userData.quiet) continue;
     clay.controlWorld(j, w);
     const d = w.distanceTo(worldPoint);
     if (d <= maxDistance && (!best || d < best.distance)) best = { index: j, distance: d };

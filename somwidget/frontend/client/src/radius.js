@@ -111,7 +111,8 @@ const DISC_COLOUR = 0x3d7be0;
 const DISC_SEGMENTS = 72;
 const LABEL_OFFSET = [16, 18]; // px from the cursor to the label's corner
 
-// The radius under the cursor: a disc on the clay (filled faintly, its rim drawn) and a label by the cursor.
+// The radius under the cursor: a disc on the clay (its rim drawn, filled faintly unless it is a new control's radius
+// the person has not chosen) and a label by the cursor.
 export class RadiusDisc {
   // clay: the Clay; radius: the RadiusBall (radii and the new control's); scene: where the disc is drawn; label: the
   // element the text goes in (placed over the view, by the cursor); onChange(): the disc changed
@@ -129,6 +130,7 @@ export class RadiusDisc {
       (_, m) => new THREE.Vector3(Math.cos((2 * Math.PI * m) / DISC_SEGMENTS),
         Math.sin((2 * Math.PI * m) / DISC_SEGMENTS), 0))), new THREE.LineBasicMaterial({
       color: DISC_COLOUR, transparent: true, opacity: 0.9, depthTest: false }));
+    this.fill = fill;
     for (const o of [fill, rim]) {
       o.renderOrder = 6;
       o.frustumCulled = false;
@@ -156,6 +158,9 @@ export class RadiusDisc {
       this.disc.position.copy(where);
       this.disc.quaternion.setFromUnitVectors(this.z, normal.clone().normalize());
       this.disc.scale.setScalar(r * this.clay.scale);
+      // a new control's radius the person has not chosen (the controls' usual one, a quarter of the tube's size):
+      // its rim alone, so that it does not cover the clay under the cursor
+      this.fill.visible = of !== 'new' || this.radius.chosen !== null;
     }
     this.writeLabel(of, r, at);
     this.onChange?.();
@@ -186,6 +191,7 @@ export class RadiusDisc {
   // The radius shown, for describe(): what it is of, its value, its share of the size, the label's text.
   describe() {
     return { of: this.of, shown: this.disc.visible, radius: this.value, share: this.value / (2 * this.clay.radius),
+      filled: this.disc.visible && this.fill.visible,
       label: this.label.hidden ? null : this.label.textContent, world: this.disc.visible ? this.disc.scale.x : 0,
       centre: this.disc.visible ? this.disc.position.toArray() : null };
   }

@@ -35,6 +35,8 @@ const CSS = `
 .somview-status.offline { background: #fde2e2; color: #8a1010; font-weight: 600; }
 .somview-picture { position: absolute; inset: 0; width: 100%; height: 100%; object-fit: contain;
   background: #eef0f4; pointer-events: none; }
+.somview-hint { position: absolute; left: 50%; top: 40px; transform: translateX(-50%); font-size: 13px;
+  padding: 4px 10px; border-radius: 4px; background: rgba(29, 66, 138, 0.88); color: white; pointer-events: none; }
 .somview-error { position: absolute; left: 6px; top: 36px; right: 6px; font-size: 12px; padding: 3px 6px;
   background: #fde2e2; color: #8a1010; border-radius: 4px; pointer-events: none; }
 ${LABEL_CSS}${TOOLBAR_CSS}${PRESENCE_CSS}`;
@@ -57,6 +59,8 @@ export function digestOf(positions) {
 }
 
 const STATUS_MS = 250;
+const HINT_MS = 3000;
+const GROUND_HINT = 'The camera stays above the ground: 6 looks from below';
 const SAME_CLAY = 0.02; // a new topology whose clay's bounds moved less than this share of its size is the same clay
 const DRAG_REDRAW_MS = 50;
 
@@ -157,7 +161,11 @@ export class ClayView {
     this.errorBox = document.createElement('div');
     this.errorBox.className = 'somview-error';
     this.errorBox.hidden = true;
-    container.append(this.labels.layer, this.radiusLabel, this.statusLine, this.errorBox);
+    this.hint = document.createElement('div');
+    this.hint.className = 'somview-hint';
+    this.hint.hidden = true;
+    this.desktop.onGroundStop = () => this.showHint(GROUND_HINT);
+    container.append(this.labels.layer, this.radiusLabel, this.statusLine, this.errorBox, this.hint);
     this.presence = new Presence(container, this.clay);
     this.toolbar = new Toolbar(container, act, () => ({ orthographic: this.rig.orthographicOn,
       stroke: this.desktop.strokeTool, revolve: this.desktop.revolveTool, display: this.display.describe() }));
@@ -284,6 +292,14 @@ export class ClayView {
     return true;
   }
 
+  // A short line over the view for HINT_MS (what a gesture could not do, and what does it).
+  showHint(text) {
+    this.hint.textContent = text;
+    this.hint.hidden = false;
+    clearTimeout(this.hintTimer);
+    this.hintTimer = setTimeout(() => { this.hint.hidden = true; }, HINT_MS);
+  }
+
   showError(e) {
     const s = this.state;
     s.lastError = e.message;
@@ -385,7 +401,9 @@ export class ClayView {
         ? this.disc.disc.scale.x / this.pixelSize(this.disc.disc.position) : 0 }, newRadius: this.radius.newRadius, keptPlace: s.kept,
       numbered: Array.from({ length: clay.kEff }, (_, j) => clay.numbered(j)),
       tethers: clay.tethers.describe(), // the lines from controls off the clay: {control, node, gap}
-      presence: this.presence.describe(),
+      ghostSpheres: clay.controlAnchors.filter((m) => m.userData.mirror && !m.userData.quiet).length,
+      strokeCopyLines: clay.strokeCopies.count, // a stroke's copies, a line each
+      presence: this.presence.describe(), hint: this.hint.hidden ? null : this.hint.textContent,
       size: [this.renderer.domElement.clientWidth, this.renderer.domElement.clientHeight],
     };
   }
