@@ -21,7 +21,8 @@ engine            The engine alone, as the rooms step it (no server; numpy and w
                   room's move applied to its Som and its controls and cycle put in, one launch, every weight back in
                   one copy, each frame its row; one room steps alone, as the worker's loop steps it); `kernels`: the
                   batched kernels alone (every state loaded, controls up, one launch, every weight back). Round time
-                  median / p95 and whether R rooms keep 30 frames a second (p95 <= 33 ms).
+                  median / p95 and whether R rooms keep 30 frames a second (p95 <= 33 ms); `studio host ms`: the
+                  studio's round less its launch (the rooms' moves, the per-room work, the frames' rows).
 dask              A LocalCluster of two workers (processes): R rooms on its workers reached (a) through the front
                   relaying to the workers' own room servers (what the studio does), (b) as Dask actors (a move is an
                   actor call, frames come back by long-polling calls); move -> frame as in `rooms`.
@@ -152,7 +153,10 @@ def _designers(urls: list[str], first: int, seconds: float, start_at: float, que
         failed = [str(r) for r in results if isinstance(r, BaseException)]
         return out, failed
 
-    queue.put(asyncio.run(main()))
+    result = asyncio.run(main())
+    if os.environ.get("SOMWIDGET_PROFILE_DIR") and "sitecustomize" in sys.modules:  # benchmarks/profile_hook
+        getattr(sys.modules["sitecustomize"], "dump", lambda role: None)("designers")
+    queue.put(result)
 
 
 def drive(urls: list[str], seconds: float, procs: int, lead: float) -> tuple[list, list]:
@@ -255,7 +259,7 @@ def run_rooms(count: int, presets: tuple[str, ...], seconds: float, device: str,
 
 
 # -- the engine alone -----------------------------------------------------------------------------------------------
-def run_engine(count: int, device: str, rounds: int) -> dict:
+def run_engine(count: int, device: str, rounds: int, own_rooms: bool = True) -> dict:
     """R car rooms' Soms (as the studio's rooms hold them), each round every room's control 0 moved (its local
     restart), 10 cycles stepped and its weights read back (its frame); three ways: each Som alone (`own`), the
     studio's rounds (BatchedRooms: the states held in one BatchSom, each room's move applied to its Som and its
@@ -307,7 +311,7 @@ def run_engine(count: int, device: str, rounds: int) -> dict:
             s.step(10)
             _ = s.weights
 
-    own_ms = timed(own)
+    own_ms = timed(own) if own_rooms else np.full(1, np.nan)
     for s in soms:
         s.restore(settled, s.iterations)
     batches = BatchedRooms()
@@ -322,10 +326,12 @@ def run_engine(count: int, device: str, rounds: int) -> dict:
             soms[0].step(10)
             _ = soms[0].weights
             return
-        batches.step([(b, 10) for b in range(count)])
+        got = batches.step([(b, 10) for b in range(count)])
+        launched.append(got[0][1])  # the launch and the one copy of every weight out
         for b in range(count):
             _ = batches.host(b)
 
+    launched: list[float] = []
     studio_ms = timed(studio)
     assert count == 1 or (batches.launches == rounds and batches.widest == count)  # all in each round's launch
     soms.clear()  # their memory goes before the batch is made
@@ -348,7 +354,11 @@ def run_engine(count: int, device: str, rounds: int) -> dict:
         return {f"{name}_median_ms": float(np.median(ms)), f"{name}_p95_ms": float(np.percentile(ms, 95)),
                 f"{name}_30fps": float(np.percentile(ms, 95)) <= frame}
 
-    return {"rooms": count, **figures("own", own_ms), **figures("studio", studio_ms), **figures("kernels", kernels_ms)}
+    # the round's host work: the studio's round less its launch (the kernels and the one copy of every weight out)
+    launch_ms = np.array(launched[min(2, rounds - 1):]) * 1e3 if count > 1 else np.zeros(1)
+    host_ms = studio_ms - launch_ms
+    return {"rooms": count, **figures("own", own_ms), **figures("studio", studio_ms), **figures("kernels", kernels_ms),
+            "host_median_ms": float(np.median(host_ms))}
 
 
 # -- Dask: actors against the workers' own servers ---------------------------------------------------------------------
@@ -474,6 +484,7 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=0, help="worker processes (0: the rooms in the server's own)")
     parser.add_argument("--client-procs", type=int, default=0, help="designer processes (0: one per 64 designers)")
     parser.add_argument("--rounds", type=int, default=20, help="engine mode: rounds timed")
+    parser.add_argument("--no-own", action="store_true", help="engine mode: leave out the rooms stepped one by one")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
     # the rooms' sessions keep their folders under the rooms folder; anything else goes to a folder of this run
@@ -504,13 +515,14 @@ def main(argv=None) -> int:
               f"(of {', '.join(map(str, counts))}; presets {args.presets})", flush=True)
     elif args.mode == "engine":
         print(f"{'rooms':>6} " + " ".join(f"{w + ' median':>15} {w + ' p95':>12} {w + ' 30/s':>12}"
-                                           for w in ("own", "studio", "kernels")), flush=True)
+                                           for w in ("own", "studio", "kernels"))
+              + f" {'studio host ms':>15}", flush=True)
         for count in counts:
-            r = run_engine(count, args.device, args.rounds)
+            r = run_engine(count, args.device, args.rounds, not args.no_own)
             results.append(r)
             print(f"{r['rooms']:>6} " + " ".join(
                 f"{r[w + '_median_ms']:>15.2f} {r[w + '_p95_ms']:>12.2f} {'yes' if r[w + '_30fps'] else 'no':>12}"
-                for w in ("own", "studio", "kernels")), flush=True)
+                for w in ("own", "studio", "kernels")) + f" {r['host_median_ms']:>15.2f}", flush=True)
     else:
         for count in counts:
             for r in run_dask(count, args.seconds):
