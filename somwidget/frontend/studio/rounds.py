@@ -3,15 +3,15 @@ trainers' `driver` is this loop, model/trainer.py), so no thread a room waits it
 
 A room's slow posted calls (a preset switch, a refine, an undo, a save: any but the quick ones, Trainer.post) run on
 threads of their own, the room without a turn until they ran, so that the other rooms' rounds go on meanwhile.
-A round: each room with work runs its quick posted calls (a move, a grab), then (under its Som lock) applies its queued operations and
-chooses its cycles (`Trainer.prepare`); rooms alike (batched.py: `batch_key`) are held in their batch and stepped
-in one launch a batch, the others step by themselves at once; each room then gets its frame (from its row of the
+A round: each room with work runs its quick posted calls (a move, a grab), then (under its Som lock) applies its queued
+operations and chooses its cycles (`Trainer.prepare`); rooms alike (batched.py: `batch_key`) are held in their batch and
+stepped in one launch a batch, the others step by themselves at once; each room then gets its frame (from its row of the
 batch's one copy of the weights: `Trainer.end_step`) and its autosave's turn. A room is in a round when an intent
-reached it since its last turn, or when it trains and its last turn was a frame's time ago (the rooms' frame rate):
-so a move is answered by the next round, which starts as soon as one is poked (at most one every MIN_GAP seconds),
-and rooms that only train get a frame `frame_rate` times a second. Alike rooms step batched from the round after two
-or more of them stepped in one round, and a room held stays in its batch when it steps alone (no copies back and
-forth); a room of a kind no other room steps with steps by itself (its own path, its graphs).
+reached it since its last turn, or when it trains and its last turn was a frame's time ago (the rooms' frame rate): so a
+move is answered by the next round, which starts as soon as one is poked (at most one every MIN_GAP seconds), and rooms
+that only train get a frame `frame_rate` times a second. Alike rooms step batched from the round after two or more of
+them stepped in one round, and a room held stays in its batch when it steps alone (no copies back and forth); a room of
+a kind no other room steps with steps by itself (its own path, its graphs).
 """
 
 from __future__ import annotations
