@@ -104,6 +104,7 @@ class RemotePlace:
         self.secret = secret
         self.label = label or self.url
         self.index: int | None = None  # its number among a machine's worker processes (workers.py)
+        self.gpu: str | None = None  # the GPU it steps its rooms on, where several workers share one (workers.py)
         self.alive = True
         self.failures = 0
         self.load = {"rooms": 0, "nodes": 0, "limit": 1}
