@@ -245,8 +245,9 @@ class Session:
 
     @property
     def n_controls(self) -> int:
-        with self.modelling.lock:
-            return int(self.modelling.controls.shape[0])
+        """k, read without the session's lock (one reference read: a server's event loop checks every intent with it
+        and must never wait for a turn that holds the lock)."""
+        return int(self.modelling.controls.shape[0])
 
     @property
     def parameters(self) -> dict:
