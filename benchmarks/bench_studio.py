@@ -21,7 +21,8 @@ engine            The engine alone, as the rooms step it (no server; numpy and w
                   room's move applied to its Som and its controls and cycle put in, one launch, every weight back in
                   one copy, each frame its row; one room steps alone, as the worker's loop steps it); `kernels`: the
                   batched kernels alone (every state loaded, controls up, one launch, every weight back). Round time
-                  median / p95 and whether R rooms keep 30 frames a second (p95 <= 33 ms).
+                  median / p95 and whether R rooms keep 30 frames a second (p95 <= 33 ms); `studio host ms`: the
+                  studio's round less its launch (the rooms' moves, the per-room work, the frames' rows).
 dask              A LocalCluster of two workers (processes): R rooms on its workers reached (a) through the front
                   relaying to the workers' own room servers (what the studio does), (b) as Dask actors (a move is an
                   actor call, frames come back by long-polling calls); move -> frame as in `rooms`.
@@ -44,10 +45,8 @@ import argparse
 import asyncio
 import json
 import math
-import multiprocessing
 import os
 import platform
-import struct
 import sys
 import tempfile
 import time
@@ -57,6 +56,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from studio_load import back_after_cut, drive, summarise  # noqa: E402 (benchmarks/, next to this file)
 
 MOVE_INTERVAL = 1.0 / 30.0  # s: 30 moves a second
 TARGET_MS = 50.0
@@ -71,117 +71,6 @@ def check_imports() -> list[str]:
     from somwidget.frontend.transport import messages  # noqa: F401
 
     return sorted({m.split(".")[0] for m in sys.modules} & set(HEAVY))
-
-
-# -- designers (processes of their own) -----------------------------------------------------------------------------
-async def _designer(url: str, index: int, seconds: float, start_at: float, out: list) -> None:
-    import aiohttp
-
-    from somwidget.frontend.transport.messages import HEADER_FORMAT, HEADER_SIZE
-
-    header = struct.Struct(HEADER_FORMAT)
-    async with aiohttp.ClientSession() as cs, cs.ws_connect(url, compress=0, max_msg_size=0) as ws:
-        topology, latest = None, None
-        while topology is None or latest is None:
-            msg = await ws.receive(timeout=300)
-            if msg.type == aiohttp.WSMsgType.TEXT and json.loads(msg.data)["type"] == "topology":
-                topology = json.loads(msg.data)
-            elif msg.type == aiohttp.WSMsgType.BINARY and topology is not None:
-                latest = msg.data
-            elif msg.type in (aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
-                raise RuntimeError(f"designer {index}: the room closed its websocket")
-        cid = topology["control_ids"][0]
-        n = header.unpack_from(latest, 0)[7]
-        at = HEADER_SIZE + 12 * n  # control 0 in the frame's control positions
-        home = np.array(struct.unpack_from("<3f", latest, at), np.float64)
-        size = float(np.linalg.norm(np.subtract(topology["bounds"]["max"], topology["bounds"]["min"])))
-        pending: list[tuple[float, tuple]] = []
-        latencies, sent, frames = [], 0, 0
-        done = asyncio.Event()
-
-        async def receive():
-            nonlocal frames
-            while not done.is_set():
-                try:
-                    msg = await ws.receive(timeout=0.5)
-                except asyncio.TimeoutError:
-                    continue
-                if msg.type != aiohttp.WSMsgType.BINARY:
-                    if msg.type in (aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
-                        return
-                    continue
-                now = time.perf_counter()
-                frames += 1
-                if len(msg.data) < at + 12:
-                    continue
-                shown = struct.unpack_from("<3f", msg.data, at)
-                for m, (t, p) in enumerate(pending):
-                    if p == shown:
-                        latencies.append(now - t)
-                        del pending[:m + 1]
-                        break
-
-        receiver = asyncio.ensure_future(receive())
-        await asyncio.sleep(max(0.0, start_at - time.time()))
-        # the grab just before the moves: a hand silent for hands.SILENT_SECONDS while it holds lets go
-        await ws.send_json({"type": "grab", "id": cid})
-        t0 = time.perf_counter()
-        phase = 2 * math.pi * (index % 7) / 7
-        tick = t0
-        while time.perf_counter() - t0 < seconds:
-            a = phase + 2 * math.pi * (time.perf_counter() - t0) / 2.0
-            p = home + 0.015 * size * np.array([math.cos(a), math.sin(a), 0.5 * math.sin(2 * a)])
-            p = np.round(p, 6)
-            await ws.send_json({"type": "move", "id": cid, "position": [float(v) for v in p]})
-            pending.append((time.perf_counter(), tuple(float(v) for v in np.float32(p))))
-            sent += 1
-            tick += MOVE_INTERVAL
-            await asyncio.sleep(max(0.0, tick - time.perf_counter()))
-        await asyncio.sleep(0.5)
-        done.set()
-        await receiver
-        await ws.send_json({"type": "release", "id": cid})
-        out.append({"latencies": latencies, "sent": sent, "frames": frames, "seconds": time.perf_counter() - t0})
-
-
-def _designers(urls: list[str], first: int, seconds: float, start_at: float, queue) -> None:
-    async def main():
-        out: list = []
-        results = await asyncio.gather(*(_designer(u, first + i, seconds, start_at, out) for i, u in enumerate(urls)),
-                                       return_exceptions=True)
-        failed = [str(r) for r in results if isinstance(r, BaseException)]
-        return out, failed
-
-    queue.put(asyncio.run(main()))
-
-
-def drive(urls: list[str], seconds: float, procs: int, lead: float) -> tuple[list, list]:
-    """Run the designers in `procs` processes; their results and failures."""
-    ctx = multiprocessing.get_context("spawn")
-    queue = ctx.Queue()
-    start_at = time.time() + lead
-    chunks = [urls[i::procs] for i in range(procs)]
-    workers = [ctx.Process(target=_designers, args=(chunk, i * 1000, seconds, start_at, queue))
-               for i, chunk in enumerate(chunks) if chunk]
-    for w in workers:
-        w.start()
-    views, failed = [], []
-    for _ in workers:
-        out, bad = queue.get(timeout=seconds + lead + 600)
-        views += out
-        failed += bad
-    for w in workers:
-        w.join(60)
-    return views, failed
-
-
-def summarise(views: list, seconds: float) -> dict:
-    lat = np.array([x for v in views for x in v["latencies"]]) * 1e3
-    sent = sum(v["sent"] for v in views)
-    pct = (lambda q: float(np.percentile(lat, q))) if len(lat) else (lambda q: float("nan"))
-    return {"moves": sent, "answered": len(lat) / max(sent, 1), "median_ms": pct(50), "p95_ms": pct(95),
-            "p99_ms": pct(99), "designer_fps": float(np.mean([v["frames"] / v["seconds"] for v in views]))
-            if views else 0.0}
 
 
 # -- the server's processes ------------------------------------------------------------------------------------------
@@ -221,41 +110,101 @@ def server_pids(studio) -> list[int]:
     return pids
 
 
-def run_rooms(count: int, presets: tuple[str, ...], seconds: float, device: str, workers: int, procs: int) -> dict:
+async def _make_rooms(front, names: list[str], presets: tuple[str, ...], at_once: int) -> None:
+    """The rooms, `at_once` made at a time (each on the least loaded place)."""
+    gate = asyncio.Semaphore(at_once)
+
+    async def one(i, name):
+        async with gate:
+            await front.create(name, presets[i % len(presets)])
+
+    await asyncio.gather(*(one(i, n) for i, n in enumerate(names)))
+
+
+def _kill_one(studio) -> tuple[object, int]:
+    """SIGKILL the worker process with the most rooms; (its place, its room count)."""
+    import signal
+
+    procs = studio.pool.procs
+    place = max(procs, key=lambda p: p.load.get("rooms", 0))
+    os.kill(procs[place].pid, signal.SIGKILL)
+    return place, int(place.load.get("rooms", 0))
+
+
+def run_rooms(count: int, presets: tuple[str, ...], seconds: float, device: str, workers: int, procs: int,
+              deadline: float, kill: bool = False) -> dict:
+    """R rooms with a designer each (the module's docstring); `kill`: a worker killed halfway through the moving,
+    its rooms' time back measured. Whatever happens, it ends by `deadline` (time.time)."""
     from somwidget.frontend.studio.limits import StudioLimits
     from somwidget.frontend.studio.serve import StudioServer
 
     limits = StudioLimits(rooms=max(64, count + 1), park_after=0)
+    made = float("nan")
     with StudioServer(tempfile.mkdtemp(prefix="bench-studio-"), device=device, workers=workers,
                       limits=limits) as studio:
-        for place in range(max(1, workers)):  # a room on each place first: what the first room loads is not a room's
-            studio.call(studio.front.create(f"warm{place}", presets[0]), timeout=600)
-        time.sleep(3.0)
+        left = lambda: max(1.0, deadline - time.time())  # noqa: E731
+        # a room on each place first: what the first room loads is not a room's
+        studio.call(_make_rooms(studio.front, [f"warm{p}" for p in range(max(1, workers))], presets, 64),
+                    timeout=left())
+        time.sleep(2.0)
         rss0, gpu0 = memory(studio)
         names = [f"d{i}" for i in range(count)]
         t0 = time.perf_counter()
-        for i, name in enumerate(names):
-            studio.call(studio.front.create(name, presets[i % len(presets)]), timeout=600)
+        studio.call(_make_rooms(studio.front, names, presets, 4 * max(1, workers)), timeout=left())
         made = time.perf_counter() - t0
         urls = [studio.room_url(n).replace("http", "ws", 1).replace("/?token=", "/view/ws?token=") for n in names]
-        time.sleep(min(30.0, 2.0 + 0.05 * count))  # the rooms grow their shapes (the car) meanwhile
+        time.sleep(min(20.0, 2.0 + 0.02 * count))  # the rooms grow their shapes (the car) meanwhile
         rss1, gpu1 = memory(studio)
-        pids = server_pids(studio)
-        lead = 10.0 + 0.05 * count
-        c0 = cpu_seconds(pids)
-        w0 = time.perf_counter()
-        views, failed = drive(urls, seconds, procs, lead)
-        busy = (cpu_seconds(pids) - c0) / (time.perf_counter() - w0)
+        front, workers_pids = [os.getpid()], server_pids(studio)[1:]
+        lead = 5.0 + 0.02 * count
+        c0, w0 = cpu_seconds(front), cpu_seconds(workers_pids)
+        t0 = time.perf_counter()
+        killed = None
+        if kill:
+            import threading
+
+            def killer():
+                time.sleep(lead + seconds / 2)
+                killed_place, rooms_there = _kill_one(studio)
+                killed.update(at=time.time(), label=killed_place.label, rooms=rooms_there)
+
+            killed = {}
+            threading.Thread(target=killer, daemon=True).start()
+        moving_end = time.time() + lead + seconds + 1.0
+        views, designer_cpu = drive(urls, seconds, procs, lead, min(deadline - 20.0, moving_end + 30.0))
+        wall = time.perf_counter() - t0
+        front_cores = (cpu_seconds(front) - c0) / wall
+        worker_cores = (cpu_seconds(workers_pids) - w0) / wall if kill is False else float("nan")
     out = summarise(views, seconds)
-    out.update(rooms=count, presets="+".join(presets), failed=len(failed), errors=failed[:3],
-               made_s=made, rss_mb_room=(rss1 - rss0) / count, gpu_mb_room=(gpu1 - gpu0) / count,
-               server_cores=busy, cpu_ms_frame=1e3 * busy / max(1e-9, count * out["designer_fps"]),
-               ok=out["p95_ms"] <= TARGET_MS and not failed)
+    frames = max(1, out["frames"])
+    out.update(rooms=count, presets="+".join(presets), made_s=made, rss_mb_room=(rss1 - rss0) / count,
+               gpu_mb_room=(gpu1 - gpu0) / count, front_cores=front_cores, worker_cores=worker_cores,
+               designer_cores=designer_cpu / wall, server_cores=front_cores + worker_cores,
+               front_ms_frame=1e3 * front_cores * wall / frames, worker_ms_frame=1e3 * worker_cores * wall / frames,
+               designer_ms_frame=1e3 * designer_cpu / frames,
+               ok=out["p95_ms"] <= TARGET_MS and out["answered"] >= 0.9 and not out["silent"])
+    out["cpu_ms_frame"] = out["front_ms_frame"] + out["worker_ms_frame"]
+    if killed is not None:
+        out.update(killed=killed, **back_after_cut(views, killed.get("at", float("nan"))))
     return out
 
 
+ROOMS_HEAD = (f"{'GPUs':>4} {'workers':>7} {'rooms':>5} {'moves':>6} {'answered':>8} {'median':>7} {'p95':>7} "
+              f"{'p99':>7} {'fps':>5} {'front':>6} {'workers':>7} {'designers':>9} {'server ms/frame':>15} "
+              f"{'MB/room':>7} {'GPU MB/room':>11} {'ok':>3}")
+
+
+def rooms_line(r: dict, gpus, workers: int) -> str:
+    """One row of ROOMS_HEAD: cores busy by role, server CPU a frame (front + workers)."""
+    return (f"{gpus!s:>4} {workers:>7} {r['rooms']:>5} {r['moves']:>6} {r['answered']:>8.0%} {r['median_ms']:>7.1f} "
+            f"{r['p95_ms']:>7.1f} {r['p99_ms']:>7.1f} {r['designer_fps']:>5.1f} {r['front_cores']:>6.2f} "
+            f"{r['worker_cores']:>7.2f} {r['designer_cores']:>9.2f} {r['cpu_ms_frame']:>15.2f} "
+            f"{r['rss_mb_room']:>7.1f} {r['gpu_mb_room']:>11.1f} {'yes' if r['ok'] else 'no':>3}"
+            + (f"  ({r['silent']} rooms never answered: {r['errors']})" if r["silent"] else ""))
+
+
 # -- the engine alone -----------------------------------------------------------------------------------------------
-def run_engine(count: int, device: str, rounds: int) -> dict:
+def run_engine(count: int, device: str, rounds: int, own_rooms: bool = True) -> dict:
     """R car rooms' Soms (as the studio's rooms hold them), each round every room's control 0 moved (its local
     restart), 10 cycles stepped and its weights read back (its frame); three ways: each Som alone (`own`), the
     studio's rounds (BatchedRooms: the states held in one BatchSom, each room's move applied to its Som and its
@@ -307,7 +256,7 @@ def run_engine(count: int, device: str, rounds: int) -> dict:
             s.step(10)
             _ = s.weights
 
-    own_ms = timed(own)
+    own_ms = timed(own) if own_rooms else np.full(1, np.nan)
     for s in soms:
         s.restore(settled, s.iterations)
     batches = BatchedRooms()
@@ -322,10 +271,12 @@ def run_engine(count: int, device: str, rounds: int) -> dict:
             soms[0].step(10)
             _ = soms[0].weights
             return
-        batches.step([(b, 10) for b in range(count)])
+        got = batches.step([(b, 10) for b in range(count)])
+        launched.append(got[0][1])  # the launch and the one copy of every weight out
         for b in range(count):
             _ = batches.host(b)
 
+    launched: list[float] = []
     studio_ms = timed(studio)
     assert count == 1 or (batches.launches == rounds and batches.widest == count)  # all in each round's launch
     soms.clear()  # their memory goes before the batch is made
@@ -348,7 +299,11 @@ def run_engine(count: int, device: str, rounds: int) -> dict:
         return {f"{name}_median_ms": float(np.median(ms)), f"{name}_p95_ms": float(np.percentile(ms, 95)),
                 f"{name}_30fps": float(np.percentile(ms, 95)) <= frame}
 
-    return {"rooms": count, **figures("own", own_ms), **figures("studio", studio_ms), **figures("kernels", kernels_ms)}
+    # the round's host work: the studio's round less its launch (the kernels and the one copy of every weight out)
+    launch_ms = np.array(launched[min(2, rounds - 1):]) * 1e3 if count > 1 else np.zeros(1)
+    host_ms = studio_ms - launch_ms
+    return {"rooms": count, **figures("own", own_ms), **figures("studio", studio_ms), **figures("kernels", kernels_ms),
+            "host_median_ms": float(np.median(host_ms))}
 
 
 # -- Dask: actors against the workers' own servers ---------------------------------------------------------------------
@@ -429,7 +384,8 @@ async def _actor_designer(actor, seconds: float, index: int) -> dict:
     await asyncio.sleep(0.5)
     done.set()
     poller.cancel()
-    return {"latencies": latencies, "sent": sent, "frames": frames, "seconds": time.perf_counter() - t0}
+    return {"latencies": latencies, "sent": sent, "frames": frames, "seconds": time.perf_counter() - t0,
+            "connected": True, "error": None, "cuts": []}
 
 
 def run_dask(count: int, seconds: float) -> list[dict]:
@@ -448,9 +404,8 @@ def run_dask(count: int, seconds: float) -> list[dict]:
                 studio.call(studio.front.create(name, "car"), timeout=600)
             time.sleep(15)
             urls = [studio.room_url(n).replace("http", "ws", 1).replace("/?token=", "/view/ws?token=") for n in names]
-            views, failed = drive(urls, seconds, 1, 10.0)
-            out.append(dict(summarise(views, seconds), path="front -> workers' own servers", rooms=count,
-                            failed=len(failed)))
+            views, _ = drive(urls, seconds, 1, 10.0, time.time() + seconds + 120)
+            out.append(dict(summarise(views, seconds), path="front -> workers' own servers", rooms=count))
 
         async def actors():
             async with Client(cluster.scheduler_address, asynchronous=True) as client:
@@ -458,9 +413,103 @@ def run_dask(count: int, seconds: float) -> list[dict]:
                 return await asyncio.gather(*(_actor_designer(h, seconds, i) for i, h in enumerate(handles)))
 
         views = asyncio.run(actors())
-        out.append(dict(summarise(views, seconds), path="Dask actors (calls, long-polled frames)", rooms=count,
-                        failed=0))
+        out.append(dict(summarise(views, seconds), path="Dask actors (calls, long-polled frames)", rooms=count))
     return out
+
+
+# -- GPU counts, the deadline --------------------------------------------------------------------------------------
+def default_procs(count: int) -> int:
+    """Designer processes: one per 48 designers, at most a quarter of the cores (the studio has the rest)."""
+    return max(1, min(math.ceil(count / 48), (os.cpu_count() or 4) // 4))
+
+
+def trial_seconds(count: int, seconds: float) -> float:
+    """About how long one room count takes here: workers starting, rooms made, their shapes grown, the moving,
+    the studio closed."""
+    return 30.0 + seconds + 0.12 * count
+
+
+def run_gpu_counts(args, gpu_counts: list[int], per_gpu: list[int], presets: tuple[str, ...]) -> list[dict]:
+    """For each GPU count g (the first g GPUs, --workers-per-gpu workers each, rooms on the least loaded GPU): g x
+    --rooms designers in turn, up to the first count that misses p95 <= 50 ms, within --budget seconds; then the most
+    designers that passed per GPU count and the ratio to one GPU; with --kill-worker a run more that kills a worker."""
+    from somwidget.frontend.studio.workers import gpu_ids
+
+    visible = gpu_ids() if args.device != "cpu" else [str(i) for i in range(max(gpu_counts))]
+    before = os.environ.get("CUDA_VISIBLE_DEVICES")
+    results, best = [], {}
+    for g in gpu_counts:
+        if g > len(visible):
+            print(f"# {g} GPUs: this host has {len(visible)}; skipped", flush=True)
+            continue
+        if args.device != "cpu":
+            os.environ["CUDA_VISIBLE_DEVICES"] = ",".join(visible[:g])
+        workers = g * (args.workers_per_gpu or max(1, min(8, (os.cpu_count() or 2) // (2 * g))))
+        end = time.time() + args.budget
+        best[g] = 0
+        for per in per_gpu:
+            count = per * g
+            need = trial_seconds(count, args.seconds)
+            if time.time() + need > end:
+                print(f"# {g} GPUs, {count} rooms: not started (about {need:.0f} s; {end - time.time():.0f} s of "
+                      f"the budget left)", flush=True)
+                break
+            r = run_rooms(count, presets, args.seconds, args.device, workers,
+                          args.client_procs or default_procs(count), end)
+            r.update(gpus=g, workers=workers)
+            results.append(r)
+            print(rooms_line(r, g, workers), flush=True)
+            if not r["ok"]:
+                break
+            best[g] = count
+    if before is None:
+        os.environ.pop("CUDA_VISIBLE_DEVICES", None)
+    else:
+        os.environ["CUDA_VISIBLE_DEVICES"] = before
+    one = best.get(1)
+    print(f"# most designers at p95 <= {TARGET_MS:g} ms (car rooms, one a designer): "
+          + "; ".join(f"{g} GPU{'s' if g > 1 else ''}: {n}" + (f" ({n / one:.2f}x one GPU)" if one and g > 1 else "")
+                      for g, n in best.items()), flush=True)
+    if args.kill_worker and best:
+        g = max(best)
+        count = max(best[g], per_gpu[0] * g)
+        if args.device != "cpu":
+            os.environ["CUDA_VISIBLE_DEVICES"] = ",".join(visible[:g])
+        workers = g * (args.workers_per_gpu or max(1, min(8, (os.cpu_count() or 2) // (2 * g))))
+        r = run_rooms(count, presets, args.seconds, args.device, workers, args.client_procs or default_procs(count),
+                      time.time() + args.budget, kill=True)
+        r.update(gpus=g, workers=workers)
+        results.append(r)
+        k = r.get("killed", {})
+        print(f"# a worker killed halfway ({g} GPUs, {workers} workers, {count} rooms): {k.get('label', '?')} held "
+              f"{k.get('rooms', '?')} rooms; {r['back']} of the {r['cut']} designers cut answered again, the last "
+              f"{r['back_max_s']:.1f} s after the kill (median {r['back_median_s']:.1f} s); all moves: answered "
+              f"{r['answered']:.0%}, p95 {r['p95_ms']:.1f} ms", flush=True)
+    return results
+
+
+def watchdog(seconds: float) -> None:
+    """Past `seconds` from now: say so, end this run's child processes (the studio's workers, the designers) and exit;
+    what was measured is printed already."""
+    if seconds <= 0:
+        return
+    import signal
+    import threading
+
+    def fire():
+        print(f"# deadline: the run passed its {seconds:.0f} s and ends here (the figures above stand)", flush=True)
+        me = str(os.getpid())
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                if stat.read_text().rsplit(")", 1)[1].split()[1] == me:
+                    os.kill(int(stat.parent.name), signal.SIGKILL)
+            except (OSError, IndexError, ValueError):
+                pass
+        os._exit(3)
+
+    timer = threading.Timer(seconds, fire)
+    timer.daemon = True
+    timer.start()
 
 
 # -- the command -----------------------------------------------------------------------------------------------------
@@ -472,8 +521,19 @@ def main(argv=None) -> int:
     parser.add_argument("--seconds", type=float, default=8.0)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--workers", type=int, default=0, help="worker processes (0: the rooms in the server's own)")
-    parser.add_argument("--client-procs", type=int, default=0, help="designer processes (0: one per 64 designers)")
+    parser.add_argument("--client-procs", type=int, default=0,
+                        help="designer processes (0: one per 48 designers, at most a quarter of the cores)")
+    parser.add_argument("--gpus", default="", help="rooms mode: GPU counts to run in turn (e.g. 1,2,4): --rooms per "
+                        "GPU, --workers-per-gpu workers a GPU; the most designers at p95 <= 50 ms each and the ratio")
+    parser.add_argument("--workers-per-gpu", type=int, default=0, help="with --gpus (0: cores / (2 GPUs), at most 8)")
+    parser.add_argument("--budget", type=float, default=300.0, help="rooms mode: seconds for each GPU count (or "
+                        "room count without --gpus); a room count that would not fit what is left is not started")
+    parser.add_argument("--deadline", type=float, default=0.0, help="rooms mode: seconds for the whole run (0: the "
+                        "budgets and 2 minutes); past it, what was measured stays printed and the run ends")
+    parser.add_argument("--kill-worker", action="store_true", help="with --gpus: after each GPU count's largest "
+                        "room count, one run more killing a worker halfway: seconds until its rooms answer again")
     parser.add_argument("--rounds", type=int, default=20, help="engine mode: rounds timed")
+    parser.add_argument("--no-own", action="store_true", help="engine mode: leave out the rooms stepped one by one")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
     # the rooms' sessions keep their folders under the rooms folder; anything else goes to a folder of this run
@@ -482,35 +542,36 @@ def main(argv=None) -> int:
     if heavy:
         print(f"# warning: the studio's imports pulled in {heavy}", flush=True)
     counts = [int(v) for v in args.rooms.split(",") if v.strip()]
+    gpu_counts = [int(v) for v in args.gpus.split(",") if v.strip()]
     gpus = os.environ.get("CUDA_VISIBLE_DEVICES", "all")
     print(f"# bench_studio {args.mode}: {platform.node()}, {os.cpu_count()} CPUs, device {args.device} "
           f"(CUDA_VISIBLE_DEVICES={gpus}), workers {args.workers}, {time.strftime('%Y-%m-%d %H:%M')}", flush=True)
     results = []
     if args.mode == "rooms":
+        watchdog(args.deadline or (args.budget * len(gpu_counts) + 120 if gpu_counts else 0))
         presets = ("car",) if args.presets == "car" else MIXED
-        print(f"{'rooms':>5} {'moves':>6} {'answered':>8} {'median':>7} {'p95':>7} {'p99':>7} {'fps':>5} "
-              f"{'cores':>5} {'CPU ms/frame':>12} {'MB/room':>7} {'GPU MB/room':>11} {'ok':>3}", flush=True)
-        for count in counts:
-            procs = args.client_procs or max(1, math.ceil(count / 64))
-            r = run_rooms(count, presets, args.seconds, args.device, args.workers, procs)
-            results.append(r)
-            print(f"{r['rooms']:>5} {r['moves']:>6} {r['answered']:>8.0%} {r['median_ms']:>7.1f} {r['p95_ms']:>7.1f} "
-                  f"{r['p99_ms']:>7.1f} {r['designer_fps']:>5.1f} {r['server_cores']:>5.2f} {r['cpu_ms_frame']:>12.2f} "
-                  f"{r['rss_mb_room']:>7.1f} "
-                  f"{r['gpu_mb_room']:>11.1f} {'yes' if r['ok'] else 'no':>3}"
-                  + (f"  ({r['failed']} designers failed: {r['errors']})" if r["failed"] else ""), flush=True)
-        passing = [r["rooms"] for r in results if r["ok"]]
-        print(f"# most rooms with p95 <= {TARGET_MS:g} ms: {max(passing) if passing else 'none'} "
-              f"(of {', '.join(map(str, counts))}; presets {args.presets})", flush=True)
+        print(ROOMS_HEAD, flush=True)
+        if not gpu_counts:  # the rooms as given, the workers as given
+            for count in counts:
+                procs = args.client_procs or default_procs(count)
+                r = run_rooms(count, presets, args.seconds, args.device, args.workers, procs, time.time() + args.budget)
+                results.append(r)
+                print(rooms_line(r, "-", args.workers), flush=True)
+            passing = [r["rooms"] for r in results if r["ok"]]
+            print(f"# most rooms with p95 <= {TARGET_MS:g} ms: {max(passing) if passing else 'none'} "
+                  f"(of {', '.join(map(str, counts))}; presets {args.presets})", flush=True)
+        else:
+            results = run_gpu_counts(args, gpu_counts, counts, presets)
     elif args.mode == "engine":
         print(f"{'rooms':>6} " + " ".join(f"{w + ' median':>15} {w + ' p95':>12} {w + ' 30/s':>12}"
-                                           for w in ("own", "studio", "kernels")), flush=True)
+                                           for w in ("own", "studio", "kernels"))
+              + f" {'studio host ms':>15}", flush=True)
         for count in counts:
-            r = run_engine(count, args.device, args.rounds)
+            r = run_engine(count, args.device, args.rounds, not args.no_own)
             results.append(r)
             print(f"{r['rooms']:>6} " + " ".join(
                 f"{r[w + '_median_ms']:>15.2f} {r[w + '_p95_ms']:>12.2f} {'yes' if r[w + '_30fps'] else 'no':>12}"
-                for w in ("own", "studio", "kernels")), flush=True)
+                for w in ("own", "studio", "kernels")) + f" {r['host_median_ms']:>15.2f}", flush=True)
     else:
         for count in counts:
             for r in run_dask(count, args.seconds):

@@ -339,6 +339,26 @@ class BatchSom:
                 raise ValueError(f"variant {b}: a restart from the anchor, but `put` was given none")
             self._to_anchor.add(b)
 
+    def move_rows(self, rows: np.ndarray, controls: np.ndarray, iteration: np.ndarray, from_anchor: np.ndarray) -> None:
+        """`move` for many variants at once (a studio's round: every held room's move in one call): rows (m,) distinct
+        variants, controls (m, k, n), iteration (m,), from_anchor (m,) bools."""
+        rows = np.asarray(rows, np.int64)
+        if rows.ndim != 1 or ((rows < 0) | (rows >= self.n_variants)).any():
+            raise ValueError(f"rows: expected variants 0 to {self.n_variants - 1}, got {rows.tolist()}")
+        m, shape = len(rows), self._controls.shape[1:]
+        if controls.shape != (m, *shape):
+            raise ValueError(f"controls: expected shape {(m, *shape)}, got {controls.shape}")
+        iteration = np.asarray(iteration, np.int64)
+        if ((iteration < 0) | (iteration > self._iterations[rows])).any():
+            raise ValueError(f"iteration: expected 0 to each variant's S, got {iteration.tolist()}")
+        anchored = rows[np.asarray(from_anchor, bool)]
+        if len(anchored) and self._anchor is None:
+            raise ValueError(f"variants {anchored.tolist()}: a restart from the anchor, but `put` was given none")
+        self._controls[rows] = controls
+        self._controls_moved = True
+        self._s[rows] = iteration
+        self._to_anchor.update(anchored.tolist())
+
     def forget(self, b: int) -> bool:
         """Variant b is no longer used (its state went back to its Som): a restart from its anchor that `move` left
         for the next step is dropped; whether there was one."""

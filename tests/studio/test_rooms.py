@@ -4,6 +4,7 @@ was; limits refusing a new room with a message that names the limit; room names 
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -100,3 +101,32 @@ def test_room_names(bad):
     with pytest.raises(ValueError, match="room name"):
         room_name(bad)
     assert room_name(" Group-3_b ") == "group-3_b"
+
+
+def test_a_rooms_slow_call_does_not_hold_up_the_other_rooms(rooms):
+    """A preset switch (a slow call: here it also waits 3 s, as a large preset's build on a busy host would) runs off
+    the worker's stepping loop: another room's move is shown while it is still under way, and the switch lands."""
+    a = rooms.create("alice", "t", "car")
+    b = rooms.create("bob", "t", "car")
+    assert a.session.wait_idle(120) and b.session.wait_idle(120)
+    started = threading.Event()
+
+    def switch():
+        started.set()
+        a.session.load_preset("sphere")
+        time.sleep(3.0)
+
+    call = a.session.submit(switch)
+    assert started.wait(60)
+    shown: list[tuple[np.ndarray, bool]] = []  # bob's frames: control 0 where, alice's call still running
+    b.session.add_listener(lambda f: shown.append((f.control_positions[0].copy(), not call.done())), replay=False)
+    to = b.session.controls[0][:3] + np.float32([0.0, 0.0, 0.05])
+    b.session.move_control(0, to)
+    deadline = time.monotonic() + 2.5
+    while time.monotonic() < deadline and not any(np.array_equal(p, to) for p, _ in shown):
+        time.sleep(0.01)
+    during = [running for p, running in shown if np.array_equal(p, to)]
+    assert during and during[0], "bob's move waited for alice's preset switch"
+    call.result(60)
+    assert a.session.wait_idle(120) and a.session.preset.name == "sphere"
+    assert b.session.preset.name == "car"

@@ -98,3 +98,26 @@ def test_dask_workers_hold_rooms_and_a_killed_one_s_come_back(tmp_path, cluster)
         with somwidget.join(studio.room_url("alice")) as room:
             np.testing.assert_allclose(room.control_positions[0], to, atol=1e-6)
             assert room.history == (True, False)
+
+
+class _Place:
+    """A place as the front's placing reads it: its GPU and its last load report."""
+
+    def __init__(self, gpu: str, rooms: int, limit: int = 10):
+        self.gpu, self.alive, self.label = gpu, True, f"GPU {gpu}"
+        self.load = {"rooms": rooms, "limit": limit, "nodes": 0}
+
+
+def test_a_new_room_goes_to_the_least_loaded_gpu_then_its_least_loaded_worker():
+    from somwidget.frontend.studio.front import StudioFront
+
+    # GPU 0's two workers hold 3 rooms (one worker none), GPU 1's two hold 2: the room goes to GPU 1
+    places = [_Place("0", 3), _Place("0", 0), _Place("1", 2), _Place("1", 0)]
+    front = StudioFront(places)
+    assert front.choose() is places[3]
+    assert front.choose() is places[1]  # 3 against 3: GPU 0's empty worker, then by turns
+    chosen = [front.choose().gpu for _ in range(6)]
+    assert sorted(chosen) == ["0", "0", "0", "1", "1", "1"]
+    places[2].alive = False  # a worker gone: its GPU's other worker carries that GPU's share
+    loads = {g: sum(p.load["rooms"] for p in places if p.alive and p.gpu == g) for g in "01"}
+    assert front.choose().gpu == min(loads, key=lambda g: loads[g] / (20 if g == "0" else 10))

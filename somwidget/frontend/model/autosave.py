@@ -218,7 +218,7 @@ class SessionAutosave:
             with state.lock:
                 self._timer = None
             if not self.trainer.closed:
-                self.trainer.post(lambda: None)  # the training thread's turn after it saves (`if_due`)
+                self.trainer.post(lambda: None, quick=True)  # the training thread's turn after it saves (`if_due`)
 
         delay = max(0.0, self._saved_at + AUTOSAVE_SECONDS - time.monotonic()) + 0.01
         self._timer = threading.Timer(delay, turn)

@@ -245,8 +245,9 @@ class Session:
 
     @property
     def n_controls(self) -> int:
-        with self.modelling.lock:
-            return int(self.modelling.controls.shape[0])
+        """k, read without the session's lock (one reference read: a server's event loop checks every intent with it
+        and must never wait for a turn that holds the lock)."""
+        return int(self.modelling.controls.shape[0])
 
     @property
     def parameters(self) -> dict:
@@ -320,10 +321,10 @@ class Session:
         undo of an older step, that undo is taken back."""
         return self.timeline.redo() if hand is None else redo_own(self, hand)
 
-    def submit(self, call):
+    def submit(self, call, quick: bool = False):
         """Run `call()` on the training thread between two steps (a server's event loop never waits for the Som's
-        lock); returns a concurrent.futures.Future of its result."""
-        return self.trainer.post(call)
+        lock); returns a concurrent.futures.Future of its result. `quick`: it takes no time (Trainer.post)."""
+        return self.trainer.post(call, quick)
 
     # -- intents: controls (session.control_edits) ----------------------------------------------------------------
     def move_control(self, index: int | None, position, *, control_id: int | None = None) -> None:

@@ -72,7 +72,7 @@ class Trainer:
         self.pace = Pace()  # steps that go on with the schedule
         self.restart_pace = Pace()  # steps right after a restart took the schedule back
         self._stepped_to = 0  # the iteration the last step reached
-        self.calls: collections.deque = collections.deque()  # (call, Future): posted, run between two turns
+        self.calls: collections.deque = collections.deque()  # (call, Future, quick): posted, run between two turns
         self.posted = 0  # calls posted so far
         self.ran = 0  # calls run so far
         #: The loop that runs this session's turns with others' (studio/rounds.py); None: a thread of its own
@@ -109,17 +109,18 @@ class Trainer:
             t.join(timeout)
         return not already
 
-    def post(self, call: Callable[[], object]) -> Future:
+    def post(self, call: Callable[[], object], quick: bool = False) -> Future:
         """Run `call()` on the training thread between two turns, after the calls posted before it; returns its Future
         (its result, or the exception it raised). Without a running thread (never started) it runs here and now; on a
-        closed session (or a thread stopped on an error) the Future holds a RuntimeError."""
+        closed session (or a thread stopped on an error) the Future holds a RuntimeError. `quick`: a call that takes
+        no time (a move, a grab: a studio's loop runs it in its round; any other runs off the loop, rounds.py)."""
         future: Future = Future()
         with self.state.wake:
             if self.closed or self.thread_error is not None:
                 future.set_exception(RuntimeError(self.thread_error or "session is closed"))
                 return future
             if self.thread is not None and self.thread.is_alive():
-                self.calls.append((call, future))
+                self.calls.append((call, future, quick))
                 self.posted += 1
                 self.state.wake.notify_all()
                 self._poke()
@@ -131,17 +132,18 @@ class Trainer:
         if self.driver is not None:
             self.driver.poke()
 
-    def run_calls(self) -> bool:
-        """The posted calls, in order (on the training thread, holding no lock); then a moment for the threads that
-        wait on them (their replies go out before the next step). Whether any ran."""
+    def run_calls(self, quick_only: bool = False) -> bool:
+        """The posted calls, in order (on the training thread, holding no lock), with `quick_only` up to the first
+        that is not quick; then a moment for the threads that wait on them (their replies go out before the next
+        step). Whether any ran."""
         ran = False
         while True:
             with self.state.wake:
-                if not self.calls:
+                if not self.calls or (quick_only and not self.calls[0][2]):
                     if ran:
                         time.sleep(0)
                     return ran
-                call, future = self.calls.popleft()
+                call, future, _ = self.calls.popleft()
             ran = True
             _run(call, future)
             with self.state.wake:
@@ -152,7 +154,7 @@ class Trainer:
         with self.state.wake:
             calls, self.calls = list(self.calls), collections.deque()
             self.ran += len(calls)
-        for _, future in calls:
+        for _, future, _ in calls:
             future.set_exception(RuntimeError(why))
 
     def stopped(self) -> bool:

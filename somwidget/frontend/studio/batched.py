@@ -60,6 +60,15 @@ def applies_in_batch(op) -> bool:
     return isinstance(op, (Grab, Release, Publish))
 
 
+def keeps_key(op, key: tuple | None) -> bool:
+    """Whether `op` leaves a Som's batch key (`batch_key`) as it was: a grab, a release, a frame, or a move of point
+    controls that keeps their count and strokes (so a round need not find the key again)."""
+    if isinstance(op, (Grab, Release, Publish)):
+        return True
+    return (key is not None and isinstance(op, SetControls) and applies_in_batch(op)
+            and np.shape(op.controls) == (key[3], key[2]) and all(s == 1 for s in op.strokes))
+
+
 @dataclass
 class _Loan:
     """A room held by a batch: its Som, its variant, its weights as the last round left them, and the Som's count of
@@ -67,6 +76,7 @@ class _Loan:
 
     key: tuple
     som: Som
+    state: object  # the Som's state (its s, its anchor's restarts): read every round, found once
     slot: int
     host: np.ndarray
     restarts: int
@@ -78,6 +88,14 @@ class _Group:
     def __init__(self) -> None:
         self.batch: BatchSom | None = None
         self.free: list[int] = []
+        self.moves: list[tuple] = []  # (slot, controls, s, from anchor): the held rooms' moves, put in at once
+
+    def put_moves(self) -> None:
+        """The moves `hold` noted since the last round into the batch, in one call (BatchSom.move_rows)."""
+        if self.moves:
+            moves, self.moves = self.moves, []
+            slots, controls, s, anchor = zip(*moves)
+            self.batch.move_rows(np.array(slots), np.stack(controls), np.array(s), np.array(anchor, bool))
 
     def slot(self, som: Som) -> int:
         if not self.free:
@@ -131,14 +149,15 @@ class BatchedRooms:
                 loan = None
             if loan is None:
                 group = self._groups.setdefault(key, _Group())
+                group.put_moves()  # before a growth copies the batch
                 slot = group.slot(som)
                 host = som.weights  # the anchor settled first
                 state = som.parts.state
                 group.batch.put(slot, host, som.iteration, som.controls, state.w_anchor)
-                self._loans[owner] = _Loan(key, som, slot, host, state.anchor_restarts)
+                self._loans[owner] = _Loan(key, som, state, slot, host, state.anchor_restarts)
                 return
-            restarts = som.parts.state.anchor_restarts
-            self._groups[key].batch.move(loan.slot, som.controls, som.iteration, from_anchor=restarts != loan.restarts)
+            restarts = loan.state.anchor_restarts  # a drag's move restarts from its anchor: the batch's row too
+            self._groups[key].moves.append((loan.slot, som.controls, loan.state.s, restarts != loan.restarts))
             loan.restarts = restarts
 
     def give_back(self, owner) -> None:
@@ -152,6 +171,8 @@ class BatchedRooms:
         if loan is None:
             return
         group = self._groups.get(loan.key)
+        if group is not None:
+            group.put_moves()
         pending = group is not None and group.batch.forget(loan.slot)
         if group is not None:
             group.free.append(loan.slot)
@@ -169,13 +190,16 @@ class BatchedRooms:
                 if loan is not None:  # else given back since it was held: it steps next round
                     groups.setdefault(loan.key, []).append((owner, loan, cycles))
             for key, items in groups.items():
-                batch = self._groups[key].batch
-                s = batch.iteration
-                to = s.copy()
-                for _, loan, cycles in items:
-                    to[loan.slot] = min(s[loan.slot] + cycles, int(batch.iterations[loan.slot]))
-                t = time.perf_counter()
+                group = self._groups[key]
+                batch = group.batch
                 try:
+                    group.put_moves()
+                    slots = np.fromiter((loan.slot for _, loan, _ in items), np.int64, len(items))
+                    cycles = np.fromiter((c for _, _, c in items), np.int64, len(items))
+                    s = batch.iteration
+                    to = s.copy()
+                    to[slots] = np.minimum(s[slots] + cycles, batch.iterations[slots])
+                    t = time.perf_counter()
                     batch.step_to(to)
                     host = batch.weights
                 except Exception as exc:  # each room's turn reports it; the rooms go back as they were
@@ -185,10 +209,11 @@ class BatchedRooms:
                     self._groups.pop(key, None)
                     continue
                 seconds = time.perf_counter() - t
-                for owner, loan, _ in items:
+                reached, ran = to[slots].tolist(), (to[slots] - s[slots]).tolist()
+                for (owner, loan, _), at, n in zip(items, reached, ran):
                     loan.host = host[loan.slot]
-                    loan.som.parts.state.restart(int(to[loan.slot]))  # s moved on, the winners found afresh
-                    out[owner] = (int(to[loan.slot] - s[loan.slot]), seconds)
+                    loan.state.restart(at)  # s moved on, the winners found afresh
+                    out[owner] = (n, seconds)
                 self.launches += 1
                 self.batched += len(items)
                 self.widest = max(self.widest, len(items))
@@ -234,4 +259,4 @@ class RoomLock:
         self._lock.release()
 
 
-__all__ = ["BatchedRooms", "RoomLock", "applies_in_batch", "batch_key"]
+__all__ = ["BatchedRooms", "RoomLock", "applies_in_batch", "batch_key", "keeps_key"]

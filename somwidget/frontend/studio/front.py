@@ -1,9 +1,10 @@
 """The studio's front: which rooms there are, where each lives, and placing new and orphaned ones.
 
 The front holds the browsers' connections (routes.py) and a directory of rooms: each room's name, token, preset and
-place (places.py: this process, or a worker's room server). A new room goes to the least loaded place (fewest live
-rooms for its limit, then fewest nodes). Every MONITOR_PERIOD seconds the front asks each place how it is and what it
-holds (the wall's list comes from there); a place that fails DEAD_AFTER checks in a row, or that its cluster says has
+place (places.py: this process, or a worker's room server). A new room goes to the least loaded place: on the GPU
+whose workers hold the fewest live rooms for their limits (where several workers share a GPU), then the worker with the
+fewest for its limit, then the fewest nodes. Every MONITOR_PERIOD seconds the front asks each place how it is and what
+it holds (the wall's list comes from there); a place that fails DEAD_AFTER checks in a row, or that its cluster says has
 gone, is dead: its rooms are brought back on the other places from their autosaves (a room's folder is on storage every
 worker reaches), the live ones at once, the parked ones when next opened.
 """
@@ -121,8 +122,18 @@ class StudioFront:
             raise StudioFull(f"the studio is full: {held} live rooms on {len(alive)} worker(s), each at its limit "
                              "(--rooms-per-worker); rooms without a view are parked after a while, or add workers"
                              if alive else "the studio has no worker for rooms now; try again in a moment")
-        place = min(open_places, key=lambda p: (p.load.get("rooms", 0) / max(1, p.load.get("limit", 1)),
-                                                p.load.get("nodes", 0)))
+        gpus: dict = {}  # GPU -> (its workers' rooms, their limits): the least loaded GPU first
+        for p in self.alive():
+            gpu = getattr(p, "gpu", None)
+            if gpu is not None:
+                rooms, limit = gpus.get(gpu, (0, 0))
+                gpus[gpu] = (rooms + p.load.get("rooms", 0), limit + max(1, p.load.get("limit", 1)))
+
+        def load(p) -> tuple:
+            rooms, limit = gpus.get(getattr(p, "gpu", None), (0, 1))
+            return (rooms / limit, p.load.get("rooms", 0) / max(1, p.load.get("limit", 1)), p.load.get("nodes", 0))
+
+        place = min(open_places, key=load)
         place.load = dict(place.load, rooms=place.load.get("rooms", 0) + 1)  # until its next report
         return place
 

@@ -2,11 +2,11 @@
 `RemotePlace` (a worker's room server, host.py: another process on this machine, or a Dask worker). Both answer the
 same coroutines; the front routes each room to its place.
 
-A remote room's websocket is relayed: the browser's websocket ends at the front (its tokens, Host and Origin checked
-there), which opens one to the worker's room server for it and passes each message on, both ways, as it comes
-(frames are the latest state already: the worker's hub keeps one slot a view, so a slow browser skips frames). When the
-worker goes, the front closes the browser's websocket with 1012 (service restart): its link connects again, to the
-room's new place.
+A remote room's websocket is relayed (relay.py): the browser's websocket ends at the front (its tokens, Host and Origin
+checked there), which opens one to the worker's room server for it and passes the worker's bytes on as they come, the
+browser's messages up (frames are the latest state already: the worker's hub keeps one slot a view, so a slow browser
+skips frames). When the worker goes, the front closes the browser's websocket with 1012 (service restart): its link
+connects again, to the room's new place.
 """
 
 from __future__ import annotations
@@ -16,8 +16,9 @@ import base64
 import logging
 
 import aiohttp
-from aiohttp import WSMsgType, web
+from aiohttp import web
 
+from . import relay
 from .limits import StudioFull
 from .rooms import RoomBusy, Rooms
 
@@ -104,6 +105,7 @@ class RemotePlace:
         self.secret = secret
         self.label = label or self.url
         self.index: int | None = None  # its number among a machine's worker processes (workers.py)
+        self.gpu: str | None = None  # the GPU it steps its rooms on, where several workers share one (workers.py)
         self.alive = True
         self.failures = 0
         self.load = {"rooms": 0, "nodes": 0, "limit": 1}
@@ -159,59 +161,17 @@ class RemotePlace:
         return out
 
     async def socket(self, request, name: str, watch: bool):
-        """The browser's websocket relayed to the room's on the worker (the module's docstring)."""
+        """The browser's websocket relayed to the room's on the worker, the worker's bytes passed on as they come
+        (relay.py)."""
         url = self.url + f"/studio/rooms/{name}/ws" + ("?watch=1" if watch else "")
         try:
-            up = await self._client().ws_connect(url, max_msg_size=0, compress=0, heartbeat=20.0,
-                                                 timeout=aiohttp.ClientWSTimeout(ws_close=5.0))
-        except aiohttp.WSServerHandshakeError as exc:
-            return web.Response(status=exc.status, text=f"somwidget studio: the room's worker refused: {exc.message}\n")
-        except (aiohttp.ClientError, OSError, asyncio.TimeoutError) as exc:
-            raise PlaceDown(f"the worker at {self.url} does not answer: {exc}") from None
-        ws = web.WebSocketResponse(heartbeat=20.0, max_msg_size=64 * 1024, compress=False)
-        await ws.prepare(request)
-        await relay(ws, up)
-        return ws
+            reader, writer = await relay.open_upstream(url, self.headers)
+        except relay.Refused as exc:
+            return web.Response(status=exc.status, text=f"somwidget studio: the room's worker refused: {exc.text}\n")
+        except (OSError, asyncio.TimeoutError, asyncio.IncompleteReadError, ValueError) as exc:
+            raise PlaceDown(f"the worker at {self.url} does not answer: {exc or type(exc).__name__}") from None
+        return await relay.relay(request, reader, writer)
 
     async def close(self) -> None:
         if self._http is not None:
             await self._http.close()
-
-
-async def relay(browser: web.WebSocketResponse, up: aiohttp.ClientWebSocketResponse) -> None:
-    """Pass messages both ways until either side ends; a worker that went closes the browser's with 1012."""
-    async def down():
-        async for msg in up:
-            if msg.type == WSMsgType.TEXT:
-                await browser.send_str(msg.data)
-            elif msg.type == WSMsgType.BINARY:
-                await browser.send_bytes(msg.data)
-            else:
-                break
-        return "worker"
-
-    async def upward():
-        async for msg in browser:
-            if msg.type == WSMsgType.TEXT:
-                await up.send_str(msg.data)
-            elif msg.type == WSMsgType.BINARY:
-                await up.send_bytes(msg.data)  # refused there, as at any view websocket
-            else:
-                break
-        return "browser"
-
-    tasks = [asyncio.ensure_future(down()), asyncio.ensure_future(upward())]
-    try:
-        done, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        for task in tasks:
-            task.cancel()
-    first = next(iter(done), None)
-    ended = first.result() if first is not None and not first.cancelled() and first.exception() is None else "worker"
-    if not up.closed:
-        await up.close()
-    if not browser.closed:
-        code, why = (1012, b"the room moves to another worker") if ended == "worker" else (1000, b"")
-        if up.close_code not in (None, 1000, 1006) and ended == "worker":
-            code, why = up.close_code, b"closed by the room"
-        await browser.close(code=code, message=why)

@@ -1,15 +1,17 @@
 """One stepping loop for every room of a worker: the rooms' sessions have no training thread of their own (their
 trainers' `driver` is this loop, model/trainer.py), so no thread a room waits its turn for the process's Warp lock.
 
-A round: each room with work runs its posted calls, then (under its Som lock) applies its queued operations and
-chooses its cycles (`Trainer.prepare`); rooms alike (batched.py: `batch_key`) are held in their batch and stepped
-in one launch a batch, the others step by themselves at once; each room then gets its frame (from its row of the
+A room's slow posted calls (a preset switch, a refine, an undo, a save: any but the quick ones, Trainer.post) run on
+threads of their own, the room without a turn until they ran, so that the other rooms' rounds go on meanwhile.
+A round: each room with work runs its quick posted calls (a move, a grab), then (under its Som lock) applies its queued
+operations and chooses its cycles (`Trainer.prepare`); rooms alike (batched.py: `batch_key`) are held in their batch and
+stepped in one launch a batch, the others step by themselves at once; each room then gets its frame (from its row of the
 batch's one copy of the weights: `Trainer.end_step`) and its autosave's turn. A room is in a round when an intent
-reached it since its last turn, or when it trains and its last turn was a frame's time ago (the rooms' frame rate):
-so a move is answered by the next round, which starts as soon as one is poked (at most one every MIN_GAP seconds),
-and rooms that only train get a frame `frame_rate` times a second. Alike rooms step batched from the round after two
-or more of them stepped in one round, and a room held stays in its batch when it steps alone (no copies back and
-forth); a room of a kind no other room steps with steps by itself (its own path, its graphs).
+reached it since its last turn, or when it trains and its last turn was a frame's time ago (the rooms' frame rate): so a
+move is answered by the next round, which starts as soon as one is poked (at most one every MIN_GAP seconds), and rooms
+that only train get a frame `frame_rate` times a second. Alike rooms step batched from the round after two or more of
+them stepped in one round, and a room held stays in its batch when it steps alone (no copies back and forth); a room of
+a kind no other room steps with steps by itself (its own path, its graphs).
 """
 
 from __future__ import annotations
@@ -17,9 +19,10 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 from ..model.trainer import step_alone
-from .batched import BatchedRooms, RoomLock, applies_in_batch
+from .batched import BatchedRooms, RoomLock, applies_in_batch, keeps_key
 
 log = logging.getLogger(__name__)
 
@@ -29,6 +32,8 @@ MIN_GAP = 0.004
 EARLY = 0.002
 #: How long an idle loop waits before it looks at its rooms again without being poked (s).
 IDLE_LOOK = 0.25
+#: Threads that run rooms' slow calls (a preset switch, a refine, an undo, a save) off the loop.
+CALL_THREADS = 4
 
 
 class Rounds:
@@ -43,6 +48,9 @@ class Rounds:
         self._poked = threading.Event()
         self._stopped = False
         self._counts: dict[tuple, int] = {}  # rooms of each batch key stepped in the last round
+        self._keys: dict[int, tuple] = {}  # id(trainer) -> (its Som, its batch key): found again when either changes
+        self._calling: set[int] = set()  # rooms whose slow calls run off the loop: no turn meanwhile
+        self._calls = ThreadPoolExecutor(CALL_THREADS, thread_name_prefix="somwidget-room-calls")
         self.thread = threading.Thread(target=self._run, name="somwidget-rounds", daemon=True)
         self.rounds = 0
 
@@ -55,6 +63,9 @@ class Rounds:
         def before_apply(ops) -> None:
             if not all(applies_in_batch(op) for op in ops):
                 self.batches.give_back(trainer)
+            kept = self._keys.get(id(trainer))
+            if kept is not None and not all(keeps_key(op, kept[1]) for op in ops):
+                self._keys.pop(id(trainer), None)
 
         trainer.before_apply = before_apply
         with self._lock:
@@ -70,6 +81,7 @@ class Rounds:
         with self._lock:
             self._trainers.pop(id(trainer), None)
             self._last.pop(id(trainer), None)
+            self._keys.pop(id(trainer), None)
         with trainer.state.som_lock:  # RoomLock: given back
             pass
 
@@ -82,6 +94,7 @@ class Rounds:
         self._poked.set()
         if self.thread.is_alive() and self.thread is not threading.current_thread():
             self.thread.join(10)
+        self._calls.shutdown(wait=False)
 
     # -- the loop -----------------------------------------------------------------------------------------------
     def _run(self) -> None:
@@ -119,7 +132,7 @@ class Rounds:
             try:
                 cycles = trainer.prepare()
                 som = trainer.state.som
-                key = self.batches.key(som) if cycles else None
+                key = self._key(trainer, som) if cycles else None
                 if key is not None:
                     counts[key] = counts.get(key, 0) + 1
                 if key is not None and (self._counts.get(key, 0) >= 2 or self.batches.holds(trainer)):
@@ -160,11 +173,22 @@ class Rounds:
                 due = when if due is None else min(due, when)
         return due
 
+    def _key(self, trainer, som) -> tuple | None:
+        """The room's batch key (batched.batch_key), found again only when its Som or its settings changed."""
+        kept = self._keys.get(id(trainer))
+        if kept is None or kept[0] is not som:
+            kept = self._keys[id(trainer)] = (som, self.batches.key(som))
+        return kept[1]
+
     def _wants_turn(self, trainer, now: float) -> bool:
-        """Whether `trainer` has a turn this round (its posted calls run first)."""
-        if trainer.closed:
+        """Whether `trainer` has a turn this round (its quick posted calls run first; a slow one sends the room's
+        calls off the loop, and the room has no turn until they ran: `_call_off_loop`)."""
+        if trainer.closed or id(trainer) in self._calling:
             return False
-        ran = trainer.run_calls() if trainer.calls else False
+        ran = trainer.run_calls(quick_only=True) if trainer.calls else False
+        if trainer.calls:  # a slow call: the other rooms do not wait for it
+            self._call_off_loop(trainer)
+            return False
         with trainer.state.wake:
             if trainer.ops:
                 trainer.busy = True
@@ -173,9 +197,38 @@ class Rounds:
                 trainer.busy = True
                 return self._last.get(id(trainer), 0.0) + self.period - EARLY <= now
         if ran:
+            self._keys.pop(id(trainer), None)
             trainer.after_turn()
         self._idle(trainer)
         return False
+
+    def _call_off_loop(self, trainer) -> None:
+        """Run the room's posted calls on a thread of their own (in order, with the quick ones behind them); the room's
+        turns wait for them, then the loop is poked."""
+        with trainer.state.wake:
+            trainer.busy = True  # wait_idle: a call is under way
+        self._calling.add(id(trainer))
+        self._keys.pop(id(trainer), None)  # a call may change the Som's settings
+
+        def run() -> None:
+            try:
+                trainer.run_calls()
+                with trainer.state.wake:
+                    idle = not trainer.ops and not trainer.should_step()
+                if idle:  # a step completed that trains nothing: the autosave's turn
+                    trainer.after_turn()
+            except Exception:  # pragma: no cover - each call's Future holds its own exception
+                log.exception("studio: a room's calls failed")
+            finally:
+                self._keys.pop(id(trainer), None)
+                self._calling.discard(id(trainer))
+                self._idle(trainer)
+                self.poke()
+
+        try:
+            self._calls.submit(run)
+        except RuntimeError:  # stopped: the room's calls fail as the room closes
+            self._calling.discard(id(trainer))
 
     @staticmethod
     def _idle(trainer) -> None:

@@ -55,12 +55,16 @@ class LocalWorkers:
         self._front = None
         self._task: asyncio.Task | None = None
 
+    def gpu_of(self, i: int) -> str | None:
+        """The GPU worker i uses (None: the CPU)."""
+        return self.gpus[i % len(self.gpus)] if self.gpus else None
+
     def _device(self, i: int) -> tuple[dict, str, str]:
         """(environment, device, label) of worker i."""
         env = dict(os.environ, **{SECRET_ENV: self.secret})
         if not self.gpus:
             return env, "cpu", f"CPU worker {i}"
-        gpu = self.gpus[i % len(self.gpus)]
+        gpu = self.gpu_of(i)
         env["CUDA_VISIBLE_DEVICES"] = gpu
         return env, "cuda:0", f"GPU {gpu}" + (f" worker {i}" if self.count > len(self.gpus) else "")
 
@@ -88,6 +92,7 @@ class LocalWorkers:
             raise
         place = RemotePlace(line[len(ANNOUNCE):].strip(), self.secret, label)
         place.index = i
+        place.gpu = self.gpu_of(i)
         self.procs[place] = proc
         asyncio.ensure_future(self._drain(proc))
         return place

@@ -155,14 +155,14 @@ class ViewConnection:
             if waiting:  # the move waiting there takes this position
                 self.intents += 1
                 return _done(True)
-            return self._submit(lambda: self._handle(self._latest_move(key)))
-        return self._submit(lambda: self._handle(intent))
+            return self._submit(lambda: self._handle(self._latest_move(key)), quick=True)
+        return self._submit(lambda: self._handle(intent), quick=isinstance(intent, QUICK))
 
     def _latest_move(self, key) -> MoveIntent:
         with self._moves_lock:
             return self._moves.pop(key)
 
-    def _submit(self, call: Callable[[], bool]) -> Future:
+    def _submit(self, call: Callable[[], bool], quick: bool = False) -> Future:
         done: Future = Future()
         with self._moves_lock:
             self._waiting += 1
@@ -176,7 +176,7 @@ class ViewConnection:
                 self._refuse(future.exception(), None)
                 done.set_result(False)
 
-        self.session.submit(call).add_done_callback(finish)
+        self.session.submit(call, quick).add_done_callback(finish)
         return done
 
     def _handle(self, intent: Intent) -> bool:
@@ -292,5 +292,7 @@ HANDLERS: dict[type[Intent], Callable[[ViewConnection, Intent], ServerMessage | 
 AT_ONCE = frozenset({HelloIntent, HandIntent})
 #: What a view that only watches may send.
 WATCHING = frozenset({HelloIntent, HandIntent, PingIntent})
+#: Intents that take no time: a studio's loop runs them in its round, any other off it (studio/rounds.py)
+QUICK = (MoveIntent, GrabIntent, ReleaseIntent, PingIntent, HandIntent, HelloIntent)
 if set(HANDLERS) != set(INTENTS.values()):
     raise TypeError(f"intents without a handler in HANDLERS: {set(INTENTS.values()) - set(HANDLERS)}")
