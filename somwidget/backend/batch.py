@@ -305,7 +305,7 @@ class BatchSom:
     def put(self, b: int, weights: ArrayLike, iteration: int, controls: ArrayLike,
             anchor: wp.array | None = None) -> None:
         """Variant b's weights (N, n), cycle s and controls (k, n) from now on, the others' unchanged; `anchor`: the
-        device weights (N vectors: those a Som's `anchor()` kept) that `move(..., from_anchor=True)` goes back to. As
+        device weights (N vectors: those a Som's `anchor()` kept) that `move_rows(..., from_anchor)` goes back to. As
         `load` for one variant: what a Som's state becomes when a batch holds it between steps."""
         b = checks.integer("variant", b, 0, self.n_variants - 1)
         w = np.asarray(weights)
@@ -319,29 +319,13 @@ class BatchSom:
             if self._anchor is None:
                 self._anchor = wp.empty_like(self._w)
             wp.copy(self._anchor[b], anchor)
-        self.move(b, checks.finite_array("controls", controls, 2), iteration)
-
-    def move(self, b: int, controls: np.ndarray, iteration: int, from_anchor: bool = False) -> None:
-        """Variant b's controls (k, n) and cycle s from now on (its Som's `set_controls`: a restart), with
-        `from_anchor` from the weights its `put` anchored. They reach the device with the next step, the controls
-        of every variant moved in one copy."""
-        row = self._controls[b]
-        if controls.shape != row.shape:
-            raise ValueError(f"controls: expected shape {row.shape}, got {controls.shape}")
-        if not np.array_equal(controls, row):
-            row[:] = controls
-            self._controls_moved = True
-        if not 0 <= iteration <= self._iterations[b]:
-            raise ValueError(f"iteration: expected 0 to {self._iterations[b]}, got {iteration}")
-        self._s[b] = iteration
-        if from_anchor:
-            if self._anchor is None:
-                raise ValueError(f"variant {b}: a restart from the anchor, but `put` was given none")
-            self._to_anchor.add(b)
+        self.move_rows(np.array([b]), checks.finite_array("controls", controls, 2)[None], np.array([iteration]),
+                       [False])
 
     def move_rows(self, rows: np.ndarray, controls: np.ndarray, iteration: np.ndarray, from_anchor: np.ndarray) -> None:
-        """`move` for many variants at once (a studio's round: every held room's move in one call): rows (m,) distinct
-        variants, controls (m, k, n), iteration (m,), from_anchor (m,) bools."""
+        """Variants' controls (m, k, n) and cycles s (m,) from now on (their Soms' `set_controls`: a restart), rows (m,)
+        distinct variants, with `from_anchor` (m,) bools from the weights `put` anchored (a studio's round: every held
+        room's move in one call). They reach the device with the next step, every variant's controls in one copy."""
         rows = np.asarray(rows, np.int64)
         if rows.ndim != 1 or ((rows < 0) | (rows >= self.n_variants)).any():
             raise ValueError(f"rows: expected variants 0 to {self.n_variants - 1}, got {rows.tolist()}")

@@ -245,8 +245,7 @@ class Session:
 
     @property
     def n_controls(self) -> int:
-        """k, read without the session's lock (one reference read: a server's event loop checks every intent with it
-        and must never wait for a turn that holds the lock)."""
+        """k, read without the lock: a server's event loop checks every intent with it and must never wait."""
         return int(self.modelling.controls.shape[0])
 
     @property
