@@ -147,8 +147,8 @@ class ShapingPath:
         (a conditional node)."""
         h = self.handles
         wp.launch(h.kernels.advance, dim=h.n_rows, device=model.device,
-                  inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.rebind, h.stepped,
-                          h.changed])
+                  inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.starts, h.reach,
+                          h.rebind, h.stepped, h.changed])
         wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
 
     def _carry(self, model: SomModel, state: SomState) -> None:
@@ -156,7 +156,7 @@ class ShapingPath:
         h = self.handles
         wp.launch(h.kernels.carry, dim=model.n_neurons, device=model.device,
                   inputs=[h.slot_of_row, h.group_start, h.live_dev, h.patch, h.places, h.winner_anchors, h.anchors,
-                          state.w, h.held_nodes, h.stepped])
+                          state.w, h.held_nodes, h.stepped, h.box])
 
     def _smooth(self, model: SomModel, state: SomState, pulls: list, parts, taubin: bool) -> None:
         """Step 4: the smoothing steps on the free nodes; with Taubin's rule the volume of each closed part put back
