@@ -18,9 +18,10 @@ A BINDING (one member g of a control c of radius r > 0) holds: its winner u (fix
   Every node has one anchor A_v (n,); anchors (A of every node, a_u of every binding) are re-taken from W whenever a
   binding is made, re-bound or ends, so a node's target never jumps.
   The patch around u, from W as it is: every node joined to u through nodes whose straight distance (position dims)
-  from W_u is below r (a flood over the edges inside that ball: the other wall of a thin part is not taken unless the
-  clay joins it inside the ball); weight w_v = f(|W_v - W_u| / r), f(t) = (1 - t^2)^2 (f(0) = 1, flat at t = 0
-  and t = 1). Every bound node is within r of its winner: that is what bounds the rule.
+  from W_u is below its reach R (a flood over the edges inside that ball: the other wall of a thin part is not taken
+  unless the clay joins it inside the ball); weight w_v = f(|W_v - W_u| / R), f(t) = (1 - t^2)^2 (f(0) = 1, flat at
+  t = 0 and t = 1). The reach is r at the grab and R = max(r, WIDEN |p - p(grab)|) once the place p has been
+  carried (a lift taller than r rolls rather than standing up in a step with a crease at its foot).
 
 EVENTS (what the person does; a control of radius 0 binds nothing and stays the paper's, re-choosing its winner)
   grab(c)          for every member g: u = argmin_v sum_j m_j (M_g C_c - W_v)_j^2 (lowest index on a tie), place
@@ -43,7 +44,8 @@ ONE CYCLE s (s0 <= s < S), in this order:
      to its target T_v = A_v + W_v^c sum_b w_bv D_b / sum_b w_bv, over the bindings b that hold it, D_b = p_b -
      a_u,b, W_v^c = 1 - prod_b (1 - w_bv) (so one binding gives A_v + w_v D_b, its winner lands on p exactly; a
      node several hold takes their weighted mean displacement, never more than the longest). T_v is a convex blend
-     of A_v and points p_b + (A_v - a_u,b) within r of a place the control has been: the box holds it;
+     of A_v and points p_b + (A_v - a_u,b) within R of a place the control has been, clamped into the box without
+     BOX_MARGIN (where R > r the rim of a widened patch could leave it): no bound node leaves the box;
   4. smoothing, when lambda > 0, of the nodes no binding holds, on the smooth dims (default P), every neighbour's
      W after step 3 counting: lambda's Jacobi step of the uniform Laplacian (W_v += lambda (mean of v's neighbours -
      W_v), a node without a neighbour stays); with Taubin's rule then mu = 1 / (PASS_BAND - 1 / lambda) the same
@@ -92,6 +94,9 @@ TAUBIN_MOST = 0.7
 STEP = 0.25
 #: The box is grown by this share of the start's size beyond the largest radius.
 BOX_MARGIN = 0.01
+#: A binding carried farther than half its radius binds its patch this many times as wide as it has been carried
+#: (its reach R = max(r, WIDEN |p - p(grab)|)): a lift taller than the radius rolls instead of standing up in a step.
+WIDEN = 2.0
 
 
 # ----------------------------------------------------------------------------------------------- falloffs
@@ -159,6 +164,7 @@ class Rule:
     others: str = "inert"
     volume: bool = True
     fit: float | None = None  # radians an edge: widen a binding's radius so its bump turns no more at any node
+    widen: float | None = WIDEN  # the reach R = max(r, widen |p - p(grab)|) (None: the radius alone, or the fit)
 
     def but(self, **changes) -> Rule:
         return replace(self, **changes)
@@ -360,11 +366,11 @@ class HandleSom:
             b.anchor = self.W[b.winner].copy()
 
     def _radius(self, b: Binding, place: np.ndarray) -> float:
-        """The binding's radius, widened by the fit for how far its winner has been carried."""
+        """The binding's reach: its radius, widened for how far its place has been carried (WIDEN, or the fit)."""
         r = float(self.radii[b.control])
-        if self.rule.fit is None:
-            return r
         travel = float(np.linalg.norm((place - b.start)[self.position]))
+        if self.rule.fit is None:
+            return r if self.rule.widen is None else max(r, self.rule.widen * travel)
         return max(r, float(np.sqrt(travel * CURVATURE[self.rule.falloff] * b.edge / self.rule.fit)))
 
     def _bind(self, c: int, at: np.ndarray, held: bool) -> None:
@@ -497,7 +503,8 @@ class HandleSom:
             scale = (1.0 - miss[bound]) / den[bound]
         else:
             scale = 1.0 / np.maximum(1.0, den[bound])
-        target = self.anchor[bound] + num[bound] * scale[:, None]
+        lo, hi = self.box(margin=0.0)
+        target = np.clip(self.anchor[bound] + num[bound] * scale[:, None], lo, hi)  # (a widened patch's rim)
         kappa = 1.0 if self.rule.rate == "hard" else \
             self.l_start * self.l_end / (self.l_end + (self.l_start - self.l_end) * s / self.S)
         self.W[bound] += kappa * (target - self.W[bound])

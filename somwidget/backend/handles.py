@@ -1,17 +1,19 @@
 """Handles: what a Som's controls with a radius hold of the clay (DESIGN.md "Handles"; tests/reference_handles.py is
 the normative float64 reference, whose docstring this follows).
 
-A grab binds each member of the control (the control and its symmetric copies): its winner u (fixed while the
-binding lives), its place p = W_u, and its patch, the nodes joined to u through nodes whose straight distance from
-W_u is below the radius r, weighted (1 - t^2)^2. While it lives, each cycle steps p after the member by at most r / 4
-and binds the patch again around the same u, and the patch is carried to p (shaping_kernels.py). A release ends
-nothing at once: a released binding still carries its patch to where the hand left it until the run reaches S or
-the next restart (a set_controls, a parameter change), then ends. A control of radius > 0 moved while no hand holds
-it (a typed position) is grabbed at its old place and released at once. Controls with a radius that nothing binds do
-nothing. Every bound node stays within r of a place its member has been, and a node several bindings hold takes
-their weighted mean displacement: no node leaves the box of the start and every place of the members grown by the
-largest radius; with Taubin's rule (whose mu and volume steps could stand out by a hair) every node is clamped into
-that box grown by BOX_MARGIN of the start's size.
+A grab binds each member of the control (the control and its symmetric copies): its winner u (fixed while the binding
+lives), its place p = W_u, and its patch, the nodes joined to u through nodes whose straight distance from W_u is below
+the radius r, weighted (1 - t^2)^2. While it lives, each cycle steps p after the member by at most r / 4 and binds the
+patch again around the same u, within its reach R = max(r, WIDEN |p - p(grab)|) (a lift taller than the radius rolls,
+the patch widening as the hand goes), and the patch is carried to p (shaping_kernels.py). A release ends nothing at
+once: a released binding still carries its patch to where the hand left it until the run reaches S or the next restart
+(a set_controls, a parameter change), then ends. A control of radius > 0 moved while no hand holds it (a typed position)
+is grabbed at its old place and released at once. Controls with a radius that nothing binds do nothing. A bound node's
+target is a convex blend of its anchor and points within R of a place its member has been, and a node several bindings
+hold takes their weighted mean displacement; the target is clamped into the box of the start and every place of the
+members grown by the largest radius (only a widened patch's rim could reach past it), and every node after Taubin's
+steps (whose mu and volume steps could stand out by a hair) into that box grown by BOX_MARGIN of the start's size: no
+node leaves the box.
 
 The engine keeps one binding per slot (member g of control c: slot c G + g). A grab of a control whose released
 bindings still live ends them first (the reference would keep both until its next restart; they carry to the same
@@ -80,7 +82,7 @@ class Handles:
         self.position = vec(*position.tolist())
         self.anchors = wp.empty(n, dtype=vec, device=dev)
         self.held_nodes = wp.zeros(n, dtype=wp.int32, device=dev)  # 1 where a live binding holds the node
-        self.box = wp.zeros(2, dtype=vec, device=dev)
+        self.box = wp.zeros(4, dtype=vec, device=dev)  # lo, hi grown by BOX_MARGIN; lo, hi by the radius alone
         self.stepped = wp.zeros(1, dtype=wp.int32, device=dev)
         self.changed = wp.zeros(1, dtype=wp.int32, device=dev)
 
@@ -136,9 +138,11 @@ class Handles:
         self.probe = wp.zeros(slots, dtype=vec, device=dev)  # members where a grab searches
         self.radius = wp.zeros(slots, dtype=wp.float32, device=dev)
         self._radii_for = None
+        self.reach = wp.zeros(slots, dtype=wp.float32, device=dev)  # the radius widened for how far it was carried
         self.live_dev = wp.zeros(slots, dtype=wp.int32, device=dev)
         self.winners = wp.zeros(slots, dtype=wp.int32, device=dev)
         self.places = wp.zeros(slots, dtype=vec, device=dev)
+        self.starts = wp.zeros(slots, dtype=vec, device=dev)  # each binding's place at its grab
         self.winner_anchors = wp.zeros(slots, dtype=vec, device=dev)
         self.keys = wp.full(slots, KEY_NONE, dtype=wp.uint64, device=dev)
         self.rebind = wp.zeros(max(1, self.n_rows), dtype=wp.int32, device=dev)
@@ -189,8 +193,9 @@ class Handles:
         self._radii_for = controls.radii
 
     def upload_box(self) -> None:
-        """The clamp's box on the device (if it changed since): only Taubin's steps read it."""
-        box = self.box_values()
+        """The boxes on the device (if they changed since): Taubin's clamp's and the carry's (grown by the radius
+        alone)."""
+        box = (*self.box_values(), *self.box_values(margin=0.0))
         if self._box_for is None or not all(np.array_equal(a, b) for a, b in zip(box, self._box_for)):
             self.box.assign(np.stack(box).astype(np.float32))
             self._box_for = box
@@ -290,7 +295,8 @@ class Handles:
         binding[self.row_of[slots]] = 1
         self.binding.assign(binding)
         wp.launch(kern.bind, dim=self.n_rows, device=dev, inputs=[self.slot_of_row, self.binding, self.keys, state.w,
-                                                                  self.winners, self.places, self.rebind])
+                                                                  self.winners, self.places, self.starts, self.radius,
+                                                                  self.reach, self.rebind])
         self.changed.fill_(1)
         self.bind_patches(state)
         self.live[slots] = True
@@ -307,7 +313,7 @@ class Handles:
         if dev == "cpu" or n <= FLOOD_IN_BLOCKS_MOST:
             threads = 1 if dev == "cpu" else min(FLOOD_THREADS, 32 * -(-n // 32))
             wp.launch(kern.flood_block, dim=self.n_rows * threads, block_dim=threads, device=dev,
-                      inputs=[state.w, self.rebind, self.slot_of_row, self.winners, self.radius, self.position,
+                      inputs=[state.w, self.rebind, self.slot_of_row, self.winners, self.reach, self.position,
                               model.offsets, model.neighbors, self.patch])
             return
         rows = (self.n_rows, n)
@@ -316,7 +322,7 @@ class Handles:
         def round_():
             wp.launch(clear_flag, dim=1, device=dev, inputs=[self.changed])
             wp.launch(kern.flood, dim=rows, device=dev,
-                      inputs=[state.w, self.rebind, self.slot_of_row, self.winners, self.radius, self.position,
+                      inputs=[state.w, self.rebind, self.slot_of_row, self.winners, self.reach, self.position,
                               model.offsets, model.neighbors, self.patch, self.changed])
 
         wp.capture_while(self.changed, round_)

@@ -9,11 +9,13 @@ own in `patch` (R, N) for each member: the member's binding, -1 where a node is 
   2. `move_points`: each point control and its copies in control order, W_v += L[s, D[u, v]] (C - W_v), a group's
      rates from the same W_v and scaled by 1 / max(1, their sum) when it has copies;
   3. the handles: `advance` steps each live binding's place p towards its member by at most STEP r (the straight
-     length on the position dims) and marks it for binding again; then, if any moved, `seed` and `flood` (repeated
-     while it joins a node; `flood_block` does both in one launch) bind the patch again: the nodes joined to the
-     winner u through nodes whose straight distance from W_u is below r, each weighted w = (1 - t^2)^2, t = |W_v -
-     W_u| / r; and `reanchor` takes every anchor again (A_v = W_v, a_u = W_u). `carry` puts every bound node on its
-     target T_v = A_v + (1 - prod_b (1 - w_bv)) sum_b w_bv (p_b - a_u,b) / sum_b w_bv;
+     length on the position dims), takes its reach R = max(r, WIDEN |p - p(grab)|) and marks it for binding again;
+     then, if any moved, `seed` and `flood` (repeated while it joins a node; `flood_block` does both in one launch)
+     bind the patch again: the nodes joined to the winner u through nodes whose straight distance from W_u is below
+     R, each weighted w = (1 - t^2)^2, t = |W_v - W_u| / R; and `reanchor` takes every anchor again (A_v = W_v,
+     a_u = W_u). `carry` puts every bound node on its target T_v = A_v + (1 - prod_b (1 - w_bv)) sum_b w_bv (p_b -
+     a_u,b) / sum_b w_bv, clamped into the box grown by the radius alone (box[2], box[3]: a patch wider than r could
+     carry its rim out of it);
   4. `smooth_free`: lambda's (and with Taubin's rule mu's) Jacobi step of the uniform Laplacian on the nodes no binding
      holds; with Taubin's rule `part_volumes` before and after, `volume_gradient` and `put_back` move the free nodes
      of each closed part along the volume's gradient by what the steps took, then clamp every node into the box.
@@ -32,6 +34,10 @@ from .smoothing_kernels import smoothed
 FIND_STRETCH = 256
 #: A binding steps towards its member by at most this share of its radius a cycle, and binds again at each step.
 STEP = wp.constant(wp.float32(0.25))
+#: A binding carried farther than half its radius binds a patch this many times as wide as it has been carried (its
+#: reach, never less than the radius; tests/reference_handles.py WIDEN): a lift taller than the radius rolls instead
+#: of standing up in a step with a crease at its foot (BENCHMARKS.md, "A lift taller than its radius").
+WIDEN = wp.constant(wp.float32(2.0))
 
 
 @wp.func
@@ -137,10 +143,12 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def advance(slot_of_row: wp.array(dtype=wp.int32), live: wp.array(dtype=wp.int32),
                 members: wp.array(dtype=vec), radius: wp.array(dtype=wp.float32), position: vec,
-                places: wp.array(dtype=vec), rebind: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32),
+                places: wp.array(dtype=vec), starts: wp.array(dtype=vec), reach: wp.array(dtype=wp.float32),
+                rebind: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32),
                 changed: wp.array(dtype=wp.int32)):
         """Step 3 (a) for handle row r: a live binding whose place differs from its member steps towards it by at
-        most STEP r and is marked for binding again (rebind[r]; stepped and changed set, both 0 before)."""
+        most STEP r, takes the reach max(r, WIDEN |p - p(grab)|) and is marked for binding again (rebind[r];
+        stepped and changed set, both 0 before)."""
         r = wp.tid()
         j = slot_of_row[r]
         rebind[r] = 0
@@ -159,6 +167,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 else:
                     p = p + (m - p) * (most / gap)
                 places[j] = p
+                reach[j] = wp.max(radius[j], WIDEN * wp.length(wp.cw_mul(p - starts[j], position)))
                 rebind[r] = 1
                 stepped[0] = 1
                 changed[0] = 1
@@ -166,9 +175,11 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def bind(slot_of_row: wp.array(dtype=wp.int32), binding: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.uint64),
              weights: wp.array(dtype=vec), winners: wp.array(dtype=wp.int32), places: wp.array(dtype=vec),
+             starts: wp.array(dtype=vec), radius: wp.array(dtype=wp.float32), reach: wp.array(dtype=wp.float32),
              rebind: wp.array(dtype=wp.int32)):
-        """A grab, for handle row r marked in `binding`: the winner found for it (keys), its place that node's
-        weights, and a patch to bind (rebind[r]); the other rows are left as they are."""
+        """A grab, for handle row r marked in `binding`: the winner found for it (keys), its place and start that
+        node's weights, its reach its radius, and a patch to bind (rebind[r]); the other rows are left as they
+        are."""
         r = wp.tid()
         rebind[r] = 0
         if binding[r] != 0:
@@ -176,6 +187,8 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
             u = wp.int32(keys[j] & INDEX_MASK)
             winners[j] = u
             places[j] = weights[u]
+            starts[j] = weights[u]
+            reach[j] = radius[j]
             rebind[r] = 1
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
@@ -188,30 +201,31 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def flood(weights: wp.array(dtype=vec), rebind: wp.array(dtype=wp.int32), slot_of_row: wp.array(dtype=wp.int32),
-              winners: wp.array(dtype=wp.int32), radius: wp.array(dtype=wp.float32), position: vec,
+              winners: wp.array(dtype=wp.int32), reach: wp.array(dtype=wp.float32), position: vec,
               offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32),
               patch: wp.array2d(dtype=wp.float32), changed: wp.array(dtype=wp.int32)):
-        """One round of the patch's flood: a node inside the ball (straight distance from W_u below r) next to a
-        bound node is bound, weight falloff(d, r); changed[0] set when any is (cleared before). Bound is for good,
-        so rounds that see a neighbour bound in the same round only reach the end sooner."""
+        """One round of the patch's flood: a node inside the ball (straight distance from W_u below the binding's
+        reach R, its radius widened by advance) next to a bound node is bound, weight falloff(d, R); changed[0] set
+        when any is (cleared before). Bound is for good, so rounds that see a neighbour bound in the same round only
+        reach the end sooner."""
         r, v = wp.tid()
         if rebind[r] != 0 and patch[r, v] < wp.float32(0.0):
             j = slot_of_row[r]
             d = wp.length(wp.cw_mul(weights[v] - weights[winners[j]], position))
-            reach = radius[j]
-            if d < reach:
+            ball = reach[j]
+            if d < ball:
                 joined = int(0)
                 for e in range(offsets[v], offsets[v + 1]):
                     if patch[r, neighbors[e]] >= wp.float32(0.0):
                         joined = 1
                 if joined != 0:
-                    patch[r, v] = falloff(d, reach)
+                    patch[r, v] = falloff(d, ball)
                     changed[0] = 1
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def flood_block(weights: wp.array(dtype=vec), rebind: wp.array(dtype=wp.int32),
                     slot_of_row: wp.array(dtype=wp.int32), winners: wp.array(dtype=wp.int32),
-                    radius: wp.array(dtype=wp.float32), position: vec, offsets: wp.array(dtype=wp.int32),
+                    reach: wp.array(dtype=wp.float32), position: vec, offsets: wp.array(dtype=wp.int32),
                     neighbors: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32)):
         """`seed` and every round of `flood` in one launch, a block per handle row (its threads share the nodes out,
         a barrier between rounds, until a round joins no node): the same patch, since the flood's end (the nodes
@@ -229,20 +243,20 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 for v in range(t, n, threads):
                     patch[r, v] = wp.where(v == u, wp.float32(1.0), wp.float32(-1.0))
                 centre = weights[u]
-                reach = radius[j]
+                ball = reach[j]
                 joining = int(1)
                 while sync_block_any(joining) != 0:
                     joining = int(0)
                     for v in range(t, n, threads):
                         if patch[r, v] < wp.float32(0.0):
                             d = wp.length(wp.cw_mul(weights[v] - centre, position))
-                            if d < reach:
+                            if d < ball:
                                 joined = int(0)
                                 for e in range(offsets[v], offsets[v + 1]):
                                     if patch[r, neighbors[e]] >= wp.float32(0.0):
                                         joined = 1
                                 if joined != 0:
-                                    patch[r, v] = falloff(d, reach)
+                                    patch[r, v] = falloff(d, ball)
                                     joining = int(1)
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
@@ -261,8 +275,8 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     def carry(slot_of_row: wp.array(dtype=wp.int32), group_start: wp.array(dtype=wp.int32),
               live: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32), places: wp.array(dtype=vec),
               winner_anchors: wp.array(dtype=vec), anchors: wp.array(dtype=vec), weights: wp.array(dtype=vec),
-              held: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32), counting: int,
-              left: wp.array(dtype=wp.int32), going: wp.array(dtype=wp.int32)):
+              held: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32), box: wp.array(dtype=vec),
+              counting: int, left: wp.array(dtype=wp.int32), going: wp.array(dtype=wp.int32)):
         """Step 3 (b) for node v: onto its target when a live binding holds it (held[v] = 1), else left (0); a group
         of rows (a stroke's samples, one copy) counts as one binding, its weight their largest, its displacement their
         weighted mean. Thread 0 clears `stepped` for the next cycle's `advance` (read by then); with `counting`, a
@@ -300,7 +314,8 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 den += most
                 miss *= wp.float32(1.0) - most
         if den > wp.float32(0.0):
-            weights[v] = anchors[v] + num * ((wp.float32(1.0) - miss) / den)
+            target = anchors[v] + num * ((wp.float32(1.0) - miss) / den)
+            weights[v] = wp.max(box[2], wp.min(target, box[3]))
             held[v] = 1
         else:
             held[v] = 0

@@ -96,6 +96,7 @@ class ShapingPath:
         points, live, steps, taubin = plan
         if taubin:
             self._closed()  # (made before a capture: a graph must not allocate)
+        if taubin or live:
             h.upload_box()
         if points and self._counter_s != state.s:
             self.counter.assign(np.array([state.s, state.s], np.int32))
@@ -163,8 +164,8 @@ class ShapingPath:
         (a conditional node)."""
         h = self.handles
         wp.launch(h.kernels.advance, dim=h.n_rows, device=model.device,
-                  inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.rebind, h.stepped,
-                          h.changed])
+                  inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.starts, h.reach,
+                          h.rebind, h.stepped, h.changed])
         wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
 
     def _carry(self, model: SomModel, state: SomState, counting: bool = False) -> None:
@@ -173,7 +174,7 @@ class ShapingPath:
         h = self.handles
         wp.launch(h.kernels.carry, dim=model.n_neurons, device=model.device,
                   inputs=[h.slot_of_row, h.group_start, h.live_dev, h.patch, h.places, h.winner_anchors, h.anchors,
-                          state.w, h.held_nodes, h.stepped, int(counting), self.left, self.going])
+                          state.w, h.held_nodes, h.stepped, h.box, int(counting), self.left, self.going])
 
     def _smooth(self, model: SomModel, state: SomState, pulls: list, parts, taubin: bool) -> None:
         """Step 4: the smoothing steps on the free nodes; with Taubin's rule the volume of each closed part put back
