@@ -16,7 +16,9 @@ Printed per brief, before the first action and after the last:
   p95         the 95th percentile of the same nearest distances (both ways together), over the size: where the worst
               of the shape is (not a target; the Chamfer mean forgives a small part far off)
   max / p99   the largest and the 99th-percentile dihedral angle between adjacent faces of the clay (its faces fanned
-              into the triangles a renderer draws: metrics.dihedral_angles), degrees; target: max <= 30
+              into the triangles a renderer draws: metrics.dihedral_angles), degrees; edges > 30 deg their share
+  made        target: no crease made (no_crease_made): on a smooth start max <= 30; on a start already creased (the
+              car's trained body) no more edges over 30 degrees and no sharper fold than it had
   volume      the closed shapes' enclosed volume after over before (metrics.mesh_volume); the target's own ratio
               beside it
   spike       the largest spike figure (metrics.spike_figures) at the controls' winners (the node nearest each control
@@ -111,6 +113,16 @@ def clay_figures(session, target: Target, closed: bool, volume_before: float | N
     win = winners_of(p, np.asarray(frame.effective_positions, np.float64))
     out["spike"] = float(metrics.spike_figures(p, frame.preset.topology, win).max())
     return out
+
+
+def no_crease_made(before: dict, after: dict) -> bool:
+    """No crease over CREASE_TARGET made: a smooth start (no edge over it) keeps every edge at most CREASE_TARGET; a
+    start already creased (the car case study's trained body: 17.6% of its edges over 30 degrees, knife edges of 179.9
+    at its nose and tail) gets no more such edges and no sharper fold than it had (its folds move with the shape, so
+    they are counted, not matched edge by edge)."""
+    if before["over_30"] == 0.0:
+        return after["max_dihedral"] <= CREASE_TARGET
+    return after["over_30"] <= before["over_30"] and after["max_dihedral"] <= before["max_dihedral"] + 0.5
 
 
 # -- target forms -----------------------------------------------------------------------------------------------------
@@ -415,7 +427,7 @@ class Result:
 
     @property
     def met(self) -> bool:
-        return self.after["chamfer"] <= CHAMFER_TARGET and self.after["max_dihedral"] <= CREASE_TARGET and \
+        return self.after["chamfer"] <= CHAMFER_TARGET and self.after["no_crease_made"] and \
             self.brief.n_actions <= MAX_ACTIONS
 
 
@@ -456,6 +468,7 @@ def run_brief(brief: Brief, device: str = "cpu", pictures: Path | None = None, v
             if verbose:
                 print(f"  {brief.name} {i:2d}. {action}" + (f"  ({action.count} actions)" if action.count > 1 else ""))
         after = clay_figures(session, target, brief.closed, volume0)
+        after["no_crease_made"] = no_crease_made(before, after)
         seconds = time.perf_counter() - t0
         thumb = None
         if pictures is not None:
@@ -495,7 +508,8 @@ def summary(result: Result) -> str:
              f"  Chamfer / size     {b['chamfer']:7.2%} -> {a['chamfer']:6.2%}   (target <= {CHAMFER_TARGET:.0%})",
              f"  p95 / size         {b['p95']:7.1%} -> {a['p95']:6.1%}",
              f"  max dihedral       {b['max_dihedral']:7.1f} -> {a['max_dihedral']:6.1f}   (target <= "
-             f"{CREASE_TARGET:g} degrees; p99 {a['p99_dihedral']:.1f})",
+             f"{CREASE_TARGET:g} degrees, or no sharper than a creased start: "
+             f"{'met' if a['no_crease_made'] else 'NOT met'}; p99 {a['p99_dihedral']:.1f})",
              f"  edges over 30 deg  {b['over_30']:7.1%} -> {a['over_30']:6.1%}",
              f"  spike              {b['spike']:7.2f} -> {a['spike']:6.2f}"]
     if brief.closed:
@@ -509,13 +523,14 @@ def row(result: Result) -> str:
     vol = f"{a['volume_ratio']:.2f} ({t.volume / b['volume']:.2f})" if brief.closed else ""
     return (f"| {brief.name} | {brief.preset} | {brief.n_actions} | {b['chamfer']:.2%} -> **{a['chamfer']:.2%}** | "
             f"{b['p95']:.1%} -> {a['p95']:.1%} | {b['max_dihedral']:.1f} -> **{a['max_dihedral']:.1f}** | "
+            f"{'none' if a['no_crease_made'] else '**yes**'} | "
             f"{a['p99_dihedral']:.1f} | {b['over_30']:.1%} -> {a['over_30']:.1%} | {vol} | {a['spike']:.2f} | "
             f"{'yes' if result.met else 'no'} | {result.seconds:.1f} |")
 
 
-HEADER = ("| brief | start | actions | Chamfer / size | p95 / size | max dihedral | p99 dihedral | edges > 30 deg | "
-          "volume after / before (target's) | spike | targets met | s |\n"
-          "|---|---|---|---|---|---|---|---|---|---|---|---|")
+HEADER = ("| brief | start | actions | Chamfer / size | p95 / size | max dihedral | crease made | p99 dihedral "
+          "| edges > 30 deg | volume after / before (target's) | spike | targets met | s |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def main(argv=None) -> int:
@@ -545,7 +560,7 @@ def main(argv=None) -> int:
     for r in results:
         print(row(r))
     print(f"\n{sum(r.met for r in results)} of {len(results)} briefs met the targets (Chamfer <= {CHAMFER_TARGET:.0%} "
-          f"of the size, no crease over {CREASE_TARGET:g} degrees, <= {MAX_ACTIONS} actions); "
+          f"of the size, no crease made over {CREASE_TARGET:g} degrees, <= {MAX_ACTIONS} actions); "
           f"{time.perf_counter() - t0:.0f} s in all")
     if args.pictures is not None:
         thumbs = [r.thumbnail for r in results if r.thumbnail is not None]
