@@ -203,31 +203,27 @@ class Handles:
         self._radii_for = controls.radii
 
     def _stage_box(self) -> None:
-        """The boxes into the staged rows after the members: Taubin's clamp's and the carry's (grown by the radius
-        alone)."""
+        """The boxes into the staged rows after the members: the start's, every weight set's and every member's places
+        grown on the position dims by the largest radius and BOX_MARGIN of the start's size (Taubin's clamp), and by
+        the radius alone (the carry's)."""
+        radius = float(self.controls.radii.max(initial=0.0)) if self.controls is not None else 0.0
+        pad = np.zeros((2, len(self._lo)))
+        pad[:, self.model.position_dims] = [[radius + BOX_MARGIN * self.size], [radius]]
         staged = self._staged[-4:]
-        staged[0], staged[1] = self.box_values()
-        staged[2], staged[3] = self.box_values(margin=0.0)
+        staged[0::2] = self._lo - pad
+        staged[1::2] = self._hi + pad
         self._box_sent = self._box_version
 
     # -- the box ------------------------------------------------------------------------------------------------
     def grow(self, points: np.ndarray) -> None:
         """The box takes these places (or weights) too (goes up with the next run when that moved it)."""
-        p = np.asarray(points, np.float64).reshape(-1, len(self._lo))
+        p = np.asarray(points).reshape(-1, len(self._lo))
         if len(p):
             lo, hi = p.min(axis=0), p.max(axis=0)
             if (lo < self._lo).any() or (hi > self._hi).any():
                 self._lo = np.minimum(self._lo, lo)
                 self._hi = np.maximum(self._hi, hi)
                 self._box_version += 1
-
-    def box_values(self, margin: float = BOX_MARGIN) -> tuple[np.ndarray, np.ndarray]:
-        """(lo, hi): the start's, every weight set's and every member's places, grown on the position dims by the
-        largest radius and `margin` of the start's size."""
-        grow = np.zeros(len(self._lo))
-        radius = float(self.controls.radii.max(initial=0.0)) if self.controls is not None else 0.0
-        grow[self.model.position_dims] = radius + margin * self.size
-        return self._lo - grow, self._hi + grow
 
     # -- events -------------------------------------------------------------------------------------------------
     def grab(self, state: SomState, controls: Iterable[int]) -> None:
