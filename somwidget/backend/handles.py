@@ -74,7 +74,8 @@ class Handles:
         start = model.start.astype(np.float64)
         self._lo, self._hi = start.min(axis=0), start.max(axis=0)
         self.size = bounding_diagonal(start[:, model.position_dims]) or 1.0
-        self._box_for: tuple[np.ndarray, np.ndarray] | None = None
+        self._box_version = 0  # counts the box's changes (a grow that moved it, other radii) ...
+        self._box_sent: int | None = None  # ... and the one the device holds (None: none yet)
         self._radii_for: np.ndarray | None = None  # the radii whose members' radii the device holds
         self._grown: Controls | None = None  # the controls the box last took
         position = np.zeros(model.n_dims, np.float32)
@@ -82,7 +83,6 @@ class Handles:
         self.position = vec(*position.tolist())
         self.anchors = wp.empty(n, dtype=vec, device=dev)
         self.held_nodes = wp.zeros(n, dtype=wp.int32, device=dev)  # 1 where a live binding holds the node
-        self.box = wp.zeros(4, dtype=vec, device=dev)  # lo, hi grown by BOX_MARGIN; lo, hi by the radius alone
         self.stepped = wp.zeros(1, dtype=wp.int32, device=dev)
         self.changed = wp.zeros(1, dtype=wp.int32, device=dev)
 
@@ -130,11 +130,15 @@ class Handles:
         self.group_start = ints(starts)
         self.point_controls = wp.array(point.astype(np.int32), dtype=wp.int32, device=dev)
         self.point_slot_list = ints(self.point_slots)
-        self.members = wp.zeros(slots, dtype=vec, device=dev)
-        self._members_host = None if dev == "cpu" else wp.zeros(slots, dtype=vec, device="cpu", pinned=True)
+        # the members and, after them, the boxes (lo, hi grown by BOX_MARGIN; lo, hi by the radius alone): one copy
+        sent = wp.zeros(slots + 4, dtype=vec, device=dev)
+        self.members, self.box = sent[:slots], sent[slots:]
+        self._sent = sent
+        self._members_host = None if dev == "cpu" else wp.zeros(slots + 4, dtype=vec, device="cpu", pinned=True)
         self._members_sent = None if dev == "cpu" else wp.Event(dev)
         self._members_busy = False
-        self._members_staged = (self.members if dev == "cpu" else self._members_host).numpy()
+        self._staged = (sent if dev == "cpu" else self._members_host).numpy()
+        self._box_sent = None
         self.probe = wp.zeros(slots, dtype=vec, device=dev)  # members where a grab searches
         self.radius = wp.zeros(slots, dtype=wp.float32, device=dev)
         self._radii_for = None
@@ -153,6 +157,8 @@ class Handles:
         """The Som's controls are now `controls` (their members and radii go up with the next run)."""
         if controls is self.controls:
             return
+        if self.controls is None or controls.radii is not self.controls.radii:
+            self._box_version += 1  # (grown by the largest radius; a move keeps the radii array)
         self._layout(controls)
         self.controls = controls
         if controls.radii.any() or controls.symmetry is not None:
@@ -160,29 +166,33 @@ class Handles:
             self._grown = controls
 
     def upload(self, controls: Controls) -> None:
-        """The members and radii on the device for these controls (if they are not there yet: a move uploads only
-        the members)."""
+        """The members, radii and boxes on the device for these controls (those not there yet: a move uploads the
+        members, and the boxes when it grew them)."""
         if controls is not self.controls:
             self.adopt(controls)
-        if self._uploaded is not controls:
-            if self._grown is not controls:
-                self.grow(controls.effective())
-            self._upload_members(members_of(controls))
+        members = self._uploaded is not controls
+        if members and self._grown is not controls:
+            self.grow(controls.effective())
+        if members or self._box_sent != self._box_version:
+            self._upload_members(members_of(controls) if members else None)
+        if members:
             self._upload_radii(controls)
             self._uploaded = controls
 
-    def _upload_members(self, members: np.ndarray) -> None:
-        """The members into `members`: on CUDA through pinned memory in an asynchronous copy (waiting first, should
-        the last one still read it), as the paper's controls go up (SomState.set_cycle)."""
-        if self._members_sent is None:
-            self._members_staged[:] = members
-            return
+    def _upload_members(self, members: np.ndarray | None) -> None:
+        """The members (None: those there) and the boxes into `members` and `box`, one copy: on CUDA through pinned
+        memory in an asynchronous copy (waiting first, should the last one still read it), as the paper's controls
+        go up (SomState.set_cycle)."""
         if self._members_busy:
             wp.synchronize_event(self._members_sent)
-        self._members_staged[:] = members
-        wp.copy(self.members, self._members_host)
-        wp.record_event(self._members_sent)
-        self._members_busy = True
+        if members is not None:
+            self._staged[:-4] = members
+        if self._box_sent != self._box_version:
+            self._stage_box()
+        if self._members_sent is not None:
+            wp.copy(self._sent, self._members_host)
+            wp.record_event(self._members_sent)
+            self._members_busy = True
 
     def _upload_radii(self, controls: Controls) -> None:
         """The radii, member by member (only when they changed: a move keeps the radii array)."""
@@ -192,29 +202,28 @@ class Handles:
             self.radius.assign(np.repeat(controls.radii.astype(np.float32), controls.order))
         self._radii_for = controls.radii
 
-    def upload_box(self) -> None:
-        """The boxes on the device (if they changed since): Taubin's clamp's and the carry's (grown by the radius
-        alone)."""
-        box = (*self.box_values(), *self.box_values(margin=0.0))
-        if self._box_for is None or not all(np.array_equal(a, b) for a, b in zip(box, self._box_for)):
-            self.box.assign(np.stack(box).astype(np.float32))
-            self._box_for = box
+    def _stage_box(self) -> None:
+        """The boxes into the staged rows after the members: the start's, every weight set's and every member's places
+        grown on the position dims by the largest radius and BOX_MARGIN of the start's size (Taubin's clamp), and by
+        the radius alone (the carry's)."""
+        radius = float(self.controls.radii.max(initial=0.0)) if self.controls is not None else 0.0
+        pad = np.zeros((2, len(self._lo)))
+        pad[:, self.model.position_dims] = [[radius + BOX_MARGIN * self.size], [radius]]
+        staged = self._staged[-4:]
+        staged[0::2] = self._lo - pad
+        staged[1::2] = self._hi + pad
+        self._box_sent = self._box_version
 
     # -- the box ------------------------------------------------------------------------------------------------
     def grow(self, points: np.ndarray) -> None:
-        """The box takes these places (or weights) too."""
-        p = np.asarray(points, np.float64).reshape(-1, len(self._lo))
+        """The box takes these places (or weights) too (goes up with the next run when that moved it)."""
+        p = np.asarray(points).reshape(-1, len(self._lo))
         if len(p):
-            self._lo = np.minimum(self._lo, p.min(axis=0))
-            self._hi = np.maximum(self._hi, p.max(axis=0))
-
-    def box_values(self, margin: float = BOX_MARGIN) -> tuple[np.ndarray, np.ndarray]:
-        """(lo, hi): the start's, every weight set's and every member's places, grown on the position dims by the
-        largest radius and `margin` of the start's size."""
-        grow = np.zeros(len(self._lo))
-        radius = float(self.controls.radii.max(initial=0.0)) if self.controls is not None else 0.0
-        grow[self.model.position_dims] = radius + margin * self.size
-        return self._lo - grow, self._hi + grow
+            lo, hi = p.min(axis=0), p.max(axis=0)
+            if (lo < self._lo).any() or (hi > self._hi).any():
+                self._lo = np.minimum(self._lo, lo)
+                self._hi = np.maximum(self._hi, hi)
+                self._box_version += 1
 
     # -- events -------------------------------------------------------------------------------------------------
     def grab(self, state: SomState, controls: Iterable[int]) -> None:

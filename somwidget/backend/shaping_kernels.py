@@ -38,6 +38,8 @@ STEP = wp.constant(wp.float32(0.25))
 #: reach, never less than the radius; tests/reference_handles.py WIDEN): a lift taller than the radius rolls instead
 #: of standing up in a step with a crease at its foot (BENCHMARKS.md, "A lift taller than its radius").
 WIDEN = wp.constant(wp.float32(2.0))
+#: `flood_block` marks a node inside the ball that is not bound (yet) with this (a node not bound is -1 after it).
+INSIDE = wp.constant(wp.float32(-2.0))
 
 
 @wp.func
@@ -230,7 +232,10 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         """`seed` and every round of `flood` in one launch, a block per handle row (its threads share the nodes out,
         a barrier between rounds, until a round joins no node): the same patch, since the flood's end (the nodes
         joined to u inside the ball) does not depend on the order nodes join in. On the CPU a block is one thread,
-        whose rounds are sweeps in index order (a node joins in the sweep that reaches its neighbour)."""
+        whose rounds are sweeps in index order (a node joins in the sweep that reaches its neighbour). The seed marks
+        the nodes inside the ball OUTSIDE (-2: a round looks at no other node and measures none again; a widened
+        reach makes the patch deep, many rounds), and the last round's barrier is followed by those left marked set
+        to -1."""
         i = wp.tid()
         threads = wp.block_dim()
         r = i // threads
@@ -240,24 +245,26 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 j = slot_of_row[r]
                 u = winners[j]
                 n = patch.shape[1]
-                for v in range(t, n, threads):
-                    patch[r, v] = wp.where(v == u, wp.float32(1.0), wp.float32(-1.0))
                 centre = weights[u]
                 ball = reach[j]
+                for v in range(t, n, threads):
+                    inside = wp.length(wp.cw_mul(weights[v] - centre, position)) < ball
+                    patch[r, v] = wp.where(v == u, wp.float32(1.0), wp.where(inside, INSIDE, wp.float32(-1.0)))
                 joining = int(1)
                 while sync_block_any(joining) != 0:
                     joining = int(0)
                     for v in range(t, n, threads):
-                        if patch[r, v] < wp.float32(0.0):
-                            d = wp.length(wp.cw_mul(weights[v] - centre, position))
-                            if d < ball:
-                                joined = int(0)
-                                for e in range(offsets[v], offsets[v + 1]):
-                                    if patch[r, neighbors[e]] >= wp.float32(0.0):
-                                        joined = 1
-                                if joined != 0:
-                                    patch[r, v] = falloff(d, ball)
-                                    joining = int(1)
+                        if patch[r, v] == INSIDE:
+                            joined = int(0)
+                            for e in range(offsets[v], offsets[v + 1]):
+                                if patch[r, neighbors[e]] >= wp.float32(0.0):
+                                    joined = 1
+                            if joined != 0:
+                                patch[r, v] = falloff(wp.length(wp.cw_mul(weights[v] - centre, position)), ball)
+                                joining = int(1)
+                for v in range(t, n, threads):
+                    if patch[r, v] == INSIDE:
+                        patch[r, v] = wp.float32(-1.0)
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def reanchor(weights: wp.array(dtype=vec), live: wp.array(dtype=wp.int32), winners: wp.array(dtype=wp.int32),

@@ -96,8 +96,6 @@ class ShapingPath:
         points, live, steps, taubin = plan
         if taubin:
             self._closed()  # (made before a capture: a graph must not allocate)
-        if taubin or live:
-            h.upload_box()
         if points and self._counter_s != state.s:
             self.counter.assign(np.array([state.s, state.s], np.int32))
             self._counter_s, self._parity = state.s, 0
