@@ -23,9 +23,54 @@ WAITS = re.compile(r"acquire|\bwait\b|\bsleep\b|select|\bpoll\b|epoll|<method 'c
                    r"<built-in method _thread|\bjoin\b|_recv_bytes|waitpid|of '_queue|"
                    r"<method 'read' of '_io\.(FileIO|TextIOWrapper)'")
 #: Warp's launches (their cumulative time: the kernels on the CPU device).
-LAUNCHES = {"launch", "capture_launch"}
+LAUNCHES = {"launch", "capture_launch", "launch_tiled"}
 #: Warp's waits for the device (a GPU's kernels land here, not in the launches).
 DEVICE_WAITS = {"synchronize", "synchronize_device", "synchronize_stream", "numpy"}
+
+
+#: A worker's round, part by part (ms a frame in the summary): (what, file's tail, function).
+ROUND_PARTS = (("the stepping loop's rounds", "studio/rounds.py", "_round"),
+               ("  stepping alone (own path)", "model/trainer.py", "step_alone"),
+               ("  stepping batched (one launch a batch)", "studio/batched.py", "step"),
+               ("    the batches' launches", "backend/batch.py", "_launch"),
+               ("  a room's quick calls (the moves)", "model/trainer.py", "run_calls"),
+               ("  making frames", "model/frames.py", "make"),
+               ("    the nodes' colours", "model/frames.py", "_node_colours"),
+               ("  publishing frames", "model/frames.py", "publish"),
+               ("  the autosave's turn", "model/trainer.py", "after_turn"),
+               ("encoding frames (the views' loop)", "transport/frames.py", "encode_frame"),
+               ("Som.set_controls", "backend/som.py", "set_controls"))
+
+
+def _cumulative(stats: pstats.Stats, tail: str, name: str) -> tuple[int, float]:
+    """(calls, seconds inside) of the functions `name` in files ending `tail`."""
+    calls, inside = 0, 0.0
+    for (path, _line, fname), (_cc, nc, _tt, ct, _c) in stats.stats.items():
+        if fname == name and path.replace("\\", "/").endswith(tail):
+            calls += nc
+            inside += ct
+    return calls, inside
+
+
+def per_frame(stats: pstats.Stats) -> str:
+    """A worker's round part by part in ms a frame (frames: FrameStream.make's calls), Warp's launches taken out of
+    the rounds' time; empty where this role made no frames."""
+    frames, _ = _cumulative(stats, "model/frames.py", "make")
+    if not frames:
+        return ""
+    launches = _cumulative(stats, "backend/batch.py", "_launch")[1] + _cumulative(stats, "model/trainer.py",
+                                                                                   "step_alone")[1]
+    _, rounds = _cumulative(stats, "studio/rounds.py", "_round")
+    lines = [f"-- a frame, part by part ({frames} frames; ms a frame, profiled: slower than unprofiled, compare "
+             f"runs with each other): the rounds {1e3 * rounds / frames:.3f}, of which the steps "
+             f"{1e3 * launches / frames:.3f}"
+             f" (the batches' launches and the rooms stepped alone: on the CPU the kernels), the rest "
+             f"{1e3 * (rounds - launches) / frames:.3f}"]
+    for what, tail, name in ROUND_PARTS:
+        calls, inside = _cumulative(stats, tail, name)
+        if calls:
+            lines.append(f"{1e3 * inside / frames:>10.3f} ms a frame  {what} ({calls} calls)")
+    return "\n".join(lines)
 
 
 def _label(func: tuple) -> str:
@@ -88,6 +133,9 @@ def summarise_role(role: str, stats: pstats.Stats, processes: int, top: int = 25
     lines = [f"== {role}: {processes} process{'es' if processes != 1 else ''}; profiled {f['profiled_s']:.2f} s, "
              f"waiting {f['waiting_s']:.2f} s, inside Warp's launches {f['launch_s']:.2f} s, waiting for the device "
              f"{f['device_wait_s']:.2f} s, busy outside them {f['busy_outside_s']:.2f} s"]
+    parts = per_frame(stats)
+    if parts:
+        lines.append(parts)
     rows = [(func, v) for func, v in stats.stats.items() if not _is_wait(func)]
     lines.append("-- most time of their own (waits left out): calls, own s, inside s")
     for func, (_cc, nc, tt, ct, _c) in sorted(rows, key=lambda r: -r[1][2])[:top]:
