@@ -37,6 +37,8 @@ Usage:
     CUDA_VISIBLE_DEVICES=0,1 python benchmarks/bench_studio.py --device cuda --workers 2 --rooms 64,128,256,512
     python benchmarks/bench_studio.py --mode engine --rooms 256,1024,2048 --device cuda
     python benchmarks/bench_studio.py --mode dask --rooms 2
+    python benchmarks/bench_studio.py --device cuda --gpus 1 --workers-per-gpu 2,4,8 --rooms 128,256,320  # a sweep
+    python benchmarks/bench_studio.py --device cuda --gpus 1 --rooms 128 --profile prof  # prof/profile.txt by role
 """
 
 from __future__ import annotations
