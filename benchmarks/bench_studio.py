@@ -37,12 +37,15 @@ Usage:
     CUDA_VISIBLE_DEVICES=0,1 python benchmarks/bench_studio.py --device cuda --workers 2 --rooms 64,128,256,512
     python benchmarks/bench_studio.py --mode engine --rooms 256,1024,2048 --device cuda
     python benchmarks/bench_studio.py --mode dask --rooms 2
+    python benchmarks/bench_studio.py --device cuda --gpus 1 --workers-per-gpu 2,4,8 --rooms 128,256,320  # a sweep
+    python benchmarks/bench_studio.py --device cuda --gpus 1 --rooms 128 --profile prof  # prof/profile.txt by role
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import math
 import os
@@ -121,6 +124,15 @@ async def _make_rooms(front, names: list[str], presets: tuple[str, ...], at_once
     await asyncio.gather(*(one(i, n) for i, n in enumerate(names)))
 
 
+@contextlib.contextmanager
+def started(studio, timeout: float):
+    """The studio started (given `timeout` seconds: its workers start slower under the profiler), stopped after."""
+    try:
+        yield studio.start(timeout)
+    finally:
+        studio.stop()
+
+
 def _kill_one(studio) -> tuple[object, int]:
     """SIGKILL the worker process with the most rooms; (its place, its room count)."""
     import signal
@@ -140,8 +152,8 @@ def run_rooms(count: int, presets: tuple[str, ...], seconds: float, device: str,
 
     limits = StudioLimits(rooms=max(64, count + 1), park_after=0)
     made = float("nan")
-    with StudioServer(tempfile.mkdtemp(prefix="bench-studio-"), device=device, workers=workers,
-                      limits=limits) as studio:
+    with started(StudioServer(tempfile.mkdtemp(prefix="bench-studio-"), device=device, workers=workers,
+                              limits=limits), max(180.0, deadline - time.time() - 60.0)) as studio:
         left = lambda: max(1.0, deadline - time.time())  # noqa: E731
         # a room on each place first: what the first room loads is not a room's
         studio.call(_make_rooms(studio.front, [f"warm{p}" for p in range(max(1, workers))], presets, 64),
@@ -429,10 +441,16 @@ def trial_seconds(count: int, seconds: float) -> float:
     return 30.0 + seconds + 0.12 * count
 
 
+def workers_of(g: int, per_gpu: int) -> int:
+    """Worker processes for g GPUs: per_gpu each (0: cores / (2 GPUs), at most 8 a GPU)."""
+    return g * (per_gpu or max(1, min(8, (os.cpu_count() or 2) // (2 * g))))
+
+
 def run_gpu_counts(args, gpu_counts: list[int], per_gpu: list[int], presets: tuple[str, ...]) -> list[dict]:
-    """For each GPU count g (the first g GPUs, --workers-per-gpu workers each, rooms on the least loaded GPU): g x
-    --rooms designers in turn, up to the first count that misses p95 <= 50 ms, within --budget seconds; then the most
-    designers that passed per GPU count and the ratio to one GPU; with --kill-worker a run more that kills a worker."""
+    """For each GPU count g (the first g GPUs, rooms on the least loaded GPU) and each --workers-per-gpu w in turn:
+    g x --rooms designers in turn, up to the first count that misses p95 <= 50 ms, within --budget seconds a (g, w);
+    then the most designers that passed for each and the ratio to one GPU (same w); with --kill-worker a run more
+    that kills a worker (the largest g, the w that passed the most designers there)."""
     from somwidget.frontend.studio.workers import gpu_ids
 
     visible = gpu_ids() if args.device != "cpu" else [str(i) for i in range(max(gpu_counts))]
@@ -444,38 +462,44 @@ def run_gpu_counts(args, gpu_counts: list[int], per_gpu: list[int], presets: tup
             continue
         if args.device != "cpu":
             os.environ["CUDA_VISIBLE_DEVICES"] = ",".join(visible[:g])
-        workers = g * (args.workers_per_gpu or max(1, min(8, (os.cpu_count() or 2) // (2 * g))))
-        end = time.time() + args.budget
-        best[g] = 0
-        for per in per_gpu:
-            count = per * g
-            need = trial_seconds(count, args.seconds)
-            if time.time() + need > end:
-                print(f"# {g} GPUs, {count} rooms: not started (about {need:.0f} s; {end - time.time():.0f} s of "
-                      f"the budget left)", flush=True)
-                break
-            r = run_rooms(count, presets, args.seconds, args.device, workers,
-                          args.client_procs or default_procs(count), end)
-            r.update(gpus=g, workers=workers)
-            results.append(r)
-            print(rooms_line(r, g, workers), flush=True)
-            if not r["ok"]:
-                break
-            best[g] = count
+        for w in args.workers_per_gpu:
+            workers = workers_of(g, w)
+            end = time.time() + args.budget
+            best[g, w] = 0
+            for per in per_gpu:
+                count = per * g
+                need = trial_seconds(count, args.seconds)
+                if time.time() + need > end:
+                    print(f"# {g} GPUs, {workers} workers, {count} rooms: not started (about {need:.0f} s; "
+                          f"{end - time.time():.0f} s of the budget left)", flush=True)
+                    break
+                r = run_rooms(count, presets, args.seconds, args.device, workers,
+                              args.client_procs or default_procs(count), end)
+                r.update(gpus=g, workers=workers)
+                results.append(r)
+                print(rooms_line(r, g, workers), flush=True)
+                if not r["ok"]:
+                    break
+                best[g, w] = count
     if before is None:
         os.environ.pop("CUDA_VISIBLE_DEVICES", None)
     else:
         os.environ["CUDA_VISIBLE_DEVICES"] = before
-    one = best.get(1)
+
+    def shown(g, w, n):
+        one = best.get((1, w))
+        return (f"{g} GPU{'s' if g > 1 else ''} x {workers_of(g, w) // g} workers: {n}"
+                + (f" ({n / one:.2f}x one GPU)" if one and g > 1 else ""))
+
     print(f"# most designers at p95 <= {TARGET_MS:g} ms (car rooms, one a designer): "
-          + "; ".join(f"{g} GPU{'s' if g > 1 else ''}: {n}" + (f" ({n / one:.2f}x one GPU)" if one and g > 1 else "")
-                      for g, n in best.items()), flush=True)
+          + "; ".join(shown(g, w, n) for (g, w), n in best.items()), flush=True)
     if args.kill_worker and best:
-        g = max(best)
-        count = max(best[g], per_gpu[0] * g)
+        g = max(g for g, _ in best)
+        w = max((w for gg, w in best if gg == g), key=lambda w: best[g, w])
+        count = max(best[g, w], per_gpu[0] * g)
         if args.device != "cpu":
             os.environ["CUDA_VISIBLE_DEVICES"] = ",".join(visible[:g])
-        workers = g * (args.workers_per_gpu or max(1, min(8, (os.cpu_count() or 2) // (2 * g))))
+        workers = workers_of(g, w)
         r = run_rooms(count, presets, args.seconds, args.device, workers, args.client_procs or default_procs(count),
                       time.time() + args.budget, kill=True)
         r.update(gpus=g, workers=workers)
@@ -512,6 +536,40 @@ def watchdog(seconds: float) -> None:
     timer.start()
 
 
+# -- profiling every process (benchmarks/profile_hook) -------------------------------------------------------------
+HOOK = Path(__file__).resolve().parent / "profile_hook"
+
+
+def profiling(folder: str) -> bool:
+    """Whether this process runs under the hook, profiling into `folder`."""
+    hook = sys.modules.get("sitecustomize")
+    return (getattr(hook, "_DIR", None) == str(Path(folder).resolve())
+            and Path(getattr(hook, "__file__", "")).resolve().parent == HOOK)
+
+
+def profiled_again(folder: str, argv) -> int:
+    """This command again under the hook (its folder first on PYTHONPATH, SOMWIDGET_PROFILE_DIR set): every process
+    it starts (the studio's workers, the designers) is profiled from its first line; its exit status."""
+    import subprocess
+
+    out = Path(folder).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    for old in out.glob("*.prof"):
+        old.unlink()
+    path = os.pathsep.join(p for p in (str(HOOK), str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
+    env = dict(os.environ, PYTHONPATH=path, SOMWIDGET_PROFILE_DIR=str(out))
+    args = sys.argv[1:] if argv is None else list(argv)
+    return subprocess.call([sys.executable, str(Path(__file__).resolve()), *args], env=env)
+
+
+def summarise_profiles(folder: str) -> Path:
+    """This process's profile written (the studio's workers wrote theirs as they stopped), then DIR/profile.txt."""
+    from profile_summary import write_summary
+
+    sys.modules["sitecustomize"].dump("front")
+    return write_summary(folder)
+
+
 # -- the command -----------------------------------------------------------------------------------------------------
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -525,7 +583,11 @@ def main(argv=None) -> int:
                         help="designer processes (0: one per 48 designers, at most a quarter of the cores)")
     parser.add_argument("--gpus", default="", help="rooms mode: GPU counts to run in turn (e.g. 1,2,4): --rooms per "
                         "GPU, --workers-per-gpu workers a GPU; the most designers at p95 <= 50 ms each and the ratio")
-    parser.add_argument("--workers-per-gpu", type=int, default=0, help="with --gpus (0: cores / (2 GPUs), at most 8)")
+    parser.add_argument("--workers-per-gpu", default="0", help="with --gpus: worker processes a GPU, or several to "
+                        "run in turn, comma-separated (e.g. 2,4,8; 0: cores / (2 GPUs), at most 8)")
+    parser.add_argument("--profile", default=None, metavar="DIR", help="profile every process of the run "
+                        "(benchmarks/profile_hook: cProfile, one file a process) and summarise them by role in "
+                        "DIR/profile.txt (the top functions of the front, the workers, the designers)")
     parser.add_argument("--budget", type=float, default=300.0, help="rooms mode: seconds for each GPU count (or "
                         "room count without --gpus); a room count that would not fit what is left is not started")
     parser.add_argument("--deadline", type=float, default=0.0, help="rooms mode: seconds for the whole run (0: the "
@@ -536,6 +598,9 @@ def main(argv=None) -> int:
     parser.add_argument("--no-own", action="store_true", help="engine mode: leave out the rooms stepped one by one")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
+    if args.profile and not profiling(args.profile):
+        return profiled_again(args.profile, argv)
+    args.workers_per_gpu = [int(v) for v in str(args.workers_per_gpu).split(",") if v.strip()] or [0]
     # the rooms' sessions keep their folders under the rooms folder; anything else goes to a folder of this run
     os.environ.setdefault("SOMWIDGET_DATA_DIR", tempfile.mkdtemp(prefix="bench-studio-data-"))
     heavy = check_imports() if args.mode != "engine" else []  # the engine alone needs numpy and warp only
@@ -581,6 +646,8 @@ def main(argv=None) -> int:
                       f"{r['designer_fps']:.1f} frames/s", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2))
+    if args.profile:
+        print(f"# profiles by role: {summarise_profiles(args.profile)}", flush=True)
     return 0
 
 

@@ -246,8 +246,8 @@ class Handles:
         grabbed at its old place and released at once; then `new` are the controls."""
         old = self.controls
         self.end_released(state)
-        if old is not None and len(new.values) == len(old.values) and new.order == old.order and (
-                new.radii is old.radii or np.array_equal(new.radii > 0, old.radii > 0)) and new.radii.any():
+        if new.radii.any() and old is not None and len(new.values) == len(old.values) and new.order == old.order and (
+                new.radii is old.radii or np.array_equal(new.radii > 0, old.radii > 0)):
             moved = np.any(new.values != old.values, axis=1) & (new.radii > 0)
             typed = [int(i) for i in np.flatnonzero(moved) if int(i) not in self.held]
             if typed:
@@ -256,7 +256,7 @@ class Handles:
 
     def end_released(self, state: SomState) -> None:
         """A restart, or the run at S: every binding no hand holds ends."""
-        if self.controls is not None:
+        if self.controls is not None and self.live.any():  # (point controls bind nothing: a drag's every move)
             live = np.flatnonzero(self.live.reshape(-1, self.order).any(axis=1)).tolist()  # (slot c G + g)
             let_go = [c for c in live if c not in self.held]
             if let_go:

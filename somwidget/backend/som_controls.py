@@ -133,10 +133,14 @@ class Controls:
         raise AssertionError("unreachable: the strokes cover every control")
 
     def effective(self) -> np.ndarray:
-        """[originals..., their first copies..., their second copies...] (copy j is of control j mod k)."""
-        if self.order == 1:
-            return self.values.copy()
-        return images(self.values, self.group_maps()).astype(np.float32)
+        """[originals..., their first copies..., their second copies...] (copy j is of control j mod k): a copy of
+        those made once for these controls (values are this object's own copy, never changed in place; a frame reads
+        them every round)."""
+        kept = self.__dict__.get("_effective")
+        if kept is None:
+            kept = self.values if self.order == 1 else images(self.values, self.group_maps()).astype(np.float32)
+            self.__dict__["_effective"] = kept  # frozen: set past __setattr__, as functools.cached_property does
+        return kept.copy()
 
     def from_slots(self, found: np.ndarray) -> np.ndarray:
         """Per-slot values (a mirrored pair side by side, `n_slots`) in the order of `effective`."""

@@ -18,14 +18,23 @@ NEUTRAL_GREY = (0.72, 0.72, 0.72)
 def hsv_to_rgb(h, s, v) -> np.ndarray:
     """HSV -> RGB for arrays of equal shape (h taken mod 1, s and v clipped to [0, 1]); returns (..., 3) float32.
     Channel n of (r, g, b) is v (1 - s ramp(k)), k = (n' + 6 h) mod 6 for n' = 5, 3, 1 and ramp(k) =
-    clip(min(k, 4 - k), 0, 1): the sextants' table without a branch (a frame's colours: a few numpy calls)."""
+    clip(min(k, 4 - k), 0, 1): the sextants' table without a branch (a frame's colours: a few numpy calls, in place;
+    k lies in [1, 12), so its mod 6 is k - 6 from 6 on, exactly; 1 - s ramp and v times it stay in [0, 1])."""
     h = np.mod(np.asarray(h, np.float64), 1.0)
     s = np.clip(np.asarray(s, np.float64), 0.0, 1.0)
     v = np.clip(np.asarray(v, np.float64), 0.0, 1.0)
-    h, s, v = np.broadcast_arrays(h, s, v)
-    k = np.mod(_CHANNEL_OFFSETS + 6.0 * h[..., None], 6.0)
-    ramp = np.clip(np.minimum(k, 4.0 - k), 0.0, 1.0)
-    return np.clip(v[..., None] * (1.0 - s[..., None] * ramp), 0.0, 1.0).astype(np.float32)
+    h = np.broadcast_to(h, np.broadcast_shapes(h.shape, s.shape, v.shape))
+    k = np.add(_CHANNEL_OFFSETS, 6.0 * h[..., None])
+    k -= 6.0 * (k >= 6.0)
+    ramp = np.subtract(4.0, k)
+    np.minimum(k, ramp, out=ramp)
+    np.clip(ramp, 0.0, 1.0, out=ramp)
+    if s.ndim or s != 1.0:
+        ramp *= s[..., None] if s.ndim else s
+    np.subtract(1.0, ramp, out=ramp)
+    if v.ndim or v != 1.0:
+        ramp *= v[..., None] if v.ndim else v
+    return ramp.astype(np.float32)
 
 
 _CHANNEL_OFFSETS = np.array([5.0, 3.0, 1.0])

@@ -164,6 +164,7 @@ class FrameStream:
         self._seq = 0
         self._times: list[float] = []
         self._control_colours: tuple = ((), None)  # (key, (control colours, effective colours)): `_colours_of`
+        self._node_colours: tuple = (None, None, None)  # (layout, the weights' colour dims, colours): `_nodes_of`
 
     def make(self, som, preset: Preset, generation: int, *, cycles: int, cycle_time: float,
              status: Callable[[], dict], weights: np.ndarray | None = None) -> Frame:
@@ -187,7 +188,7 @@ class FrameStream:
         return Frame(
             seq=seq, generation=generation, iteration=s, iterations=S, running=(not paused and not held and s < S),
             paused=paused, weights=_readonly(w), positions=_readonly(pos),
-            colours=_readonly(_node_colours(w, layout)), controls=_readonly(controls),
+            colours=self._nodes_of(w, layout), controls=_readonly(controls),
             control_colours=control_colours, effective_controls=_readonly(eff),
             effective_colours=effective_colours, control_positions=_readonly(cpos),
             effective_positions=_readonly(epos), cycle_time=float(cycle_time), step_cycles=int(cycles),
@@ -205,6 +206,19 @@ class FrameStream:
         if kept is None or kept_key != key:
             kept = (_readonly(_presets.colours_of(controls, layout)), _readonly(_presets.colours_of(eff, layout)))
             self._control_colours = (key, kept)
+        return kept
+
+    def _nodes_of(self, w: np.ndarray, layout) -> np.ndarray:
+        """The nodes' colours (read-only), made again only when the weights' colour dims changed: a drag's frames,
+        restarted from its anchor, mostly move positions only (a car room's colours took a quarter of its frame).
+        Caller: `make`, under the Som's lock."""
+        if layout.colour_space == "none":
+            return _node_colours(w, layout)
+        dims = w[:, list(layout.colour)]
+        kept_layout, kept_dims, kept = self._node_colours
+        if kept is None or kept_layout != layout or not np.array_equal(kept_dims, dims):
+            kept = _readonly(_node_colours(w, layout))
+            self._node_colours = (layout, dims, kept)
         return kept
 
     def again(self, frame: Frame, **changes) -> Frame:
