@@ -11,7 +11,6 @@ panel and a second output of the widget follow. The sessions train the real Som 
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import json
 import os
@@ -19,7 +18,6 @@ import re
 import subprocess
 import sys
 import time
-import urllib.request
 
 import helpers
 import numpy as np
@@ -350,35 +348,12 @@ def notebook_file(path, cells: list[str]) -> None:
     path.write_text(json.dumps(nb))
 
 
-@contextlib.contextmanager
-def jupyter_server(app: str, root, *options: str):
-    """A real JupyterLab 4 (`app` "jupyterlab") or Notebook 7 ("notebook") server on `root`; yields its port."""
-    pytest.importorskip(app)
-    if not os.path.exists(CHROMIUM):
-        pytest.skip(f"{CHROMIUM} is missing")
-    port = helpers.free_port()
-    env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(root / "data")}
-    with open(root / "lab.log", "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", app, "--allow-root", "--no-browser", f"--port={port}",
-                                 "--ServerApp.ip=127.0.0.1", "--IdentityProvider.token=t0k",
-                                 f"--ServerApp.root_dir={root}", *options], env=env, stdout=log,
-                                stderr=subprocess.STDOUT)
-        try:
-            helpers.wait_for(lambda: _answers(f"http://127.0.0.1:{port}/api?token=t0k"), timeout=90,
-                             what=f"{app} to start")
-            yield port
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-
-
 @pytest.fixture(scope="module", params=["jupyterlab", "notebook"])
-def lab(request, tmp_path_factory):
-    """A notebook with the widget's cells, opened in a real JupyterLab 4 or Notebook 7 server; yields its URL."""
-    root = tmp_path_factory.mktemp("lab")
+def lab(request, jupyter):
+    """A notebook with the widget's cells, opened in JupyterLab 4 or Notebook 7 (the worker's Jupyter server,
+    conftest.py); yields its URL. The module's tests share its kernel; it is shut down after the last."""
+    root = jupyter.root / f"lab-{request.param}"
+    root.mkdir()
     notebook_file(root / "clay.ipynb", [
         "import somwidget\nview = somwidget.show('car', device='cpu')\nview",
         "view  # a second output of the same widget",
@@ -389,17 +364,8 @@ def lab(request, tmp_path_factory):
         "import somwidget\nview = somwidget.show('car', device='cpu')\nview",
         "import hashlib\nprint('clay', len(view.session.controls), view.session.history[0],\n"
         "      hashlib.md5(view.session.frame.positions.tobytes()).hexdigest())"])
-    with jupyter_server(request.param, root) as port:
-        page = "lab/tree" if request.param == "jupyterlab" else "notebooks"
-        yield f"http://127.0.0.1:{port}/{page}/clay.ipynb?token=t0k"
-
-
-def _answers(url: str) -> bool:
-    try:
-        with urllib.request.urlopen(url, timeout=5):
-            return True
-    except OSError:
-        return False
+    yield jupyter.url(root / "clay.ipynb", request.param)
+    jupyter.shut_down_kernels(root)
 
 
 def open_notebook(browser, url: str):
@@ -636,19 +602,14 @@ def view_errors(page, views: str) -> list:
     return page.evaluate(f"() => {views}.flatMap((v) => v.describe().errors)")
 
 
-def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened(tmp_path):
+def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened(jupyter, notebook_dir):
     """JupyterLab with "Save Widget State Automatically": run the widget, let the view take its picture, save; the
     file holds that picture in its widget state, and the notebook reopened in a fresh kernel (whose widgets are gone)
     shows it in the view's place instead of a blank canvas."""
-    settings = tmp_path / "settings" / "@jupyter-widgets" / "jupyterlab-manager"
-    settings.mkdir(parents=True)
-    (settings / "plugin.jupyterlab-settings").write_text(json.dumps({"saveState": True}))
-    root = tmp_path / "root"
-    root.mkdir()
-    path = root / "saved.ipynb"
+    path = notebook_dir / "saved.ipynb"
     notebook_file(path, ["import somwidget\nview = somwidget.show('car', device='cpu')\nview"])
-    with jupyter_server("jupyterlab", root, f"--LabApp.user_settings_dir={tmp_path / 'settings'}") as port:
-        url = f"http://127.0.0.1:{port}/lab/tree/saved.ipynb?token=t0k"
+    with jupyter.lab_setting("@jupyter-widgets/jupyterlab-manager:plugin", {"saveState": True}):
+        url = jupyter.url(path)
         with helpers.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
             try:
@@ -672,11 +633,7 @@ def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened
                 page.close()
                 # the notebook's kernel shut down: reopened, it gets a fresh one, where the saved widgets have no
                 # kernel side (what a reader of the saved file sees)
-                api = f"http://127.0.0.1:{port}/api/sessions"
-                with urllib.request.urlopen(f"{api}?token=t0k", timeout=10) as r:
-                    for session in json.loads(r.read()):
-                        urllib.request.urlopen(urllib.request.Request(f"{api}/{session['id']}?token=t0k",
-                                                                      method="DELETE"), timeout=30).close()
+                jupyter.shut_down_kernels(notebook_dir)
                 page = browser.new_page(viewport={"width": 1400, "height": 1000})
                 page.goto(url)
                 shown = page.wait_for_selector("img.somview-picture", timeout=90000)
