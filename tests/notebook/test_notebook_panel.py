@@ -4,7 +4,7 @@ ipywidgets objects work in plain Python, so most tests need no Jupyter frontend:
 frontend does when a person moves a slider) and check the session followed, or send an intent to the session and
 check the widgets after the next frame. Those tests show the protocol, as does
 `test_clay_widget_protocol_over_the_comm` (the clay view's messages, sent by hand).
-`test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session` shows the interaction: a real JupyterLab 4
+`test_drag_in_the_widget_and_a_refused_value_in_jupyterlab_and_notebook_7` shows the interaction: a real JupyterLab 4
 and a real Notebook 7 run the cells in Chromium (Playwright), the mouse drags a control inside the widget, and the
 panel and a second output of the widget follow. The sessions train the real Som on the CPU.
 """
@@ -389,10 +389,11 @@ def dismiss_dialogs(page) -> None:
         page.wait_for_timeout(500)
 
 
-def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
+def test_drag_in_the_widget_and_a_refused_value_in_jupyterlab_and_notebook_7(lab):
     """Interaction, in JupyterLab 4 and in Notebook 7: the page runs the cells; the mouse drags control 2 inside the
     widget; the panel's controls table (same output) shows the control moved and the second output of the widget
-    draws it there too; the picture a saved notebook keeps (the widget's state) is retaken after the drag."""
+    draws it there too; the picture a saved notebook keeps (the widget's state) is retaken after the drag. Then, on
+    the same page, the keyboard in the panel's metric weight fields (`refused_value_snaps_back`)."""
     views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
     with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
@@ -427,6 +428,7 @@ def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
             assert view_errors(page, views) == []
             after = picture(page, unlike=shown)  # a new picture of the clay after the drag, in the kernel
             assert after[1] > 5000, after  # a PNG of a drawn clay, not an empty canvas
+            refused_value_snaps_back(page)
         finally:
             browser.close()
 
@@ -459,41 +461,32 @@ def type_in(page, field, text: str) -> None:
     page.keyboard.press("Enter")
 
 
-def test_a_refused_value_snaps_back_and_ctrl_z_in_a_field_edits_only_the_field(lab):
-    """In JupyterLab 4 and Notebook 7, with the keyboard in the panel's metric weight fields: every weight 0 is
-    refused (the last one): the message shows and the field goes back to the value in effect. Ctrl+Z in a field
-    undoes the typing there and nothing of the session."""
-    views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
+def refused_value_snaps_back(page) -> None:
+    """With the keyboard in the panel's metric weight fields: every weight 0 is refused (the last one): the message
+    shows and the field goes back to the value in effect. Ctrl+Z in a field undoes the typing there and nothing of
+    the session. The car's weights are typed back at the end."""
     names = ["x", "y", "z", "hue", "saturation"]
-    with helpers.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            page = open_notebook(browser, lab)
-            run_cell(page, 0)
-            metric_field(page, names[-1]).wait_for(timeout=120000)
-            page.wait_for_function(f"() => {views}.length > 0", timeout=30000)  # the view beside the panel
-            steps = kernel_session(page)[0]
-            for name in names[:-1]:
-                type_in(page, metric_field(page, name), "0")
-            last = metric_field(page, names[-1])
-            type_in(page, last, "0")
-            page.get_by_text("at least one weight must be positive").wait_for(timeout=15000)
-            page.wait_for_function("(el) => el.value === '1'", arg=last.element_handle(), timeout=15000)
-            state = kernel_session(page)
-            assert state[1:] == [0.0, 0.0, 0.0, 0.0, 1.0] and state[0] > steps  # taken, the last refused
-            field = metric_field(page, "x")
-            field.click()
-            page.keyboard.press("Control+a")
-            page.keyboard.type("3")
-            page.keyboard.press("Control+z")  # the field's own undo
-            page.wait_for_function("(el) => el.value === '0'", arg=field.element_handle(), timeout=5000)
-            page.keyboard.press("Tab")
-            assert kernel_session(page) == state  # nothing of the session changed or was undone
-            for name in names[:-1]:  # the car's weights again
-                type_in(page, metric_field(page, name), "1")
-            assert kernel_session(page)[1:] == [1.0] * 5
-        finally:
-            browser.close()
+    metric_field(page, names[-1]).wait_for(timeout=120000)
+    steps = kernel_session(page)[0]
+    for name in names[:-1]:
+        type_in(page, metric_field(page, name), "0")
+    last = metric_field(page, names[-1])
+    type_in(page, last, "0")
+    page.get_by_text("at least one weight must be positive").first.wait_for(timeout=15000)  # (each output's panel)
+    page.wait_for_function("(el) => el.value === '1'", arg=last.element_handle(), timeout=15000)
+    state = kernel_session(page)
+    assert state[1:] == [0.0, 0.0, 0.0, 0.0, 1.0] and state[0] > steps  # taken, the last refused
+    field = metric_field(page, "x")
+    field.click()
+    page.keyboard.press("Control+a")
+    page.keyboard.type("3")
+    page.keyboard.press("Control+z")  # the field's own undo
+    page.wait_for_function("(el) => el.value === '0'", arg=field.element_handle(), timeout=5000)
+    page.keyboard.press("Tab")
+    assert kernel_session(page) == state  # nothing of the session changed or was undone
+    for name in names[:-1]:  # the car's weights again
+        type_in(page, metric_field(page, name), "1")
+    assert kernel_session(page)[1:] == [1.0] * 5
 
 
 def clay_in_kernel(page) -> tuple[int, int, str]:
