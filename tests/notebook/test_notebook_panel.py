@@ -359,10 +359,9 @@ def lab(request, jupyter):
         "view  # a second output of the same widget",
         "import hashlib\npng = view.view.picture_png() or b''\n"
         "print('picture', png[:8] == b'\\x89PNG\\r\\n\\x1a\\n', len(png), hashlib.md5(png).hexdigest())",
-        "print('session', view.session.history[0], *view.session.parameters['metric_weights'])"])
-    notebook_file(root / "modelling.ipynb", [  # a kernel of its own: no earlier test's sessions or saved outputs
-        "import somwidget\nview = somwidget.show('car', device='cpu')\nview",
-        "import hashlib\nprint('clay', len(view.session.controls), view.session.history[0],\n"
+        "print('session', view.session.history[0], *view.session.parameters['metric_weights'])",
+        "import hashlib\nassert view.session.wait_idle(120)  # (the weights typed back retrain the car)\n"
+        "print('clay', len(view.session.controls), view.session.history[0],\n"
         "      hashlib.md5(view.session.frame.positions.tobytes()).hexdigest())"])
     yield jupyter.url(root / "clay.ipynb", request.param)
     jupyter.shut_down_kernels(root)
@@ -389,11 +388,12 @@ def dismiss_dialogs(page) -> None:
         page.wait_for_timeout(500)
 
 
-def test_drag_in_the_widget_and_a_refused_value_in_jupyterlab_and_notebook_7(lab):
+def test_drag_wheel_and_keys_in_the_widget_in_jupyterlab_and_notebook_7(lab):
     """Interaction, in JupyterLab 4 and in Notebook 7: the page runs the cells; the mouse drags control 2 inside the
     widget; the panel's controls table (same output) shows the control moved and the second output of the widget
     draws it there too; the picture a saved notebook keeps (the widget's state) is retaken after the drag. Then, on
-    the same page, the keyboard in the panel's metric weight fields (`refused_value_snaps_back`)."""
+    the same page and kernel (one setup for the three): the keyboard in the panel's metric weight fields
+    (`refused_value_snaps_back`), and the wheel and a double click in the view (`wheel_and_double_click`)."""
     views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
     with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
@@ -429,6 +429,7 @@ def test_drag_in_the_widget_and_a_refused_value_in_jupyterlab_and_notebook_7(lab
             after = picture(page, unlike=shown)  # a new picture of the clay after the drag, in the kernel
             assert after[1] > 5000, after  # a PNG of a drawn clay, not an empty canvas
             refused_value_snaps_back(page)
+            wheel_and_double_click(page, views)
         finally:
             browser.close()
 
@@ -490,9 +491,10 @@ def refused_value_snaps_back(page) -> None:
 
 
 def clay_in_kernel(page) -> tuple[int, int, str]:
-    """Run modelling.ipynb's second cell: (controls, undo steps, md5 of the positions) of the kernel's session."""
-    cell = page.locator(".jp-Notebook .jp-Cell").nth(1)
-    run_cell(page, 1)
+    """Run the notebook's fifth cell: (controls, undo steps, md5 of the positions) of the kernel's session, once it
+    has settled."""
+    cell = page.locator(".jp-Notebook .jp-Cell").nth(4)
+    run_cell(page, 4)
     page.wait_for_function("(el) => !el.innerText.includes('[*]')",
                            arg=cell.locator(".jp-InputPrompt").element_handle(), timeout=30000)
     page.wait_for_timeout(200)
@@ -501,53 +503,44 @@ def clay_in_kernel(page) -> tuple[int, int, str]:
     return int(words[1]), int(words[2]), words[3]
 
 
-def test_the_wheel_zooms_in_and_a_double_click_adds_a_control_in_the_notebook_widget(lab):
-    """The view as a modelling tool inside JupyterLab 4 and Notebook 7 (the same client as the web app): ten wheel
-    ticks over the clay bring the camera closer each time (and do not scroll the notebook away); a double click on
-    the clay adds a control at that point of the surface in the kernel's session, one undo step, and no node moves."""
-    views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
-    with helpers.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            page = open_notebook(browser, lab.replace("clay.ipynb", "modelling.ipynb"))
-            run_cell(page, 0)
-            page.wait_for_function(f"() => {{ const v = {views}; return v.length >= 1 && "
-                                   "v[0].describe().painted > 0; }", timeout=120000)
-            try:  # the car trained to its end: nothing moves by itself
-                page.wait_for_function(f"() => {views}[0].describe().running === false", timeout=180000)
-            except Exception:
-                d = page.evaluate(f"() => {views}[0].describe()")
-                seen = {k: d.get(k) for k in ("running", "status", "painted", "errors")}
-                raise AssertionError(f"the car did not settle in the view: {seen}") from None
-            page.locator(".somview").first.scroll_into_view_if_needed()
-            page.wait_for_timeout(500)
-            box = page.locator(".somview canvas").first.bounding_box()
-            helpers.wheel_ten_ticks_closer(page, f"{views}[0]", (box["x"] + box["width"] / 2,
-                                                                 box["y"] + box["height"] / 2))
-            assert page.locator(".somview canvas").first.bounding_box()["y"] == pytest.approx(box["y"], abs=1), \
-                "the wheel scrolled the notebook"
-            n0, steps0, positions0 = clay_in_kernel(page)  # the notebook scrolls to that cell: back to the view
-            page.locator(".somview").first.scroll_into_view_if_needed()
-            page.locator(".somview-fit").first.click()
-            page.wait_for_function(f"() => {{ const d = {views}[0].describe(); "
-                                   "return Math.abs(d.distance - d.fitDistance) < 1e-6 * d.fitDistance; }",
-                                   timeout=5000)
-            page.wait_for_timeout(300)
-            box = page.locator(".somview canvas").first.bounding_box()
-            at = (round(box["x"] + box["width"] / 2 - 20), round(box["y"] + box["height"] / 2 + 15))
-            # (whole pixels, as a mouse event's clientX / clientY are: half a pixel is 0.006 of the car here)
-            aimed = page.evaluate(f"() => {views}[0].surfaceAt({at[0]}, {at[1]})")
-            assert aimed is not None
-            page.mouse.dblclick(*at)
-            page.wait_for_function(f"() => {views}[0].describe().k === {n0 + 1}", timeout=15000)
-            placed = page.evaluate(f"() => {views}[0].controlModel({n0})")
-            np.testing.assert_allclose(placed, aimed, atol=1e-4)  # where the double click was, on the surface
-            n1, steps1, positions1 = clay_in_kernel(page)
-            assert (n1, steps1) == (n0 + 1, steps0 + 1)  # one control more, one undo step
-            assert positions1 == positions0  # nothing moved
-            assert view_errors(page, views) == []
-        finally:
-            browser.close()
+def wheel_and_double_click(page, views: str) -> None:
+    """The view as a modelling tool inside JupyterLab 4 and Notebook 7 (the same client as the web app), once the
+    clay has settled: ten wheel ticks over the clay bring the camera closer each time (and do not scroll the notebook
+    away); a double click on the clay adds a control at that point of the surface in the kernel's session, one undo
+    step, and no node moves."""
+    try:  # the car trained to its end: nothing moves by itself
+        page.wait_for_function(f"() => {views}[0].describe().running === false", timeout=180000)
+    except Exception:
+        d = page.evaluate(f"() => {views}[0].describe()")
+        seen = {k: d.get(k) for k in ("running", "status", "painted", "errors")}
+        raise AssertionError(f"the car did not settle in the view: {seen}") from None
+    page.locator(".somview").first.scroll_into_view_if_needed()
+    page.wait_for_timeout(500)
+    box = page.locator(".somview canvas").first.bounding_box()
+    helpers.wheel_ten_ticks_closer(page, f"{views}[0]", (box["x"] + box["width"] / 2,
+                                                         box["y"] + box["height"] / 2))
+    assert page.locator(".somview canvas").first.bounding_box()["y"] == pytest.approx(box["y"], abs=1), \
+        "the wheel scrolled the notebook"
+    n0, steps0, positions0 = clay_in_kernel(page)  # the notebook scrolls to that cell: back to the view
+    page.locator(".somview").first.scroll_into_view_if_needed()
+    page.locator(".somview-fit").first.click()
+    page.wait_for_function(f"() => {{ const d = {views}[0].describe(); "
+                           "return Math.abs(d.distance - d.fitDistance) < 1e-6 * d.fitDistance; }",
+                           timeout=5000)
+    page.wait_for_timeout(300)
+    box = page.locator(".somview canvas").first.bounding_box()
+    at = (round(box["x"] + box["width"] / 2 - 20), round(box["y"] + box["height"] / 2 + 15))
+    # (whole pixels, as a mouse event's clientX / clientY are: half a pixel is 0.006 of the car here)
+    aimed = page.evaluate(f"() => {views}[0].surfaceAt({at[0]}, {at[1]})")
+    assert aimed is not None
+    page.mouse.dblclick(*at)
+    page.wait_for_function(f"() => {views}[0].describe().k === {n0 + 1}", timeout=15000)
+    placed = page.evaluate(f"() => {views}[0].controlModel({n0})")
+    np.testing.assert_allclose(placed, aimed, atol=1e-4)  # where the double click was, on the surface
+    n1, steps1, positions1 = clay_in_kernel(page)
+    assert (n1, steps1) == (n0 + 1, steps0 + 1)  # one control more, one undo step
+    assert positions1 == positions0  # nothing moved
+    assert view_errors(page, views) == []
 
 
 def picture(page, unlike=None, timeout: float = 30.0) -> tuple:
