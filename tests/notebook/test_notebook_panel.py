@@ -351,7 +351,7 @@ def notebook_file(path, cells: list[str]) -> None:
 @pytest.fixture(scope="module", params=["jupyterlab", "notebook"])
 def lab(request, jupyter):
     """A notebook with the widget's cells, opened in JupyterLab 4 or Notebook 7 (the worker's Jupyter server,
-    conftest.py); yields its URL. The module's tests share its kernel; it is shut down after the last."""
+    conftest.py); yields its URL. Its kernel is shut down after the host's tests."""
     root = jupyter.root / f"lab-{request.param}"
     root.mkdir()
     notebook_file(root / "clay.ipynb", [
