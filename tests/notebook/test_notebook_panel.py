@@ -4,9 +4,10 @@ ipywidgets objects work in plain Python, so most tests need no Jupyter frontend:
 frontend does when a person moves a slider) and check the session followed, or send an intent to the session and
 check the widgets after the next frame. Those tests show the protocol, as does
 `test_clay_widget_protocol_over_the_comm` (the clay view's messages, sent by hand).
-`test_drag_in_the_widget_and_a_refused_value_in_jupyterlab_and_notebook_7` shows the interaction: a real JupyterLab 4
-and a real Notebook 7 run the cells in Chromium (Playwright), the mouse drags a control inside the widget, and the
-panel and a second output of the widget follow. The sessions train the real Som on the CPU.
+`test_drag_wheel_and_keys_in_the_widget_in_jupyterlab_and_notebook_7` shows the interaction: a real JupyterLab 4 and
+a real Notebook 7 (one Jupyter server, tests/notebook/conftest.py) run the cells in Chromium (Playwright), the mouse
+drags a control inside the widget, and the panel and a second output of the widget follow; keys in the panel's
+fields, the wheel and a double click in the view act on the same page. The sessions train the real Som on the CPU.
 """
 
 from __future__ import annotations
