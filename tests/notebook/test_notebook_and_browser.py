@@ -14,7 +14,7 @@ import helpers
 import numpy as np
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS
-from test_notebook_panel import jupyter_server, notebook_file, open_notebook, run_cell, view_errors
+from test_notebook_panel import notebook_file, open_notebook, run_cell, view_errors
 
 pytest.importorskip("ipywidgets")
 
@@ -62,16 +62,16 @@ def rgb(colour: str) -> np.ndarray:
     return np.array([int(colour[i:i + 2], 16) for i in (1, 3, 5)])
 
 
-def test_a_notebook_and_a_browser_share_the_hands(tmp_path):
-    notebook_file(tmp_path / "hands.ipynb", [
+def test_a_notebook_and_a_browser_share_the_hands(jupyter, notebook_dir):
+    notebook_file(notebook_dir / "hands.ipynb", [
         "import somwidget\nview = somwidget.show('car', device='cpu')\nview",
         "from somwidget.frontend.web.standalone import XRServer\nsrv = XRServer(view.session).start()\n"
         "print('serving', srv.base)",
         "s = view.session\nprint('session', s.history[0], *s.controls[2][:3], *s.controls[5][:3])"])
-    with jupyter_server("jupyterlab", tmp_path) as port, helpers.sync_playwright() as p:
+    with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         try:
-            lab = open_notebook(browser, f"http://127.0.0.1:{port}/lab/tree/hands.ipynb?token=t0k")
+            lab = open_notebook(browser, jupyter.url(notebook_dir / "hands.ipynb"))
             run_cell(lab, 0)
             lab.wait_for_function(f"() => {VIEWS}.length === 1 && {VIEWS}[0].describe().painted > 0",
                                   timeout=120000)

@@ -4,14 +4,14 @@ ipywidgets objects work in plain Python, so most tests need no Jupyter frontend:
 frontend does when a person moves a slider) and check the session followed, or send an intent to the session and
 check the widgets after the next frame. Those tests show the protocol, as does
 `test_clay_widget_protocol_over_the_comm` (the clay view's messages, sent by hand).
-`test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session` shows the interaction: a real JupyterLab 4
-and a real Notebook 7 run the cells in Chromium (Playwright), the mouse drags a control inside the widget, and the
-panel and a second output of the widget follow. The sessions train the real Som on the CPU.
+`test_drag_wheel_and_keys_in_the_widget_in_jupyterlab_and_notebook_7` shows the interaction: a real JupyterLab 4 and
+a real Notebook 7 (one Jupyter server, tests/notebook/conftest.py) run the cells in Chromium (Playwright), the mouse
+drags a control inside the widget, and the panel and a second output of the widget follow; keys in the panel's
+fields, the wheel and a double click in the view act on the same page. The sessions train the real Som on the CPU.
 """
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import json
 import os
@@ -19,7 +19,6 @@ import re
 import subprocess
 import sys
 import time
-import urllib.request
 
 import helpers
 import numpy as np
@@ -350,56 +349,23 @@ def notebook_file(path, cells: list[str]) -> None:
     path.write_text(json.dumps(nb))
 
 
-@contextlib.contextmanager
-def jupyter_server(app: str, root, *options: str):
-    """A real JupyterLab 4 (`app` "jupyterlab") or Notebook 7 ("notebook") server on `root`; yields its port."""
-    pytest.importorskip(app)
-    if not os.path.exists(CHROMIUM):
-        pytest.skip(f"{CHROMIUM} is missing")
-    port = helpers.free_port()
-    env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(root / "data")}
-    with open(root / "lab.log", "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", app, "--allow-root", "--no-browser", f"--port={port}",
-                                 "--ServerApp.ip=127.0.0.1", "--IdentityProvider.token=t0k",
-                                 f"--ServerApp.root_dir={root}", *options], env=env, stdout=log,
-                                stderr=subprocess.STDOUT)
-        try:
-            helpers.wait_for(lambda: _answers(f"http://127.0.0.1:{port}/api?token=t0k"), timeout=90,
-                             what=f"{app} to start")
-            yield port
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-
-
 @pytest.fixture(scope="module", params=["jupyterlab", "notebook"])
-def lab(request, tmp_path_factory):
-    """A notebook with the widget's cells, opened in a real JupyterLab 4 or Notebook 7 server; yields its URL."""
-    root = tmp_path_factory.mktemp("lab")
+def lab(request, jupyter):
+    """A notebook with the widget's cells, opened in JupyterLab 4 or Notebook 7 (the worker's Jupyter server,
+    conftest.py); yields its URL. Its kernel is shut down after the host's tests."""
+    root = jupyter.root / f"lab-{request.param}"
+    root.mkdir()
     notebook_file(root / "clay.ipynb", [
         "import somwidget\nview = somwidget.show('car', device='cpu')\nview",
         "view  # a second output of the same widget",
         "import hashlib\npng = view.view.picture_png() or b''\n"
         "print('picture', png[:8] == b'\\x89PNG\\r\\n\\x1a\\n', len(png), hashlib.md5(png).hexdigest())",
-        "print('session', view.session.history[0], *view.session.parameters['metric_weights'])"])
-    notebook_file(root / "modelling.ipynb", [  # a kernel of its own: no earlier test's sessions or saved outputs
-        "import somwidget\nview = somwidget.show('car', device='cpu')\nview",
-        "import hashlib\nprint('clay', len(view.session.controls), view.session.history[0],\n"
+        "print('session', view.session.history[0], *view.session.parameters['metric_weights'])",
+        "import hashlib\nassert view.session.wait_idle(120)  # (the weights typed back retrain the car)\n"
+        "print('clay', len(view.session.controls), view.session.history[0],\n"
         "      hashlib.md5(view.session.frame.positions.tobytes()).hexdigest())"])
-    with jupyter_server(request.param, root) as port:
-        page = "lab/tree" if request.param == "jupyterlab" else "notebooks"
-        yield f"http://127.0.0.1:{port}/{page}/clay.ipynb?token=t0k"
-
-
-def _answers(url: str) -> bool:
-    try:
-        with urllib.request.urlopen(url, timeout=5):
-            return True
-    except OSError:
-        return False
+    yield jupyter.url(root / "clay.ipynb", request.param)
+    jupyter.shut_down_kernels(root)
 
 
 def open_notebook(browser, url: str):
@@ -423,10 +389,12 @@ def dismiss_dialogs(page) -> None:
         page.wait_for_timeout(500)
 
 
-def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
+def test_drag_wheel_and_keys_in_the_widget_in_jupyterlab_and_notebook_7(lab):
     """Interaction, in JupyterLab 4 and in Notebook 7: the page runs the cells; the mouse drags control 2 inside the
     widget; the panel's controls table (same output) shows the control moved and the second output of the widget
-    draws it there too; the picture a saved notebook keeps (the widget's state) is retaken after the drag."""
+    draws it there too; the picture a saved notebook keeps (the widget's state) is retaken after the drag. Then, on
+    the same page and kernel (one setup for the three): the keyboard in the panel's metric weight fields
+    (`refused_value_snaps_back`), and the wheel and a double click in the view (`wheel_and_double_click`)."""
     views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
     with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
@@ -461,6 +429,8 @@ def test_drag_in_the_widget_in_jupyterlab_and_notebook_7_moves_the_session(lab):
             assert view_errors(page, views) == []
             after = picture(page, unlike=shown)  # a new picture of the clay after the drag, in the kernel
             assert after[1] > 5000, after  # a PNG of a drawn clay, not an empty canvas
+            refused_value_snaps_back(page)
+            wheel_and_double_click(page, views)
         finally:
             browser.close()
 
@@ -493,47 +463,39 @@ def type_in(page, field, text: str) -> None:
     page.keyboard.press("Enter")
 
 
-def test_a_refused_value_snaps_back_and_ctrl_z_in_a_field_edits_only_the_field(lab):
-    """In JupyterLab 4 and Notebook 7, with the keyboard in the panel's metric weight fields: every weight 0 is
-    refused (the last one): the message shows and the field goes back to the value in effect. Ctrl+Z in a field
-    undoes the typing there and nothing of the session."""
-    views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
+def refused_value_snaps_back(page) -> None:
+    """With the keyboard in the panel's metric weight fields: every weight 0 is refused (the last one): the message
+    shows and the field goes back to the value in effect. Ctrl+Z in a field undoes the typing there and nothing of
+    the session. The car's weights are typed back at the end."""
     names = ["x", "y", "z", "hue", "saturation"]
-    with helpers.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            page = open_notebook(browser, lab)
-            run_cell(page, 0)
-            metric_field(page, names[-1]).wait_for(timeout=120000)
-            page.wait_for_function(f"() => {views}.length > 0", timeout=30000)  # the view beside the panel
-            steps = kernel_session(page)[0]
-            for name in names[:-1]:
-                type_in(page, metric_field(page, name), "0")
-            last = metric_field(page, names[-1])
-            type_in(page, last, "0")
-            page.get_by_text("at least one weight must be positive").wait_for(timeout=15000)
-            page.wait_for_function("(el) => el.value === '1'", arg=last.element_handle(), timeout=15000)
-            state = kernel_session(page)
-            assert state[1:] == [0.0, 0.0, 0.0, 0.0, 1.0] and state[0] > steps  # taken, the last refused
-            field = metric_field(page, "x")
-            field.click()
-            page.keyboard.press("Control+a")
-            page.keyboard.type("3")
-            page.keyboard.press("Control+z")  # the field's own undo
-            page.wait_for_function("(el) => el.value === '0'", arg=field.element_handle(), timeout=5000)
-            page.keyboard.press("Tab")
-            assert kernel_session(page) == state  # nothing of the session changed or was undone
-            for name in names[:-1]:  # the car's weights again
-                type_in(page, metric_field(page, name), "1")
-            assert kernel_session(page)[1:] == [1.0] * 5
-        finally:
-            browser.close()
+    metric_field(page, names[-1]).wait_for(timeout=120000)
+    steps = kernel_session(page)[0]
+    for name in names[:-1]:
+        type_in(page, metric_field(page, name), "0")
+    last = metric_field(page, names[-1])
+    type_in(page, last, "0")
+    page.get_by_text("at least one weight must be positive").first.wait_for(timeout=15000)  # (each output's panel)
+    page.wait_for_function("(el) => el.value === '1'", arg=last.element_handle(), timeout=15000)
+    state = kernel_session(page)
+    assert state[1:] == [0.0, 0.0, 0.0, 0.0, 1.0] and state[0] > steps  # taken, the last refused
+    field = metric_field(page, "x")
+    field.click()
+    page.keyboard.press("Control+a")
+    page.keyboard.type("3")
+    page.keyboard.press("Control+z")  # the field's own undo
+    page.wait_for_function("(el) => el.value === '0'", arg=field.element_handle(), timeout=5000)
+    page.keyboard.press("Tab")
+    assert kernel_session(page) == state  # nothing of the session changed or was undone
+    for name in names[:-1]:  # the car's weights again
+        type_in(page, metric_field(page, name), "1")
+    assert kernel_session(page)[1:] == [1.0] * 5
 
 
 def clay_in_kernel(page) -> tuple[int, int, str]:
-    """Run modelling.ipynb's second cell: (controls, undo steps, md5 of the positions) of the kernel's session."""
-    cell = page.locator(".jp-Notebook .jp-Cell").nth(1)
-    run_cell(page, 1)
+    """Run the notebook's fifth cell: (controls, undo steps, md5 of the positions) of the kernel's session, once it
+    has settled."""
+    cell = page.locator(".jp-Notebook .jp-Cell").nth(4)
+    run_cell(page, 4)
     page.wait_for_function("(el) => !el.innerText.includes('[*]')",
                            arg=cell.locator(".jp-InputPrompt").element_handle(), timeout=30000)
     page.wait_for_timeout(200)
@@ -542,53 +504,44 @@ def clay_in_kernel(page) -> tuple[int, int, str]:
     return int(words[1]), int(words[2]), words[3]
 
 
-def test_the_wheel_zooms_in_and_a_double_click_adds_a_control_in_the_notebook_widget(lab):
-    """The view as a modelling tool inside JupyterLab 4 and Notebook 7 (the same client as the web app): ten wheel
-    ticks over the clay bring the camera closer each time (and do not scroll the notebook away); a double click on
-    the clay adds a control at that point of the surface in the kernel's session, one undo step, and no node moves."""
-    views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
-    with helpers.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            page = open_notebook(browser, lab.replace("clay.ipynb", "modelling.ipynb"))
-            run_cell(page, 0)
-            page.wait_for_function(f"() => {{ const v = {views}; return v.length >= 1 && "
-                                   "v[0].describe().painted > 0; }", timeout=120000)
-            try:  # the car trained to its end: nothing moves by itself
-                page.wait_for_function(f"() => {views}[0].describe().running === false", timeout=180000)
-            except Exception:
-                d = page.evaluate(f"() => {views}[0].describe()")
-                seen = {k: d.get(k) for k in ("running", "status", "painted", "errors")}
-                raise AssertionError(f"the car did not settle in the view: {seen}") from None
-            page.locator(".somview").first.scroll_into_view_if_needed()
-            page.wait_for_timeout(500)
-            box = page.locator(".somview canvas").first.bounding_box()
-            helpers.wheel_ten_ticks_closer(page, f"{views}[0]", (box["x"] + box["width"] / 2,
-                                                                 box["y"] + box["height"] / 2))
-            assert page.locator(".somview canvas").first.bounding_box()["y"] == pytest.approx(box["y"], abs=1), \
-                "the wheel scrolled the notebook"
-            n0, steps0, positions0 = clay_in_kernel(page)  # the notebook scrolls to that cell: back to the view
-            page.locator(".somview").first.scroll_into_view_if_needed()
-            page.locator(".somview-fit").first.click()
-            page.wait_for_function(f"() => {{ const d = {views}[0].describe(); "
-                                   "return Math.abs(d.distance - d.fitDistance) < 1e-6 * d.fitDistance; }",
-                                   timeout=5000)
-            page.wait_for_timeout(300)
-            box = page.locator(".somview canvas").first.bounding_box()
-            at = (round(box["x"] + box["width"] / 2 - 20), round(box["y"] + box["height"] / 2 + 15))
-            # (whole pixels, as a mouse event's clientX / clientY are: half a pixel is 0.006 of the car here)
-            aimed = page.evaluate(f"() => {views}[0].surfaceAt({at[0]}, {at[1]})")
-            assert aimed is not None
-            page.mouse.dblclick(*at)
-            page.wait_for_function(f"() => {views}[0].describe().k === {n0 + 1}", timeout=15000)
-            placed = page.evaluate(f"() => {views}[0].controlModel({n0})")
-            np.testing.assert_allclose(placed, aimed, atol=1e-4)  # where the double click was, on the surface
-            n1, steps1, positions1 = clay_in_kernel(page)
-            assert (n1, steps1) == (n0 + 1, steps0 + 1)  # one control more, one undo step
-            assert positions1 == positions0  # nothing moved
-            assert view_errors(page, views) == []
-        finally:
-            browser.close()
+def wheel_and_double_click(page, views: str) -> None:
+    """The view as a modelling tool inside JupyterLab 4 and Notebook 7 (the same client as the web app), once the
+    clay has settled: ten wheel ticks over the clay bring the camera closer each time (and do not scroll the notebook
+    away); a double click on the clay adds a control at that point of the surface in the kernel's session, one undo
+    step, and no node moves."""
+    try:  # the car trained to its end: nothing moves by itself
+        page.wait_for_function(f"() => {views}[0].describe().running === false", timeout=180000)
+    except Exception:
+        d = page.evaluate(f"() => {views}[0].describe()")
+        seen = {k: d.get(k) for k in ("running", "status", "painted", "errors")}
+        raise AssertionError(f"the car did not settle in the view: {seen}") from None
+    page.locator(".somview").first.scroll_into_view_if_needed()
+    page.wait_for_timeout(500)
+    box = page.locator(".somview canvas").first.bounding_box()
+    helpers.wheel_ten_ticks_closer(page, f"{views}[0]", (box["x"] + box["width"] / 2,
+                                                         box["y"] + box["height"] / 2))
+    assert page.locator(".somview canvas").first.bounding_box()["y"] == pytest.approx(box["y"], abs=1), \
+        "the wheel scrolled the notebook"
+    n0, steps0, positions0 = clay_in_kernel(page)  # the notebook scrolls to that cell: back to the view
+    page.locator(".somview").first.scroll_into_view_if_needed()
+    page.locator(".somview-fit").first.click()
+    page.wait_for_function(f"() => {{ const d = {views}[0].describe(); "
+                           "return Math.abs(d.distance - d.fitDistance) < 1e-6 * d.fitDistance; }",
+                           timeout=5000)
+    page.wait_for_timeout(300)
+    box = page.locator(".somview canvas").first.bounding_box()
+    at = (round(box["x"] + box["width"] / 2 - 20), round(box["y"] + box["height"] / 2 + 15))
+    # (whole pixels, as a mouse event's clientX / clientY are: half a pixel is 0.006 of the car here)
+    aimed = page.evaluate(f"() => {views}[0].surfaceAt({at[0]}, {at[1]})")
+    assert aimed is not None
+    page.mouse.dblclick(*at)
+    page.wait_for_function(f"() => {views}[0].describe().k === {n0 + 1}", timeout=15000)
+    placed = page.evaluate(f"() => {views}[0].controlModel({n0})")
+    np.testing.assert_allclose(placed, aimed, atol=1e-4)  # where the double click was, on the surface
+    n1, steps1, positions1 = clay_in_kernel(page)
+    assert (n1, steps1) == (n0 + 1, steps0 + 1)  # one control more, one undo step
+    assert positions1 == positions0  # nothing moved
+    assert view_errors(page, views) == []
 
 
 def picture(page, unlike=None, timeout: float = 30.0) -> tuple:
@@ -636,19 +589,14 @@ def view_errors(page, views: str) -> list:
     return page.evaluate(f"() => {views}.flatMap((v) => v.describe().errors)")
 
 
-def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened(tmp_path):
+def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened(jupyter, notebook_dir):
     """JupyterLab with "Save Widget State Automatically": run the widget, let the view take its picture, save; the
     file holds that picture in its widget state, and the notebook reopened in a fresh kernel (whose widgets are gone)
     shows it in the view's place instead of a blank canvas."""
-    settings = tmp_path / "settings" / "@jupyter-widgets" / "jupyterlab-manager"
-    settings.mkdir(parents=True)
-    (settings / "plugin.jupyterlab-settings").write_text(json.dumps({"saveState": True}))
-    root = tmp_path / "root"
-    root.mkdir()
-    path = root / "saved.ipynb"
+    path = notebook_dir / "saved.ipynb"
     notebook_file(path, ["import somwidget\nview = somwidget.show('car', device='cpu')\nview"])
-    with jupyter_server("jupyterlab", root, f"--LabApp.user_settings_dir={tmp_path / 'settings'}") as port:
-        url = f"http://127.0.0.1:{port}/lab/tree/saved.ipynb?token=t0k"
+    with jupyter.lab_setting("@jupyter-widgets/jupyterlab-manager:plugin", {"saveState": True}):
+        url = jupyter.url(path)
         with helpers.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
             try:
@@ -672,11 +620,7 @@ def test_a_notebook_saved_with_widget_state_shows_the_last_picture_when_reopened
                 page.close()
                 # the notebook's kernel shut down: reopened, it gets a fresh one, where the saved widgets have no
                 # kernel side (what a reader of the saved file sees)
-                api = f"http://127.0.0.1:{port}/api/sessions"
-                with urllib.request.urlopen(f"{api}?token=t0k", timeout=10) as r:
-                    for session in json.loads(r.read()):
-                        urllib.request.urlopen(urllib.request.Request(f"{api}/{session['id']}?token=t0k",
-                                                                      method="DELETE"), timeout=30).close()
+                jupyter.shut_down_kernels(notebook_dir)
                 page = browser.new_page(viewport={"width": 1400, "height": 1000})
                 page.goto(url)
                 shown = page.wait_for_selector("img.somview-picture", timeout=90000)

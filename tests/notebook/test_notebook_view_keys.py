@@ -13,7 +13,7 @@ import helpers
 import numpy as np
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS
-from test_notebook_panel import jupyter_server, notebook_file, open_notebook, run_cell
+from test_notebook_panel import notebook_file, open_notebook, run_cell
 
 pytestmark = pytest.mark.browser
 
@@ -46,15 +46,16 @@ def looking_from(v: dict) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
-def test_view_keys_and_undo_act_on_the_clay_in_jupyterlab_and_escape_gives_the_notebook_its_keys(tmp_path):
-    notebook_file(tmp_path / "keys.ipynb", [
+def test_view_keys_and_undo_act_on_the_clay_in_jupyterlab_and_escape_gives_the_notebook_its_keys(
+        tmp_path, jupyter, notebook_dir):
+    notebook_file(notebook_dir / "keys.ipynb", [
         "import somwidget\nview = somwidget.show('sphere', device='cpu')\nview",
         "print('clay', len(view.session.controls), view.session.history[0])",
         "1 + 1"])
-    with jupyter_server("jupyterlab", tmp_path) as port, helpers.sync_playwright() as p:
+    with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         try:
-            page = open_notebook(browser, f"http://127.0.0.1:{port}/lab/tree/keys.ipynb?token=t0k")
+            page = open_notebook(browser, jupyter.url(notebook_dir / "keys.ipynb"))
             run_cell(page, 0)
             page.wait_for_function(f"() => {{ const v = {VIEWS}; return v.length >= 1 && "
                                    "v[0].describe().painted > 0 && v[0].describe().running === false; }",

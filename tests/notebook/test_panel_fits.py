@@ -24,7 +24,7 @@ pytestmark = [pytest.mark.browser, pytest.mark.slow]
 if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
     pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
 
-from test_notebook_panel import jupyter_server, notebook_file, open_notebook, run_cell  # noqa: E402
+from test_notebook_panel import notebook_file, open_notebook, run_cell  # noqa: E402
 
 WIDTHS = (1280, 360)
 APP = helpers.ROOT / "notebooks" / "09_modelling_app.ipynb"
@@ -116,19 +116,17 @@ def wait_for_view(page, timeout: float = 180000) -> None:
 
 
 @pytest.mark.parametrize("app", ["jupyterlab", "notebook"])
-def test_the_panel_fits_jupyterlab_and_notebook_7(tmp_path, app):
-    notebook_file(tmp_path / "fit.ipynb", ["import somwidget\nview = somwidget.show('car', device='cpu')\nview"])
-    with jupyter_server(app, tmp_path) as port:
-        page_path = "lab/tree" if app == "jupyterlab" else "notebooks"
-        with helpers.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-            try:
-                page = open_notebook(browser, f"http://127.0.0.1:{port}/{page_path}/fit.ipynb?token=t0k")
-                run_cell(page, 0)
-                wait_for_view(page)
-                check_widths(page, app)
-            finally:
-                browser.close()
+def test_the_panel_fits_jupyterlab_and_notebook_7(jupyter, notebook_dir, app):
+    notebook_file(notebook_dir / "fit.ipynb", ["import somwidget\nview = somwidget.show('car', device='cpu')\nview"])
+    with helpers.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            page = open_notebook(browser, jupyter.url(notebook_dir / "fit.ipynb", app))
+            run_cell(page, 0)
+            wait_for_view(page)
+            check_widths(page, app)
+        finally:
+            browser.close()
 
 
 def _answers(url: str) -> bool:

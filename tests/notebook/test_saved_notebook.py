@@ -19,7 +19,6 @@ import io
 import json
 import os
 import re
-import urllib.request
 
 import helpers
 import numpy as np
@@ -28,7 +27,7 @@ from helpers import CHROMIUM, CHROMIUM_ARGS
 
 pytest.importorskip("nbclient")
 pytest.importorskip("nbconvert")
-from test_notebook_panel import jupyter_server, notebook_file, open_notebook, run_cell  # noqa: E402
+from test_notebook_panel import notebook_file, open_notebook, run_cell  # noqa: E402
 
 #: The pictures' background (model/picture.py BACKGROUND, the clay view's): what is not clay.
 BACKGROUND = np.array([238, 240, 244])
@@ -130,62 +129,54 @@ def test_a_notebook_run_by_nbclient_keeps_a_small_still_that_nbconvert_shows(tmp
 @pytest.mark.browser
 @pytest.mark.slow
 @pytest.mark.parametrize("app", ["jupyterlab", "notebook"])
-def test_a_saved_notebook_reopened_without_its_kernel_shows_the_clay(tmp_path, app):
-    root = tmp_path / "root"
-    root.mkdir()
-    path = root / "saved.ipynb"
+def test_a_saved_notebook_reopened_without_its_kernel_shows_the_clay(jupyter, notebook_dir, app):
+    path = notebook_dir / "saved.ipynb"
     notebook_file(path, CELLS)
     stills = "img.somwidget-still"
-    with jupyter_server(app, root) as port:
-        page_path = "lab/tree" if app == "jupyterlab" else "notebooks"
-        url = f"http://127.0.0.1:{port}/{page_path}/saved.ipynb?token=t0k"
-        with helpers.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-            try:
-                page = open_notebook(browser, url)
-                run_cell(page, 0)
-                page.wait_for_function("() => [...document.querySelectorAll('.somview')].some((e) => "
-                                       "e.somview.describe().painted > 0)", timeout=120000)
-                run_cell(page, 1)  # waits until the view's own picture has replaced the still
-                page.get_by_text(re.compile(r"stills [1-9]")).wait_for(timeout=180000)
-                assert not page.locator(stills).first.is_visible()  # hidden while the live view stands
+    url = jupyter.url(path, app)
+    with helpers.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            page = open_notebook(browser, url)
+            run_cell(page, 0)
+            page.wait_for_function("() => [...document.querySelectorAll('.somview')].some((e) => "
+                                   "e.somview.describe().painted > 0)", timeout=120000)
+            run_cell(page, 1)  # waits until the view's own picture has replaced the still
+            page.get_by_text(re.compile(r"stills [1-9]")).wait_for(timeout=180000)
+            assert not page.locator(stills).first.is_visible()  # hidden while the live view stands
 
-                def saved():
-                    page.keyboard.press("Control+s")
-                    page.wait_for_timeout(1000)
-                    try:
-                        outputs = widget_outputs(path)[1]
-                    except (ValueError, IndexError):  # read while Jupyter was writing it: look again
-                        return None
-                    return next((o for o in outputs if "image/png" in o.get("data", {})), None)
+            def saved():
+                page.keyboard.press("Control+s")
+                page.wait_for_timeout(1000)
+                try:
+                    outputs = widget_outputs(path)[1]
+                except (ValueError, IndexError):  # read while Jupyter was writing it: look again
+                    return None
+                return next((o for o in outputs if "image/png" in o.get("data", {})), None)
 
-                still = helpers.wait_for(saved, timeout=30, what="the saved still")
-                png = base64.b64decode(still["data"]["image/png"])
-                assert_clay(png, "the saved still")
-                assert widget_outputs(path)[0] < WIDGET_BYTES
-                page.close()
-                api = f"http://127.0.0.1:{port}/api/sessions"  # the kernel goes: the widget's model with it
-                with urllib.request.urlopen(f"{api}?token=t0k", timeout=10) as r:
-                    for session in json.loads(r.read()):
-                        urllib.request.urlopen(urllib.request.Request(f"{api}/{session['id']}?token=t0k",
-                                                                      method="DELETE"), timeout=30).close()
-                page = browser.new_page(viewport={"width": 1400, "height": 1000})
-                page.goto(url)
-                shown = page.wait_for_selector(stills, state="visible", timeout=90000)
-                page.wait_for_function("() => [...document.querySelectorAll('.jp-OutputArea-output')].some((e) => "
-                                       "e.textContent.includes('Error displaying widget: model not found'))",
-                                       timeout=90000)  # the widget manager has given up on the model: in the page
-                page.wait_for_timeout(500)
-                box = shown.bounding_box()
-                assert box and box["width"] >= 300 and box["height"] >= 150, box
-                assert_clay(shown.screenshot(), "the reopened notebook's output")
-                for words in ("Error displaying widget", "Loading widget"):  # but not shown
-                    said = page.get_by_text(words)
-                    assert all(not said.nth(i).is_visible() for i in range(said.count())), f"{words} is shown"
-                if os.environ.get("SOMWIDGET_SHOTS"):
-                    page.set_viewport_size({"width": 900, "height": 700})
-                    shown.scroll_into_view_if_needed()
-                    page.screenshot(path=os.path.join(os.environ["SOMWIDGET_SHOTS"], f"reopened-{app}.png"))
-            finally:
-                browser.close()
+            still = helpers.wait_for(saved, timeout=30, what="the saved still")
+            png = base64.b64decode(still["data"]["image/png"])
+            assert_clay(png, "the saved still")
+            assert widget_outputs(path)[0] < WIDGET_BYTES
+            page.close()
+            jupyter.shut_down_kernels(notebook_dir)  # the kernel goes: the widget's model with it
+            page = browser.new_page(viewport={"width": 1400, "height": 1000})
+            page.goto(url)
+            shown = page.wait_for_selector(stills, state="visible", timeout=90000)
+            page.wait_for_function("() => [...document.querySelectorAll('.jp-OutputArea-output')].some((e) => "
+                                   "e.textContent.includes('Error displaying widget: model not found'))",
+                                   timeout=90000)  # the widget manager has given up on the model: in the page
+            page.wait_for_timeout(500)
+            box = shown.bounding_box()
+            assert box and box["width"] >= 300 and box["height"] >= 150, box
+            assert_clay(shown.screenshot(), "the reopened notebook's output")
+            for words in ("Error displaying widget", "Loading widget"):  # but not shown
+                said = page.get_by_text(words)
+                assert all(not said.nth(i).is_visible() for i in range(said.count())), f"{words} is shown"
+            if os.environ.get("SOMWIDGET_SHOTS"):
+                page.set_viewport_size({"width": 900, "height": 700})
+                shown.scroll_into_view_if_needed()
+                page.screenshot(path=os.path.join(os.environ["SOMWIDGET_SHOTS"], f"reopened-{app}.png"))
+        finally:
+            browser.close()
     assert [clay_in(png) for png in html_stills(path)] == [clay_in(png)]  # nbconvert's HTML of the saved file
