@@ -131,9 +131,10 @@ def test_a_shift_drag_on_a_stroke_in_stroke_mode_lifts_it_and_draws_nothing(page
     z1 = np.asarray(st2["session"]["controls"], float)[run, 2]
     assert np.all(z1 > z0 + 0.1), (z0, z1)
     # what the person reads: the stroke's row, its z up; as many rows as before
-    page.wait_for_function(f"() => document.querySelectorAll('#controls-table tbody tr').length === {len(before)} && "
-                           f"Number(document.querySelectorAll('#controls-table .position-cell input')[{len(before) - 1}]"
-                           f".value.split(',')[2]) > {before[-1][1][2] + 0.1}", timeout=10000)
+    cells = "document.querySelectorAll('#controls-table .position-cell input')"
+    page.wait_for_function(f"() => {cells}.length === {len(before)} && "
+                           f"Number({cells}[{len(before) - 1}].value.split(',')[2]) > {before[-1][1][2] + 0.1}",
+                           timeout=10000)
     after = table_rows(page)
     assert len(after) == len(before)
     assert after[-1][0] == before[-1][0] and after[-1][1][2] > before[-1][1][2] + 0.1, (before[-1], after[-1])
@@ -159,3 +160,40 @@ def test_the_hover_label_of_a_stroke_says_the_tables_number(page, server):
     assert text is not None and text.endswith(f"control {number}"), (text, number)
     assert label.is_visible() and label.inner_text().endswith(f"control {number}")
     shot(page, "trial4-stroke-hover")
+
+
+def test_a_symmetry_notice_lies_beside_the_view_and_goes_away_by_itself(page, server):
+    """The symmetry switch turned (as the person did): its notice shows in full, nowhere over the view's canvas, the
+    panel's fields stay where they were; some 10 s later it is gone without a click, and the view has its height
+    back. An error (a refused radius) stays until closed."""
+    panel = page.locator("#panel")
+    places = lambda: [page.locator(sel).bounding_box()["y"] - panel.bounding_box()["y"]  # noqa: E731
+                      for sel in ("#preset-select", "#iteration-text", "#symmetry-switch")]
+    before, full = places(), page.locator("#clay-view canvas").bounding_box()
+    page.locator("#symmetry-switch").click()
+    notice = page.locator("#info-alert")
+    notice.wait_for(timeout=10000)
+    assert "mirror" in notice.inner_text() or "symmetry" in notice.inner_text(), notice.inner_text()
+    page.wait_for_timeout(500)  # the view takes the height left
+    box, canvas = notice.bounding_box(), page.locator("#clay-view canvas").bounding_box()
+    assert box["y"] + box["height"] <= canvas["y"] or box["x"] >= canvas["x"] + canvas["width"] \
+        or box["x"] + box["width"] <= canvas["x"], (box, canvas)  # it covers nothing of the view
+    assert 0 <= box["y"] and box["y"] + box["height"] <= 900 and box["x"] + box["width"] <= 1400  # in sight
+    assert places() == before
+    shot(page, "trial4-notice", None)
+    shown = page.evaluate("() => performance.now()")
+    notice.wait_for(state="detached", timeout=15000)
+    gone = (page.evaluate("() => performance.now()") - shown) / 1000
+    assert 5.0 < gone < 12.0, gone
+    page.wait_for_timeout(500)
+    assert page.locator("#clay-view canvas").bounding_box() == full
+    # an error stays until closed
+    radius = page.locator("#controls-table tr").nth(1).locator(".radius-cell input")
+    radius.fill("-1")
+    radius.press("Enter")
+    page.wait_for_selector("#error-alert", timeout=10000)
+    page.wait_for_timeout(11000)
+    assert page.locator("#error-alert").is_visible()
+    page.locator("#error-alert button").click()
+    page.wait_for_selector("#error-alert", state="detached", timeout=10000)
+    page.locator("#symmetry-switch").click()  # as it was
