@@ -85,7 +85,7 @@ class SomApp:
         if session.preset.name not in _presets.PRESETS:  # started from `somwidget serve --mesh FILE`
             self._uploaded = {session.preset.name: session.preset}
         uploads.sweep_uploads()  # what servers killed mid-upload left behind
-        self.panel_state = PanelState(session, self.state)
+        self.panel_state = PanelState(session, self.state, watched=lambda: bool(self.clients))
         self.panel = self.panel_state.panel
         self._init_state()
         self.layout = build_page(self.server, self.panel)

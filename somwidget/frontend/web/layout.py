@@ -130,10 +130,13 @@ def build_page(server, panel: PanelModel):
         client.Script(RECONNECT_JS)
         # what trame draws in the page's place while its websocket is closed (instead of "Connection closed")
         server.state.trame__template_error = '<trame-loading message="The page reloads when the server is back" />'
-        with layout.content, html.Div(style="position: relative"):
-            _alerts()  # over the view's top left corner: they never move the panel nor cover its fields
-            # the clay view mounts here (MOUNT_VIEW_JS); Vue leaves the element's children alone
-            html.Div(id="clay-view", style="position: relative; width: 100%; height: calc(100vh - 88px)")
+        with layout.content, html.Div(style="position: relative; display: flex; flex-direction: column; "
+                                                  "height: calc(100vh - 88px)"):
+            _notices()  # notices in a strip above the view: the view gives up their height while they show
+            with html.Div(style="position: relative; flex: 1 1 auto; min-height: 0"):
+                _alerts()  # errors over the view's top left corner: they never move the panel nor cover its fields
+                # the clay view mounts here (MOUNT_VIEW_JS); Vue leaves the element's children alone
+                html.Div(id="clay-view", style="position: relative; width: 100%; height: 100%")
     return layout
 
 
@@ -161,31 +164,45 @@ def _on_enter_or_change(handler: str) -> list[str]:
     return [f'@change="{handler}"', f'@keydown.enter="{handler}"']
 
 
-#: The panel's alerts lie over the clay view's top left corner, below the view's own bar line, so that showing or
+#: The panel's errors lie over the clay view's top left corner, below the view's own bar line, so that showing or
 #: closing one never moves the panel's fields (at the top of the panel they took 50-66 px, and every field moved
-#: down by as much) and never covers them (over the foot of the drawer they hid the export buttons).
+#: down by as much) and never covers them (over the foot of the drawer they hid the export buttons). They stay until
+#: closed.
 _ALERTS = ("position: absolute; left: 8px; top: 40px; width: min(440px, 55%); z-index: 20; display: flex; "
            "flex-direction: column; gap: 6px")
 
+#: The notices (news, a recovered session, saved sessions set aside) lie in a strip above the clay view, side by side:
+#: the view gives up their height while they show and covers nothing of them, nor they of it. They go away by
+#: themselves (panel_state.py, NOTICE_SECONDS) or when closed.
+_NOTICES = "display: flex; flex-wrap: wrap; gap: 6px; padding: 6px 8px"
+_NOTICE = "flex: 1 1 320px"
+
 
 def _alerts() -> None:
-    """The alerts (a refusal, news, a recovered session, a failing autosave, saved sessions set aside) over the clay
-    view's corner (_ALERTS): they come and go without moving the panel."""
+    """The errors (a refusal, a failing autosave) over the clay view's corner (_ALERTS): they come and go without
+    moving the panel."""
     with html.Div(id="panel-alerts", style=_ALERTS):
         v3.VAlert(v_if="error_message", text=("error_message",), type="error", density="compact",
                   closable=True, id="error-alert", click_close="error_message = ''", elevation=4)
+        v3.VAlert(v_if="save_error", text=("save_error",), type="error", density="compact", id="save-alert",
+                  icon="mdi-content-save-alert", elevation=4)  # until a save is on disk again: not closable
+
+
+def _notices() -> None:
+    """The notices (news, a recovered session, saved sessions set aside) in a strip above the clay view
+    (_NOTICES)."""
+    with html.Div(id="panel-notices", style=_NOTICES,
+                  v_show="(info_message && !error_message) || recovered_message || notice_message"):
         v3.VAlert(v_if="info_message && !error_message", text=("info_message",), type="info", id="info-alert",
-                  density="compact", closable=True, click_close="info_message = ''", elevation=4)
-        with v3.VAlert(v_if="recovered_message", type="success", density="compact", elevation=4,
+                  density="compact", closable=True, click_close="info_message = ''", style=_NOTICE)
+        with v3.VAlert(v_if="recovered_message", type="success", density="compact", style=_NOTICE,
                        id="recovered-alert", closable=True, click_close="recovered_message = ''"):
             html.Div("{{ recovered_message }}")
             v3.VBtn("Start fresh", size="small", variant="tonal", classes="mt-1", id="start-fresh",
                     click="trigger('start_fresh')", title="Load the preset the server was started with (Undo "
                                                        "brings the recovered session back)")
-        v3.VAlert(v_if="save_error", text=("save_error",), type="error", density="compact", id="save-alert",
-                  icon="mdi-content-save-alert", elevation=4)  # until a save is on disk again: not closable
         v3.VAlert(v_if="notice_message", text=("notice_message",), type="warning", density="compact",
-                  id="notice-alert", closable=True, click_close="notice_message = ''", elevation=4)
+                  id="notice-alert", closable=True, click_close="notice_message = ''", style=_NOTICE)
 
 
 def _panel(panel: PanelModel) -> None:

@@ -11,6 +11,7 @@ import base64
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 from ..model import Frame, Session
 from ..model.files import export_stem
@@ -24,12 +25,20 @@ log = logging.getLogger(__name__)
 #: Panel numbers (iteration, gaps, cycle time) refresh at most this often per second.
 PANEL_HZ = 8
 
+#: The panel's notices (news, saved sessions set aside, a recovered session; not errors, which stay until closed)
+#: go away by themselves this many seconds after a page first showed them.
+NOTICE_SECONDS = 8.0
+NOTICES = ("info_message", "notice_message", "recovered_message")
+
 
 class PanelState:
     """One session's panel model in one trame server's state (see the module's docstring)."""
 
-    def __init__(self, session: Session, state) -> None:
+    def __init__(self, session: Session, state, watched: Callable[[], bool] = lambda: True) -> None:
+        """`watched()`: whether a page shows the panel now (a notice's time runs only then)."""
         self.session = session
+        self.watched = watched
+        self._notices_shown: dict[str, tuple[str, float]] = {}  # a notice's text and when a page first showed it
         self.panel = PanelModel(session)
         self.state = state
         self._latest: Frame | None = None
@@ -66,6 +75,7 @@ class PanelState:
             with self.state:
                 self.state.save_error = failed
         self._show_notice()
+        self._expire_notices()
         with self._latest_lock:
             frame = self._latest
         if frame is None:
@@ -117,6 +127,22 @@ class PanelState:
             self._notices_seen = settings.notices
             with self.state:
                 self.state.info_message = settings.notice
+
+    def _expire_notices(self) -> None:
+        """Each notice shown NOTICE_SECONDS on a page is cleared (its clock starts when a page is there to show it,
+        and again with a new text)."""
+        now = time.monotonic()
+        for name in NOTICES:
+            text, shown = self.state[name], self._notices_shown.get(name)
+            if not text:
+                self._notices_shown.pop(name, None)
+            elif shown is None or shown[0] != text:
+                if self.watched():
+                    self._notices_shown[name] = (text, now)
+            elif now - shown[1] >= NOTICE_SECONDS:
+                self._notices_shown.pop(name)
+                with self.state:
+                    self.state[name] = ""
 
     def show_frame(self, frame: Frame) -> None:
         with self.state as s:

@@ -188,6 +188,13 @@ export class Clay {
     return j < this.k && this.runOf(j)[0] === j;
   }
 
+  // Control i's number, as the views and the controls table show it: its stable id, a stroke's sample its stroke's
+  // (the first sample's; the later samples' ids, from 2^30 on, are never shown).
+  numberOf(i) {
+    const first = this.runOf(i)[0];
+    return this.controlIds[first] ?? first;
+  }
+
   // The indices of the controls that act as one with control i (a stroke's samples; i alone otherwise).
   runOf(i) {
     let first = 0;

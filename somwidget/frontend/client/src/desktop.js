@@ -1,7 +1,8 @@
 // Mouse, touch and keys on a flat screen. A press goes to what is visible under it: the selected control's handle
-// (handle.js), the Stroke or Revolve tool while it is on (stroke.js, revolve.js), a control (before the clay: a
+// (handle.js), a control (also while the Stroke or Revolve tool is on; before the clay: a
 // control lying on the surface is taken even where the clay shows in front of part of it, and a small one within
-// PICKED_PX of it; a control the clay hides is not; a placed control before its ghosts), else the orbit (camera.js:
+// PICKED_PX of it; a control the clay hides is not; a placed control before its ghosts), the Stroke or Revolve tool
+// while it is on (stroke.js, revolve.js: a press off every control draws), else the orbit (camera.js:
 // drag to orbit, right-drag to pan; an orbit stopped by the ground says so). A drag moves the control on the plane facing the camera (a radial copy seen
 // nearly side-on: in its meridian plane; with Shift along the model axis closest to the motion only). A click on
 // a control selects it (its handle shows), a double click on the clay adds a control there (the radius the disc
@@ -111,7 +112,7 @@ export class Desktop {
     this.hovered = j;
     this.clay.setHover(j === null ? new Set() : new Set([j]));
     this.radius.show(j ?? this.handle.selected);
-    this.renderer.domElement.style.cursor = this.drawTool ? 'crosshair' : j !== null ? 'grab' : '';
+    this.renderer.domElement.style.cursor = j !== null ? 'grab' : this.drawTool ? 'crosshair' : '';
   }
 
   // The radius under the cursor: the dragged control's, the hovered one's, else a new control's where the cursor is
@@ -147,16 +148,16 @@ export class Desktop {
       return;
     }
     this.press = { x: ev.clientX, y: ev.clientY, control: null };
-    if (this.drawTool) {
+    const hidden = { count: 0 };
+    const hit = this.visibleControl(this.ray(ev), hidden);
+    this.stats.hiddenPresses += hidden.count;
+    if (!hit && this.drawTool) { // a press off every control draws; one on a control moves it, tool on or off
       ev.stopImmediatePropagation();
       ev.preventDefault();
       this.renderer.domElement.setPointerCapture?.(ev.pointerId);
       this.stroke.begin(this.strokePoint(ev));
       return;
     }
-    const hidden = { count: 0 };
-    const hit = this.visibleControl(this.ray(ev), hidden);
-    this.stats.hiddenPresses += hidden.count;
     if (!hit) return;
     ev.stopImmediatePropagation(); // the orbit controls do not see this press
     ev.preventDefault();
@@ -167,7 +168,7 @@ export class Desktop {
   // A press on the dimmed label of a control the clay hides (labels.js): the control is dragged as a press on its
   // sphere would drag it (the clay in front of it still turns the view when pressed).
   pressLabel(j, ev) {
-    if (this.presenting || ev.button !== 0 || this.drawTool || this.drag) return;
+    if (this.presenting || ev.button !== 0 || this.drag) return;
     ev.preventDefault();
     this.renderer.domElement.focus({ preventScroll: true });
     this.ray(ev);
@@ -224,7 +225,7 @@ export class Desktop {
         return;
       }
       const rc = this.ray(ev);
-      const hit = this.drawTool ? null : this.visibleControl(rc);
+      const hit = this.visibleControl(rc);
       this.hover(hit ? hit.index : null);
       this.showDisc(ev, rc);
       return;

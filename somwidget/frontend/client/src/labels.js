@@ -18,9 +18,9 @@ export const LABEL_CSS = `
 .somview-label.behind { opacity: 0.4; pointer-events: auto; cursor: pointer; }
 ${MARKER_CSS}`;
 
-// Control i's number: its stable id.
+// Control i's number: its stable id (a stroke's sample: its stroke's).
 export function labelOf(clay, i) {
-  return String(clay.controlIds[i] ?? i);
+  return String(clay.numberOf(i));
 }
 
 export class ControlLabels {

@@ -176,8 +176,7 @@ export class RadiusDisc {
 
   writeLabel(of, r, at) {
     const size = 2 * this.clay.radius; // the clay's size: the diagonal of its bounds
-    const who = of === 'new' ? 'new control' : `control ${this.clay.controlIds[this.clay.originalOf(of)] ??
-      this.clay.originalOf(of)}`;
+    const who = of === 'new' ? 'new control' : `control ${this.clay.numberOf(this.clay.originalOf(of))}`;
     const text = r > 0 ? `radius ${Number(r.toPrecision(3))} \u00b7 ${(100 * r / size).toFixed(r / size < 0.1 ? 1 : 0)}%`
       + ` of the size \u00b7 ${who}` : `radius 0 (a point control) \u00b7 ${who}`;
     if (this.label.textContent !== text) this.label.textContent = text;

@@ -1,0 +1,199 @@
+"""The fourth first-time user's trial (a chair shell, a bowl, a vase), in Chromium at 1400 x 900 against
+`somwidget serve --preset grid`, done as the person did it: the view's keys, the mouse on the view, the panel's
+switches. What the page shows is read from the page (the controls table, the hover label, the alerts) and through the
+view's read-only `describe()` and `controlScreen`; the session's state through GET /api/state.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from helpers import CHROMIUM, Serve
+
+pytestmark = pytest.mark.browser
+
+playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
+if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
+    pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
+
+VIEW = "document.getElementById('clay-view')?.somview"
+SHOTS = os.environ.get("SOMWIDGET_SHOTS")  # a folder: the tests leave pictures there
+
+
+@pytest.fixture(scope="module")
+def server():
+    srv = Serve("--preset", "grid")
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture
+def page(browser, server):
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    page.goto(server.url)
+    page.wait_for_function(f"() => {{ const v = {VIEW}; return v && v.describe().painted > 0; }}", timeout=60000)
+    page.wait_for_timeout(400)
+    yield page
+    page.close()
+
+
+def shot(page, name: str, selector: str | None = "#clay-view") -> None:
+    if SHOTS:
+        os.makedirs(SHOTS, exist_ok=True)
+        page.wait_for_timeout(400)
+        path = os.path.join(SHOTS, f"{name}.png")
+        page.locator(selector).screenshot(path=path) if selector else page.screenshot(path=path)
+
+
+def view(page) -> dict:
+    return page.evaluate(f"() => {VIEW}.describe()")
+
+
+def screen(page, j: int) -> np.ndarray:
+    return np.asarray(page.evaluate(f"() => {VIEW}.controlScreen({j})"), float)
+
+
+def press_key_in_view(page, key: str) -> None:
+    box = page.locator("#clay-view canvas").bounding_box()
+    page.mouse.move(box["x"] + 40, box["y"] + box["height"] - 60)  # the pointer on the view: it has the keys
+    page.keyboard.press(key)
+    page.wait_for_timeout(300)
+
+
+def drag(page, start, delta, steps: int = 12, shift: bool = False) -> None:
+    page.mouse.move(*start)
+    if shift:
+        page.keyboard.down("Shift")
+    page.mouse.down()
+    for s in range(1, steps + 1):
+        page.mouse.move(start[0] + delta[0] * s / steps, start[1] + delta[1] * s / steps)
+        page.wait_for_timeout(25)
+    page.mouse.up()
+    if shift:
+        page.keyboard.up("Shift")
+
+
+def table_rows(page) -> list[tuple[str, list[float]]]:
+    """The controls table as the person reads it: each row's number and its x, y, z."""
+    rows = page.locator("#controls-table tbody tr")
+    out = []
+    for r in range(rows.count()):
+        row = rows.nth(r)
+        number = row.locator(".control-index").inner_text().strip()
+        xyz = [float(t) for t in row.locator(".position-cell input").input_value().split(",")]
+        out.append((number, xyz))
+    return out
+
+
+def draw_stroke_from_top(page, server) -> tuple[dict, list[int]]:
+    """Top (5), S, a stroke across the grid clear of its controls; the tool stays on. Returns the state and the
+    stroke's sample indices."""
+    st0 = server.idle()
+    press_key_in_view(page, "5")
+    press_key_in_view(page, "s")
+    assert view(page)["tool"] == "stroke"
+    box = page.locator("#clay-view canvas").bounding_box()
+    v = view(page)
+    spots = [screen(page, j) for j in range(v["kEff"])]
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    # a line clear of every control (its start above all: the press must not land on one)
+    y = min((cy + dy for dy in range(-120, 121, 10)),
+            key=lambda yy: -min(abs(p[1] - yy) for p in spots))
+    drag(page, (cx - 120, y), (240, 0), steps=20)
+    st = server.wait(lambda s: len(s["session"]["strokes"]) == len(st0["session"]["strokes"]) + 1
+                     and not s["session"]["frame"]["running"] and s["session"]["pending_intents"] == 0,
+                     timeout=60, what="the stroke added")
+    n = st["session"]["strokes"][-1]
+    k = len(st["session"]["controls"])
+    assert n >= 2
+    return st, list(range(k - n, k))
+
+
+def test_a_shift_drag_on_a_stroke_in_stroke_mode_lifts_it_and_draws_nothing(page, server):
+    """Grid, Top (5), S, a stroke; Front (1), the Stroke tool still on, Shift-drag the stroke up: the stroke rises
+    (its z in the controls table), and no new stroke (no new row) appears."""
+    st, run = draw_stroke_from_top(page, server)
+    page.wait_for_function("() => document.querySelectorAll('#controls-table tbody tr').length === "
+                           f"{len(st['session']['strokes'])}", timeout=10000)
+    before = table_rows(page)
+    press_key_in_view(page, "1")
+    assert view(page)["tool"] == "stroke"
+    mid = run[len(run) // 2]
+    at = screen(page, mid)
+    drag(page, at, (0, -90), steps=15, shift=True)
+    st2 = server.wait(lambda s: s["session"]["history"][0] > st["session"]["history"][0]
+                      and not s["session"]["frame"]["running"] and s["session"]["pending_intents"] == 0,
+                      timeout=60, what="the lift in the session")
+    assert st2["session"]["strokes"] == st["session"]["strokes"]  # nothing drawn
+    z0 = np.asarray(st["session"]["controls"], float)[run, 2]
+    z1 = np.asarray(st2["session"]["controls"], float)[run, 2]
+    assert np.all(z1 > z0 + 0.1), (z0, z1)
+    # what the person reads: the stroke's row, its z up; as many rows as before
+    cells = "document.querySelectorAll('#controls-table .position-cell input')"
+    page.wait_for_function(f"() => {cells}.length === {len(before)} && "
+                           f"Number({cells}[{len(before) - 1}].value.split(',')[2]) > {before[-1][1][2] + 0.1}",
+                           timeout=10000)
+    after = table_rows(page)
+    assert len(after) == len(before)
+    assert after[-1][0] == before[-1][0] and after[-1][1][2] > before[-1][1][2] + 0.1, (before[-1], after[-1])
+    assert view(page)["desktop"]["strokes"] == 1  # the one drawn from the top
+    shot(page, "trial4-stroke-lifted")
+
+
+def test_the_hover_label_of_a_stroke_says_the_tables_number(page, server):
+    """The pointer on a stroke's sample (not its first): the label by the cursor says "control N", N the number
+    the controls table shows for the stroke, not the sample's internal id."""
+    st, run = draw_stroke_from_top(page, server)
+    press_key_in_view(page, "Escape")  # the tool off
+    page.wait_for_function("() => document.querySelectorAll('#controls-table tbody tr').length === "
+                           f"{len(st['session']['strokes'])}", timeout=10000)
+    number = table_rows(page)[-1][0]
+    mid = run[len(run) // 2]
+    page.mouse.move(*screen(page, mid))
+    page.wait_for_timeout(300)
+    page.mouse.move(*(screen(page, mid) + 1))
+    page.wait_for_function(f"() => {VIEW}.describe().hover.length === 1", timeout=5000)
+    label = page.locator(".somview-radius")
+    text = view(page)["radiusDisc"]["label"]
+    assert text is not None and text.endswith(f"control {number}"), (text, number)
+    assert label.is_visible() and label.inner_text().endswith(f"control {number}")
+    shot(page, "trial4-stroke-hover")
+
+
+def test_a_symmetry_notice_lies_beside_the_view_and_goes_away_by_itself(page, server):
+    """The symmetry switch turned (as the person did): its notice shows in full, nowhere over the view's canvas, the
+    panel's fields stay where they were; some 10 s later it is gone without a click, and the view has its height
+    back. An error (a refused radius) stays until closed."""
+    panel = page.locator("#panel")
+    places = lambda: [page.locator(sel).bounding_box()["y"] - panel.bounding_box()["y"]  # noqa: E731
+                      for sel in ("#preset-select", "#iteration-text", "#symmetry-switch")]
+    before, full = places(), page.locator("#clay-view canvas").bounding_box()
+    page.locator("#symmetry-switch").click()
+    notice = page.locator("#info-alert")
+    notice.wait_for(timeout=10000)
+    assert "mirror" in notice.inner_text() or "symmetry" in notice.inner_text(), notice.inner_text()
+    page.wait_for_timeout(500)  # the view takes the height left
+    box, canvas = notice.bounding_box(), page.locator("#clay-view canvas").bounding_box()
+    assert box["y"] + box["height"] <= canvas["y"] or box["x"] >= canvas["x"] + canvas["width"] \
+        or box["x"] + box["width"] <= canvas["x"], (box, canvas)  # it covers nothing of the view
+    assert 0 <= box["y"] and box["y"] + box["height"] <= 900 and box["x"] + box["width"] <= 1400  # in sight
+    assert places() == before
+    shot(page, "trial4-notice", None)
+    shown = page.evaluate("() => performance.now()")
+    notice.wait_for(state="detached", timeout=15000)
+    gone = (page.evaluate("() => performance.now()") - shown) / 1000
+    assert 5.0 < gone < 12.0, gone
+    page.wait_for_timeout(500)
+    assert page.locator("#clay-view canvas").bounding_box() == full
+    # an error stays until closed
+    radius = page.locator("#controls-table tr").nth(1).locator(".radius-cell input")
+    radius.fill("-1")
+    radius.press("Enter")
+    page.wait_for_selector("#error-alert", timeout=10000)
+    page.wait_for_timeout(11000)
+    assert page.locator("#error-alert").is_visible()
+    page.locator("#error-alert button").click()
+    page.wait_for_selector("#error-alert", state="detached", timeout=10000)
+    page.locator("#symmetry-switch").click()  # as it was
