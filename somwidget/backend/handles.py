@@ -134,10 +134,11 @@ class Handles:
         sent = wp.zeros(slots + 4, dtype=vec, device=dev)
         self.members, self.box = sent[:slots], sent[slots:]
         self._sent = sent
-        self._members_host = None if dev == "cpu" else wp.zeros(slots + 4, dtype=vec, device="cpu", pinned=True)
+        host = sent if dev == "cpu" else wp.zeros(slots + 4, dtype=vec, device="cpu", pinned=True)
+        self._members_host = host  # (on the CPU the device array itself: written in place, no copy)
         self._members_sent = None if dev == "cpu" else wp.Event(dev)
         self._members_busy = False
-        self._staged = (sent if dev == "cpu" else self._members_host).numpy()
+        self._staged = host.numpy()
         self._box_sent = None
         self.probe = wp.zeros(slots, dtype=vec, device=dev)  # members where a grab searches
         self.radius = wp.zeros(slots, dtype=wp.float32, device=dev)
