@@ -705,3 +705,19 @@ def test_a_typed_radius_after_a_move_makes_the_move_again_with_the_handle():
         np.testing.assert_allclose(s.controls[0][:3], 1.3 * c0, rtol=1e-6)
     finally:
         s.close()
+
+
+def test_a_group_change_counts_a_stroke_as_one_control_as_the_table_does():
+    """The notice after a group change counts controls as the table's rows: a stroke of 30 samples is one (it said
+    "38 controls kept" beside a table of 8 rows)."""
+    s = Session("grid", device="cpu", autosave=False)
+    try:
+        assert s.wait_idle(120)
+        s.add_stroke([[x, 0.5, 0.0] for x in np.linspace(-0.6, 0.6, 30)])
+        assert s.wait_applied(30) and s.n_controls > 6 + 1  # the stroke: its samples (resampled) act as one
+        said = s.set_symmetry("mirror-x")
+        assert "7 controls kept" in said, said
+        said = s.set_symmetry(None)
+        assert said.startswith("symmetry off: 14 controls"), said
+    finally:
+        s.close()

@@ -1,18 +1,70 @@
-"""The sphere app the view tests act on: `somwidget serve --preset sphere` once per test file, a tab on it per test,
-and where the view draws things (read through its read-only `describe()` and `controlScreen`)."""
+"""The app the view tests act on: `somwidget serve --preset <name>` once per test file (the sphere's by default), a
+tab on it per test, and where the view draws things (read through its read-only `describe()` and `controlScreen`)."""
 
 from __future__ import annotations
 
+import os
+
+import numpy as np
 from helpers import Serve
 
 VIEW = "document.getElementById('clay-view')?.somview"
+SHOTS = os.environ.get("SOMWIDGET_SHOTS")  # a folder: the tests leave pictures there
 
 
-def serve_sphere():
-    """The module's server (a fixture's body: `yield from serve_sphere()`)."""
-    srv = Serve("--preset", "sphere")
+def serve_sphere(preset: str = "sphere"):
+    """The module's server (a fixture's body: `yield from serve_sphere()`, or `serve_sphere("grid")`)."""
+    srv = Serve("--preset", preset)
     yield srv
     srv.stop()
+
+
+def open_page(browser, server, width: int = 1400, height: int = 900):
+    """A fresh tab of the given size once the view has drawn; closed after (the session left as the test leaves it:
+    for files whose tests start from where the one before ended). A fixture's body: `yield from open_page(...)`."""
+    page = browser.new_page(viewport={"width": width, "height": height})
+    page.goto(server.url)
+    page.wait_for_function(f"() => {{ const v = {VIEW}; return v && v.describe().painted > 0; }}", timeout=60000)
+    page.wait_for_timeout(400)
+    yield page
+    page.close()
+
+
+def shot(page, name: str, selector: str | None = "#clay-view") -> None:
+    """A picture of the view (or the whole page: selector None) into SOMWIDGET_SHOTS, when that is set."""
+    if SHOTS:
+        os.makedirs(SHOTS, exist_ok=True)
+        page.wait_for_timeout(400)
+        path = os.path.join(SHOTS, f"{name}.png")
+        page.locator(selector).screenshot(path=path) if selector else page.screenshot(path=path)
+
+
+def drag(page, start, delta, steps: int = 12, shift: bool = False) -> None:
+    """The mouse pressed at `start` (page pixels), moved by `delta` in `steps` steps 25 ms apart, released; with Shift
+    held throughout when `shift`."""
+    page.mouse.move(*start)
+    if shift:
+        page.keyboard.down("Shift")
+    page.mouse.down()
+    for s in range(1, steps + 1):
+        page.mouse.move(start[0] + delta[0] * s / steps, start[1] + delta[1] * s / steps)
+        page.wait_for_timeout(25)
+    page.mouse.up()
+    if shift:
+        page.keyboard.up("Shift")
+
+
+def press_key_in_view(page, key: str) -> None:
+    """A key pressed with the pointer over the view (the view has the keys then), as a person would."""
+    box = page.locator("#clay-view canvas").bounding_box()
+    page.mouse.move(box["x"] + 40, box["y"] + box["height"] - 60)
+    page.keyboard.press(key)
+    page.wait_for_timeout(300)
+
+
+def screen(page, j: int) -> np.ndarray:
+    """Control j's place on the screen (page pixels)."""
+    return np.asarray(page.evaluate(f"() => {VIEW}.controlScreen({j})"), float)
 
 
 def open_tab(browser, server):

@@ -10,7 +10,8 @@ import os
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, Serve
+from helpers import CHROMIUM
+from sphere_app import VIEW, drag, open_page, press_key_in_view, screen, serve_sphere, shot, view
 
 pytestmark = pytest.mark.browser
 
@@ -18,61 +19,15 @@ playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Play
 if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
     pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
 
-VIEW = "document.getElementById('clay-view')?.somview"
-SHOTS = os.environ.get("SOMWIDGET_SHOTS")  # a folder: the tests leave pictures there
-
 
 @pytest.fixture(scope="module")
 def server():
-    srv = Serve("--preset", "grid")
-    yield srv
-    srv.stop()
+    yield from serve_sphere("grid")
 
 
 @pytest.fixture
 def page(browser, server):
-    page = browser.new_page(viewport={"width": 1400, "height": 900})
-    page.goto(server.url)
-    page.wait_for_function(f"() => {{ const v = {VIEW}; return v && v.describe().painted > 0; }}", timeout=60000)
-    page.wait_for_timeout(400)
-    yield page
-    page.close()
-
-
-def shot(page, name: str, selector: str | None = "#clay-view") -> None:
-    if SHOTS:
-        os.makedirs(SHOTS, exist_ok=True)
-        page.wait_for_timeout(400)
-        path = os.path.join(SHOTS, f"{name}.png")
-        page.locator(selector).screenshot(path=path) if selector else page.screenshot(path=path)
-
-
-def view(page) -> dict:
-    return page.evaluate(f"() => {VIEW}.describe()")
-
-
-def screen(page, j: int) -> np.ndarray:
-    return np.asarray(page.evaluate(f"() => {VIEW}.controlScreen({j})"), float)
-
-
-def press_key_in_view(page, key: str) -> None:
-    box = page.locator("#clay-view canvas").bounding_box()
-    page.mouse.move(box["x"] + 40, box["y"] + box["height"] - 60)  # the pointer on the view: it has the keys
-    page.keyboard.press(key)
-    page.wait_for_timeout(300)
-
-
-def drag(page, start, delta, steps: int = 12, shift: bool = False) -> None:
-    page.mouse.move(*start)
-    if shift:
-        page.keyboard.down("Shift")
-    page.mouse.down()
-    for s in range(1, steps + 1):
-        page.mouse.move(start[0] + delta[0] * s / steps, start[1] + delta[1] * s / steps)
-        page.wait_for_timeout(25)
-    page.mouse.up()
-    if shift:
-        page.keyboard.up("Shift")
+    yield from open_page(browser, server)
 
 
 def table_rows(page) -> list[tuple[str, list[float]]]:
@@ -162,10 +117,10 @@ def test_the_hover_label_of_a_stroke_says_the_tables_number(page, server):
     shot(page, "trial4-stroke-hover")
 
 
-def test_a_symmetry_notice_lies_beside_the_view_and_goes_away_by_itself(page, server):
-    """The symmetry switch turned (as the person did): its notice shows in full, nowhere over the view's canvas, the
-    panel's fields stay where they were; some 10 s later it is gone without a click, and the view has its height
-    back. An error (a refused radius) stays until closed."""
+def test_a_symmetry_notice_lies_at_the_views_foot_and_goes_away_by_itself(page, server):
+    """The symmetry switch turned (as the person did): its notice shows in full over the view's foot (as a snackbar,
+    the clay in the middle clear), the view keeps its size and the panel's fields stay where they were; some 10 s later
+    it is gone without a click. An error (a refused radius) stays until closed."""
     panel = page.locator("#panel")
     places = lambda: [page.locator(sel).bounding_box()["y"] - panel.bounding_box()["y"]  # noqa: E731
                       for sel in ("#preset-select", "#iteration-text", "#symmetry-switch")]
@@ -174,11 +129,12 @@ def test_a_symmetry_notice_lies_beside_the_view_and_goes_away_by_itself(page, se
     notice = page.locator("#info-alert")
     notice.wait_for(timeout=10000)
     assert "mirror" in notice.inner_text() or "symmetry" in notice.inner_text(), notice.inner_text()
-    page.wait_for_timeout(500)  # the view takes the height left
+    page.wait_for_timeout(500)
     box, canvas = notice.bounding_box(), page.locator("#clay-view canvas").bounding_box()
-    assert box["y"] + box["height"] <= canvas["y"] or box["x"] >= canvas["x"] + canvas["width"] \
-        or box["x"] + box["width"] <= canvas["x"], (box, canvas)  # it covers nothing of the view
-    assert 0 <= box["y"] and box["y"] + box["height"] <= 900 and box["x"] + box["width"] <= 1400  # in sight
+    assert canvas == full  # the view keeps its size: nothing on it moves
+    assert box["y"] >= canvas["y"] + 0.6 * canvas["height"], (box, canvas)  # over the foot: the middle stays clear
+    assert 0 <= box["y"] and box["y"] + box["height"] <= canvas["y"] + canvas["height"] and \
+        box["x"] + box["width"] <= 1400  # in sight, above the view's bottom edge
     assert places() == before
     shot(page, "trial4-notice", None)
     shown = page.evaluate("() => performance.now()")

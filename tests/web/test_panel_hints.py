@@ -11,10 +11,12 @@ import os
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, Serve
+from helpers import CHROMIUM
+from sphere_app import VIEW, open_page, serve_sphere
 
 from somwidget.backend.presets import PRESET_LABELS, get_preset
-from somwidget.frontend.model.panel import ACTIONS, OFF_CLAY, clay_size
+from somwidget.frontend.model.panel import ACTION_HELP as HELP
+from somwidget.frontend.model.panel import OFF_CLAY, clay_size
 
 pytestmark = pytest.mark.browser
 
@@ -22,25 +24,15 @@ playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Play
 if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
     pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
 
-VIEW = "document.getElementById('clay-view')?.somview"
-HELP = {a.name: a.help for a in ACTIONS}
-
 
 @pytest.fixture(scope="module")
 def server():
-    srv = Serve("--preset", "grid")
-    yield srv
-    srv.stop()
+    yield from serve_sphere("grid")
 
 
 @pytest.fixture
 def page(browser, server):
-    page = browser.new_page(viewport={"width": 1200, "height": 800})
-    page.goto(server.url)
-    page.wait_for_function(f"() => {{ const v = {VIEW}; return v && v.describe().painted > 0; }}", timeout=60000)
-    page.wait_for_timeout(300)
-    yield page
-    page.close()
+    yield from open_page(browser, server, 1200, 800)
 
 
 def tooltip_after_hover(page, selector: str, wait_ms: int = 700) -> str:

@@ -13,7 +13,8 @@ import os
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, Serve
+from helpers import CHROMIUM
+from sphere_app import VIEW, drag, open_page, press_key_in_view, screen, serve_sphere, shot, view
 
 pytestmark = pytest.mark.browser
 
@@ -21,60 +22,19 @@ playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Play
 if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
     pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
 
-VIEW = "document.getElementById('clay-view')?.somview"
-SHOTS = os.environ.get("SOMWIDGET_SHOTS")  # a folder: the tests leave pictures there
-
 
 @pytest.fixture(scope="module")
 def server():
-    srv = Serve("--preset", "bowl")
-    yield srv
-    srv.stop()
+    yield from serve_sphere("bowl")
 
 
 @pytest.fixture
 def page(browser, server):
-    page = browser.new_page(viewport={"width": 1400, "height": 900})
-    page.goto(server.url)
-    page.wait_for_function(f"() => {{ const v = {VIEW}; return v && v.describe().painted > 0; }}", timeout=60000)
-    page.wait_for_timeout(400)
-    yield page
-    page.close()
-
-
-def shot(page, name: str, selector: str = "#clay-view") -> None:
-    if SHOTS:
-        os.makedirs(SHOTS, exist_ok=True)
-        page.wait_for_timeout(400)
-        page.locator(selector).screenshot(path=os.path.join(SHOTS, f"{name}.png"))
-
-
-def view(page) -> dict:
-    return page.evaluate(f"() => {VIEW}.describe()")
-
-
-def screen(page, j: int) -> np.ndarray:
-    return np.asarray(page.evaluate(f"() => {VIEW}.controlScreen({j})"), float)
+    yield from open_page(browser, server)
 
 
 def model_screen(page, p) -> np.ndarray:
     return np.asarray(page.evaluate(f"() => {VIEW}.modelScreen({json.dumps(list(p))})"), float)
-
-
-def press_key_in_view(page, key: str) -> None:
-    box = page.locator("#clay-view canvas").bounding_box()
-    page.mouse.move(box["x"] + 40, box["y"] + box["height"] - 60)  # the pointer on the view: it has the keys
-    page.keyboard.press(key)
-    page.wait_for_timeout(300)
-
-
-def drag(page, start, delta, steps: int = 12) -> None:
-    page.mouse.move(*start)
-    page.mouse.down()
-    for s in range(1, steps + 1):
-        page.mouse.move(start[0] + delta[0] * s / steps, start[1] + delta[1] * s / steps)
-        page.wait_for_timeout(25)
-    page.mouse.up()
 
 
 def test_a_drag_of_the_rim_in_the_left_view_keeps_it_in_its_plane_and_the_ring_even(page, server):

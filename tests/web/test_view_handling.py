@@ -15,7 +15,7 @@ import os
 import numpy as np
 import pytest
 from helpers import CHROMIUM, ROOT
-from sphere_app import VIEW, canvas, centre, open_tab, serve_sphere, view
+from sphere_app import VIEW, canvas, centre, drag, open_tab, serve_sphere, view
 
 pytestmark = pytest.mark.browser
 
@@ -43,15 +43,6 @@ def screen(page, j: int) -> np.ndarray:
 def looking_from(v: dict) -> np.ndarray:
     d = np.subtract(v["camera"], v["target"])
     return d / np.linalg.norm(d)
-
-
-def drag(page, start, delta, steps: int = 12) -> None:
-    page.mouse.move(*start)
-    page.mouse.down()
-    for s in range(1, steps + 1):
-        page.mouse.move(start[0] + delta[0] * s / steps, start[1] + delta[1] * s / steps)
-        page.wait_for_timeout(25)
-    page.mouse.up()
 
 
 def shot(page, name: str) -> bytes:

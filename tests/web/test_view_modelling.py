@@ -13,7 +13,7 @@ import re
 import numpy as np
 import pytest
 from helpers import CHROMIUM
-from sphere_app import VIEW, canvas, centre, open_tab, serve_sphere, view
+from sphere_app import VIEW, canvas, centre, drag, open_tab, serve_sphere, view
 
 from somwidget.backend import metrics
 
@@ -51,15 +51,6 @@ def visible_control(page) -> int:
                 and box["y"] + 80 < y < box["y"] + box["height"] - 80:
             return j
     raise AssertionError(f"no control in plain sight: {v['behind']}")
-
-
-def drag(page, start, delta, steps: int = 12) -> None:
-    page.mouse.move(*start)
-    page.mouse.down()
-    for s in range(1, steps + 1):
-        page.mouse.move(start[0] + delta[0] * s / steps, start[1] + delta[1] * s / steps)
-        page.wait_for_timeout(25)
-    page.mouse.up()
 
 
 def test_ten_wheel_ticks_bring_the_camera_closer_towards_the_cursor_down_to_five_percent(page):

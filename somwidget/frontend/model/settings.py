@@ -205,8 +205,9 @@ class Regrouped:
     images: tuple = ()
 
     def notice(self, group, layout) -> str:
-        """What happened to the controls, in words (numbered by their ids, as the views number them)."""
-        k = len(self.controls)
+        """What happened to the controls, in words (numbered by their ids, as the views number them; a stroke counts
+        as one, as the table's rows)."""
+        k = len(self.controls) - sum(self.strokes) + len(self.strokes)
         if group is None:
             return f"symmetry off: {k} controls, each copy now a control of its own (nothing moves)"
         said = f"{group.describe()}: "

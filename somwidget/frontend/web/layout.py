@@ -130,13 +130,11 @@ def build_page(server, panel: PanelModel):
         client.Script(RECONNECT_JS)
         # what trame draws in the page's place while its websocket is closed (instead of "Connection closed")
         server.state.trame__template_error = '<trame-loading message="The page reloads when the server is back" />'
-        with layout.content, html.Div(style="position: relative; display: flex; flex-direction: column; "
-                                                  "height: calc(100vh - 88px)"):
-            _notices()  # notices in a strip above the view: the view gives up their height while they show
-            with html.Div(style="position: relative; flex: 1 1 auto; min-height: 0"):
-                _alerts()  # errors over the view's top left corner: they never move the panel nor cover its fields
-                # the clay view mounts here (MOUNT_VIEW_JS); Vue leaves the element's children alone
-                html.Div(id="clay-view", style="position: relative; width: 100%; height: 100%")
+        with layout.content, html.Div(style="position: relative"):
+            _alerts()  # errors over the view's top left corner: they never move the panel nor cover its fields
+            _notices()  # notices over the view's foot, as a snackbar: they never resize the view
+            # the clay view mounts here (MOUNT_VIEW_JS); Vue leaves the element's children alone
+            html.Div(id="clay-view", style="position: relative; width: 100%; height: calc(100vh - 88px)")
     return layout
 
 
@@ -171,11 +169,13 @@ def _on_enter_or_change(handler: str) -> list[str]:
 _ALERTS = ("position: absolute; left: 8px; top: 40px; width: min(440px, 55%); z-index: 20; display: flex; "
            "flex-direction: column; gap: 6px")
 
-#: The notices (news, a recovered session, saved sessions set aside) lie in a strip above the clay view, side by side:
-#: the view gives up their height while they show and covers nothing of them, nor they of it. They go away by
-#: themselves (panel_state.py, NOTICE_SECONDS) or when closed.
-_NOTICES = "display: flex; flex-wrap: wrap; gap: 6px; padding: 6px 8px"
-_NOTICE = "flex: 1 1 320px"
+#: The notices (news, a recovered session, saved sessions set aside) lie side by side over the clay view's foot, above
+#: its status line, as a snackbar does: the view keeps its size (a notice that shrank it moved every control on the
+#: screen, at a Refine too), the clay in the middle stays clear, and they go away by themselves (panel_state.py,
+#: NOTICE_SECONDS) or when closed.
+_NOTICES = ("position: absolute; left: 8px; right: 8px; bottom: 34px; z-index: 20; display: flex; flex-wrap: wrap; "
+            "gap: 6px; pointer-events: none")
+_NOTICE = "flex: 0 1 480px; pointer-events: auto"
 
 
 def _alerts() -> None:
@@ -189,20 +189,19 @@ def _alerts() -> None:
 
 
 def _notices() -> None:
-    """The notices (news, a recovered session, saved sessions set aside) in a strip above the clay view
-    (_NOTICES)."""
+    """The notices (news, a recovered session, saved sessions set aside) over the clay view's foot (_NOTICES)."""
     with html.Div(id="panel-notices", style=_NOTICES,
                   v_show="(info_message && !error_message) || recovered_message || notice_message"):
         v3.VAlert(v_if="info_message && !error_message", text=("info_message",), type="info", id="info-alert",
-                  density="compact", closable=True, click_close="info_message = ''", style=_NOTICE)
-        with v3.VAlert(v_if="recovered_message", type="success", density="compact", style=_NOTICE,
+                  density="compact", closable=True, click_close="info_message = ''", style=_NOTICE, elevation=4)
+        with v3.VAlert(v_if="recovered_message", type="success", density="compact", style=_NOTICE, elevation=4,
                        id="recovered-alert", closable=True, click_close="recovered_message = ''"):
             html.Div("{{ recovered_message }}")
             v3.VBtn("Start fresh", size="small", variant="tonal", classes="mt-1", id="start-fresh",
                     click="trigger('start_fresh')", title="Load the preset the server was started with (Undo "
                                                        "brings the recovered session back)")
         v3.VAlert(v_if="notice_message", text=("notice_message",), type="warning", density="compact",
-                  id="notice-alert", closable=True, click_close="notice_message = ''", style=_NOTICE)
+                  id="notice-alert", closable=True, click_close="notice_message = ''", style=_NOTICE, elevation=4)
 
 
 def _panel(panel: PanelModel) -> None:
