@@ -113,6 +113,14 @@ def server_pids(studio) -> list[int]:
     return pids
 
 
+async def _workers_up(front, count: int, timeout: float) -> None:
+    """Until `count` workers answer (32 workers starting on one host took longer than the studio's own start: the
+    first rooms were refused, "no worker for rooms now")."""
+    end = time.time() + timeout
+    while len(front.alive()) < count and time.time() < end:
+        await asyncio.sleep(0.2)
+
+
 async def _make_rooms(front, names: list[str], presets: tuple[str, ...], at_once: int) -> None:
     """The rooms, `at_once` made at a time (each on the least loaded place)."""
     gate = asyncio.Semaphore(at_once)
@@ -155,6 +163,7 @@ def run_rooms(count: int, presets: tuple[str, ...], seconds: float, device: str,
     with started(StudioServer(tempfile.mkdtemp(prefix="bench-studio-"), device=device, workers=workers,
                               limits=limits), max(180.0, deadline - time.time() - 60.0)) as studio:
         left = lambda: max(1.0, deadline - time.time())  # noqa: E731
+        studio.call(_workers_up(studio.front, max(1, workers), left() - 30.0), timeout=left())
         # a room on each place first: what the first room loads is not a room's
         studio.call(_make_rooms(studio.front, [f"warm{p}" for p in range(max(1, workers))], presets, 64),
                     timeout=left())
