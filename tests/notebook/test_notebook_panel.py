@@ -228,7 +228,7 @@ def test_buttons_and_preset(panel, session):
 
 
 def _gap_of(panel: Panel, index: int) -> float:
-    cells = re.findall(r'<td class="somwidget-gap">([^<]*)</td>', panel.controls_html.value)
+    cells = re.findall(r'<td class="somwidget-gap"[^>]*>([^<]*)</td>', panel.controls_html.value)
     return float(cells[index].split("/")[0])
 
 
