@@ -10,6 +10,9 @@ projected on the main direction of their spread (the height along a tube, the ra
 cone), scaled to [0, 1] and laid along the profile by arc length, the profile taken in the same sense (its end further
 along that direction). So rings stay rings and keep their order, the faces keep their orientation, and the topology
 is untouched: a tube closed around stays closed around. A node on the axis (a pole) stays on it, at its height.
+
+An end of the profile drawn within AXIS_SNAP of the clay's size of the axis starts on it, as a CAD lathe snaps: the
+form closes there (a round bottom) instead of leaving a hole or a flat ring about the pole.
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ from . import checks
 
 #: A node closer to the axis than this share of the clay's size is on it (a pole): it stays on the axis.
 ON_AXIS = 1e-6
+#: An end of a profile closer to the axis than this share of the clay's size is put on the axis (`profile_of`).
+AXIS_SNAP = 0.05
 
 
 def axis_index(axis) -> int:
@@ -46,11 +51,11 @@ def place(r, h, theta, axis: int) -> np.ndarray:
     return out
 
 
-def profile_of(points, axis: int) -> tuple[np.ndarray, np.ndarray, float]:
+def profile_of(points, axis: int, snap: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:
     """(r, h, theta) of a drawn profile (M >= 2 points, x, y, z): its points' distances from the axis and heights,
     and the angle of the half-plane it was drawn in (the mean of its points' angles, each by its distance). Points
-    closer together than ON_AXIS of the profile's size are merged. ValueError for a profile with no length or one
-    lying on the axis."""
+    closer together than ON_AXIS of the profile's size are merged; an end within `snap` of the axis is put on it
+    (r = 0, its height kept). ValueError for a profile with no length or one lying on the axis."""
     p = checks.finite_array("profile points", points, 2, np.float64)
     if len(p) < 2 or p.shape[1] != 3:
         raise ValueError(f"profile points: expected at least 2 points of 3 (x, y, z), got shape {p.shape}")
@@ -63,6 +68,10 @@ def profile_of(points, axis: int) -> tuple[np.ndarray, np.ndarray, float]:
     if len(r) < 2:
         raise ValueError("profile points: the profile has no length in its half-plane (it goes round the axis)")
     angle = float(np.arctan2((r * np.sin(theta[keep])).sum(), (r * np.cos(theta[keep])).sum()))
+    r = r.copy()
+    for end in (0, -1):
+        if r[end] <= snap and r.max() > snap:
+            r[end] = 0.0
     return r, h, angle
 
 
@@ -84,16 +93,27 @@ def along(r, h) -> np.ndarray:
     return (s - s.min()) / span
 
 
+def arc_length(profile_r, profile_h) -> np.ndarray:
+    """The arc length (M,) float64 from the profile's first point to each of its points."""
+    return np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(profile_r), np.diff(profile_h)))])
+
+
+def node_arcs(positions, profile_r, profile_h, axis: int) -> np.ndarray:
+    """Where along the profile (its arc length from its first point) `lathe` puts each of the positions (N, 3)."""
+    r, h, _ = meridian(positions, axis)
+    pr, ph = np.asarray(profile_r, np.float64), np.asarray(profile_h, np.float64)
+    total = arc_length(pr, ph)[-1]
+    at = along(r, h) * total
+    # the profile taken in the sense of the clay's meridian (its end further along the main direction)
+    return total - at if (np.array([pr[-1] - pr[0], ph[-1] - ph[0]]) @ main_direction(r, h)) < 0 else at
+
+
 def lathe(positions, profile_r, profile_h, axis: int) -> np.ndarray:
     """The positions (N, 3) placed on the surface of revolution of the profile (profile_r, profile_h) about `axis`
     (see the module's docstring); float64."""
-    r, h, theta = meridian(positions, axis)
-    t = along(r, h)
+    r, _, theta = meridian(positions, axis)
     pr, ph = np.asarray(profile_r, np.float64), np.asarray(profile_h, np.float64)
-    if (np.array([pr[-1] - pr[0], ph[-1] - ph[0]]) @ main_direction(r, h)) < 0:
-        pr, ph = pr[::-1], ph[::-1]  # the profile in the sense of the clay's meridian
-    arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(pr), np.diff(ph)))])
-    at = t * arc[-1]
+    arc, at = arc_length(pr, ph), node_arcs(positions, pr, ph, axis)
     new_r, new_h = np.interp(at, arc, pr), np.interp(at, arc, ph)
     size = float(np.linalg.norm(np.ptp(np.asarray(positions, np.float64), axis=0))) or 1.0
     new_r[r <= ON_AXIS * size] = 0.0  # a pole stays on the axis

@@ -176,3 +176,90 @@ def test_the_rule_keeps_rings_in_order_whichever_way_the_profile_was_drawn():
     np.testing.assert_allclose(up, down, atol=1e-12)
     assert reference_distance(up, VASE).max() < 1e-12
     assert (np.diff(up.reshape(9, 12, 3)[:, 0, 2]) > 0).all()  # the bottom ring lowest, as before
+
+
+#: The fifth trial's bowl profile (docs/modelling.md, "Five shapes"): drawn in the front view from just beside the
+#: bowl's bottom centre (control 0, at z -0.394; 0.08 off the axis, under AXIS_SNAP x the size 3) out and up to a
+#: flared rim.
+BESIDE = np.stack([0.08 + 1.4 * np.linspace(0, 1, 30), np.zeros(30), -0.38 + 1.2 * np.linspace(0, 1, 30) ** 2], 1)
+
+
+def crease(weights: np.ndarray, faces) -> float:
+    """The largest angle between neighbouring triangles of the clay, degrees."""
+    from somwidget.backend import metrics
+    return float(metrics.dihedral_angles(weights, metrics.triangles_of(faces)).max())
+
+
+@pytest.fixture
+def bowl():
+    s = Session("bowl", device="cpu", autosave=False)
+    assert s.wait_idle(30)
+    yield s
+    s.close()
+
+
+def test_a_profile_begun_beside_the_axis_starts_on_it_and_the_bowl_stays_closed(bowl):
+    """The bowl's profile from 0.08 beside the axis: its first sample lies on the axis at the pole (r = 0), the
+    lathed form is the surface of revolution of the profile with that end on the axis (float64 reference), its first
+    ring of nodes off the pole no farther out than one step along the meridian (a closed round bottom, no flat ring
+    about the pole), and no crease over 35 degrees."""
+    n = bowl.revolve(BESIDE)
+    assert bowl.wait_applied(30)
+    w = bowl.frame.weights.astype(np.float64)
+    size = np.linalg.norm(np.ptp(bowl.preset.weights, axis=0))
+    snapped = BESIDE.copy()
+    snapped[0, 0] = 0.0
+    assert reference_distance(w, snapped).max() <= 1e-4 * size
+    c = bowl.controls[:n, :3].astype(np.float64)
+    np.testing.assert_allclose(c[0], [0.0, 0.0, BESIDE[0, 2]], atol=1e-6)
+    radius = np.hypot(w[:, 0], w[:, 1])
+    rings = np.unique(np.round(radius, 5))
+    steps = np.hypot(np.diff(rings), 0)  # radial steps between rings: the first (pole to ring 1) like the others
+    assert rings[0] == 0 and rings[1] <= 1.5 * np.median(steps), rings[:4]
+    assert crease(w, bowl.topology.faces) <= 35.0
+
+
+def test_an_end_farther_from_the_axis_than_the_snap_stays_where_drawn():
+    """profile_of puts an end on the axis only within `snap` of it (either end), never a whole profile near it."""
+    far = np.array([[0.2, 0.0, -0.4], [1.0, 0.0, 0.5]])
+    r, _, _ = rule.profile_of(far, 2, snap=0.15)
+    np.testing.assert_allclose(r, [0.2, 1.0])
+    r, _, _ = rule.profile_of(far[::-1] * [0.5, 1, 1], 2, snap=0.15)
+    np.testing.assert_allclose(r, [0.5, 0.0])  # the last end, 0.1 off, on the axis
+    r, _, _ = rule.profile_of([[0.05, 0.0, 0.0], [0.1, 0.0, 1.0]], 2, snap=0.15)
+    np.testing.assert_allclose(r, [0.05, 0.1])  # the whole profile within the snap: kept as drawn
+
+
+def test_every_revolved_sample_lies_on_a_node_of_the_clay(bowl):
+    """After the revolve, each of the profile's samples and each of its copies lies on a node of the lathed clay
+    (the controls table's gaps 0, none off the clay), also for a profile drawn in a half-plane between two of the
+    bowl's 32 longitudes (turned onto the nearest)."""
+    turn = np.deg2rad(4.0)
+    rotation = np.array([[np.cos(turn), -np.sin(turn), 0], [np.sin(turn), np.cos(turn), 0], [0, 0, 1]])
+    bowl.revolve(BESIDE @ rotation.T)
+    assert bowl.wait_applied(30)
+    f = bowl.frame
+    w = f.weights.astype(np.float64)
+    size = np.linalg.norm(np.ptp(bowl.preset.weights, axis=0))
+    nearest = np.linalg.norm(f.effective_controls[:, None, :3] - w[None], axis=2).min(axis=1)
+    assert nearest.max() <= 1e-5 * size, nearest.max()
+    assert f.gaps.max() <= 0.02 * size
+    assert len(f.controls) >= 4 and np.diff(np.hypot(f.controls[:, 0], f.controls[:, 1])).min() > 0
+
+
+def test_the_revolve_says_which_controls_it_replaced_and_one_undo_brings_them_back(bowl):
+    """The notice names the preset and how many controls (as the table counts them) the profile replaced; one undo
+    brings those controls back exactly."""
+    before, notices = bowl.controls.copy(), bowl.settings.notices
+    bowl.revolve(BESIDE)
+    assert bowl.wait_applied(30)
+    assert bowl.settings.notices == notices + 1
+    assert bowl.settings.notice == ("Revolve replaced the 3 controls of Bowl with the profile; Ctrl+Z brings them "
+                                    "back")
+    assert bowl.undo() and bowl.wait_applied(30)
+    np.testing.assert_array_equal(bowl.controls, before)
+    bowl.revolve(BESIDE)  # a second profile replaces the first: one stroke, one control as the table counts
+    assert bowl.wait_applied(30)
+    bowl.revolve(VASE[:, [0, 1, 2]] * [1, 1, 0.5])
+    assert bowl.wait_applied(30)
+    assert bowl.settings.notice.startswith("Revolve replaced the 1 control of Bowl ")

@@ -3,8 +3,11 @@
 One undo step: the nodes are placed on the surface of revolution of the profile (backend/revolve.py; the weights
 change, nothing trains), the symmetry becomes n-fold about the axis, and the profile's samples become the clay's
 stroke control (its copies turned about the axis) in place of the controls of the form it replaces: PROFILE_SAMPLES
-samples at most, and with their copies at most half of the engine's controls (so that as many can be added). Nothing
-trains until the person acts: dragging the profile then swells or pinches the whole form.
+samples at most, and with their copies at most half of the engine's controls (so that as many can be added), each
+sample on a node of the lathed clay (its place along the profile and its half-plane those of the nearest node: the
+table shows no gap). An end drawn within AXIS_SNAP of the clay's size of the axis starts on it (backend/revolve.py).
+Nothing trains until the person acts: dragging the profile then swells or pinches the whole form. The panels say
+which controls the profile replaced (`Settings.notice`); one undo brings them back.
 """
 
 from __future__ import annotations
@@ -13,9 +16,9 @@ import numpy as np
 
 from ...backend import checks
 from ...backend import revolve as lathe_rule
-from ...backend.metrics import median_edge
+from ...backend.metrics import bounding_diagonal, median_edge
 from ...backend.symmetry import MAX_RADIAL, Symmetry
-from .controls import MAX_ABS_VALUE, MAX_CONTROLS, SPACING_SHARE, check_radius, resample
+from .controls import MAX_ABS_VALUE, MAX_CONTROLS, SPACING_SHARE, check_radius
 from .history import Step
 from .operations import Publish
 
@@ -45,7 +48,8 @@ def revolve(session, profile_points, axis="z", n: int = DEFAULT_COPIES, radius: 
     if not state.preset.topology.faces:
         raise ValueError("revolve: this clay has no faces (a lattice): revolve shapes a surface")
     position = list(layout.position)
-    profile_r, profile_h, angle = lathe_rule.profile_of(pts[:, position] if pts.shape[1] != 3 else pts, a)
+    snap = lathe_rule.AXIS_SNAP * bounding_diagonal(state.preset.weights[:, position])
+    profile_r, profile_h, angle = lathe_rule.profile_of(pts[:, position] if pts.shape[1] != 3 else pts, a, snap)
     group = Symmetry.radial(n, a).on(layout.position, layout.direction)
     r = check_radius("revolve radius", state.preset.radius if radius is None else radius)
     with timeline.step("revolve"):
@@ -53,9 +57,14 @@ def revolve(session, profile_points, axis="z", n: int = DEFAULT_COPIES, radius: 
             trainer.drain()
             with state.lock:
                 step = _lathed(state, profile_r, profile_h, angle, a, group, r, pts)
+            replaced = len(state.controls) - sum(state.strokes) + len(state.strokes)  # as the table's rows
             timeline.put_back(step)
         with state.lock:
             trainer.enqueue(Publish(), intent=False)
+    settings = session.settings
+    settings.notice = (f"Revolve replaced the {replaced} control{'s' * (replaced != 1)} of {state.preset.title} with "
+                       "the profile; Ctrl+Z brings them back")
+    settings.notices += 1
     return len(step.controls)
 
 
@@ -64,18 +73,44 @@ def _lathed(state, profile_r, profile_h, angle, axis, group, radius, pts) -> Ste
     layout, som = state.layout, state.som
     position = list(layout.position)
     weights = np.asarray(som.weights, np.float32).copy()
+    arcs = lathe_rule.node_arcs(weights[:, position], profile_r, profile_h, axis)
     weights[:, position] = lathe_rule.lathe(weights[:, position], profile_r, profile_h, axis)
-    # the profile in its own half-plane (so its samples lie on the form), its other features the last control's
-    # (or those given)
-    full = np.repeat(state.controls[-1:].astype(np.float64), len(profile_r), axis=0)
-    full[:, position] = lathe_rule.place(profile_r, profile_h, np.full(len(profile_r), angle), axis)
-    if pts.shape[1] != 3:
-        others = [d for d in range(layout.n_dims) if d not in position]
-        full[:, others] = pts[0, others]
     spacing = max(median_edge(weights[:, position], state.preset.topology.edges), SPACING_SHARE * radius, 1e-6)
     most = min(PROFILE_SAMPLES, MAX_CONTROLS // group.order // 2)  # room left for as many controls again
-    samples = resample(full, layout.position, spacing, most).astype(np.float32)
+    arc = lathe_rule.arc_length(profile_r, profile_h)
+    at = _sample_arcs(arc[-1], arcs, spacing, most)
+    angle = _node_angle(weights[:, position], angle, axis)
+    # the profile in its own half-plane (so its samples lie on the form), its other features the last control's
+    # (or those given)
+    samples = np.repeat(state.controls[-1:].astype(np.float64), len(at), axis=0)
+    samples[:, position] = lathe_rule.place(np.interp(at, arc, profile_r), np.interp(at, arc, profile_h),
+                                            np.full(len(at), angle), axis)
+    if pts.shape[1] != 3:
+        others = [d for d in range(layout.n_dims) if d not in position]
+        samples[:, others] = pts[0, others]
+    samples = samples.astype(np.float32)
     params = {name: list(v) if isinstance(v, list) else v for name, v in state.params.items()}
     return Step(preset=state.preset, controls=samples, parameters=params, weights=weights,
                 iteration=int(som.iterations), radii=np.full(len(samples), radius, np.float32), symmetry=group,
                 strokes=(len(samples),), control_ids=state.run_ids((len(samples),)))
+
+
+def _sample_arcs(length: float, node_arcs: np.ndarray, spacing: float, most: int) -> np.ndarray:
+    """Where the profile's samples lie along it (arc lengths, its ends included): about `spacing` apart, 2 to `most`
+    of them, each moved to the nearest place a node of the lathed clay lies (so that the clay passes through every
+    sample), none twice."""
+    count = int(np.clip(np.ceil(length / spacing) + 1, 2, max(2, most)))
+    places = np.unique(node_arcs)
+    wanted = np.linspace(0.0, length, count)
+    return np.unique(places[np.abs(places[None, :] - wanted[:, None]).argmin(axis=1)])
+
+
+def _node_angle(points: np.ndarray, angle: float, axis: int) -> float:
+    """The angle about `axis` of the lathed clay's node (off the axis) nearest in angle to `angle`: the profile's
+    half-plane turned onto the nodes' (at most half a longitude's turn)."""
+    r, _, theta = lathe_rule.meridian(points, axis)
+    off = r > lathe_rule.ON_AXIS * (r.max() or 1.0)
+    if not off.any():
+        return angle
+    turn = np.angle(np.exp(1j * (theta[off] - angle)))
+    return float(angle + turn[np.abs(turn).argmin()])
