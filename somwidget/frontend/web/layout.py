@@ -104,8 +104,8 @@ def _button(help_text, *args, **props) -> None:
 
 
 def build_page(server, panel: PanelModel):
-    """The page: a toolbar (iteration, Train / Pause, Undo, Redo, Reset), the panel in a drawer, and the element the
-    clay view mounts into (#clay-view). Returns trame's layout."""
+    """The page: a toolbar (iteration, Train / Pause, Undo, Redo, Reset, Export), the panel in a drawer, and the
+    element the clay view mounts into (#clay-view). Returns trame's layout."""
     with SinglePageWithDrawerLayout(server, full_height=True) as layout:
         layout.title.set_text("somwidget: computational clay")
         with layout.toolbar:
@@ -121,6 +121,12 @@ def build_page(server, panel: PanelModel):
                     disabled=("!stats.can_redo",), variant="text", classes="mr-2")
             _button(ACTION_HELP["reset"], "Reset", id="reset-button", click="trigger('reset')",
                     prepend_icon="mdi-restore", variant="tonal", classes="mr-2")
+            # Export in the bar, in sight at any panel scroll (at the panel's foot it lay below the fold at 1400 x 900)
+            _button(("'Download the clay as ' + export_format.toUpperCase() + ' (the format menu under Export and "
+                     "sessions in the panel), named after the session and the time'",), "Export",
+                    variant="tonal", prepend_icon="mdi-download", id="export-mesh", classes="mr-2",
+                    click=f"utils.download(export_stem + {STAMP} + '.' + export_format, trigger('export_mesh', "
+                          "[export_format]), export_mimes[export_format])")
         with layout.drawer as drawer:
             drawer.width = 390
             _panel(panel)
@@ -358,15 +364,12 @@ def _panel(panel: PanelModel) -> None:
         # files out
         html.Div("Export and sessions", classes="text-subtitle-2 mt-2")
         with html.Div(classes="d-flex flex-wrap align-center ga-1 mb-2"):
-            # the format menu (model/panel.py, EXPORT_CHOICES); the file is named after the session and the day
+            # the format menu (model/panel.py, EXPORT_CHOICES) of the bar's Export; the file is named after the
+            # session and the day
             v3.VSelect(v_model=("export_format",), items=("export_items",), label="Format", density="compact",
                        hide_details=True, id="export-format", style="min-width: 190px; max-width: 240px",
                        title="What the next tool reads: STL for 3-D printing, .3dm for Rhino, glTF / GLB for "
                              "Blender and game engines (the controls as named nodes)")
-            _button("Download the clay in the chosen format, named after the session and the time", "Export",
-                    size="small", variant="tonal", prepend_icon="mdi-download", id="export-mesh",
-                    click=f"utils.download(export_stem + {STAMP} + '.' + export_format, trigger('export_mesh', "
-                          "[export_format]), export_mimes[export_format])")
             _button("Download the whole session (clay, controls, settings) as a .npz to load again later",
                     "Save session", size="small", variant="tonal", prepend_icon="mdi-content-save", id="save-session",
                     click=f"utils.download(export_stem + {STAMP} + '.npz', trigger('save_session'), "
