@@ -61,8 +61,8 @@ class SessionSettings:
         self.state = state
         self.timeline = timeline
         self.trainer = trainer
-        self.notice = ""  # what the latest symmetry change did to the controls, in words
-        self.notices = 0  # symmetry changes so far: a panel shows `notice` when this moves
+        self.notice = ""  # what the latest symmetry change (or revolve) did to the controls, in words
+        self.notices = 0  # such news so far: a panel shows `notice` when this moves
 
     def values(self) -> dict:
         """Every setting held by name, with "mirror" (the dims a mirror group negates) and "group" (the symmetry

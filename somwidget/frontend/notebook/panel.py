@@ -339,7 +339,7 @@ class Panel(widgets.VBox):
             self.controls_html.value = _controls_table(rows)
             if session.error and not self.error.value:
                 self.error.value = f'<span style="color:#b00020">{_html.escape(session.error)}</span>'
-            if session.settings.notices != self._notices_seen:  # what a symmetry change did to the controls
+            if session.settings.notices != self._notices_seen:  # what a symmetry change or revolve did
                 self._notices_seen = session.settings.notices
                 self.error.value = f'<span style="color:#1d428a">{_html.escape(session.settings.notice)}</span>'
             failed = session.save_error

@@ -121,7 +121,7 @@ class PanelState:
         s.param_errors = {}
 
     def _show_notice(self) -> None:
-        """What a symmetry change did to the controls (from any view or script), in the panel's news."""
+        """What a symmetry change or a revolve did to the controls (from any view or script), in the panel's news."""
         settings = self.session.settings
         if settings.notices != self._notices_seen:
             self._notices_seen = settings.notices
