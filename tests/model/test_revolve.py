@@ -263,3 +263,17 @@ def test_the_revolve_says_which_controls_it_replaced_and_one_undo_brings_them_ba
     bowl.revolve(VASE[:, [0, 1, 2]] * [1, 1, 0.5])
     assert bowl.wait_applied(30)
     assert bowl.settings.notice.startswith("Revolve replaced the 1 control of Bowl ")
+
+
+def test_a_tube_keeps_its_end_ring_off_the_axis_where_a_profile_begins_beside_it(tube):
+    """The tube has no pole: a profile begun 0.05 beside the axis keeps its end as drawn, so the tube's bottom ring
+    stays a ring (no face folded flat onto the axis; every face keeps an area)."""
+    profile = np.array([[0.05, 0.0, -1.0], [0.5, 0.0, -0.5], [0.3, 0.0, 0.5], [0.45, 0.0, 1.0]])
+    tube.revolve(profile)
+    assert tube.wait_applied(30)
+    w = tube.frame.weights[:, :3].astype(np.float64)
+    assert np.hypot(w[:, 0], w[:, 1]).min() > 0.03
+    f = np.asarray(tube.topology.faces)
+    tri = w[f[:, :3]]
+    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    assert area.min() > 0

@@ -48,7 +48,7 @@ def revolve(session, profile_points, axis="z", n: int = DEFAULT_COPIES, radius: 
     if not state.preset.topology.faces:
         raise ValueError("revolve: this clay has no faces (a lattice): revolve shapes a surface")
     position = list(layout.position)
-    snap = lathe_rule.AXIS_SNAP * bounding_diagonal(state.preset.weights[:, position])
+    snap = _axis_snap(state.preset.weights[:, position], a)
     profile_r, profile_h, angle = lathe_rule.profile_of(pts[:, position] if pts.shape[1] != 3 else pts, a, snap)
     group = Symmetry.radial(n, a).on(layout.position, layout.direction)
     r = check_radius("revolve radius", state.preset.radius if radius is None else radius)
@@ -66,6 +66,14 @@ def revolve(session, profile_points, axis="z", n: int = DEFAULT_COPIES, radius: 
                        "the profile; Ctrl+Z brings them back")
     settings.notices += 1
     return len(step.controls)
+
+
+def _axis_snap(start_positions, axis: int) -> float:
+    """How close to the axis a profile's end is put on it: AXIS_SNAP of the clay's size where the clay has a pole (a
+    node on the axis, as the bowl's bottom), else 0: a tube's end ring drawn onto the axis would fold its faces flat."""
+    size = bounding_diagonal(start_positions)
+    r, _, _ = lathe_rule.meridian(start_positions, axis)
+    return lathe_rule.AXIS_SNAP * size if bool((r <= lathe_rule.ON_AXIS * size).any()) else 0.0
 
 
 def _lathed(state, profile_r, profile_h, angle, axis, group, radius, pts) -> Step:
