@@ -85,6 +85,7 @@ class Handles:
         self.held_nodes = wp.zeros(n, dtype=wp.int32, device=dev)  # 1 where a live binding holds the node
         self.stepped = wp.zeros(1, dtype=wp.int32, device=dev)
         self.changed = wp.zeros(1, dtype=wp.int32, device=dev)
+        self.unarrived = wp.zeros(1, dtype=wp.int32, device=dev)  # 1 when a place stepped short of its member
 
     # -- the slots ----------------------------------------------------------------------------------------------
     def _layout(self, controls: Controls) -> None:

@@ -147,10 +147,10 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 members: wp.array(dtype=vec), radius: wp.array(dtype=wp.float32), position: vec,
                 places: wp.array(dtype=vec), starts: wp.array(dtype=vec), reach: wp.array(dtype=wp.float32),
                 rebind: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32),
-                changed: wp.array(dtype=wp.int32)):
+                changed: wp.array(dtype=wp.int32), unarrived: wp.array(dtype=wp.int32)):
         """Step 3 (a) for handle row r: a live binding whose place differs from its member steps towards it by at
         most STEP r, takes the reach max(r, WIDEN |p - p(grab)|) and is marked for binding again (rebind[r];
-        stepped and changed set, both 0 before)."""
+        stepped and changed set, both 0 before; unarrived set when the step stops short of the member)."""
         r = wp.tid()
         j = slot_of_row[r]
         rebind[r] = 0
@@ -168,6 +168,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                     p = m
                 else:
                     p = p + (m - p) * (most / gap)
+                    unarrived[0] = 1
                 places[j] = p
                 reach[j] = wp.max(radius[j], WIDEN * wp.length(wp.cw_mul(p - starts[j], position)))
                 rebind[r] = 1
@@ -282,21 +283,24 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     def carry(slot_of_row: wp.array(dtype=wp.int32), group_start: wp.array(dtype=wp.int32),
               live: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32), places: wp.array(dtype=vec),
               winner_anchors: wp.array(dtype=vec), anchors: wp.array(dtype=vec), weights: wp.array(dtype=vec),
-              held: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32), box: wp.array(dtype=vec),
-              counting: int, left: wp.array(dtype=wp.int32), going: wp.array(dtype=wp.int32)):
+              held: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32), unarrived: wp.array(dtype=wp.int32),
+              box: wp.array(dtype=vec), counting: int, left: wp.array(dtype=wp.int32),
+              going: wp.array(dtype=wp.int32)):
         """Step 3 (b) for node v: onto its target when a live binding holds it (held[v] = 1), else left (0); a group
         of rows (a stroke's samples, one copy) counts as one binding, its weight their largest, its displacement their
-        weighted mean. Thread 0 clears `stepped` for the next cycle's `advance` (read by then); with `counting`, a
-        carry-only run's loop (shaping_path), it first counts the cycle: one fewer left (left[0]), and going[0] = 1
-        while a place stepped in it and cycles are left (a cycle in which no place stepped carries its patches to
-        where the cycle before did: every later one would too, so the run stops there)."""
+        weighted mean. Thread 0 clears `stepped` and `unarrived` for the next cycle's `advance` (read by then); with
+        `counting`, a carry-only run's loop (shaping_path), it first counts the cycle: one fewer left (left[0]), and
+        going[0] = 1 while a place stopped short of its member in it and cycles are left (once every place is on its
+        member, the next cycle steps none, binds nothing again and carries every patch to where this one did: it and
+        every later one change nothing, so the run stops here)."""
         v = wp.tid()
         if v == 0:
             if counting != 0:
                 n = left[0] - 1
                 left[0] = n
-                going[0] = wp.where(stepped[0] != 0 and n > 0, 1, 0)
+                going[0] = wp.where(unarrived[0] != 0 and n > 0, 1, 0)
             stepped[0] = 0
+            unarrived[0] = 0
         num = vec()
         den = wp.float32(0.0)
         miss = wp.float32(1.0)

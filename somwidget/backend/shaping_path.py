@@ -9,7 +9,8 @@ is the point members' search and move (when there are point controls), the handl
 big meshes a conditional loop of a launch a round, so a cycle whose bindings stand still costs two small launches),
 and the smoothing of the free nodes with the volume put back and the clamp (with smoothing). With nothing but
 handles, the run is one conditional loop, whatever its length (the carry counts the cycles on the device), that stops
-at the first cycle in which no place stepped, as every later cycle would carry to the same places. The cycle s
+after the first cycle at whose end every place is on its member, as every later cycle would carry to the same places
+(a drag frame's move within a quarter radius: one cycle). The cycle s
 reaches the point members' move through a device counter (two, passed on in turn), so one graph serves every s. Past
 the dense table, point members need their winners' distance rows fetched by the host each cycle: those cycles are
 launched one by one.
@@ -163,7 +164,7 @@ class ShapingPath:
         h = self.handles
         wp.launch(h.kernels.advance, dim=h.n_rows, device=model.device,
                   inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.starts, h.reach,
-                          h.rebind, h.stepped, h.changed])
+                          h.rebind, h.stepped, h.changed, h.unarrived])
         wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
 
     def _carry(self, model: SomModel, state: SomState, counting: bool = False) -> None:
@@ -172,7 +173,8 @@ class ShapingPath:
         h = self.handles
         wp.launch(h.kernels.carry, dim=model.n_neurons, device=model.device,
                   inputs=[h.slot_of_row, h.group_start, h.live_dev, h.patch, h.places, h.winner_anchors, h.anchors,
-                          state.w, h.held_nodes, h.stepped, h.box, int(counting), self.left, self.going])
+                          state.w, h.held_nodes, h.stepped, h.unarrived, h.box, int(counting), self.left,
+                          self.going])
 
     def _smooth(self, model: SomModel, state: SomState, pulls: list, parts, taubin: bool) -> None:
         """Step 4: the smoothing steps on the free nodes; with Taubin's rule the volume of each closed part put back
