@@ -280,6 +280,12 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 winner_anchors[i] = weights[winners[i]]
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def count_from(cycles: wp.array(dtype=vec), left: wp.array(dtype=wp.int32), going: wp.array(dtype=wp.int32)):
+        """A carry-only run's loop begins: its cycles (sent with the members, cycles[0][0]) left, and going."""
+        left[0] = wp.int32(cycles[0][0])
+        going[0] = 1
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def carry(slot_of_row: wp.array(dtype=wp.int32), group_start: wp.array(dtype=wp.int32),
               live: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32), places: wp.array(dtype=vec),
               winner_anchors: wp.array(dtype=vec), anchors: wp.array(dtype=vec), weights: wp.array(dtype=vec),
@@ -409,6 +415,6 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     for source in (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32)):
         wp.overload(move_points, {"distances": source})
     return SimpleNamespace(vec=vec, find=find, move_points=move_points, advance=advance, bind=bind, seed=seed,
-                           flood=flood, flood_block=flood_block, reanchor=reanchor, carry=carry,
+                           flood=flood, flood_block=flood_block, reanchor=reanchor, count_from=count_from, carry=carry,
                            smooth_free=smooth_free, part_volumes=part_volumes, volume_gradient=volume_gradient,
                            put_back=put_back, copy_weights=copy_weights)

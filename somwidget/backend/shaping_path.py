@@ -58,6 +58,7 @@ class ShapingPath:
         self._parity = 0
         self._setup = None
         self._parts = None
+        self._planned: tuple | None = None  # (controls, schedule, plan): most_cycles's, for the run that follows
 
     def forget(self) -> None:
         """Drop the captured graphs (the learning table they hold is made again)."""
@@ -77,16 +78,23 @@ class ShapingPath:
     # -- a run ------------------------------------------------------------------------------------------------------
     def _plan(self, controls: Controls, schedule: SomSchedule) -> tuple:
         """(point members, a live binding, the smoothing steps, Taubin's rule) of a run of these controls (whose
-        members and radii go up first)."""
+        members and radii are staged first, to go up with the run's `send`); the plan `most_cycles` made just
+        before, when it was for these controls and this schedule."""
+        planned, self._planned = self._planned, None
+        if planned is not None and planned[0] is controls and planned[1] is schedule:
+            return planned[2]
         h = self.handles
-        h.upload(controls)
+        h.upload(controls, send=False)
         steps = capped_steps(schedule)
         return len(h.point_slots) > 0, bool(h.live.any()), tuple(steps), schedule.rule == "taubin" and bool(steps)
 
     def most_cycles(self, controls: Controls, schedule: SomSchedule) -> int | None:
         """The most cycles one `run` takes: any number (None) for a run of nothing but handles (one graph for every
-        length: a conditional loop that counts its cycles on the device), else cycle_kernels.LONGEST_GRAPH."""
-        points, live, steps, _ = self._plan(controls, schedule)
+        length: a conditional loop that counts its cycles on the device), else cycle_kernels.LONGEST_GRAPH. (Som.step
+        asks it right before the run, which takes its plan.)"""
+        plan = self._plan(controls, schedule)
+        self._planned = (controls, schedule, plan)
+        points, live, steps, _ = plan
         return None if live and not points and not steps and self.captured else LONGEST_GRAPH
 
     def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
@@ -101,10 +109,11 @@ class ShapingPath:
             self.counter.assign(np.array([state.s, state.s], np.int32))
             self._counter_s, self._parity = state.s, 0
         if live and not points and not steps:
-            self.left.fill_(cycles)  # (the carry-only loop's count: one graph for every length)
+            h.stage_cycles(cycles)  # (the carry-only loop's count, sent with the members: one graph for every length)
             cycles_key = 0
         else:
             cycles_key = cycles
+        h.send()
         if points or live or steps:
             if self.captured and not (model.rows and points):
                 setup = (h.version, schedule.version, model.smooth_dims)
@@ -134,7 +143,7 @@ class ShapingPath:
         volume = parts is not None and parts.count > 0
         stretches = max(1, math.ceil(n / FIND_STRETCH))
         if live and not points and not steps:  # carry only: the cycles after the places arrived change nothing
-            self.going.fill_(1)  # (left[0]: the run's cycles, filled by `run` before the graph's launch)
+            wp.launch(kern.count_from, dim=1, device=dev, inputs=[h.cycles, self.left, self.going])
 
             def cycle() -> None:
                 self._step_places(model, state)
