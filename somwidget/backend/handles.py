@@ -65,6 +65,10 @@ class Handles:
         self.model = model
         dev, n, vec = model.device, model.n_neurons, model.vec
         self.kernels = shaping_kernels(model.n_dims)
+        #: the threads of a block a handle row where a patch is bound in one launch (the CPU, meshes of up to
+        #: FLOOD_IN_BLOCKS_MOST nodes), else 0 (a launch a round)
+        self.block_threads = 1 if dev == "cpu" else min(FLOOD_THREADS, 32 * -(-n // 32)) if (
+            n <= FLOOD_IN_BLOCKS_MOST) else 0
         self.held: set[int] = set()
         self.live = np.zeros(0, bool)
         self.bound: set[int] = set()
@@ -350,8 +354,8 @@ class Handles:
         recorded into a captured graph."""
         model, kern, dev = self.model, self.kernels, self.model.device
         n = model.n_neurons
-        if dev == "cpu" or n <= FLOOD_IN_BLOCKS_MOST:
-            threads = 1 if dev == "cpu" else min(FLOOD_THREADS, 32 * -(-n // 32))
+        if self.block_threads:
+            threads = self.block_threads
             wp.launch(kern.flood_block, dim=self.n_rows * threads, block_dim=threads, device=dev,
                       inputs=[state.w, self.rebind, self.slot_of_row, self.winners, self.reach, self.position,
                               model.offsets, model.neighbors, self.patch])

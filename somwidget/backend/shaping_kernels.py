@@ -225,6 +225,33 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                     patch[r, v] = falloff(d, ball)
                     changed[0] = 1
 
+    @wp.func
+    def flood_patch(weights: wp.array(dtype=vec), r: int, u: int, ball: wp.float32, t: int, threads: int,
+                    position: vec, offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32),
+                    patch: wp.array2d(dtype=wp.float32)):
+        """Row r's patch bound around winner u within `ball` by the `threads` threads of one block (thread t): the
+        seed, then rounds behind a barrier until one joins no node (`flood_block`)."""
+        n = patch.shape[1]
+        centre = weights[u]
+        for v in range(t, n, threads):
+            inside = wp.length(wp.cw_mul(weights[v] - centre, position)) < ball
+            patch[r, v] = wp.where(v == u, wp.float32(1.0), wp.where(inside, INSIDE, wp.float32(-1.0)))
+        joining = int(1)
+        while sync_block_any(joining) != 0:
+            joining = int(0)
+            for v in range(t, n, threads):
+                if patch[r, v] == INSIDE:
+                    joined = int(0)
+                    for e in range(offsets[v], offsets[v + 1]):
+                        if patch[r, neighbors[e]] >= wp.float32(0.0):
+                            joined = 1
+                    if joined != 0:
+                        patch[r, v] = falloff(wp.length(wp.cw_mul(weights[v] - centre, position)), ball)
+                        joining = int(1)
+        for v in range(t, n, threads):
+            if patch[r, v] == INSIDE:
+                patch[r, v] = wp.float32(-1.0)
+
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def flood_block(weights: wp.array(dtype=vec), rebind: wp.array(dtype=wp.int32),
                     slot_of_row: wp.array(dtype=wp.int32), winners: wp.array(dtype=wp.int32),
@@ -244,28 +271,57 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         if r < patch.shape[0]:
             if rebind[r] != 0:
                 j = slot_of_row[r]
-                u = winners[j]
-                n = patch.shape[1]
-                centre = weights[u]
-                ball = reach[j]
-                for v in range(t, n, threads):
-                    inside = wp.length(wp.cw_mul(weights[v] - centre, position)) < ball
-                    patch[r, v] = wp.where(v == u, wp.float32(1.0), wp.where(inside, INSIDE, wp.float32(-1.0)))
-                joining = int(1)
-                while sync_block_any(joining) != 0:
-                    joining = int(0)
-                    for v in range(t, n, threads):
-                        if patch[r, v] == INSIDE:
-                            joined = int(0)
-                            for e in range(offsets[v], offsets[v + 1]):
-                                if patch[r, neighbors[e]] >= wp.float32(0.0):
-                                    joined = 1
-                            if joined != 0:
-                                patch[r, v] = falloff(wp.length(wp.cw_mul(weights[v] - centre, position)), ball)
-                                joining = int(1)
-                for v in range(t, n, threads):
-                    if patch[r, v] == INSIDE:
-                        patch[r, v] = wp.float32(-1.0)
+                flood_patch(weights, r, winners[j], reach[j], t, threads, position, offsets, neighbors, patch)
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def step_block(slot_of_row: wp.array(dtype=wp.int32), live: wp.array(dtype=wp.int32),
+                   members: wp.array(dtype=vec), radius: wp.array(dtype=wp.float32), position: vec,
+                   places: wp.array(dtype=vec), starts: wp.array(dtype=vec), reach: wp.array(dtype=wp.float32),
+                   winners: wp.array(dtype=wp.int32), weights: wp.array(dtype=vec), offsets: wp.array(dtype=wp.int32),
+                   neighbors: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32),
+                   anchors: wp.array(dtype=vec), winner_anchors: wp.array(dtype=vec),
+                   unarrived: wp.array(dtype=wp.int32)):
+        """Step 3 (a) in one launch, a block per handle row (where `flood_block` binds): `advance`, then, when the
+        row's place stepped, its patch bound again (`flood_patch`) and every anchor taken again (`reanchor`: each
+        block whose row stepped writes the same values, read from weights no thread writes). Every thread of the
+        block takes the step (the same values); thread 0 writes it after a barrier (once every thread has read the
+        place)."""
+        i = wp.tid()
+        threads = wp.block_dim()
+        r = i // threads
+        t = i - r * threads
+        if r < patch.shape[0]:
+            j = slot_of_row[r]
+            p = places[j]
+            ball = wp.float32(0.0)
+            moving = int(0)
+            stops_short = int(0)
+            if live[j] != 0:
+                m = members[j]
+                for d in range(wp.static(n_dims)):
+                    if m[d] != p[d]:
+                        moving = 1
+                if moving != 0:
+                    gap = wp.length(wp.cw_mul(m - p, position))
+                    most = STEP * radius[j]
+                    if gap <= most:
+                        p = m
+                    else:
+                        p = p + (m - p) * (most / gap)
+                        stops_short = 1
+                    ball = wp.max(radius[j], WIDEN * wp.length(wp.cw_mul(p - starts[j], position)))
+            if sync_block_any(moving) != 0:
+                if t == 0:
+                    places[j] = p
+                    reach[j] = ball
+                    if stops_short != 0:
+                        unarrived[0] = 1
+                flood_patch(weights, r, winners[j], ball, t, threads, position, offsets, neighbors, patch)
+                for v in range(t, weights.shape[0], threads):
+                    anchors[v] = weights[v]
+                for k in range(t, live.shape[0], threads):
+                    if live[k] != 0:
+                        winner_anchors[k] = weights[winners[k]]
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def reanchor(weights: wp.array(dtype=vec), live: wp.array(dtype=wp.int32), winners: wp.array(dtype=wp.int32),
@@ -415,6 +471,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     for source in (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32)):
         wp.overload(move_points, {"distances": source})
     return SimpleNamespace(vec=vec, find=find, move_points=move_points, advance=advance, bind=bind, seed=seed,
-                           flood=flood, flood_block=flood_block, reanchor=reanchor, count_from=count_from, carry=carry,
+                           flood=flood, flood_block=flood_block, step_block=step_block, reanchor=reanchor,
+                           count_from=count_from, carry=carry,
                            smooth_free=smooth_free, part_volumes=part_volumes, volume_gradient=volume_gradient,
                            put_back=put_back, copy_weights=copy_weights)

@@ -169,8 +169,15 @@ class ShapingPath:
 
     def _step_places(self, model: SomModel, state: SomState) -> None:
         """Step 3 (a): each live binding's place steps after its member, and the patches that stepped are bound again
-        (a conditional node)."""
+        (a conditional node); where a patch is bound in one launch, all of it in one (`step_block`)."""
         h = self.handles
+        if h.block_threads:
+            wp.launch(h.kernels.step_block, dim=h.n_rows * h.block_threads, block_dim=h.block_threads,
+                      device=model.device,
+                      inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.starts, h.reach,
+                              h.winners, state.w, model.offsets, model.neighbors, h.patch, h.anchors,
+                              h.winner_anchors, h.unarrived])
+            return
         wp.launch(h.kernels.advance, dim=h.n_rows, device=model.device,
                   inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.starts, h.reach,
                           h.rebind, h.stepped, h.changed, h.unarrived])
