@@ -13,9 +13,10 @@ own in `patch` (R, N) for each member: the member's binding, -1 where a node is 
      then, if any moved, `seed` and `flood` (repeated while it joins a node; `flood_block` does both in one launch)
      bind the patch again: the nodes joined to the winner u through nodes whose straight distance from W_u is below
      R, each weighted w = (1 - t^2)^2, t = |W_v - W_u| / R; and `reanchor` takes every anchor again (A_v = W_v,
-     a_u = W_u). `carry` puts every bound node on its target T_v = A_v + (1 - prod_b (1 - w_bv)) sum_b w_bv (p_b -
-     a_u,b) / sum_b w_bv, clamped into the box grown by the radius alone (box[2], box[3]: a patch wider than r could
-     carry its rim out of it);
+     a_u = W_u). `step_block` does all of step 3 (a) in one launch, a block a handle row, where `flood_block`
+     binds (the CPU, meshes of up to handles.FLOOD_IN_BLOCKS_MOST nodes). `carry` puts every bound node on its
+     target T_v = A_v + (1 - prod_b (1 - w_bv)) sum_b w_bv (p_b - a_u,b) / sum_b w_bv, clamped into the box grown by
+     the radius alone (box[2], box[3]: a patch wider than r could carry its rim out of it);
   4. `smooth_free`: lambda's (and with Taubin's rule mu's) Jacobi step of the uniform Laplacian on the nodes no binding
      holds; with Taubin's rule `part_volumes` before and after, `volume_gradient` and `put_back` move the free nodes
      of each closed part along the volume's gradient by what the steps took, then clamp every node into the box.

@@ -5,8 +5,9 @@ paper's paths and gives their results bit for bit.
 
 A run of cycles is captured as a graph (on the CPU too, where Warp replays it without Python) and replayed: a cycle
 is the point members' search and move (when there are point controls), the handles' step, binding again and carry
-(when a binding lives; binding again is a conditional node: the flood in one launch of a block a handle row, or on
-big meshes a conditional loop of a launch a round, so a cycle whose bindings stand still costs two small launches),
+(when a binding lives; on the CPU and meshes of up to handles.FLOOD_IN_BLOCKS_MOST nodes the step, the flood and the
+anchors are one launch of a block a handle row, `step_block`, so a cycle is two launches; on bigger meshes binding
+again is a conditional node holding a conditional loop of a launch a round),
 and the smoothing of the free nodes with the volume put back and the clamp (with smoothing). With nothing but
 handles, the run is one conditional loop, whatever its length (the carry counts the cycles on the device), that stops
 after the first cycle at whose end every place is on its member, as every later cycle would carry to the same places
