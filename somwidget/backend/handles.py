@@ -71,7 +71,7 @@ class Handles:
             n <= FLOOD_IN_BLOCKS_MOST) else 0
         self.held: set[int] = set()
         self.live = np.zeros(0, bool)
-        self.bound: set[int] = set()
+        self.bound: set[int] = set()  # the controls whose members' bindings live
         self.controls: Controls | None = None
         self.version = 0
         self._structure: tuple | None = None
@@ -125,7 +125,7 @@ class Handles:
         self.row_of[self.rows] = np.arange(self.n_rows)
         self.point_slots = (point[:, None] * order + copies).ravel().astype(np.int32)
         self.live = np.zeros(slots, bool)
-        self.bound: set[int] = set()  # the controls whose members' bindings live
+        self.bound = set()
         self.held.clear()
         self.held_nodes.zero_()
         self._uploaded = None
