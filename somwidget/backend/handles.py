@@ -281,8 +281,8 @@ class Handles:
         self.end_released(state)
         if new.radii.any() and old is not None and len(new.values) == len(old.values) and new.order == old.order and (
                 new.radii is old.radii or np.array_equal(new.radii > 0, old.radii > 0)):
-            moved = np.any(new.values != old.values, axis=1) & (new.radii > 0)
-            typed = [int(i) for i in np.flatnonzero(moved) if int(i) not in self.held]
+            moved = np.flatnonzero((new.values != old.values).any(axis=1)).tolist()
+            typed = [i for i in moved if i not in self.held and new.radii[i] > 0]
             if typed:
                 self._bind(state, old, new, typed)
         self.adopt(new)
