@@ -92,6 +92,7 @@ class Handles:
         self.stepped = wp.zeros(1, dtype=wp.int32, device=dev)
         self.changed = wp.zeros(1, dtype=wp.int32, device=dev)
         self.unarrived = wp.zeros(1, dtype=wp.int32, device=dev)  # 1 when a place stepped short of its member
+        self.claim = wp.zeros(1, dtype=wp.int32, device=dev)  # step_block: the blocks that stepped, counted
 
     # -- the slots ----------------------------------------------------------------------------------------------
     def _layout(self, controls: Controls) -> None:

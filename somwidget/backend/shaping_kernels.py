@@ -281,12 +281,12 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                    winners: wp.array(dtype=wp.int32), weights: wp.array(dtype=vec), offsets: wp.array(dtype=wp.int32),
                    neighbors: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32),
                    anchors: wp.array(dtype=vec), winner_anchors: wp.array(dtype=vec),
-                   unarrived: wp.array(dtype=wp.int32)):
+                   unarrived: wp.array(dtype=wp.int32), claim: wp.array(dtype=wp.int32)):
         """Step 3 (a) in one launch, a block per handle row (where `flood_block` binds): `advance`, then, when the
-        row's place stepped, its patch bound again (`flood_patch`) and every anchor taken again (`reanchor`: each
-        block whose row stepped writes the same values, read from weights no thread writes). Every thread of the
-        block takes the step (the same values); thread 0 writes it after a barrier (once every thread has read the
-        place)."""
+        row's place stepped, its patch bound again (`flood_patch`) and every anchor taken again (`reanchor`, by the
+        first block whose row stepped: claim[0], 0 before, cleared by `carry`; the weights it reads no thread
+        writes). Every thread of the block takes the step (the same values); thread 0 writes it after a barrier
+        (once every thread has read the place)."""
         i = wp.tid()
         threads = wp.block_dim()
         r = i // threads
@@ -312,17 +312,21 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                         stops_short = 1
                     ball = wp.max(radius[j], WIDEN * wp.length(wp.cw_mul(p - starts[j], position)))
             if sync_block_any(moving) != 0:
+                first = int(0)
                 if t == 0:
                     places[j] = p
                     reach[j] = ball
                     if stops_short != 0:
                         unarrived[0] = 1
+                    if wp.atomic_add(claim, 0, 1) == 0:
+                        first = 1
                 flood_patch(weights, r, winners[j], ball, t, threads, position, offsets, neighbors, patch)
-                for v in range(t, weights.shape[0], threads):
-                    anchors[v] = weights[v]
-                for k in range(t, live.shape[0], threads):
-                    if live[k] != 0:
-                        winner_anchors[k] = weights[winners[k]]
+                if sync_block_any(first) != 0:
+                    for v in range(t, weights.shape[0], threads):
+                        anchors[v] = weights[v]
+                    for k in range(t, live.shape[0], threads):
+                        if live[k] != 0:
+                            winner_anchors[k] = weights[winners[k]]
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def reanchor(weights: wp.array(dtype=vec), live: wp.array(dtype=wp.int32), winners: wp.array(dtype=wp.int32),
@@ -347,11 +351,11 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
               live: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32), places: wp.array(dtype=vec),
               winner_anchors: wp.array(dtype=vec), anchors: wp.array(dtype=vec), weights: wp.array(dtype=vec),
               held: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32), unarrived: wp.array(dtype=wp.int32),
-              box: wp.array(dtype=vec), counting: int, left: wp.array(dtype=wp.int32),
+              claim: wp.array(dtype=wp.int32), box: wp.array(dtype=vec), counting: int, left: wp.array(dtype=wp.int32),
               going: wp.array(dtype=wp.int32)):
         """Step 3 (b) for node v: onto its target when a live binding holds it (held[v] = 1), else left (0); a group
         of rows (a stroke's samples, one copy) counts as one binding, its weight their largest, its displacement their
-        weighted mean. Thread 0 clears `stepped` and `unarrived` for the next cycle's `advance` (read by then); with
+        weighted mean. Thread 0 clears `stepped`, `unarrived` and `claim` for the next cycle's step (read by then); with
         `counting`, a carry-only run's loop (shaping_path), it first counts the cycle: one fewer left (left[0]), and
         going[0] = 1 while a place stopped short of its member in it and cycles are left (once every place is on its
         member, the next cycle steps none, binds nothing again and carries every patch to where this one did: it and
@@ -364,6 +368,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 going[0] = wp.where(unarrived[0] != 0 and n > 0, 1, 0)
             stepped[0] = 0
             unarrived[0] = 0
+            claim[0] = 0
         num = vec()
         den = wp.float32(0.0)
         miss = wp.float32(1.0)

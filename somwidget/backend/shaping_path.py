@@ -177,7 +177,7 @@ class ShapingPath:
                       device=model.device,
                       inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.starts, h.reach,
                               h.winners, state.w, model.offsets, model.neighbors, h.patch, h.anchors,
-                              h.winner_anchors, h.unarrived])
+                              h.winner_anchors, h.unarrived, h.claim])
             return
         wp.launch(h.kernels.advance, dim=h.n_rows, device=model.device,
                   inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.starts, h.reach,
@@ -190,7 +190,7 @@ class ShapingPath:
         h = self.handles
         wp.launch(h.kernels.carry, dim=model.n_neurons, device=model.device,
                   inputs=[h.slot_of_row, h.group_start, h.live_dev, h.patch, h.places, h.winner_anchors, h.anchors,
-                          state.w, h.held_nodes, h.stepped, h.unarrived, h.box, int(counting), self.left,
+                          state.w, h.held_nodes, h.stepped, h.unarrived, h.claim, h.box, int(counting), self.left,
                           self.going])
 
     def _smooth(self, model: SomModel, state: SomState, pulls: list, parts, taubin: bool) -> None:
