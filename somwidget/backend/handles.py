@@ -65,8 +65,13 @@ class Handles:
         self.model = model
         dev, n, vec = model.device, model.n_neurons, model.vec
         self.kernels = shaping_kernels(model.n_dims)
+        #: the threads of a block a handle row where a patch is bound in one launch (the CPU, meshes of up to
+        #: FLOOD_IN_BLOCKS_MOST nodes), else 0 (a launch a round)
+        self.block_threads = 1 if dev == "cpu" else min(FLOOD_THREADS, 32 * -(-n // 32)) if (
+            n <= FLOOD_IN_BLOCKS_MOST) else 0
         self.held: set[int] = set()
         self.live = np.zeros(0, bool)
+        self.bound: set[int] = set()  # the controls whose members' bindings live
         self.controls: Controls | None = None
         self.version = 0
         self._structure: tuple | None = None
@@ -76,6 +81,7 @@ class Handles:
         self.size = bounding_diagonal(start[:, model.position_dims]) or 1.0
         self._box_version = 0  # counts the box's changes (a grow that moved it, other radii) ...
         self._box_sent: int | None = None  # ... and the one the device holds (None: none yet)
+        self._pad_for: np.ndarray | None = None  # the radii whose padding `_pad` holds
         self._radii_for: np.ndarray | None = None  # the radii whose members' radii the device holds
         self._grown: Controls | None = None  # the controls the box last took
         position = np.zeros(model.n_dims, np.float32)
@@ -85,6 +91,8 @@ class Handles:
         self.held_nodes = wp.zeros(n, dtype=wp.int32, device=dev)  # 1 where a live binding holds the node
         self.stepped = wp.zeros(1, dtype=wp.int32, device=dev)
         self.changed = wp.zeros(1, dtype=wp.int32, device=dev)
+        self.unarrived = wp.zeros(1, dtype=wp.int32, device=dev)  # 1 when a place stepped short of its member
+        self.claim = wp.zeros(1, dtype=wp.int32, device=dev)  # step_block: the blocks that stepped, counted
 
     # -- the slots ----------------------------------------------------------------------------------------------
     def _layout(self, controls: Controls) -> None:
@@ -118,6 +126,7 @@ class Handles:
         self.row_of[self.rows] = np.arange(self.n_rows)
         self.point_slots = (point[:, None] * order + copies).ravel().astype(np.int32)
         self.live = np.zeros(slots, bool)
+        self.bound = set()
         self.held.clear()
         self.held_nodes.zero_()
         self._uploaded = None
@@ -130,16 +139,19 @@ class Handles:
         self.group_start = ints(starts)
         self.point_controls = wp.array(point.astype(np.int32), dtype=wp.int32, device=dev)
         self.point_slot_list = ints(self.point_slots)
-        # the members and, after them, the boxes (lo, hi grown by BOX_MARGIN; lo, hi by the radius alone): one copy
-        sent = wp.zeros(slots + 4, dtype=vec, device=dev)
-        self.members, self.box = sent[:slots], sent[slots:]
+        # the members, after them the boxes (lo, hi grown by BOX_MARGIN; lo, hi by the radius alone) and a carry-only
+        # run's cycles (`cycles[0][0]`): one copy
+        sent = wp.zeros(slots + 5, dtype=vec, device=dev)
+        self.members, self.box, self.cycles = sent[:slots], sent[slots:slots + 4], sent[slots + 4:]
         self._sent = sent
-        host = sent if dev == "cpu" else wp.zeros(slots + 4, dtype=vec, device="cpu", pinned=True)
+        host = sent if dev == "cpu" else wp.zeros(slots + 5, dtype=vec, device="cpu", pinned=True)
         self._members_host = host  # (on the CPU the device array itself: written in place, no copy)
         self._members_sent = None if dev == "cpu" else wp.Event(dev)
         self._members_busy = False
         self._staged = host.numpy()
         self._box_sent = None
+        self._cycles_staged: int | None = None
+        self._unsent = False  # staged rows the device does not have yet
         self.probe = wp.zeros(slots, dtype=vec, device=dev)  # members where a grab searches
         self.radius = wp.zeros(slots, dtype=wp.float32, device=dev)
         self._radii_for = None
@@ -166,34 +178,52 @@ class Handles:
             self.grow(controls.effective())
             self._grown = controls
 
-    def upload(self, controls: Controls) -> None:
+    def upload(self, controls: Controls, send: bool = True) -> None:
         """The members, radii and boxes on the device for these controls (those not there yet: a move uploads the
-        members, and the boxes when it grew them)."""
+        members, and the boxes when it grew them); `send` False: staged, to go up with the next `send`."""
         if controls is not self.controls:
             self.adopt(controls)
         members = self._uploaded is not controls
         if members and self._grown is not controls:
             self.grow(controls.effective())
         if members or self._box_sent != self._box_version:
-            self._upload_members(members_of(controls) if members else None)
+            self._writable()
+            if members:
+                self._staged[:-5] = members_of(controls)
+            if self._box_sent != self._box_version:
+                self._stage_box()
+            self._unsent = True
         if members:
             self._upload_radii(controls)
             self._uploaded = controls
+        if send:
+            self.send()
 
-    def _upload_members(self, members: np.ndarray | None) -> None:
-        """The members (None: those there) and the boxes into `members` and `box`, one copy: on CUDA through pinned
-        memory in an asynchronous copy (waiting first, should the last one still read it), as the paper's controls
-        go up (SomState.set_cycle)."""
+    def stage_cycles(self, cycles: int) -> None:
+        """A carry-only run's cycles into `cycles` (with the next `send`; exact in float32 to 2^24, and a longer run
+        stops sooner than that only where its places have not arrived in 2^24 steps of a quarter radius)."""
+        cycles = min(cycles, 1 << 24)
+        if cycles != self._cycles_staged:
+            self._writable()
+            self._staged[-1, 0] = cycles
+            self._cycles_staged = cycles
+            self._unsent = True
+
+    def _writable(self) -> None:
+        """On CUDA, wait until the last copy has left the pinned rows (so that they can be written again)."""
         if self._members_busy:
             wp.synchronize_event(self._members_sent)
-        if members is not None:
-            self._staged[:-4] = members
-        if self._box_sent != self._box_version:
-            self._stage_box()
-        if self._members_sent is not None:
+            self._members_busy = False
+
+    def send(self) -> None:
+        """The staged members, boxes and cycles to the device in one copy (if any changed): on CUDA through pinned
+        memory in an asynchronous copy, as the paper's controls go up (SomState.set_cycle); on the CPU they were
+        written in place."""
+        if self._unsent and self._members_sent is not None:
             wp.copy(self._sent, self._members_host)
             wp.record_event(self._members_sent)
             self._members_busy = True
+        self._unsent = False
 
     def _upload_radii(self, controls: Controls) -> None:
         """The radii, member by member (only when they changed: a move keeps the radii array)."""
@@ -207,12 +237,15 @@ class Handles:
         """The boxes into the staged rows after the members: the start's, every weight set's and every member's places
         grown on the position dims by the largest radius and BOX_MARGIN of the start's size (Taubin's clamp), and by
         the radius alone (the carry's)."""
-        radius = float(self.controls.radii.max(initial=0.0)) if self.controls is not None else 0.0
-        pad = np.zeros((2, len(self._lo)))
-        pad[:, self.model.position_dims] = [[radius + BOX_MARGIN * self.size], [radius]]
-        staged = self._staged[-4:]
-        staged[0::2] = self._lo - pad
-        staged[1::2] = self._hi + pad
+        radii = self.controls.radii if self.controls is not None else None
+        if self._pad_for is not radii or radii is None:
+            radius = float(radii.max(initial=0.0)) if radii is not None else 0.0
+            self._pad = np.zeros((2, len(self._lo)))
+            self._pad[:, self.model.position_dims] = [[radius + BOX_MARGIN * self.size], [radius]]
+            self._pad_for = radii
+        staged = self._staged[-5:-1]
+        np.subtract(self._lo, self._pad, out=staged[0::2])
+        np.add(self._hi, self._pad, out=staged[1::2])
         self._box_sent = self._box_version
 
     # -- the box ------------------------------------------------------------------------------------------------
@@ -249,23 +282,23 @@ class Handles:
         self.end_released(state)
         if new.radii.any() and old is not None and len(new.values) == len(old.values) and new.order == old.order and (
                 new.radii is old.radii or np.array_equal(new.radii > 0, old.radii > 0)):
-            moved = np.any(new.values != old.values, axis=1) & (new.radii > 0)
-            typed = [int(i) for i in np.flatnonzero(moved) if int(i) not in self.held]
+            moved = np.flatnonzero((new.values != old.values).any(axis=1)).tolist()
+            typed = [i for i in moved if i not in self.held and new.radii[i] > 0]
             if typed:
                 self._bind(state, old, new, typed)
         self.adopt(new)
 
     def end_released(self, state: SomState) -> None:
         """A restart, or the run at S: every binding no hand holds ends."""
-        if self.controls is not None and self.live.any():  # (point controls bind nothing: a drag's every move)
-            live = np.flatnonzero(self.live.reshape(-1, self.order).any(axis=1)).tolist()  # (slot c G + g)
-            let_go = [c for c in live if c not in self.held]
+        if self.bound:  # (point controls bind nothing: a drag's every move)
+            let_go = sorted(self.bound - self.held)
             if let_go:
                 self._end(let_go, state)
 
     def end_all(self, state: SomState) -> None:
         """Every binding ends and every hold is let go (new weights, another group, a reset)."""
         self.held.clear()
+        self.bound.clear()
         if self.live.any():
             self.live[:] = False
             self.live_dev.zero_()
@@ -280,6 +313,7 @@ class Handles:
         if not len(slots) or not self.live[slots].any():
             return
         self.live[slots] = False
+        self.bound.difference_update(controls)
         self.live_dev.assign(self.live.astype(np.int32))
         if self.live.any():
             state.settle_anchor()
@@ -310,6 +344,7 @@ class Handles:
         self.changed.fill_(1)
         self.bind_patches(state)
         self.live[slots] = True
+        self.bound.update(controls)
         self.live_dev.assign(self.live.astype(np.int32))
         self.reanchor(state)
 
@@ -320,8 +355,8 @@ class Handles:
         recorded into a captured graph."""
         model, kern, dev = self.model, self.kernels, self.model.device
         n = model.n_neurons
-        if dev == "cpu" or n <= FLOOD_IN_BLOCKS_MOST:
-            threads = 1 if dev == "cpu" else min(FLOOD_THREADS, 32 * -(-n // 32))
+        if self.block_threads:
+            threads = self.block_threads
             wp.launch(kern.flood_block, dim=self.n_rows * threads, block_dim=threads, device=dev,
                       inputs=[state.w, self.rebind, self.slot_of_row, self.winners, self.reach, self.position,
                               model.offsets, model.neighbors, self.patch])

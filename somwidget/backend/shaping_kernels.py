@@ -13,9 +13,10 @@ own in `patch` (R, N) for each member: the member's binding, -1 where a node is 
      then, if any moved, `seed` and `flood` (repeated while it joins a node; `flood_block` does both in one launch)
      bind the patch again: the nodes joined to the winner u through nodes whose straight distance from W_u is below
      R, each weighted w = (1 - t^2)^2, t = |W_v - W_u| / R; and `reanchor` takes every anchor again (A_v = W_v,
-     a_u = W_u). `carry` puts every bound node on its target T_v = A_v + (1 - prod_b (1 - w_bv)) sum_b w_bv (p_b -
-     a_u,b) / sum_b w_bv, clamped into the box grown by the radius alone (box[2], box[3]: a patch wider than r could
-     carry its rim out of it);
+     a_u = W_u). `step_block` does all of step 3 (a) in one launch, a block a handle row, where `flood_block`
+     binds (the CPU, meshes of up to handles.FLOOD_IN_BLOCKS_MOST nodes). `carry` puts every bound node on its
+     target T_v = A_v + (1 - prod_b (1 - w_bv)) sum_b w_bv (p_b - a_u,b) / sum_b w_bv, clamped into the box grown by
+     the radius alone (box[2], box[3]: a patch wider than r could carry its rim out of it);
   4. `smooth_free`: lambda's (and with Taubin's rule mu's) Jacobi step of the uniform Laplacian on the nodes no binding
      holds; with Taubin's rule `part_volumes` before and after, `volume_gradient` and `put_back` move the free nodes
      of each closed part along the volume's gradient by what the steps took, then clamp every node into the box.
@@ -147,10 +148,10 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 members: wp.array(dtype=vec), radius: wp.array(dtype=wp.float32), position: vec,
                 places: wp.array(dtype=vec), starts: wp.array(dtype=vec), reach: wp.array(dtype=wp.float32),
                 rebind: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32),
-                changed: wp.array(dtype=wp.int32)):
+                changed: wp.array(dtype=wp.int32), unarrived: wp.array(dtype=wp.int32)):
         """Step 3 (a) for handle row r: a live binding whose place differs from its member steps towards it by at
         most STEP r, takes the reach max(r, WIDEN |p - p(grab)|) and is marked for binding again (rebind[r];
-        stepped and changed set, both 0 before)."""
+        stepped and changed set, both 0 before; unarrived set when the step stops short of the member)."""
         r = wp.tid()
         j = slot_of_row[r]
         rebind[r] = 0
@@ -168,6 +169,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                     p = m
                 else:
                     p = p + (m - p) * (most / gap)
+                    unarrived[0] = 1
                 places[j] = p
                 reach[j] = wp.max(radius[j], WIDEN * wp.length(wp.cw_mul(p - starts[j], position)))
                 rebind[r] = 1
@@ -224,6 +226,33 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                     patch[r, v] = falloff(d, ball)
                     changed[0] = 1
 
+    @wp.func
+    def flood_patch(weights: wp.array(dtype=vec), r: int, u: int, ball: wp.float32, t: int, threads: int,
+                    position: vec, offsets: wp.array(dtype=wp.int32), neighbors: wp.array(dtype=wp.int32),
+                    patch: wp.array2d(dtype=wp.float32)):
+        """Row r's patch bound around winner u within `ball` by the `threads` threads of one block (thread t): the
+        seed, then rounds behind a barrier until one joins no node (`flood_block`)."""
+        n = patch.shape[1]
+        centre = weights[u]
+        for v in range(t, n, threads):
+            inside = wp.length(wp.cw_mul(weights[v] - centre, position)) < ball
+            patch[r, v] = wp.where(v == u, wp.float32(1.0), wp.where(inside, INSIDE, wp.float32(-1.0)))
+        joining = int(1)
+        while sync_block_any(joining) != 0:
+            joining = int(0)
+            for v in range(t, n, threads):
+                if patch[r, v] == INSIDE:
+                    joined = int(0)
+                    for e in range(offsets[v], offsets[v + 1]):
+                        if patch[r, neighbors[e]] >= wp.float32(0.0):
+                            joined = 1
+                    if joined != 0:
+                        patch[r, v] = falloff(wp.length(wp.cw_mul(weights[v] - centre, position)), ball)
+                        joining = int(1)
+        for v in range(t, n, threads):
+            if patch[r, v] == INSIDE:
+                patch[r, v] = wp.float32(-1.0)
+
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def flood_block(weights: wp.array(dtype=vec), rebind: wp.array(dtype=wp.int32),
                     slot_of_row: wp.array(dtype=wp.int32), winners: wp.array(dtype=wp.int32),
@@ -243,28 +272,61 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         if r < patch.shape[0]:
             if rebind[r] != 0:
                 j = slot_of_row[r]
-                u = winners[j]
-                n = patch.shape[1]
-                centre = weights[u]
-                ball = reach[j]
-                for v in range(t, n, threads):
-                    inside = wp.length(wp.cw_mul(weights[v] - centre, position)) < ball
-                    patch[r, v] = wp.where(v == u, wp.float32(1.0), wp.where(inside, INSIDE, wp.float32(-1.0)))
-                joining = int(1)
-                while sync_block_any(joining) != 0:
-                    joining = int(0)
-                    for v in range(t, n, threads):
-                        if patch[r, v] == INSIDE:
-                            joined = int(0)
-                            for e in range(offsets[v], offsets[v + 1]):
-                                if patch[r, neighbors[e]] >= wp.float32(0.0):
-                                    joined = 1
-                            if joined != 0:
-                                patch[r, v] = falloff(wp.length(wp.cw_mul(weights[v] - centre, position)), ball)
-                                joining = int(1)
-                for v in range(t, n, threads):
-                    if patch[r, v] == INSIDE:
-                        patch[r, v] = wp.float32(-1.0)
+                flood_patch(weights, r, winners[j], reach[j], t, threads, position, offsets, neighbors, patch)
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def step_block(slot_of_row: wp.array(dtype=wp.int32), live: wp.array(dtype=wp.int32),
+                   members: wp.array(dtype=vec), radius: wp.array(dtype=wp.float32), position: vec,
+                   places: wp.array(dtype=vec), starts: wp.array(dtype=vec), reach: wp.array(dtype=wp.float32),
+                   winners: wp.array(dtype=wp.int32), weights: wp.array(dtype=vec), offsets: wp.array(dtype=wp.int32),
+                   neighbors: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32),
+                   anchors: wp.array(dtype=vec), winner_anchors: wp.array(dtype=vec),
+                   unarrived: wp.array(dtype=wp.int32), claim: wp.array(dtype=wp.int32)):
+        """Step 3 (a) in one launch, a block per handle row (where `flood_block` binds): `advance`, then, when the
+        row's place stepped, its patch bound again (`flood_patch`) and every anchor taken again (`reanchor`, by the
+        first block whose row stepped: claim[0], 0 before, cleared by `carry`; the weights it reads no thread
+        writes). Every thread of the block takes the step (the same values); thread 0 writes it after a barrier
+        (once every thread has read the place)."""
+        i = wp.tid()
+        threads = wp.block_dim()
+        r = i // threads
+        t = i - r * threads
+        if r < patch.shape[0]:
+            j = slot_of_row[r]
+            p = places[j]
+            ball = wp.float32(0.0)
+            moving = int(0)
+            stops_short = int(0)
+            if live[j] != 0:
+                m = members[j]
+                for d in range(wp.static(n_dims)):
+                    if m[d] != p[d]:
+                        moving = 1
+                if moving != 0:
+                    gap = wp.length(wp.cw_mul(m - p, position))
+                    most = STEP * radius[j]
+                    if gap <= most:
+                        p = m
+                    else:
+                        p = p + (m - p) * (most / gap)
+                        stops_short = 1
+                    ball = wp.max(radius[j], WIDEN * wp.length(wp.cw_mul(p - starts[j], position)))
+            if sync_block_any(moving) != 0:
+                first = int(0)
+                if t == 0:
+                    places[j] = p
+                    reach[j] = ball
+                    if stops_short != 0:
+                        unarrived[0] = 1
+                    if wp.atomic_add(claim, 0, 1) == 0:
+                        first = 1
+                flood_patch(weights, r, winners[j], ball, t, threads, position, offsets, neighbors, patch)
+                if sync_block_any(first) != 0:
+                    for v in range(t, weights.shape[0], threads):
+                        anchors[v] = weights[v]
+                    for k in range(t, live.shape[0], threads):
+                        if live[k] != 0:
+                            winner_anchors[k] = weights[winners[k]]
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def reanchor(weights: wp.array(dtype=vec), live: wp.array(dtype=wp.int32), winners: wp.array(dtype=wp.int32),
@@ -279,24 +341,34 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
                 winner_anchors[i] = weights[winners[i]]
 
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
+    def count_from(cycles: wp.array(dtype=vec), left: wp.array(dtype=wp.int32), going: wp.array(dtype=wp.int32)):
+        """A carry-only run's loop begins: its cycles (sent with the members, cycles[0][0]) left, and going."""
+        left[0] = wp.int32(cycles[0][0])
+        going[0] = 1
+
+    @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def carry(slot_of_row: wp.array(dtype=wp.int32), group_start: wp.array(dtype=wp.int32),
               live: wp.array(dtype=wp.int32), patch: wp.array2d(dtype=wp.float32), places: wp.array(dtype=vec),
               winner_anchors: wp.array(dtype=vec), anchors: wp.array(dtype=vec), weights: wp.array(dtype=vec),
-              held: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32), box: wp.array(dtype=vec),
-              counting: int, left: wp.array(dtype=wp.int32), going: wp.array(dtype=wp.int32)):
+              held: wp.array(dtype=wp.int32), stepped: wp.array(dtype=wp.int32), unarrived: wp.array(dtype=wp.int32),
+              claim: wp.array(dtype=wp.int32), box: wp.array(dtype=vec), counting: int, left: wp.array(dtype=wp.int32),
+              going: wp.array(dtype=wp.int32)):
         """Step 3 (b) for node v: onto its target when a live binding holds it (held[v] = 1), else left (0); a group
         of rows (a stroke's samples, one copy) counts as one binding, its weight their largest, its displacement their
-        weighted mean. Thread 0 clears `stepped` for the next cycle's `advance` (read by then); with `counting`, a
-        carry-only run's loop (shaping_path), it first counts the cycle: one fewer left (left[0]), and going[0] = 1
-        while a place stepped in it and cycles are left (a cycle in which no place stepped carries its patches to
-        where the cycle before did: every later one would too, so the run stops there)."""
+        weighted mean. Thread 0 clears `stepped`, `unarrived` and `claim` for the next cycle's step (read by then); with
+        `counting`, a carry-only run's loop (shaping_path), it first counts the cycle: one fewer left (left[0]), and
+        going[0] = 1 while a place stopped short of its member in it and cycles are left (once every place is on its
+        member, the next cycle steps none, binds nothing again and carries every patch to where this one did: it and
+        every later one change nothing, so the run stops here)."""
         v = wp.tid()
         if v == 0:
             if counting != 0:
                 n = left[0] - 1
                 left[0] = n
-                going[0] = wp.where(stepped[0] != 0 and n > 0, 1, 0)
+                going[0] = wp.where(unarrived[0] != 0 and n > 0, 1, 0)
             stepped[0] = 0
+            unarrived[0] = 0
+            claim[0] = 0
         num = vec()
         den = wp.float32(0.0)
         miss = wp.float32(1.0)
@@ -405,6 +477,7 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
     for source in (wp.array2d(dtype=wp.uint16), wp.array2d(dtype=wp.int32)):
         wp.overload(move_points, {"distances": source})
     return SimpleNamespace(vec=vec, find=find, move_points=move_points, advance=advance, bind=bind, seed=seed,
-                           flood=flood, flood_block=flood_block, reanchor=reanchor, carry=carry,
+                           flood=flood, flood_block=flood_block, step_block=step_block, reanchor=reanchor,
+                           count_from=count_from, carry=carry,
                            smooth_free=smooth_free, part_volumes=part_volumes, volume_gradient=volume_gradient,
                            put_back=put_back, copy_weights=copy_weights)

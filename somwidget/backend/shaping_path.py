@@ -5,11 +5,13 @@ paper's paths and gives their results bit for bit.
 
 A run of cycles is captured as a graph (on the CPU too, where Warp replays it without Python) and replayed: a cycle
 is the point members' search and move (when there are point controls), the handles' step, binding again and carry
-(when a binding lives; binding again is a conditional node: the flood in one launch of a block a handle row, or on
-big meshes a conditional loop of a launch a round, so a cycle whose bindings stand still costs two small launches),
+(when a binding lives; on the CPU and meshes of up to handles.FLOOD_IN_BLOCKS_MOST nodes the step, the flood and the
+anchors are one launch of a block a handle row, `step_block`, so a cycle is two launches; on bigger meshes binding
+again is a conditional node holding a conditional loop of a launch a round),
 and the smoothing of the free nodes with the volume put back and the clamp (with smoothing). With nothing but
 handles, the run is one conditional loop, whatever its length (the carry counts the cycles on the device), that stops
-at the first cycle in which no place stepped, as every later cycle would carry to the same places. The cycle s
+after the first cycle at whose end every place is on its member, as every later cycle would carry to the same places
+(a drag frame's move within a quarter radius: one cycle). The cycle s
 reaches the point members' move through a device counter (two, passed on in turn), so one graph serves every s. Past
 the dense table, point members need their winners' distance rows fetched by the host each cycle: those cycles are
 launched one by one.
@@ -57,6 +59,7 @@ class ShapingPath:
         self._parity = 0
         self._setup = None
         self._parts = None
+        self._planned: tuple | None = None  # (controls, schedule, plan): most_cycles's, for the run that follows
 
     def forget(self) -> None:
         """Drop the captured graphs (the learning table they hold is made again)."""
@@ -76,16 +79,23 @@ class ShapingPath:
     # -- a run ------------------------------------------------------------------------------------------------------
     def _plan(self, controls: Controls, schedule: SomSchedule) -> tuple:
         """(point members, a live binding, the smoothing steps, Taubin's rule) of a run of these controls (whose
-        members and radii go up first)."""
+        members and radii are staged first, to go up with the run's `send`); the plan `most_cycles` made just
+        before, when it was for these controls and this schedule."""
+        planned, self._planned = self._planned, None
+        if planned is not None and planned[0] is controls and planned[1] is schedule:
+            return planned[2]
         h = self.handles
-        h.upload(controls)
+        h.upload(controls, send=False)
         steps = capped_steps(schedule)
         return len(h.point_slots) > 0, bool(h.live.any()), tuple(steps), schedule.rule == "taubin" and bool(steps)
 
     def most_cycles(self, controls: Controls, schedule: SomSchedule) -> int | None:
         """The most cycles one `run` takes: any number (None) for a run of nothing but handles (one graph for every
-        length: a conditional loop that counts its cycles on the device), else cycle_kernels.LONGEST_GRAPH."""
-        points, live, steps, _ = self._plan(controls, schedule)
+        length: a conditional loop that counts its cycles on the device), else cycle_kernels.LONGEST_GRAPH. (Som.step
+        asks it right before the run, which takes its plan.)"""
+        plan = self._plan(controls, schedule)
+        self._planned = (controls, schedule, plan)
+        points, live, steps, _ = plan
         return None if live and not points and not steps and self.captured else LONGEST_GRAPH
 
     def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
@@ -100,10 +110,11 @@ class ShapingPath:
             self.counter.assign(np.array([state.s, state.s], np.int32))
             self._counter_s, self._parity = state.s, 0
         if live and not points and not steps:
-            self.left.fill_(cycles)  # (the carry-only loop's count: one graph for every length)
+            h.stage_cycles(cycles)  # (the carry-only loop's count, sent with the members: one graph for every length)
             cycles_key = 0
         else:
             cycles_key = cycles
+        h.send()
         if points or live or steps:
             if self.captured and not (model.rows and points):
                 setup = (h.version, schedule.version, model.smooth_dims)
@@ -133,7 +144,7 @@ class ShapingPath:
         volume = parts is not None and parts.count > 0
         stretches = max(1, math.ceil(n / FIND_STRETCH))
         if live and not points and not steps:  # carry only: the cycles after the places arrived change nothing
-            self.going.fill_(1)  # (left[0]: the run's cycles, filled by `run` before the graph's launch)
+            wp.launch(kern.count_from, dim=1, device=dev, inputs=[h.cycles, self.left, self.going])
 
             def cycle() -> None:
                 self._step_places(model, state)
@@ -159,11 +170,18 @@ class ShapingPath:
 
     def _step_places(self, model: SomModel, state: SomState) -> None:
         """Step 3 (a): each live binding's place steps after its member, and the patches that stepped are bound again
-        (a conditional node)."""
+        (a conditional node); where a patch is bound in one launch, all of it in one (`step_block`)."""
         h = self.handles
+        if h.block_threads:
+            wp.launch(h.kernels.step_block, dim=h.n_rows * h.block_threads, block_dim=h.block_threads,
+                      device=model.device,
+                      inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.starts, h.reach,
+                              h.winners, state.w, model.offsets, model.neighbors, h.patch, h.anchors,
+                              h.winner_anchors, h.unarrived, h.claim])
+            return
         wp.launch(h.kernels.advance, dim=h.n_rows, device=model.device,
                   inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.starts, h.reach,
-                          h.rebind, h.stepped, h.changed])
+                          h.rebind, h.stepped, h.changed, h.unarrived])
         wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
 
     def _carry(self, model: SomModel, state: SomState, counting: bool = False) -> None:
@@ -172,7 +190,8 @@ class ShapingPath:
         h = self.handles
         wp.launch(h.kernels.carry, dim=model.n_neurons, device=model.device,
                   inputs=[h.slot_of_row, h.group_start, h.live_dev, h.patch, h.places, h.winner_anchors, h.anchors,
-                          state.w, h.held_nodes, h.stepped, h.box, int(counting), self.left, self.going])
+                          state.w, h.held_nodes, h.stepped, h.unarrived, h.claim, h.box, int(counting), self.left,
+                          self.going])
 
     def _smooth(self, model: SomModel, state: SomState, pulls: list, parts, taubin: bool) -> None:
         """Step 4: the smoothing steps on the free nodes; with Taubin's rule the volume of each closed part put back

@@ -82,10 +82,10 @@ def apart(som: Som, ref: HandleSom) -> float:
 
 # ------------------------------------------------------------------------------------------- against the reference
 def test_a_drag_with_nothing_but_handles_matches_the_reference_frame_by_frame(device):
-    """No point control and no smoothing: a run carries the patches only, and the engine stops its cycles at the
-    first one in which no place stepped (every later one would carry to the same places). Frame by frame, with
-    frames longer and shorter than the places need to arrive, and after the rest of the run, as the reference's
-    cycle by cycle."""
+    """No point control and no smoothing: a run carries the patches only, and the engine stops its cycles after the
+    first one at whose end every place is on its member (every later one would carry to the same places). Frame by
+    frame, with frames longer and shorter than the places need to arrive, and after the rest of the run, as the
+    reference's cycle by cycle."""
     faces, p = sphere()
     size = metrics.bounding_diagonal(p)
     controls = p[[40, 300]].copy()
