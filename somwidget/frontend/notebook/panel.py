@@ -430,18 +430,11 @@ def _field(p: Setting, style: dict, layout) -> widgets.ValueWidget:
     if p.kind == "bool":
         return widgets.Checkbox(description=p.short or p.label, indent=False, tooltip=p.help,
                                 layout=widgets.Layout(width="auto", flex="0 0 auto"))
-    low, high, step = _slider(p)
+    low, high, step = p.slider_range()
     kind, extra = (widgets.IntSlider, {}) if p.kind == "int" else (
         widgets.FloatSlider, {"readout_format": f".{slider_digits(p)}f"})
     return kind(description=p.short or p.label, min=low, max=high, step=step, continuous_update=False, style=style,
                 layout=layout, tooltip=p.help, **extra)
-
-
-def _slider(p: Setting) -> tuple[float, float, float]:
-    """A number setting's slider (min, max, step): every one the panel shows declares one (backend/schedule.py)."""
-    if p.slider is None:
-        raise ValueError(f"{p.name}: a number setting the notebook panel shows needs a slider (backend/schedule.py)")
-    return p.slider
 
 
 def _show(widget, p: Setting, value) -> None:
@@ -449,7 +442,7 @@ def _show(widget, p: Setting, value) -> None:
     if p.kind == "bool":
         return _set(widget, bool(value))
     value = int(value) if p.kind == "int" else float(value)
-    low, high, _ = _slider(p)
+    low, high, _ = p.slider_range()
     widget.max = max(high, value)
     widget.min = min(low, value)
     _set(widget, value)
