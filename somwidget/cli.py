@@ -161,7 +161,7 @@ def _build_parser() -> argparse.ArgumentParser:
 
 def parse_vary(items: list[str]) -> dict:
     """--vary NAME=LOW:HIGH (a range) or NAME=A,B,... (a list) or NAME=VALUE -> sweep's params."""
-    out = {}
+    out: dict[str, tuple[float, float] | list[float] | float] = {}
     for item in items:
         name, sep, text = item.partition("=")
         name = name.strip()
@@ -267,6 +267,8 @@ def load_bench_harness() -> ModuleType:
     name = "somwidget_engine_harness"
     if name not in sys.modules:
         spec = importlib.util.spec_from_file_location(name, BENCH_HARNESS)
+        if spec is None or spec.loader is None:  # a .py file always has both
+            raise ImportError(f"bench: {BENCH_HARNESS} cannot be imported as a module")
         module = importlib.util.module_from_spec(spec)
         sys.modules[name] = module  # (its dataclasses look their module up)
         try:

@@ -98,8 +98,9 @@ class BatchSom:
             raise ValueError(f"controls: expected an array (variants, controls, dims), got shape {np.shape(c)}")
         if c.shape[0] < 1:
             raise ValueError("controls: expected at least one variant, got 0")
-        c = checks.finite_array("controls", c.reshape(c.shape[0], -1), 2).reshape(c.shape)
-        self.n_variants, k, n = c.shape
+        B, k, n = c.shape
+        c = checks.finite_array("controls", c.reshape(B, -1), 2).reshape(B, k, n)
+        self.n_variants: int = B
         if not 1 <= n <= MAX_DIMS:
             raise ValueError(f"controls: expected 1 to {MAX_DIMS} feature dimensions, got {n}")
         self.n_neurons, self.n_dims = topology.n_vertices, n
@@ -320,7 +321,7 @@ class BatchSom:
                 self._anchor = wp.empty_like(self._w)
             wp.copy(self._anchor[b], anchor)
         self.move_rows(np.array([b]), checks.finite_array("controls", controls, 2)[None], np.array([iteration]),
-                       [False])
+                       np.array([False]))
 
     def move_rows(self, rows: np.ndarray, controls: np.ndarray, iteration: np.ndarray, from_anchor: np.ndarray) -> None:
         """Variants' controls (m, k, n) and cycles s (m,) from now on (their Soms' `set_controls`: a restart), rows (m,)
@@ -376,11 +377,13 @@ class BatchSom:
             self._c.assign(self._effective(self._controls))
             self._controls_moved = False
         if self._to_anchor:
+            anchor = self._anchor
+            assert anchor is not None, "move_rows refuses a restart from the anchor before `put` kept one"
             rows = wp.array(sorted(self._to_anchor), dtype=wp.int32, device=self.device)
             self._to_anchor.clear()
             width = self.n_neurons * self.n_dims
             flat = [wp.array(ptr=a.ptr, dtype=wp.float32, shape=(self.n_variants, width), device=self.device)
-                    for a in (self._w, self._anchor)]
+                    for a in (self._w, anchor)]
             wp.launch(copy_rows, dim=(rows.shape[0], width), inputs=[flat[0], flat[1], rows], device=self.device)
 
     # -- training -----------------------------------------------------------------------------------------

@@ -67,15 +67,18 @@ class BlockBoxes:
 
     def back_to_anchor(self, weights: wp.array, anchor: wp.array) -> None:
         """The anchored weights and boxes back: the blocks moved since (all, after anything else changed them)."""
+        kept_boxes = self._anchor
+        if kept_boxes is None:
+            raise RuntimeError("BlockBoxes: no anchor kept to go back to (keep_anchor first)")
         if self.all_moved:
             wp.copy(weights, anchor)
-            for box, kept in zip(self.arrays, self._anchor):
+            for box, kept in zip(self.arrays, kept_boxes):
                 wp.copy(box, kept)
             self.moved.zero_()
             self.super_moved.zero_()
         else:
             wp.launch(self._kernels.back_to_anchor, dim=1, device="cpu",
-                      inputs=[weights, anchor, *self.arrays, *self._anchor, self.moved, self.super_moved])
+                      inputs=[weights, anchor, *self.arrays, *kept_boxes, self.moved, self.super_moved])
         self.valid = True
         self.all_moved = False
 

@@ -81,6 +81,12 @@ class CpuCores:
             self.meet.zero_()
             raise RuntimeError("Som: a CPU core did not reach the cycle barrier (was a worker thread stopped?)")
 
+    def _threads(self) -> ThreadPoolExecutor:
+        """The extra cores' threads (`plan` starts them when it plans more than one core)."""
+        if self._pool is None:
+            raise RuntimeError("CpuCores: work split between cores before `plan` planned more than one")
+        return self._pool
+
     def super_ranges(self, n_super: int) -> list[tuple[int, int]]:
         """Each busy core's range of superblocks."""
         bounds = np.linspace(0, n_super, self.busy + 1).astype(int)
@@ -88,7 +94,7 @@ class CpuCores:
 
     def on_cores(self, kernel: wp.Kernel, inputs: Callable[..., list], split: list[tuple]) -> None:
         """`kernel` on every core at once, core i given inputs(*split[i])."""
-        others = [self._pool.submit(wp.launch, kernel, dim=1, device="cpu", inputs=inputs(*part))
+        others = [self._threads().submit(wp.launch, kernel, dim=1, device="cpu", inputs=inputs(*part))
                   for part in split[1:]] if len(split) > 1 else []
         wp.launch(kernel, dim=1, device="cpu", inputs=inputs(*split[0]))
         for job in others:

@@ -5,6 +5,8 @@ split between the cores for steps 2 and 3, the controls for step 1, a spinning b
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import warp as wp
 
@@ -65,8 +67,9 @@ class CpuPath:
     def replay(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, key: tuple,
                cycles: int, fresh: bool, smoothing: bool) -> None:
         """Each core's graph of `key` (captured the first time) on its own thread."""
-        self.cores.replay([self.graphs.get((*key, core), lambda core=core: self.record(
-            model, state, controls, schedule, core, cycles, fresh, smoothing)) for core in range(self.cores.count)])
+        self.cores.replay([self.graphs.get((*key, core), functools.partial(
+            self.record, model, state, controls, schedule, core, cycles, fresh, smoothing))
+            for core in range(self.cores.count)])
 
     def record(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, core: int,
                cycles: int, fresh: bool, smoothing: bool) -> None:

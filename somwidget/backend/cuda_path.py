@@ -148,7 +148,7 @@ class CudaPath:
             after_kernel = True
 
         pairs = controls.pairs(schedule.table_max)
-        table, lam, w, w_moved, c = schedule.table, schedule.values.smoothing, state.w, state.w_moved, state.c
+        table, lam, w, w_moved, c = schedule.device_table(), schedule.values.smoothing, state.w, state.w_moved, state.c
         move, move_threads, spread = model.kernels_for(pairs).move, threads, False
         shared_table = table.shape[1] <= SHARED_TABLE_WORDS
         halos = self.smoothing_in_one_kernel(k) if smoothing else None

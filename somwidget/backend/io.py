@@ -309,7 +309,9 @@ def _rhino_file(label: str, points, faces, rgba, marks: list, units: str) -> byt
     if unit is None or unit in ("name", "value", "Unset", "None", "CustomUnits", "UnitScale"):
         raise ValueError(f"{label}: unknown units {units!r}; use meters, millimeters, centimeters, inches, feet...")
     model = rhino3dm.File3dm()
-    model.Settings.ModelUnitSystem = getattr(rhino3dm.UnitSystem, unit)
+    # rhino3dm's stubs (__init__.pyi, 8.35) are wrong where the ignores below say: they give settable properties no
+    # setter and File3dmObjectTable.AddMesh / AddPointCloud no `attributes` (the module itself has both)
+    model.Settings.ModelUnitSystem = getattr(rhino3dm.UnitSystem, unit)  # type: ignore[misc]
 
     def layer(name: str, colour: tuple) -> int:
         entry = rhino3dm.Layer()
@@ -318,13 +320,13 @@ def _rhino_file(label: str, points, faces, rgba, marks: list, units: str) -> byt
 
     def named(name: str, on: int):
         attrs = rhino3dm.ObjectAttributes()
-        attrs.Name, attrs.LayerIndex = name, on
+        attrs.Name, attrs.LayerIndex = name, on  # type: ignore[misc]
         return attrs
 
     clay = layer("clay", (200, 200, 210, 255))
     if len(faces):
         mesh = rhino3dm.Mesh()
-        mesh.Vertices.UseDoublePrecisionVertices = True
+        mesh.Vertices.UseDoublePrecisionVertices = True  # type: ignore[misc]
         for x, y, z in points.tolist():
             mesh.Vertices.Add(x, y, z)
         for a, b, c in np.asarray(faces, np.int64).tolist():
@@ -333,12 +335,12 @@ def _rhino_file(label: str, points, faces, rgba, marks: list, units: str) -> byt
             mesh.VertexColors.Add(r, g, b)
         mesh.Normals.ComputeNormals()
         mesh.Compact()
-        model.Objects.AddMesh(mesh, named("clay", clay))
+        model.Objects.AddMesh(mesh, named("clay", clay))  # type: ignore[call-arg]
     else:
         cloud = rhino3dm.PointCloud()
         for x, y, z in points.tolist():
             cloud.Add(rhino3dm.Point3d(x, y, z))
-        model.Objects.AddPointCloud(cloud, named("clay", clay))
+        model.Objects.AddPointCloud(cloud, named("clay", clay))  # type: ignore[call-arg]
     if marks:
         on = layer("controls", (220, 60, 40, 255))
         for name, at, radius in marks:

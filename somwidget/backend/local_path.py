@@ -30,7 +30,7 @@ def find_in_blocks(model: SomModel, state: SomState, cores: CpuCores, controls: 
     searched from the block of the neuron in keys[hint_at + c] (any value will do: it only speeds the search) through
     the blocks whose boxes may hold a nearer neuron; the controls split between the busy cores. The full scan's
     winners, bit for bit."""
-    boxes = state.boxes
+    boxes = state.cpu_boxes()
     boxes.ensure(state.w)
     kern = local_kernels(model.n_dims)
     busy = min(cores.busy, count)
@@ -55,7 +55,10 @@ class LocalPath:
 
     def run(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule, cycles: int) -> None:
         state.settle_anchor()
-        cores, boxes, cache = self.cores, state.boxes, model.cache
+        cores, boxes, cache = self.cores, state.cpu_boxes(), model.row_cache()
+        reach_hops = schedule.reach_hops
+        if reach_hops is None:
+            raise RuntimeError("LocalPath: the schedule has no reach per cycle (the CPU's schedule keeps one)")
         cores.plan(model.n_neurons, controls.n_slots)
         cores.share(boxes.work(), state.n_slots)
         boxes.tighten()
@@ -71,7 +74,7 @@ class LocalPath:
             at = (s % 3) * MAX_CONTROLS
             winners = (state.keys_host[s % 3, : state.n_slots] & np.uint64(0xFFFFFFFF)).astype(np.int64)
             for lo, hi in control_parts(winners, cache.size, 2 if controls.mirror else 1):
-                cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), int(schedule.reach_hops[s]))
+                cache.fetch(list(dict.fromkeys(winners[lo:hi].tolist())), int(reach_hops[s]))
                 cores.on_cores(kern.move, lambda sb_lo, sb_hi, lo=lo, hi=hi, s=s, at=at: [
                     state.w, state.c, lo, hi, schedule.table, s, schedule.reach_dev, model.distances, model.slot_of,
                     cache.near, cache.super_near, keys, at, *boxes.arrays, boxes.moved, boxes.super_moved, sb_lo,

@@ -42,7 +42,7 @@ def subdivide(faces, weights) -> tuple[list[np.ndarray], np.ndarray]:
     mid = n + np.arange(len(edges))
     new = [w, (w[edges[:, 0]] + w[edges[:, 1]]) / 2.0]
     out: list[np.ndarray] = []
-    centres = []
+    centres: list[np.ndarray] = []
     for f in faces:
         m = len(f)
         e = [mid[index[(min(f[i], f[(i + 1) % m]), max(f[i], f[(i + 1) % m]))]] for i in range(m)]
@@ -82,7 +82,7 @@ def refine_stretched(faces, weights, factor: float = 2.0, position=(0, 1, 2)) ->
         tris += [np.array([f[0], f[i], f[i + 1]]) for i in range(1, len(f) - 1)]
     long = {tuple(e) for e in stretched_edges(tris, w, factor, position).tolist()}
     mids: dict[tuple[int, int], int] = {}
-    extra = []
+    extra: list[np.ndarray] = []
 
     def mid(a: int, b: int) -> int | None:
         key = (a, b) if a < b else (b, a)

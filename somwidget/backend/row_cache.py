@@ -130,7 +130,8 @@ class RowCache:
 def control_parts(winners: np.ndarray, size: int, unit: int) -> list[tuple[int, int]]:
     """Consecutive runs [lo, hi) of the controls whose distinct winners fit in `size` cache rows, each neuron still
     applying the controls in list order; a unit of `unit` controls (2: a mirrored pair) is never split."""
-    parts, lo, seen = [], 0, set()
+    parts: list[tuple[int, int]] = []
+    lo, seen = 0, set[int]()
     for c in range(0, len(winners), unit):
         group = set(winners[c:c + unit].tolist())
         if len(seen | group) > size:

@@ -36,7 +36,7 @@ class RowsPath:
         cycle stalls on a winner without a row (it then leaves everything as it was); the host fetches that cycle's
         rows and goes on from it. A cycle whose distinct winners outnumber the cache rows runs in parts."""
         state.settle_anchor()
-        cache = model.cache
+        cache = model.row_cache()
         target = state.s + cycles
         smoothing = schedule.values.smoothing > 0.0
         self.inner.prepare(model, controls, schedule)
@@ -65,7 +65,7 @@ class RowsPath:
                         winners: np.ndarray, smoothing: bool) -> None:
         """One cycle in consecutive runs of controls whose winners fit in the cache (each neuron still applies the
         controls in list order)."""
-        dev, cache, kern, k = model.device, model.cache, model.kernels, state.n_slots
+        dev, cache, kern, k = model.device, model.row_cache(), model.kernels, state.n_slots
         movers = model.kernels_for(controls.pairs(schedule.table_max))
         parts = control_parts(winners, cache.size, 2 if controls.mirror else 1)
         moved = state.w_moved if smoothing else state.w

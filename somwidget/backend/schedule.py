@@ -100,6 +100,12 @@ class Setting:
                 return value.strip().lower() in _TRUE
         return self.check(value, what)
 
+    def slider_range(self) -> tuple[float, float, float]:
+        """Its panel slider's (min, max, step); ValueError for a setting declared without one."""
+        if self.slider is None:
+            raise ValueError(f"{self.name}: declared without a slider, and a panel shows it as one")
+        return self.slider
+
     def range_around(self, value) -> tuple:
         """A sweep's (low, high) around `value` (`vary`)."""
         lo, hi, floor, least = self.vary or (1.0, 1.0, self.low, self.low)

@@ -16,6 +16,7 @@ import math
 import os
 import uuid
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -87,7 +88,8 @@ def save_session(path, state: dict) -> None:
             raise ValueError(f"{label}: session state lacks the key {key!r}")
     clean = check_state(full, label)
     topo, layout = clean["topology"], clean["layout"]
-    arrays: dict[str, np.ndarray] = {
+    # arrays and numpy scalars; Any: numpy types savez_compressed(**kwds) beside its keyword allow_pickle: bool
+    arrays: dict[str, Any] = {
         "format_version": np.int64(SESSION_FORMAT_VERSION),
         "preset": np.str_(clean["preset"]),
         "display": np.str_(clean["display"]),

@@ -55,9 +55,9 @@ class ShapingPath:
         self.counter = wp.zeros(2, dtype=wp.int32, device=model.device)
         self.left = wp.zeros(1, dtype=wp.int32, device=model.device)  # a carry-only run's cycles left ...
         self.going = wp.zeros(1, dtype=wp.int32, device=model.device)  # ... and whether it goes on
-        self._counter_s = None  # the s counter[parity] holds (None: unknown)
+        self._counter_s: int | None = None  # the s counter[parity] holds (None: unknown)
         self._parity = 0
-        self._setup = None
+        self._setup: tuple | None = None
         self._parts = None
         self._planned: tuple | None = None  # (controls, schedule, plan): most_cycles's, for the run that follows
 
@@ -182,7 +182,12 @@ class ShapingPath:
         wp.launch(h.kernels.advance, dim=h.n_rows, device=model.device,
                   inputs=[h.slot_of_row, h.live_dev, h.members, h.radius, h.position, h.places, h.starts, h.reach,
                           h.rebind, h.stepped, h.changed, h.unarrived])
-        wp.capture_if(h.stepped, lambda: (h.bind_patches(state), h.reanchor(state)))
+
+        def bind_again() -> None:
+            h.bind_patches(state)
+            h.reanchor(state)
+
+        wp.capture_if(h.stepped, bind_again)
 
     def _carry(self, model: SomModel, state: SomState, counting: bool = False) -> None:
         """Step 3 (b): every held node onto its target (clears `stepped` for the next cycle); `counting`: in a
@@ -225,7 +230,7 @@ class ShapingPath:
         keys = h.keys.numpy()[h.point_slots]
         winners = (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
         reach = int(schedule.reach_hops[s]) if schedule.reach_hops is not None else schedule.d_max
-        model.cache.fetch(list(dict.fromkeys(winners.tolist())), reach)
+        model.row_cache().fetch(list(dict.fromkeys(winners.tolist())), reach)
 
     # -- winners ----------------------------------------------------------------------------------------------------
     def winners(self, model: SomModel, state: SomState, controls: Controls, schedule: SomSchedule) -> np.ndarray:

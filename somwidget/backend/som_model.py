@@ -115,6 +115,12 @@ class SomModel:
         """The cycle kernels whose step 2 applies the controls by `pairs` (Controls.pairs)."""
         return cycle_kernels(self.n_dims, 8, pairs)
 
+    def row_cache(self) -> RowCache:
+        """The cache of distance rows (distance rows mode); RuntimeError with the dense table, which needs none."""
+        if self.cache is None:
+            raise RuntimeError("SomModel: no distance rows' cache: this Som reads the dense table")
+        return self.cache
+
     def d_max(self) -> int:
         """The largest finite hop distance: the learning table's last column."""
         return self.topology.diameter(self.device) if self.rows else self.topology.d_max

@@ -62,6 +62,12 @@ class SomSchedule:
         else:  # the device holds it; `host_table()` reads it back
             self._host = None
 
+    def device_table(self) -> wp.array:
+        """L on the device; RuntimeError before `rebuild` made it."""
+        if self.table is None:
+            raise RuntimeError("SomSchedule: no learning table yet (rebuild makes it)")
+        return self.table
+
     def host_table(self) -> np.ndarray:
         """L[s, d] (S, d_max + 1) float32 (a copy)."""
         if self._host is not None:

@@ -76,6 +76,12 @@ class SomState:
             self.keys_host = self.keys.numpy()
 
     # -- controls and counters ------------------------------------------------------------------------------------
+    def cpu_boxes(self) -> BlockBoxes:
+        """The CPU's block boxes; RuntimeError on CUDA, which keeps none."""
+        if self.boxes is None:
+            raise RuntimeError(f"SomState: no block boxes on {self.device} (the CPU's local cycle keeps them)")
+        return self.boxes
+
     def upload(self, controls: Controls) -> None:
         """The effective controls into the fixed-size buffer, so that the captured graphs stay valid while only their
         values change (a drag); with a mirror in pairs, each original next to its copy (slots 2i and 2i + 1), the order

@@ -70,7 +70,7 @@ class Frame:
     effective_positions: np.ndarray
     cycle_time: float
     step_cycles: int
-    preset: Preset | None = None
+    preset: Preset
     time: float = field(default_factory=time.monotonic)
     applied: int = 0
     held: bool = False
@@ -273,9 +273,14 @@ class FrameStream:
             return tuple(self._listeners)
 
     @property
-    def latest(self) -> Frame | None:
+    def latest(self) -> Frame:
+        """The latest frame installed or published; RuntimeError before the first (a session installs its first
+        frame as it is made, so its views never see none)."""
         with self._lock:
-            return self._latest
+            frame = self._latest
+        if frame is None:
+            raise RuntimeError("no frame yet: the session installs its first frame when it is made")
+        return frame
 
     @property
     def per_second(self) -> float:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from .gestures import PYTHON, acting, actor
@@ -264,7 +264,7 @@ class Hands:
             if listener in self._listeners:
                 self._listeners.remove(listener)
 
-    def _tell(self, lost: list[Lost] = ()) -> None:
+    def _tell(self, lost: Sequence[Lost] = ()) -> None:
         with self._lock:
             listeners = list(self._listeners)
         for listener in listeners:

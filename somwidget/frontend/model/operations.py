@@ -11,19 +11,29 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ...backend.symmetry import Symmetry
 from .state import engine_symmetry, som_group
+
+if TYPE_CHECKING:
+    from ...backend.som import Som
 
 
 class Operation:
     """What the training thread does to the Som for one intent."""
 
-    #: Operations of the same key supersede each other's view (None: nothing to roll back).
-    key: str | None = None
-    #: The person acted: a held session (after an undo, a load) trains again.
-    acts = True
+    @property
+    def key(self) -> str | None:
+        """Operations of the same key supersede each other's view (None: nothing to roll back)."""
+        return None
+
+    @property
+    def acts(self) -> bool:
+        """The person acted: a held session (after an undo, a load) trains again."""
+        return True
 
     def apply(self, som) -> None:
         raise NotImplementedError
@@ -58,10 +68,10 @@ class SetControls(Operation):
     controls: np.ndarray
     radii: np.ndarray
     strokes: tuple
-    anchor: object
+    anchor: Som | None
     ids: tuple
     keep: bool = False
-    group: object = None
+    group: Symmetry | None = None
     rest: tuple[np.ndarray, np.ndarray] | None = None
     reach: float | None = None  # the restart's own reach (a long move of a point control), None: the Som's
     key = "controls"
@@ -87,8 +97,8 @@ class SetControls(Operation):
                 weights, controls = self.rest
                 som.restore(weights, som.iterations)
                 som.regroup(controls, self.radii, *engine_symmetry(self.group), keep_shape=True, strokes=self.strokes)
-            som.set_controls(self.controls, self.radii, strokes=self.strokes,
-                             from_anchor=self.anchor is som and not som.held, reach=self.reach)
+            from_anchor = self.anchor is not None and self.anchor is som and not som.held
+            som.set_controls(self.controls, self.radii, strokes=self.strokes, from_anchor=from_anchor, reach=self.reach)
 
     def applied(self, state) -> None:
         state.applied_ids = self.ids  # the ids of the controls the Som now holds
@@ -151,7 +161,7 @@ class SetSymmetry(Operation):
     becomes a control of its own; turned on, controls that are each other's images pair up again. With `keep`, the
     effective controls are the same as before: weights and s stay and nothing trains."""
 
-    group: object
+    group: Symmetry | None
     controls: np.ndarray
     radii: np.ndarray
     strokes: tuple

@@ -27,7 +27,7 @@ from .controls import check_index
 from .frames import Frame
 from .session import Session
 from .settings import PARAMETERS
-from .variants import MAX_GALLERY_VARIANTS, THUMBNAIL, VARIED, vary_around
+from .variants import MAX_GALLERY_VARIANTS, THUMBNAIL, VARIED, Variants, vary_around
 from .variants import sweep as sweep_variants
 
 
@@ -147,7 +147,7 @@ class PanelModel:
 
     def __init__(self, session: Session) -> None:
         self.session = session
-        self.variants = None  # the latest sweep's Variants
+        self.variants: Variants | None = None  # the latest sweep's
 
     # -- edits and actions: None when the session took it, else the message to show -------------------------------
     @staticmethod
@@ -197,7 +197,7 @@ class PanelModel:
     def values(self) -> dict:
         """Each field's value as the session holds it (`field_text`), and the metric weights."""
         p = self.session.parameters
-        out = {f.name: field_text(f, p[f.name]) for f in self.fields}
+        out: dict[str, str | float | bool | list[float]] = {f.name: field_text(f, p[f.name]) for f in self.fields}
         out["metric_weights"] = [float(x) for x in p["metric_weights"]]
         out["group"] = p["group"]
         return out
@@ -259,8 +259,8 @@ class PanelModel:
         as a panel's field takes them back (a coordinate within ZERO_SHARE of the size of zero as 0)."""
         k, gaps = frame.n_controls, frame.gaps
         colours = frame.control_display_colours[:k]
-        others = other_dims(frame.preset.layout) if frame.preset is not None else ()
-        size = clay_size(frame.preset) if frame.preset is not None else 1.0
+        others = other_dims(frame.preset.layout)
+        size = clay_size(frame.preset)
         ids = frame.control_ids if len(frame.control_ids) == k else tuple(range(k))
         runs = frame.strokes if sum(frame.strokes) == k else (1,) * k
         rows, i = [], 0
@@ -349,7 +349,7 @@ class PanelModel:
         group = self.session.parameters["group"]
         if group not in [spec for _, spec in choices]:
             symmetry = Symmetry.parse(group)
-            choices.append((symmetry.describe(), group))
+            choices.append((symmetry.describe() if symmetry is not None else "off", group))
         return choices
 
     def set_group(self, spec) -> str | None:
@@ -398,6 +398,8 @@ class PanelModel:
     def caption(self, i: int, vary=()) -> str:
         """Variant i's figures (and the varied parameters' values) in a line."""
         v = self.variants
+        if v is None:
+            raise ValueError(f"variants: no variant #{i}: no sweep yet")
         return (f"#{i}: gap {v.metrics['gap'][i]:.3f}, spike {v.metrics['spike'][i]:.2f}"
                 + "".join(f", {k} {fmt(x)}" for k, x in v.params[i].items() if k in vary))
 

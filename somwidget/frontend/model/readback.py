@@ -28,6 +28,7 @@ import re
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -315,7 +316,8 @@ class _Reader:
                 for k, v in value.items() if k in ("position", "direction"))
         try:
             if ok:
-                return Symmetry(**{k: tuple(v) if isinstance(v, list) else v for k, v in value.items()})
+                fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in value.items()}
+                return Symmetry(**fields)
         except (ValueError, TypeError):
             pass
         raise _Damaged(self.manifest_path, part, f"its symmetry group is not one ({_short(value)})")
@@ -337,7 +339,7 @@ class _Reader:
         if tuple(names) != _STEP_ARRAYS:
             raise _Damaged(path, part, f"not a saved session file (it holds {_short(names)} instead of a step's "
                                        "weights, controls and radii)")
-        out = {}
+        out: dict[str, np.ndarray] = {}
         for member in _STEP_ARRAYS:
             key = member[:-4]
             try:
@@ -369,8 +371,8 @@ class _Reader:
             raise _Damaged(m, part, f"its mesh's start {_short(name)} is not one the list of steps names")
         if name not in self._presets:
             try:
-                self._presets[name] = self._read_preset(name)
-                self.reading.presets[name] = self._presets[name]
+                preset = self._read_preset(name)
+                self._presets[name] = self.reading.presets[name] = preset
             except _Damaged as exc:
                 self._presets[name] = exc
         found = self._presets[name]
@@ -390,7 +392,8 @@ class _Reader:
             and isinstance(record.get("grow"), bool) and isinstance(record.get("meta"), dict) \
             and _transform_ok(record["meta"].get("transform"))
         radius = record.get("radius") if isinstance(record, dict) else None
-        if not ok or type(radius) not in (int, float) or not 0 <= radius <= schedule.BY_NAME["radius"].high:
+        if not ok or isinstance(radius, bool) or not isinstance(radius, (int, float)) \
+                or not 0 <= radius <= schedule.BY_NAME["radius"].high:
             raise _Damaged(m, part, f"its entry for {name} is damaged ({_short(record)})")
         try:  # what is read is written again with the next save: it must be plain JSON (no NaN, no Infinity)
             json.dumps(record["meta"], allow_nan=False)

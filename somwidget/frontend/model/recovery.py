@@ -108,13 +108,16 @@ def _from_folder(session_class, folder: Path, origin: str | None, max_vertices: 
         _moved(reading, aside)
         store = SessionStore.new(reading.origin or origin or "python", writable=False)
     session = None
-    try:
-        session = session_class(reading.current.preset, start=False, origin=reading.origin or origin or "python",
+    try:  # a folder read whole has its current step (a step not read is a problem); should one lack it, it is set aside
+        current = reading.current
+        if current is None:
+            raise ValueError("its current step is missing")
+        session = session_class(current.preset, start=False, origin=reading.origin or origin or "python",
                                 _store=store, **options)
-        session.timeline.bring_back(reading.current, reading.undo, reading.redo)
+        session.timeline.bring_back(current, reading.undo, reading.redo)
         if reading.whole:
-            store.take_over(reading.files, reading.presets, reading.current.key)
-        preset = reading.current.preset
+            store.take_over(reading.files, reading.presets, current.key)
+        preset = current.preset
         session.recovered = {"path": str(aside or folder), "saved": reading.saved, "preset": preset.name,
                              "gesture": reading.gesture, "undo": len(reading.undo), "redo": len(reading.redo),
                              "back": reading.back,

@@ -124,7 +124,7 @@ class Session:
             self.start()
 
     # -- what the parts call back ------------------------------------------------------------------------------
-    def _make_frame(self, cycles: int, weights=None) -> Frame:
+    def _make_frame(self, cycles: int, weights: np.ndarray | None = None) -> Frame:
         """A frame of the Som now (quiescent: under the Som's lock, or before the thread starts); `weights`: the Som's
         weights where a batch holds them (a studio's room)."""
         state = self.modelling
@@ -209,9 +209,7 @@ class Session:
     @property
     def frame(self) -> Frame:
         """The latest frame."""
-        frame = self.frames.latest
-        assert frame is not None  # made with the session (__init__ installs the first)
-        return frame
+        return self.frames.latest  # __init__ installs the first
 
     @property
     def frames_per_second(self) -> float:

@@ -92,8 +92,10 @@ class SessionSettings:
         if name in ("symmetry", "group"):
             return self.set_symmetry(value)
         if name == "metric_weights":
-            return self.set_metric_weights(value)
-        self.update({name: value})
+            self.set_metric_weights(value)
+        else:
+            self.update({name: value})
+        return None
 
     def update(self, values: Mapping | None = None, **more) -> None:
         """Several settings of one value each as one step (`update(smoothing=0.1, reach=0.2)`): every value is
@@ -145,6 +147,7 @@ class SessionSettings:
         state = self.state
         if value is None:
             return None
+        group: Symmetry | None
         if isinstance(value, Symmetry):
             group = value
         elif isinstance(value, str) and value.strip().lower() not in ("true", "false", "on", "off", "1", "0"):

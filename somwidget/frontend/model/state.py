@@ -123,6 +123,8 @@ def build(preset: str | Preset | None, device: str | None, max_vertices: int) ->
 class ModellingState:
     """The shared state of one session (see the module's docstring)."""
 
+    controls: np.ndarray  # (k, n) the controls as the session holds them (set by `install`)
+
     def __init__(self, preset: Preset, som, paused: bool = False) -> None:
         self.lock = threading.RLock()
         self.wake = threading.Condition(self.lock)

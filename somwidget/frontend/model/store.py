@@ -35,6 +35,7 @@ import os
 import re
 import shutil
 import stat
+import sys
 import threading
 import time
 import uuid
@@ -112,21 +113,17 @@ def lock(path: Path):
         raise OSError(errno.EINVAL, "not a plain file", str(path))
     handle = os.fdopen(fd, "r+b")
     try:
-        import fcntl
+        if sys.platform == "win32":  # pragma: no cover - Windows
+            import msvcrt
 
-        try:
-            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-            return handle
-        except OSError:
-            pass
-    except ImportError:  # pragma: no cover - Windows
-        import msvcrt
-
-        try:
             msvcrt.locking(handle.fileno(), msvcrt.LK_NBLCK, 1)
-            return handle
-        except OSError:
-            pass
+        else:
+            import fcntl
+
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return handle
+    except OSError:
+        pass
     handle.close()
     return None
 

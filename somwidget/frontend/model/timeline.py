@@ -228,6 +228,7 @@ class Timeline:
         things)."""
         state = self.state
         step = self.gestures.boundary
+        assert step is not None, "a step completes on its boundary: every caller checks there is one"
         self.history.push(step)
         self.gestures.note(step, change, self._kept)
         state.completed += 1
@@ -284,7 +285,9 @@ class Timeline:
         with self.state.lock:
             undo, _ = self.history.steps()
             step = self.gestures.latest_of(hand, undo)
-            newest = step is not None and undo[-1] is step and self.gestures.boundary is None
+            if step is None:
+                return None, False
+            newest = undo[-1] is step and self.gestures.boundary is None
             return step, newest and self.gestures.changes[step.key].exact
 
     def change_of(self, step: Step) -> Change | None:
@@ -354,6 +357,8 @@ class Timeline:
 class SessionHistory(tuple):
     """A session's undo history and gestures (`session.history`). It reads as the tuple (undo steps, redo steps) it
     was when read (`undo, redo = session.history`); its methods act on the session now."""
+
+    _timeline: Timeline
 
     def __new__(cls, timeline: Timeline):
         with timeline.state.lock:

@@ -26,6 +26,8 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future
 
+import numpy as np
+
 from ...backend.schedule import MAX_ITERATIONS
 from .frames import Frame, FrameStream
 from .operations import Operation, SetControls
@@ -52,10 +54,12 @@ class Pace:
 class Trainer:
     """The thread that trains one session's Som (see the module's docstring).
 
-    make_frame(cycles): a frame of the Som now; after_turn(): called after each turn (the autosave's chance)."""
+    make_frame(cycles, weights): a frame of the Som now (`weights`: where a batch holds them, else None);
+    after_turn(): called after each turn (the autosave's chance)."""
 
-    def __init__(self, state: ModellingState, frames: FrameStream, make_frame: Callable[[int], Frame],
-                 after_turn: Callable[[], None], frame_rate: float, step_fraction: float) -> None:
+    def __init__(self, state: ModellingState, frames: FrameStream,
+                 make_frame: Callable[[int, np.ndarray | None], Frame], after_turn: Callable[[], None],
+                 frame_rate: float, step_fraction: float) -> None:
         self.state = state
         self.frames = frames
         self.make_frame = make_frame
@@ -281,6 +285,7 @@ class Trainer:
 
     def _turn(self) -> None:
         """Apply the queued operations, step, publish a frame. Never raises."""
+        frame: Frame | None
         try:
             frame = self._apply_and_step()
         except Exception as exc:  # keep the thread alive; views show the error
@@ -314,7 +319,7 @@ class Trainer:
             k = max(1, k // 4)
         return max(1, min(k, som.iterations - som.iteration))
 
-    def end_step(self, cycles: int, seconds: float, weights=None) -> Frame:
+    def end_step(self, cycles: int, seconds: float, weights: np.ndarray | None = None) -> Frame:
         """A turn's second half (caller holds state.som_lock): `cycles` ran in `seconds`; the frame of the Som now
         (`weights`: its weights, where a batch holds them: studio/batched.py)."""
         if cycles > 0:
@@ -322,7 +327,7 @@ class Trainer:
             with self.state.lock:
                 self.state.unsaved = True
         self._stepped_to = self.state.som.iteration
-        return self.make_frame(cycles) if weights is None else self.make_frame(cycles, weights)
+        return self.make_frame(cycles, weights)
 
     def publish(self, frame: Frame | None) -> None:
         if frame is not None:
@@ -342,7 +347,7 @@ class Trainer:
                 state.paused = True
             try:
                 with state.som_lock:
-                    return self.make_frame(0)
+                    return self.make_frame(0, None)
             except Exception:
                 log.exception("could not make a frame after the error")
             with state.lock:  # the last frame again, marked paused, with the intents handled since

@@ -177,6 +177,7 @@ def sweep(preset_or_session="car", n: int = 64, jitter: float = 0.05, params: Ma
     else:
         raise ValueError("sweep: expected a preset name, a Preset or a Session, got "
                          f"{type(preset_or_session).__name__}")
+    metric: np.ndarray | None  # None: the Som's default
     if source is not None:
         snap = source.files.snapshot()
         preset = snap["preset"]

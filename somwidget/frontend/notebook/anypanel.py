@@ -18,6 +18,7 @@ import logging
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import anywidget
 import traitlets
@@ -53,17 +54,18 @@ def declared_fields(model: PanelModel) -> list[dict]:
 class PanelWidget(anywidget.AnyWidget):
     """The panel bound both ways to `session` (see the module's docstring); `error` shows a refused edit."""
 
-    fields = traitlets.List().tag(sync=True)
+    fields: traitlets.List[Any] = traitlets.List().tag(sync=True)
     sections = traitlets.Dict().tag(sync=True)
     values = traitlets.Dict().tag(sync=True)
     status = traitlets.Dict().tag(sync=True)
-    presets = traitlets.List().tag(sync=True)
-    groups = traitlets.List().tag(sync=True)
-    features = traitlets.List().tag(sync=True)
-    controls = traitlets.List().tag(sync=True)
-    exports = traitlets.List().tag(sync=True)
+    presets: traitlets.List[Any] = traitlets.List().tag(sync=True)
+    groups: traitlets.List[Any] = traitlets.List().tag(sync=True)
+    features: traitlets.List[Any] = traitlets.List().tag(sync=True)
+    controls: traitlets.List[Any] = traitlets.List().tag(sync=True)
+    exports: traitlets.List[Any] = traitlets.List().tag(sync=True)
     actions = traitlets.Dict().tag(sync=True)  # name -> [label, help] (model/panel.py ACTIONS)
-    off_clay = traitlets.List().tag(sync=True)  # the gap cell's mark for a control off the clay: [style, words]
+    # the gap cell's mark for a control off the clay: [style, words]
+    off_clay: traitlets.List[Any] = traitlets.List().tag(sync=True)
     error = traitlets.Unicode("").tag(sync=True)
 
     def __init__(self, session: Session, refresh_hz: float = PANEL_HZ, auto_refresh: bool = True) -> None:

@@ -177,7 +177,7 @@ class Panel(widgets.VBox):
         self.reset_button.on_click(lambda _b: self._intent(session.reset))
         self.undo_button.on_click(lambda _b: self._intent(session.undo))
         self.reload_button.on_click(lambda _b: self._reload_preset())
-        self.refine_button.on_click(lambda _b: self._intent(self.model.refine) and self.refresh())
+        self.refine_button.on_click(lambda _b: self._refine())
         self.redo_button.on_click(lambda _b: self._intent(session.redo))
         self.export_button.on_click(lambda _b: self.export())
 
@@ -209,6 +209,10 @@ class Panel(widgets.VBox):
             yield
         finally:
             self._local.syncing = before
+
+    def _refine(self) -> None:
+        if self._intent(self.model.refine):
+            self.refresh()
 
     def _intent(self, fn, *args) -> bool:
         if getattr(self._local, "syncing", False) or self._closed:
@@ -426,7 +430,7 @@ def _field(p: Setting, style: dict, layout) -> widgets.ValueWidget:
     if p.kind == "bool":
         return widgets.Checkbox(description=p.short or p.label, indent=False, tooltip=p.help,
                                 layout=widgets.Layout(width="auto", flex="0 0 auto"))
-    low, high, step = p.slider
+    low, high, step = p.slider_range()
     kind, extra = (widgets.IntSlider, {}) if p.kind == "int" else (
         widgets.FloatSlider, {"readout_format": f".{slider_digits(p)}f"})
     return kind(description=p.short or p.label, min=low, max=high, step=step, continuous_update=False, style=style,
@@ -438,8 +442,9 @@ def _show(widget, p: Setting, value) -> None:
     if p.kind == "bool":
         return _set(widget, bool(value))
     value = int(value) if p.kind == "int" else float(value)
-    widget.max = max(p.slider[1], value)
-    widget.min = min(p.slider[0], value)
+    low, high, _ = p.slider_range()
+    widget.max = max(high, value)
+    widget.min = min(low, value)
     _set(widget, value)
 
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 import base64
 import io
 import logging
+from typing import Any
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +91,7 @@ class Stills:
     `update(png)` replaces every one shown with the new picture."""
 
     def __init__(self) -> None:
-        self.handles = []
+        self.handles: list[Any] = []  # IPython's DisplayHandle of each still shown
         self.updates = 0  # stills replaced (for tests)
 
     def show(self, png: bytes | None) -> None:

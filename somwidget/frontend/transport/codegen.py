@@ -151,7 +151,7 @@ def _server_messages() -> list[str]:
            f"export const FRAME_MESSAGE = '{m.FrameMessage.type}';"]
     for kind, cls in m.SERVER_MESSAGES.items():
         out += ["", "/**"]
-        out += comment(cls.__doc__, prefix=" * ")
+        out += comment(cls.__doc__ or "", prefix=" * ")
         out.append(f" * @typedef {{object}} {cls.__name__}")
         out.append(f" * @property {{'{kind}'}} type")
         for f in m.declared_fields(cls):
@@ -176,8 +176,8 @@ def _intents() -> list[str]:
         args = ", ".join(f.name for f in fields)
         body = ", ".join([f"type: '{kind}'", *(f.name for f in fields)])
         optional = any(f.name not in required for f in fields)
-        out += comment(cls.__doc__, indent="  ")
-        types_ = ", ".join(f"{f.name}: {f.wire.js}{'' if f.name in required else ' (optional)'}" for f in fields)
+        out += comment(cls.__doc__ or "", indent="  ")
+        types_ = ", ".join(f"{f.name}: {f.wire_type().js}{'' if f.name in required else ' (optional)'}" for f in fields)
         if types_:
             out += comment(f"({types_})", indent="  ")
         built = f"compact({{ {body} }})" if optional else f"({{ {body} }})"

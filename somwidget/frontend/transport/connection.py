@@ -24,7 +24,7 @@ import logging
 import threading
 from collections.abc import Callable
 from concurrent.futures import Future
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -170,10 +170,11 @@ class ViewConnection:
         def finish(future: Future) -> None:
             with self._moves_lock:
                 self._waiting -= 1
-            if future.exception() is None:
+            exc = future.exception()
+            if exc is None:
                 done.set_result(future.result())
             else:  # a closed session
-                self._refuse(future.exception(), None)
+                self._refuse(exc, None)
                 done.set_result(False)
 
         self.session.submit(call, quick).add_done_callback(finish)
@@ -191,7 +192,7 @@ class ViewConnection:
             self.send(reply)
         return True
 
-    def _refuse(self, exc: Exception, intent: str | None) -> None:
+    def _refuse(self, exc: BaseException, intent: str | None) -> None:
         self.refused += 1
         if self.refused <= LOGGED_REFUSALS or self.refused % 100 == 0:
             log.warning("%s: refused a message (%d so far): %s", self.name, self.refused, exc)
@@ -202,10 +203,12 @@ class ViewConnection:
         if intent.id is not None:
             self.session.index_of_control(intent.id)  # ValueError when it is gone
             return intent.id
-        ids = self.session.control_ids
-        if not 0 <= intent.index < len(ids):
-            raise ValueError(f"{intent.type}: control index {intent.index} is out of range")
-        return ids[intent.index]
+        ids, index = self.session.control_ids, intent.index
+        if index is None:  # parse_intent refuses an intent with neither
+            raise ValueError(f"{intent.type}: give the control's id or its index")
+        if not 0 <= index < len(ids):
+            raise ValueError(f"{intent.type}: control index {index} is out of range")
+        return ids[index]
 
 
 def _done(value) -> Future:
@@ -268,8 +271,9 @@ def _revolve(c: ViewConnection, intent: RevolveIntent) -> None:
                       intent.radius)
 
 
-#: The one dispatch table: each intent's class -> what it does (on the training thread, but for AT_ONCE).
-HANDLERS: dict[type[Intent], Callable[[ViewConnection, Intent], ServerMessage | None]] = {
+#: The one dispatch table: each intent's class -> what it does (on the training thread, but for AT_ONCE); a handler
+#: takes the intent of its own class (Any: no type says "the class of the key"), and a ServerMessage it returns is sent.
+HANDLERS: dict[type[Intent], Callable[[ViewConnection, Any], object]] = {
     HelloIntent: _hello,
     PingIntent: lambda c, intent: PongMessage(t=intent.t),
     HandIntent: _hand,

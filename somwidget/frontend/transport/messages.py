@@ -524,6 +524,12 @@ class Declared:
     required: bool
     browser: bool
 
+    def wire_type(self) -> WireType:
+        """The field's wire type (every intent's field has one: checked as this module loads)."""
+        if self.wire is None:
+            raise TypeError(f"{self.name}: no wire type (declare it as Annotated[type, WireType], fields.py)")
+        return self.wire
+
 
 def declared_fields(cls) -> tuple[Declared, ...]:
     """The fields of a message class with their types resolved (what validation and the code generator read)."""
@@ -587,7 +593,7 @@ def parse_intent(message, n_controls: int) -> Intent:
         raise IntentError(f"{kind}: missing field(s) {', '.join(missing)}", kind)
     if cls.one_of and sum(name in given for name in cls.one_of) != 1:
         raise IntentError(f"{kind}: give {' or '.join(json.dumps(n) for n in cls.one_of)}, one of the two", kind)
-    values = {f.name: f.wire.check(data[f.name], f.name, kind, n_controls) for f in declared if f.name in given}
+    values = {f.name: f.wire_type().check(data[f.name], f.name, kind, n_controls) for f in declared if f.name in given}
     return cls(**values).checked()
 
 

@@ -61,7 +61,10 @@ class Outbox:
 
     @property
     def session(self) -> Session:
-        return self._session()
+        session = self._session()
+        if session is None:
+            raise RuntimeError("outbox: its session is gone (closed and let go)")
+        return session
 
     # -- subscribers -----------------------------------------------------------------------------------------
     def subscribe(self, wake: Callable[[], None]) -> None:
@@ -100,9 +103,10 @@ class Outbox:
         with self._lock:
             if session.generation != frame.generation:
                 return []
-            if self._topology[0] != frame.generation:
-                self._topology = (frame.generation, topology_message(session, frame))
-            topology = self._topology[1]
+            kept_generation, topology = self._topology
+            if topology is None or kept_generation != frame.generation:
+                topology = topology_message(session, frame)
+                self._topology = (frame.generation, topology)
             if self._encoded[0] != frame.seq:
                 self._encoded = (frame.seq, encode_frame(frame, session))
             data = self._encoded[1]

@@ -32,11 +32,13 @@ from wslink.websocket import LinkProtocol
 
 from ...backend import presets as _presets
 from ...backend.io import TooManyVertices
+from ...backend.presets import Preset
 from ..model import Session
 from ..model.panel import EXPORT_CHOICES, REACH_HELP
 from ..transport.limits import bound_messages
 from . import lan as _lan
 from . import uploads
+from .hub import ViewHub
 from .hub import attach as attach_hub
 from .layout import build_page
 from .panel_state import PanelState
@@ -73,14 +75,15 @@ class SomApp:
         self.xr_token: str | None = None  # the LAN access token, when served beyond loopback
         # on a loopback bind, answer only loopback Host names (False behind a proxy that forwards the browser's Host)
         self.check_host = True
-        self.view_hub = None  # the clay view's routes and clients (/view/ws, /xr/...), once the server is bound
+        # the clay view's routes and clients (/view/ws, /xr/...), once the server is bound
+        self.view_hub: ViewHub | None = None
         self.server = server if server is not None else get_server("somwidget", client_type="vue3")
         self.server.client_type = "vue3"
         self.state, self.ctrl = self.server.state, self.server.controller
         self.title = title
         self.clients: set[str] = set()
-        self._pump_task = None
-        self._uploaded: dict[str, object] = {}  # the latest mesh uploaded in this server's life, by name
+        self._pump_task: asyncio.Task[None] | None = None
+        self._uploaded: dict[str, Preset] = {}  # the latest mesh uploaded in this server's life, by name
         self._refused_upload = None  # the latest upload refused as too big (its file value), for the Decimate offer
         if session.preset.name not in _presets.PRESETS:  # started from `somwidget serve --mesh FILE`
             self._uploaded = {session.preset.name: session.preset}

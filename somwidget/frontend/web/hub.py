@@ -56,6 +56,8 @@ class _Client:
     """One websocket client: the pipe of its ViewConnection (a queue of JSON texts, sent first, and a slot for the
     latest frame; from another thread both are handed to the loop) and its counters."""
 
+    connection: ViewConnection  # set by the hub as the client is made (the connection sends through this client)
+
     def __init__(self, cid: int, ws: web.WebSocketResponse, remote: str | None) -> None:
         self.id = cid
         self.ws = ws
@@ -65,7 +67,6 @@ class _Client:
         self.texts: collections.deque = collections.deque()  # JSON messages, sent before any frame
         self.frame: bytes | None = None  # the latest frame not yet sent (a newer one replaces it)
         self.wake = asyncio.Event()
-        self.connection: ViewConnection | None = None
         self.errors: collections.deque = collections.deque()
         self.frames_sent = 0
         self.bytes_sent = 0
@@ -75,7 +76,7 @@ class _Client:
 
     @property
     def refused(self) -> int:
-        return self.connection.refused if self.connection is not None else 0
+        return self.connection.refused
 
     def send_json(self, message: dict) -> None:
         if not self.closed:
@@ -255,6 +256,8 @@ class ViewHub:
                             await asyncio.wait_for(client.wake.wait(), wait)
                         continue
                     data, client.frame = client.frame, None
+                    if data is None:  # cannot be: texts go out first (above), then the frame that is waiting
+                        continue
                     await asyncio.wait_for(ws.send_bytes(data), SEND_TIMEOUT)
                     last_frame = time.monotonic()
                     client.frames_sent += 1

@@ -400,7 +400,7 @@ def _schedule_section(panel: PanelModel) -> None:
 
 def _slider(p: Setting) -> None:
     """A setting's slider (its value shown in its label) and its help under it."""
-    key, low, high, step = state_key(p.name), *p.slider
+    key, (low, high, step) = state_key(p.name), p.slider_range()
     with html.Div(id=f"param-{p.name}", title=p.help):
         v3.VSlider(v_model=(key,), label=(f"'{p.short or p.label} ' + Number({key}).toFixed({slider_digits(p)})",),
                    min=low, max=high, step=step, density="compact", hide_details="auto", thumb_label=True,

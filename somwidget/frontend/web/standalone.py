@@ -12,7 +12,7 @@ import threading
 
 from aiohttp import web
 
-from .hub import attach
+from .hub import ViewHub, attach
 
 
 class XRServer:
@@ -39,7 +39,7 @@ class XRServer:
         self.token = token
         self.ssl_context = ssl_context
         self.dist = dist
-        self.hub = None
+        self.hub: ViewHub | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._runner: web.AppRunner | None = None
         self._thread: threading.Thread | None = None
@@ -79,7 +79,8 @@ class XRServer:
         try:
             loop.run_forever()
         finally:
-            loop.run_until_complete(self._runner.cleanup())
+            if self._runner is not None:  # _start made it before the loop ran
+                loop.run_until_complete(self._runner.cleanup())
             loop.close()
 
     async def _start(self) -> None:
@@ -90,19 +91,21 @@ class XRServer:
             middlewares.append(lan.token_middleware(self.token))
         app = web.Application(middlewares=middlewares)
         self.hub = attach(app, self.session, token=self.token, dist=self.dist)
-        self._runner = web.AppRunner(app, handle_signals=False)
-        await self._runner.setup()
-        site = web.TCPSite(self._runner, self.host, self.port, ssl_context=self.ssl_context)
+        self._runner = runner = web.AppRunner(app, handle_signals=False)
+        await runner.setup()
+        site = web.TCPSite(runner, self.host, self.port, ssl_context=self.ssl_context)
         await site.start()
-        self.port = self._runner.addresses[0][1]
+        self.port = runner.addresses[0][1]
 
     def stop(self, timeout: float = 10.0) -> None:
         loop = self._loop
         if loop is None or self._thread is None:
             return
+        hub = self.hub
         if loop.is_running():
             async def shutdown() -> None:
-                await self.hub.close()
+                if hub is not None:  # _start made it before the loop ran
+                    await hub.close()
                 loop.stop()
             asyncio.run_coroutine_threadsafe(shutdown(), loop)
         self._thread.join(timeout)

@@ -81,7 +81,8 @@ WRITABLE = {
 
 def filter_changes(changes) -> tuple[list[dict], list[str]]:
     """(the changes a client may make, the keys refused) from trame's [{"key": k, "value": v}, ...]."""
-    allowed, refused = [], []
+    allowed: list[dict] = []
+    refused: list[str] = []
     if not isinstance(changes, list):
         return allowed, ["<not a list>"]
     for change in changes:
@@ -102,7 +103,9 @@ def guard_state_updates(wslink_server) -> bool:
     guarded = False
     for handler in handlers:
         table = getattr(handler, "functionMap", None)
-        entry = table.get("trame.state.update") if isinstance(table, dict) else None
+        if not isinstance(table, dict):
+            continue
+        entry = table.get("trame.state.update")
         if entry is None:
             continue
         obj, update = entry
