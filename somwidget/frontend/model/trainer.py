@@ -132,15 +132,15 @@ class Trainer:
         if self.driver is not None:
             self.driver.poke()
 
-    def run_calls(self, quick_only: bool = False) -> bool:
+    def run_calls(self, quick_only: bool = False, pause: bool = True) -> bool:
         """The posted calls, in order (on the training thread, holding no lock), with `quick_only` up to the first
-        that is not quick; then a moment for the threads that wait on them (their replies go out before the next
-        step). Whether any ran."""
+        that is not quick; then (`pause`) a moment for the threads that wait on them (their replies go out before the
+        next step: a driver of many sessions pauses once for all of them). Whether any ran."""
         ran = False
         while True:
             with self.state.wake:
                 if not self.calls or (quick_only and not self.calls[0][2]):
-                    if ran:
+                    if ran and pause:
                         time.sleep(0)
                     return ran
                 call, future, _ = self.calls.popleft()

@@ -154,6 +154,7 @@ class BatchedRooms:
                 host = som.weights  # the anchor settled first
                 state = som.parts.state
                 group.batch.put(slot, host, som.iteration, som.controls, state.w_anchor)
+                state.lend(True)  # its moves' controls go into the batch's row, not its own rows, until given back
                 self._loans[owner] = _Loan(key, som, state, slot, host, state.anchor_restarts)
                 return
             restarts = loan.state.anchor_restarts  # a drag's move restarts from its anchor: the batch's row too
@@ -170,6 +171,7 @@ class BatchedRooms:
         loan = self._loans.pop(owner, None)
         if loan is None:
             return
+        loan.state.lend(False)  # the controls its moves left waiting go into its own rows
         group = self._groups.get(loan.key)
         if group is not None:
             group.put_moves()

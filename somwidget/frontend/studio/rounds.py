@@ -53,6 +53,7 @@ class Rounds:
         self._calls = ThreadPoolExecutor(CALL_THREADS, thread_name_prefix="somwidget-room-calls")
         self.thread = threading.Thread(target=self._run, name="somwidget-rounds", daemon=True)
         self.rounds = 0
+        self._called = False  # a room's quick calls ran in this round
 
     # -- rooms come and go --------------------------------------------------------------------------------------
     def add(self, trainer) -> threading.Thread:
@@ -120,9 +121,11 @@ class Rounds:
             trainers = list(self._trainers.values())
         due: float | None = None
         asks, counts = [], {}
-        for trainer in trainers:
-            if not self._wants_turn(trainer, now):
-                continue
+        self._called = False
+        turns = [trainer for trainer in trainers if self._wants_turn(trainer, now)]
+        if self._called:  # a moment for the threads that wait on the calls' replies: once a round, not once a room
+            time.sleep(0)
+        for trainer in turns:
             self._last[id(trainer)] = now
             lock = trainer.state.som_lock
             if not lock.turn(blocking=False):  # an undo, a save meanwhile: next round
@@ -185,7 +188,8 @@ class Rounds:
         calls off the loop, and the room has no turn until they ran: `_call_off_loop`)."""
         if trainer.closed or id(trainer) in self._calling:
             return False
-        ran = trainer.run_calls(quick_only=True) if trainer.calls else False
+        ran = trainer.run_calls(quick_only=True, pause=False) if trainer.calls else False
+        self._called = self._called or ran
         if trainer.calls:  # a slow call: the other rooms do not wait for it
             self._call_off_loop(trainer)
             return False
