@@ -83,7 +83,8 @@ class SomState:
     def upload(self, controls: Controls) -> None:
         """The effective controls into the fixed-size buffer, so that the captured graphs stay valid while only their
         values change (a drag); with a mirror in pairs, each original next to its copy (slots 2i and 2i + 1), the order
-        in which step 2 applies them. On CUDA they go up with the next `set_cycle`. While `lent`, they wait for it (or for `lend(False)`)."""
+        in which step 2 applies them. On CUDA they go up with the next `set_cycle`. While `lent`, they wait for it
+        (or for `lend(False)`)."""
         if self.lent:
             self._waiting = controls
             self.winners_valid = False  # (the next run's set_cycle writes them first)
