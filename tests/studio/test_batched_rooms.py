@@ -214,3 +214,30 @@ def test_rooms_that_drag_and_undo_while_batched_end_as_a_session_alone(tmp_path)
     finally:
         alone.close()
         rooms.close()
+
+
+def test_a_lent_states_moves_wait_for_its_give_back_and_a_run_meanwhile_takes_them_first():
+    """While a batch holds a room's Som state its moves' controls wait (SomState.lend): given back, or stepped while
+    still lent, the Som steps with its latest controls, bit for bit as a Som never lent."""
+    p = presets.get_preset("car")
+    settled = p.make_som(device="cpu")
+    settled.train()
+    soms = []
+    for _ in range(3):
+        som = p.make_som(device="cpu")
+        som.restore(settled.weights, som.iterations)
+        soms.append(som)
+    never, given_back, stepped_lent = soms
+    moves = [never.controls + np.float32(0.01 * (i + 1)) for i in range(3)]
+    given_back.parts.state.lend(True)
+    stepped_lent.parts.state.lend(True)
+    for c in moves:
+        for som in soms:
+            som.set_controls(c)
+    assert given_back.parts.state._waiting is not None  # nothing written to its own rows yet
+    given_back.parts.state.lend(False)
+    for som in soms:
+        som.step(7)
+    np.testing.assert_array_equal(given_back.weights, never.weights)
+    np.testing.assert_array_equal(stepped_lent.weights, never.weights)
+    assert stepped_lent.parts.state._waiting is None
