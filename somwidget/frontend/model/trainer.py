@@ -314,15 +314,16 @@ class Trainer:
             k = max(1, k // 4)
         return max(1, min(k, som.iterations - som.iteration))
 
-    def end_step(self, cycles: int, seconds: float, weights=None) -> Frame:
+    def end_step(self, cycles: int, seconds: float, weights=None, colours=None) -> Frame:
         """A turn's second half (caller holds state.som_lock): `cycles` ran in `seconds`; the frame of the Som now
-        (`weights`: its weights, where a batch holds them: studio/batched.py)."""
+        (`weights`: its weights, where a batch holds them, and `colours` their nodes' colours, made for every room
+        of the batch at once: studio/batched.py)."""
         if cycles > 0:
             self._pace_now.tune(seconds / cycles, self.step_fraction / self.frame_rate)
             with self.state.lock:
                 self.state.unsaved = True
         self._stepped_to = self.state.som.iteration
-        return self.make_frame(cycles) if weights is None else self.make_frame(cycles, weights)
+        return self.make_frame(cycles) if weights is None else self.make_frame(cycles, weights, colours)
 
     def publish(self, frame: Frame | None) -> None:
         if frame is not None:

@@ -161,8 +161,10 @@ class Rounds:
                 got = results.get(trainer, (0, 0.0))
                 if isinstance(got, BaseException):
                     raise got
-                weights = self.batches.host(trainer) if self.batches.holds(trainer) else None
-                frame = trainer.end_step(got[0], got[1], weights)
+                held = self.batches.holds(trainer)
+                weights = self.batches.host(trainer) if held else None
+                colours = self.batches.colours(trainer, trainer.state.preset.layout) if held else None
+                frame = trainer.end_step(got[0], got[1], weights, colours)
             except Exception as exc:
                 trainer.fail_turn(exc)
             finally:
