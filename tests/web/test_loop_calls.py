@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import asyncio
 import threading
+import time
 
-from somwidget.frontend.web.loop_calls import calls_for
+from somwidget.frontend.web.loop_calls import calls_for, one_wake
 
 
 def test_calls_from_another_thread_run_in_order_on_the_loop_with_one_wake():
@@ -61,5 +62,31 @@ def test_a_call_handed_on_the_loop_stays_behind_those_handed_before_from_another
         calls.call(ran.append, "after a failure")
         await asyncio.sleep(0.05)
         assert ran[-1] == "after a failure"
+
+    asyncio.run(main())
+
+
+def test_calls_handed_inside_one_wake_wake_the_loop_once_when_it_ends():
+    """A worker's round hands its rooms' frames inside `one_wake`: the loop is not woken (and takes no turn) until the
+    round ends, then once; nested, the outermost ends it."""
+    async def main():
+        loop = asyncio.get_running_loop()
+        calls = calls_for(loop)
+        ran, seen_inside = [], []
+
+        def round_of_rooms():
+            with one_wake():
+                with one_wake():
+                    for i in range(50):
+                        calls.call(ran.append, i)
+                time.sleep(0.05)  # the loop, free to run, has nothing to run yet
+                seen_inside.append((len(ran), calls.wakes))
+            seen_inside.append(calls.wakes)
+
+        wakes = calls.wakes
+        await asyncio.to_thread(round_of_rooms)
+        await asyncio.sleep(0.05)
+        assert seen_inside == [(0, wakes), wakes + 1]
+        assert ran == list(range(50)) and calls.wakes == wakes + 1
 
     asyncio.run(main())

@@ -22,6 +22,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 from ..model.trainer import step_alone
+from ..web.loop_calls import one_wake
 from .batched import BatchedRooms, RoomLock, applies_in_batch, keeps_key
 
 log = logging.getLogger(__name__)
@@ -116,15 +117,23 @@ class Rounds:
                 time.sleep(gap)
 
     def _round(self, now: float) -> float | None:
-        """One round (the module's docstring); when the next is due (None: no room trains)."""
+        """One round (the module's docstring); when the next is due (None: no room trains). What the rooms hand
+        their event loop (the calls' replies, then the frames) wakes it once for all of them (web/loop_calls.py):
+        a wake a room handed the loop the interpreter's lock mid-round, room after room."""
         with self._lock:
             trainers = list(self._trainers.values())
-        due: float | None = None
-        asks, counts = [], {}
         self._called = False
-        turns = [trainer for trainer in trainers if self._wants_turn(trainer, now)]
+        with one_wake():
+            turns = [trainer for trainer in trainers if self._wants_turn(trainer, now)]
         if self._called:  # a moment for the threads that wait on the calls' replies: once a round, not once a room
             time.sleep(0)
+        with one_wake():
+            return self._turns(trainers, turns, now)
+
+    def _turns(self, trainers: list, turns: list, now: float) -> float | None:
+        """The rooms' turns of a round (`turns`: those that have one); when the next round is due."""
+        due: float | None = None
+        asks, counts = [], {}
         for trainer in turns:
             self._last[id(trainer)] = now
             lock = trainer.state.som_lock

@@ -35,14 +35,30 @@ class LoopCalls:
 
     def call(self, fn: Callable, *args) -> None:
         """`fn(*args)` on the loop's thread after every call handed before it (from any thread, this one too); does
-        nothing once the loop is closed."""
+        nothing once the loop is closed. Inside `one_wake` the loop is woken when it ends."""
         with self._lock:
             self._queue.append((fn, args))
             self.calls += 1
             if self._scheduled:
                 return
+            held = getattr(_HELD, "loops", None)
+            if held is not None:
+                held.add(self)
+                return
             self._scheduled = True
             self.wakes += 1
+        self._wake()
+
+    def wake(self) -> None:
+        """Wake the loop for the calls waiting (none: nothing)."""
+        with self._lock:
+            if self._scheduled or not self._queue:
+                return
+            self._scheduled = True
+            self.wakes += 1
+        self._wake()
+
+    def _wake(self) -> None:
         try:
             self.loop.call_soon_threadsafe(self._run)
         except RuntimeError:  # the loop is closed: the server is going down
@@ -64,6 +80,25 @@ class LoopCalls:
                 log.exception("a call handed to the event loop failed")
 
 
+_HELD = threading.local()  # .loops: the LoopCalls this thread handed calls to inside `one_wake`
+
+
+@contextlib.contextmanager
+def one_wake():
+    """Calls this thread hands any loop inside wake it once, at the end (a studio worker's round: every room's frame
+    and reply), not at the first; nested, the outermost ends it."""
+    if getattr(_HELD, "loops", None) is not None:
+        yield
+        return
+    _HELD.loops = loops = set()
+    try:
+        yield
+    finally:
+        _HELD.loops = None
+        for calls in loops:
+            calls.wake()
+
+
 _BY_LOOP: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _BY_LOOP_LOCK = threading.Lock()
 
@@ -78,4 +113,4 @@ def calls_for(loop: asyncio.AbstractEventLoop) -> LoopCalls:
         return calls if calls is not None else LoopCalls(loop)
 
 
-__all__ = ["LoopCalls", "calls_for"]
+__all__ = ["LoopCalls", "calls_for", "one_wake"]
