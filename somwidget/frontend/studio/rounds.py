@@ -54,7 +54,6 @@ class Rounds:
         self._calls = ThreadPoolExecutor(CALL_THREADS, thread_name_prefix="somwidget-room-calls")
         self.thread = threading.Thread(target=self._run, name="somwidget-rounds", daemon=True)
         self.rounds = 0
-        self._called = False  # a room's quick calls ran in this round
 
     # -- rooms come and go --------------------------------------------------------------------------------------
     def add(self, trainer) -> threading.Thread:
@@ -122,11 +121,8 @@ class Rounds:
         a wake a room handed the loop the interpreter's lock mid-round, room after room."""
         with self._lock:
             trainers = list(self._trainers.values())
-        self._called = False
-        with one_wake():
+        with one_wake():  # the calls' replies handed before the steps (no pause for them: the loop takes its turn)
             turns = [trainer for trainer in trainers if self._wants_turn(trainer, now)]
-        if self._called:  # a moment for the threads that wait on the calls' replies: once a round, not once a room
-            time.sleep(0)
         with one_wake():
             return self._turns(trainers, turns, now)
 
@@ -200,7 +196,6 @@ class Rounds:
         if trainer.closed or id(trainer) in self._calling:
             return False
         ran = trainer.run_calls(quick_only=True, pause=False) if trainer.calls else False
-        self._called = self._called or ran
         if trainer.calls:  # a slow call: the other rooms do not wait for it
             self._call_off_loop(trainer)
             return False
