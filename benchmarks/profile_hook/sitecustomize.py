@@ -6,6 +6,10 @@ Python 3.11 and older: one profile a thread (threading.setprofile starts each). 
 on sys.monitoring, one tool for the whole process; a second profile cannot start ("Another profiling tool is already
 active", raised into the new thread's first call: the studio's own thread died that way and it never started), and the
 first one sees every thread already, so threads start none.
+
+SOMWIDGET_PROFILE_CLOCK=cpu (bench_studio.py --profile-clock cpu): each thread's profile counts its own CPU time
+(time.thread_time), not wall time: on a machine shared with other work, a thread waiting for a core then counts
+nothing, so two runs compare by the work done. Python 3.11 and older only (a profile a thread).
 """
 
 import atexit
@@ -13,8 +17,12 @@ import cProfile
 import os
 import sys
 import threading
+import time
 
 _DIR = os.environ.get("SOMWIDGET_PROFILE_DIR")
+#: The profiles' clock: each thread's CPU time (SOMWIDGET_PROFILE_CLOCK=cpu, a profile a thread) or wall time.
+_CPU = os.environ.get("SOMWIDGET_PROFILE_CLOCK") == "cpu" and sys.version_info < (3, 12)
+_CLOCK = (time.thread_time,) if _CPU else ()
 #: Whether one profile sees every thread (cProfile on sys.monitoring, Python 3.12+).
 PROCESS_WIDE = sys.version_info >= (3, 12)
 _profiles: list = []
@@ -24,7 +32,7 @@ _dumped = False
 
 def _start_thread(*_):
     sys.setprofile(None)
-    profile = cProfile.Profile()
+    profile = cProfile.Profile(*_CLOCK)
     try:
         profile.enable()
     except ValueError:  # a profiler of the whole process is on already: it sees this thread
@@ -76,7 +84,7 @@ def dump(role: str | None = None) -> None:
 if _DIR:
     if not PROCESS_WIDE:
         threading.setprofile(_start_thread)
-    _main = cProfile.Profile()
+    _main = cProfile.Profile(*_CLOCK)
     _profiles.append(_main)
     _main.enable()
     atexit.register(dump)

@@ -15,10 +15,10 @@ MAX_MAGNITUDE = 1e18
 def finite_array(name: str, value, ndim: int, dtype=np.float32) -> np.ndarray:
     """`value` as a C-contiguous array of `dtype` (a copy) with `ndim` dimensions and only finite entries."""
     if isinstance(value, np.ndarray) and value.dtype in (np.float32, np.float64) and value.ndim == ndim:
-        # the common case (a drag's controls, every frame): two passes, no float64 copy; anything wrong is
-        # described by the general path below
-        limit = MAX_MAGNITUDE if np.issubdtype(dtype, np.floating) else math.inf
-        if value.size == 0 or (np.isfinite(value).all() and np.abs(value).max() <= limit):
+        # the common case (a drag's controls, every frame): one pass, no float64 copy (a NaN's max is NaN and an
+        # infinity's exceeds the limit: both fail the comparison); anything wrong is described by the general path
+        limit = MAX_MAGNITUDE if dtype is np.float32 or np.issubdtype(dtype, np.floating) else math.inf
+        if value.size == 0 or np.abs(value).max() <= limit:
             return np.array(value, dtype=dtype, order="C")
     try:
         arr = np.asarray(value)

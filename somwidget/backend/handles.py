@@ -174,7 +174,7 @@ class Handles:
             self._box_version += 1  # (grown by the largest radius; a move keeps the radii array)
         self._layout(controls)
         self.controls = controls
-        if controls.radii.any() or controls.symmetry is not None:
+        if controls.any_radius or controls.symmetry is not None:
             self.grow(controls.effective())
             self._grown = controls
 
@@ -280,7 +280,7 @@ class Handles:
         grabbed at its old place and released at once; then `new` are the controls."""
         old = self.controls
         self.end_released(state)
-        if new.radii.any() and old is not None and len(new.values) == len(old.values) and new.order == old.order and (
+        if new.any_radius and old is not None and len(new.values) == len(old.values) and new.order == old.order and (
                 new.radii is old.radii or np.array_equal(new.radii > 0, old.radii > 0)):
             moved = np.flatnonzero((new.values != old.values).any(axis=1)).tolist()
             typed = [i for i in moved if i not in self.held and new.radii[i] > 0]

@@ -17,10 +17,25 @@ def bounding_diagonal(positions) -> float:
 
 
 def median_edge(positions, edges) -> float:
-    """The median length of a mesh's edges ((E, 2) vertex indices) at `positions`; 0 for a mesh without edges."""
-    p = np.asarray(positions, np.float64)
+    """The median length of a mesh's edges ((E, 2) vertex indices) at `positions`; 0 for a mesh without edges.
+    In float64, equal to np.median(np.linalg.norm(p[e0] - p[e1], axis=1)) (the lengths' middle one, or the mean of
+    the middle two), found by a partition of the squared lengths (a studio room finds it at every move)."""
+    p = np.asarray(positions)
     e = np.asarray(edges, np.int64).reshape(-1, 2)
-    return float(np.median(np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1))) if len(e) else 0.0
+    n = len(e)
+    if not n:
+        return 0.0
+    d = p[e[:, 0]].astype(np.float64)
+    d -= p[e[:, 1]]
+    d *= d
+    squared = d[:, 0] if d.shape[1] == 1 else d[:, 0] + d[:, 1]
+    for j in range(2, d.shape[1]):  # summed in numpy's order for a short row, as np.linalg.norm sums
+        squared += d[:, j]
+    k = n // 2
+    if n % 2:
+        return float(np.sqrt(np.partition(squared, k)[k]))
+    middle = np.sqrt(np.partition(squared, (k - 1, k))[k - 1:k + 1])
+    return float((middle[0] + middle[1]) / 2)
 
 
 def nearest_distances(points, nodes) -> np.ndarray:

@@ -69,13 +69,19 @@ def check_strokes(strokes, k: int) -> tuple[int, ...]:
 @dataclass(frozen=True, eq=False)
 class Controls:
     """values (k, n) float32; radii (k,) float32 (0: the paper's point control); strokes: run lengths summing to k;
-    symmetry: a radial group or None; mirror: the dims a mirrored copy negates (() without)."""
+    symmetry: a radial group or None; mirror: the dims a mirrored copy negates (() without); any_radius: whether a
+    control has a radius (a handle), found when made (None) and kept by a move with the same radii."""
 
     values: np.ndarray
     radii: np.ndarray
     strokes: tuple[int, ...]
     symmetry: Symmetry | None
     mirror: tuple[int, ...]
+    any_radius: bool | None = None
+
+    def __post_init__(self) -> None:
+        if self.any_radius is None:
+            object.__setattr__(self, "any_radius", bool(self.radii.any()))
 
     @classmethod
     def make(cls, values, radii, strokes, group: tuple[Symmetry | None, tuple[int, ...]], n_dims: int) -> Controls:
@@ -89,9 +95,12 @@ class Controls:
         (None: point controls, each alone)."""
         c = check_values(values, self.values.shape[1], self.order)
         same = len(c) == len(self.values)
-        return Controls(c, self.radii if radii is None and same else check_radii(radii, len(c)),
-                        self.strokes if strokes is None and same else check_strokes(strokes, len(c)),
-                        self.symmetry, self.mirror)
+        # a drag's every move gives the radii and strokes it had: the radii array (and what it says) kept
+        kept = same and (radii is None or (isinstance(radii, np.ndarray) and np.array_equal(radii, self.radii)))
+        return Controls(c, self.radii if kept else check_radii(radii, len(c)),
+                        self.strokes if same and (strokes is None or tuple(strokes) == self.strokes)
+                        else check_strokes(strokes, len(c)), self.symmetry, self.mirror,
+                        self.any_radius if kept else None)
 
     def regrouped(self, group: tuple[Symmetry | None, tuple[int, ...]]) -> Controls:
         """The same controls in another group (checked: `check_group`)."""
@@ -150,7 +159,7 @@ class Controls:
         """Whether the shaping path runs the cycles: radii (handles), a radial group, or a second smoothing step
         (Taubin's); else the paper's rule (cpu_path.py, cuda_path.py, rows_path.py, local_path.py). Strokes only say
         which controls a hand takes together."""
-        return bool(self.radii.any()) or self.symmetry is not None or smoothing_steps > 1
+        return self.any_radius or self.symmetry is not None or smoothing_steps > 1
 
     def pairs(self, table_max: float) -> int:
         """How step 2 applies the controls (cycle_kernels.SINGLES, PAIRS, SCALED_PAIRS): with a mirror in mirrored

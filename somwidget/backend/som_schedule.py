@@ -5,6 +5,7 @@ restart begins in it, s0 = floor((1 - reach) S).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -19,7 +20,7 @@ MAX_TABLE_ENTRIES = 1 << 29
 
 def restart_iteration(reach: float, iterations: int) -> int:
     """s0 = floor((1 - reach) S), at most S - 1: where a local restart begins in the unchanged schedule."""
-    return min(int(np.floor((1.0 - reach) * iterations)), iterations - 1)
+    return min(math.floor((1.0 - reach) * iterations), iterations - 1)  # (math: every move finds it)
 
 
 class SomSchedule:

@@ -66,6 +66,10 @@ class SomState:
         self._control_rows = words[: control_bytes // 4].reshape(MAX_CONTROLS, model.n_dims)
         self.counter_words = words[control_bytes // 4:].view(np.int32)
         self.n_slots = 0  # effective controls in `c`
+        #: While a batch holds this state (a studio's room: its controls go into the batch's row), an upload waits
+        #: here until the Som runs again or is given back (`lend`): a drag's move costs no rows written twice
+        self.lent = False
+        self._waiting: Controls | None = None
         self.keys = wp.full((3, MAX_CONTROLS), KEY_NONE, dtype=wp.uint64, device=dev)
         self.stalled = wp.zeros(1, dtype=wp.int32, device=dev)  # set only by a distance-rows cycle that stalls
         self.s = 0
@@ -85,7 +89,13 @@ class SomState:
     def upload(self, controls: Controls) -> None:
         """The effective controls into the fixed-size buffer, so that the captured graphs stay valid while only their
         values change (a drag); with a mirror in pairs, each original next to its copy (slots 2i and 2i + 1), the order
-        in which step 2 applies them. On CUDA they go up with the next `set_cycle`."""
+        in which step 2 applies them. On CUDA they go up with the next `set_cycle`. While `lent`, they wait for it
+        (or for `lend(False)`)."""
+        if self.lent:
+            self._waiting = controls
+            self.winners_valid = False  # (the next run's set_cycle writes them first)
+            return
+        self._waiting = None
         self._staging_ready()
         rows = self._control_rows
         k = len(controls.values)
@@ -101,8 +111,18 @@ class SomState:
         self.n_slots = n
         self.winners_valid = False
 
+    def lend(self, lent: bool) -> None:
+        """A batch holds this state from now on (`lent`), or gave it back: an upload that waited is made now."""
+        self.lent = lent
+        if not lent and self._waiting is not None:
+            self.upload(self._waiting)
+
     def set_cycle(self) -> None:
         """Every cycle counter to s; on CUDA the staged controls go up with them, in one asynchronous copy."""
+        if self._waiting is not None:  # a run of a state still lent: its controls first
+            controls, self.lent = self._waiting, False
+            self.upload(controls)
+            self.lent = True
         self._staging_ready()
         self.counter_words[:] = self.s
         if self.staging is not None:

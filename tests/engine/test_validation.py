@@ -313,3 +313,21 @@ def test_absurd_vertex_counts_are_refused_before_allocating(build):
     """A stray huge index must give a ValueError naming the limit, not a MemoryError from an 8 TiB array."""
     with pytest.raises(ValueError, match="134"):
         build()
+
+
+def test_a_move_with_the_radii_it_had_keeps_them_and_a_changed_radius_is_checked():
+    """Controls.moved keeps the radii array a drag's every move gives again (the handles' layout found without a
+    look), and checks any other: a radius changed by a move takes effect, a bad one is refused naming it."""
+    from somwidget.backend.som_controls import Controls
+
+    c = Controls.make(np.zeros((2, 3), np.float32), [0.0, 0.0], None, (None, ()), 3)
+    assert c.any_radius is False
+    same = c.moved(np.ones((2, 3), np.float32), np.zeros(2, np.float32), (1, 1))
+    assert same.radii is c.radii and same.strokes is c.strokes and same.any_radius is False
+    wider = c.moved(np.ones((2, 3), np.float32), np.array([0.0, 0.2], np.float32), (1, 1))
+    assert wider.radii is not c.radii and wider.any_radius is True and wider.radii.tolist() == pytest.approx([0, 0.2])
+    assert wider.moved(np.zeros((2, 3), np.float32)).any_radius is True  # kept with the radii
+    with pytest.raises(ValueError, match="radii"):
+        c.moved(np.ones((2, 3), np.float32), np.array([0.0, np.nan], np.float32))
+    with pytest.raises(ValueError, match="strokes"):
+        c.moved(np.ones((2, 3), np.float32), None, (1, 2))

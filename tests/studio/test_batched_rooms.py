@@ -214,3 +214,50 @@ def test_rooms_that_drag_and_undo_while_batched_end_as_a_session_alone(tmp_path)
     finally:
         alone.close()
         rooms.close()
+
+
+def test_a_lent_states_moves_wait_for_its_give_back_and_a_run_meanwhile_takes_them_first():
+    """While a batch holds a room's Som state its moves' controls wait (SomState.lend): given back, or stepped while
+    still lent, the Som steps with its latest controls, bit for bit as a Som never lent."""
+    p = presets.get_preset("car")
+    settled = p.make_som(device="cpu")
+    settled.train()
+    soms = []
+    for _ in range(3):
+        som = p.make_som(device="cpu")
+        som.restore(settled.weights, som.iterations)
+        soms.append(som)
+    never, given_back, stepped_lent = soms
+    moves = [never.controls + np.float32(0.01 * (i + 1)) for i in range(3)]
+    given_back.parts.state.lend(True)
+    stepped_lent.parts.state.lend(True)
+    for c in moves:
+        for som in soms:
+            som.set_controls(c)
+    assert given_back.parts.state._waiting is not None  # nothing written to its own rows yet
+    given_back.parts.state.lend(False)
+    for som in soms:
+        som.step(7)
+    np.testing.assert_array_equal(given_back.weights, never.weights)
+    np.testing.assert_array_equal(stepped_lent.weights, never.weights)
+    assert stepped_lent.parts.state._waiting is None
+
+
+def test_a_rounds_node_colours_made_for_every_room_at_once_equal_each_rooms_own():
+    """BatchedRooms.colours: the nodes' colours of every room a round stepped, made in one call, are each room's own
+    colours of its row of the round's copy, bit for bit; a room the round did not step gets none (made on its own)."""
+    layout = presets.get_preset("car").layout
+    soms = _rooms_soms("car", ROOMS, 3)
+    batches = BatchedRooms()
+    _round(batches, soms, [10, 7, 3, 10])
+    for i in range(ROOMS):
+        mine = presets.colours_of(batches.host(i), layout)
+        got = batches.colours(i, layout)
+        assert not got.flags.writeable
+        np.testing.assert_array_equal(got, mine)
+    for i in range(3):  # room 3 sits this round out: its row is the last round's, its colours are not made here
+        batches.hold(i, soms[i], batches.key(soms[i]))
+    batches.step([(i, 5) for i in range(3)])
+    assert batches.colours(3, layout) is None
+    np.testing.assert_array_equal(batches.colours(1, layout), presets.colours_of(batches.host(1), layout))
+    assert not np.array_equal(batches.colours(1, layout), presets.colours_of(soms[1].start_weights, layout))

@@ -167,10 +167,12 @@ class FrameStream:
         self._node_colours: tuple = (None, None, None)  # (layout, the weights' colour dims, colours): `_nodes_of`
 
     def make(self, som, preset: Preset, generation: int, *, cycles: int, cycle_time: float,
-             status: Callable[[], dict], weights: np.ndarray | None = None) -> Frame:
+             status: Callable[[], dict], weights: np.ndarray | None = None,
+             colours: np.ndarray | None = None) -> Frame:
         """A frame of `som` now. `status()` gives what the session knows besides the Som (paused, held, applied,
         history, control_ids); it is read under the session's lock, together with the frame's number. `weights`: the
-        Som's weights where they are held elsewhere (a batch: a studio's room), else read from it."""
+        Som's weights where they are held elsewhere (a batch: a studio's room), else read from it; `colours`: their
+        nodes' colours (read-only, presets.colours_of) where made already (a batch's rooms' at once)."""
         layout = preset.layout
         w = np.asarray(som.weights if weights is None else weights, dtype=np.float32)
         controls = np.asarray(som.controls, dtype=np.float32)
@@ -188,7 +190,7 @@ class FrameStream:
         return Frame(
             seq=seq, generation=generation, iteration=s, iterations=S, running=(not paused and not held and s < S),
             paused=paused, weights=_readonly(w), positions=_readonly(pos),
-            colours=self._nodes_of(w, layout), controls=_readonly(controls),
+            colours=self._nodes_of(w, layout) if colours is None else colours, controls=_readonly(controls),
             control_colours=control_colours, effective_controls=_readonly(eff),
             effective_colours=effective_colours, control_positions=_readonly(cpos),
             effective_positions=_readonly(epos), cycle_time=float(cycle_time), step_cycles=int(cycles),

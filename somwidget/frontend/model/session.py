@@ -124,9 +124,9 @@ class Session:
             self.start()
 
     # -- what the parts call back ------------------------------------------------------------------------------
-    def _make_frame(self, cycles: int, weights: np.ndarray | None = None) -> Frame:
+    def _make_frame(self, cycles: int, weights: np.ndarray | None = None, colours: np.ndarray | None = None) -> Frame:
         """A frame of the Som now (quiescent: under the Som's lock, or before the thread starts); `weights`: the Som's
-        weights where a batch holds them (a studio's room)."""
+        weights where a batch holds them (a studio's room), `colours` their nodes' colours if made already."""
         state = self.modelling
 
         def status() -> dict:  # read under the state lock with the frame's number
@@ -137,7 +137,8 @@ class Session:
                     "group": state.symmetry.spec if state.symmetry is not None else "none"}
 
         return self.frames.make(state.som, state.preset, state.generation, cycles=cycles,
-                                cycle_time=self.trainer.cycle_time, status=status, weights=weights)
+                                cycle_time=self.trainer.cycle_time, status=status, weights=weights,
+                                colours=colours)
 
     def _install_frame(self) -> None:
         self.frames.install(self._make_frame(0))

@@ -54,11 +54,13 @@ class Pace:
 class Trainer:
     """The thread that trains one session's Som (see the module's docstring).
 
-    make_frame(cycles, weights): a frame of the Som now (`weights`: where a batch holds them, else None);
+    make_frame(cycles, weights, colours): a frame of the Som now (`weights` and their nodes' `colours`: where a batch
+    holds them, else None);
     after_turn(): called after each turn (the autosave's chance)."""
 
     def __init__(self, state: ModellingState, frames: FrameStream,
-                 make_frame: Callable[[int, np.ndarray | None], Frame], after_turn: Callable[[], None],
+                 make_frame: Callable[[int, np.ndarray | None, np.ndarray | None], Frame],
+                 after_turn: Callable[[], None],
                  frame_rate: float, step_fraction: float) -> None:
         self.state = state
         self.frames = frames
@@ -136,15 +138,15 @@ class Trainer:
         if self.driver is not None:
             self.driver.poke()
 
-    def run_calls(self, quick_only: bool = False) -> bool:
+    def run_calls(self, quick_only: bool = False, pause: bool = True) -> bool:
         """The posted calls, in order (on the training thread, holding no lock), with `quick_only` up to the first
-        that is not quick; then a moment for the threads that wait on them (their replies go out before the next
-        step). Whether any ran."""
+        that is not quick; then (`pause`) a moment for the threads that wait on them (their replies go out before the
+        next step: a driver of many sessions pauses once for all of them). Whether any ran."""
         ran = False
         while True:
             with self.state.wake:
                 if not self.calls or (quick_only and not self.calls[0][2]):
-                    if ran:
+                    if ran and pause:
                         time.sleep(0)
                     return ran
                 call, future, _ = self.calls.popleft()
@@ -319,15 +321,17 @@ class Trainer:
             k = max(1, k // 4)
         return max(1, min(k, som.iterations - som.iteration))
 
-    def end_step(self, cycles: int, seconds: float, weights: np.ndarray | None = None) -> Frame:
+    def end_step(self, cycles: int, seconds: float, weights: np.ndarray | None = None,
+                 colours: np.ndarray | None = None) -> Frame:
         """A turn's second half (caller holds state.som_lock): `cycles` ran in `seconds`; the frame of the Som now
-        (`weights`: its weights, where a batch holds them: studio/batched.py)."""
+        (`weights`: its weights, where a batch holds them, and `colours` their nodes' colours, made for every room
+        of the batch at once: studio/batched.py)."""
         if cycles > 0:
             self._pace_now.tune(seconds / cycles, self.step_fraction / self.frame_rate)
             with self.state.lock:
                 self.state.unsaved = True
         self._stepped_to = self.state.som.iteration
-        return self.make_frame(cycles, weights)
+        return self.make_frame(cycles, weights, colours)
 
     def publish(self, frame: Frame | None) -> None:
         if frame is not None:
@@ -347,7 +351,7 @@ class Trainer:
                 state.paused = True
             try:
                 with state.som_lock:
-                    return self.make_frame(0, None)
+                    return self.make_frame(0, None, None)
             except Exception:
                 log.exception("could not make a frame after the error")
             with state.lock:  # the last frame again, marked paused, with the intents handled since

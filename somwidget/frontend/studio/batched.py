@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...backend.batch import MAX_BATCH_NEURONS, BatchSom
+from ...backend.presets import colours_of
 from ...backend.som import Som
 from ..model.operations import Grab, Publish, Release, SetControls
 
@@ -80,6 +81,8 @@ class _Loan:
     slot: int
     host: np.ndarray
     restarts: int
+    stepped: int = -1  # the group's round whose copy `host` is a row of (-1: none yet), and its row there
+    row: int = -1
 
 
 class _Group:
@@ -89,6 +92,9 @@ class _Group:
         self.batch: BatchSom | None = None
         self.free: list[int] = []
         self.moves: list[tuple] = []  # (slot, controls, s, from anchor): the held rooms' moves, put in at once
+        self.rounds = 0  # launches made
+        self.stepped: tuple | None = None  # the last round's copy of every weight and the slots it stepped
+        self.colours: dict = {}  # layout -> (m, N, 3) their nodes' colours, made when first asked for
 
     def put_moves(self) -> None:
         """The moves `hold` noted since the last round into the batch, in one call (BatchSom.move_rows)."""
@@ -154,11 +160,31 @@ class BatchedRooms:
                 host = som.weights  # the anchor settled first
                 state = som.parts.state
                 group.batch.put(slot, host, som.iteration, som.controls, state.w_anchor)
+                state.lend(True)  # its moves' controls go into the batch's row, not its own rows, until given back
                 self._loans[owner] = _Loan(key, som, state, slot, host, state.anchor_restarts)
                 return
             restarts = loan.state.anchor_restarts  # a drag's move restarts from its anchor: the batch's row too
             self._groups[key].moves.append((loan.slot, som.controls, loan.state.s, restarts != loan.restarts))
             loan.restarts = restarts
+
+    def colours(self, owner, layout) -> np.ndarray | None:
+        """The nodes' colours (read-only) of a held room's weights as its batch's last round left them, made for every
+        room that round stepped in one call (presets.colours_of is row by row: the values a room's own call gives);
+        None when the room is not held, not stepped by that round, or its layout has no colour dims."""
+        with self._lock:
+            loan = self._loans.get(owner)
+            group = None if loan is None else self._groups.get(loan.key)
+            if group is None or loan.stepped != group.rounds or layout.colour_space == "none":
+                return None
+            made = group.colours.get(layout)
+            if made is None:
+                host, slots = group.stepped
+                rows = host[slots]  # (m, N, n): the rooms that round stepped
+                m, n_nodes, n = rows.shape
+                made = colours_of(rows.reshape(m * n_nodes, n), layout).reshape(m, n_nodes, 3)
+                made.setflags(write=False)
+                group.colours[layout] = made
+            return made[loan.row]
 
     def give_back(self, owner) -> None:
         """The room's Som gets its state back (caller holds its Som lock, or it has no round any more)."""
@@ -170,6 +196,7 @@ class BatchedRooms:
         loan = self._loans.pop(owner, None)
         if loan is None:
             return
+        loan.state.lend(False)  # the controls its moves left waiting go into its own rows
         group = self._groups.get(loan.key)
         if group is not None:
             group.put_moves()
@@ -210,8 +237,11 @@ class BatchedRooms:
                     continue
                 seconds = time.perf_counter() - t
                 reached, ran = to[slots].tolist(), (to[slots] - s[slots]).tolist()
-                for (owner, loan, _), at, n in zip(items, reached, ran):
+                group.rounds += 1
+                group.stepped, group.colours = (host, slots), {}
+                for row, ((owner, loan, _), at, n) in enumerate(zip(items, reached, ran)):
                     loan.host = host[loan.slot]
+                    loan.stepped, loan.row = group.rounds, row
                     loan.state.restart(at)  # s moved on, the winners found afresh
                     out[owner] = (n, seconds)
                 self.launches += 1

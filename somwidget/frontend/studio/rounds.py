@@ -22,6 +22,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 from ..model.trainer import step_alone
+from ..web.loop_calls import one_wake
 from .batched import BatchedRooms, RoomLock, applies_in_batch, keeps_key
 
 log = logging.getLogger(__name__)
@@ -115,14 +116,21 @@ class Rounds:
                 time.sleep(gap)
 
     def _round(self, now: float) -> float | None:
-        """One round (the module's docstring); when the next is due (None: no room trains)."""
+        """One round (the module's docstring); when the next is due (None: no room trains). What the rooms hand
+        their event loop (the calls' replies, then the frames) wakes it once for all of them (web/loop_calls.py):
+        a wake a room handed the loop the interpreter's lock mid-round, room after room."""
         with self._lock:
             trainers = list(self._trainers.values())
+        with one_wake():  # the calls' replies handed before the steps (no pause for them: the loop takes its turn)
+            turns = [trainer for trainer in trainers if self._wants_turn(trainer, now)]
+        with one_wake():
+            return self._turns(trainers, turns, now)
+
+    def _turns(self, trainers: list, turns: list, now: float) -> float | None:
+        """The rooms' turns of a round (`turns`: those that have one); when the next round is due."""
         due: float | None = None
         asks, counts = [], {}
-        for trainer in trainers:
-            if not self._wants_turn(trainer, now):
-                continue
+        for trainer in turns:
             self._last[id(trainer)] = now
             lock = trainer.state.som_lock
             if not lock.turn(blocking=False):  # an undo, a save meanwhile: next round
@@ -158,8 +166,10 @@ class Rounds:
                 got = results.get(trainer, (0, 0.0))
                 if isinstance(got, BaseException):
                     raise got
-                weights = self.batches.host(trainer) if self.batches.holds(trainer) else None
-                frame = trainer.end_step(got[0], got[1], weights)
+                held = self.batches.holds(trainer)
+                weights = self.batches.host(trainer) if held else None
+                colours = self.batches.colours(trainer, trainer.state.preset.layout) if held else None
+                frame = trainer.end_step(got[0], got[1], weights, colours)
             except Exception as exc:
                 trainer.fail_turn(exc)
             finally:
@@ -185,7 +195,7 @@ class Rounds:
         calls off the loop, and the room has no turn until they ran: `_call_off_loop`)."""
         if trainer.closed or id(trainer) in self._calling:
             return False
-        ran = trainer.run_calls(quick_only=True) if trainer.calls else False
+        ran = trainer.run_calls(quick_only=True, pause=False) if trainer.calls else False
         if trainer.calls:  # a slow call: the other rooms do not wait for it
             self._call_off_loop(trainer)
             return False

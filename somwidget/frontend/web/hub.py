@@ -35,6 +35,7 @@ from ..transport.connection import ViewConnection
 from ..transport.holders import holders_for
 from ..transport.outbox import outbox_for
 from . import lan
+from .loop_calls import calls_for
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +64,7 @@ class _Client:
         self.ws = ws
         self.remote = remote
         self.loop = asyncio.get_running_loop()
-        self.thread = threading.get_ident()
+        self.calls = calls_for(self.loop)  # one wake of the loop for the calls of every client (loop_calls.py)
         self.texts: collections.deque = collections.deque()  # JSON messages, sent before any frame
         self.frame: bytes | None = None  # the latest frame not yet sent (a newer one replaces it)
         self.wake = asyncio.Event()
@@ -100,12 +101,9 @@ class _Client:
 
     def _on_loop(self, call, arg) -> None:
         """`call(arg)` on the loop's thread, in the order handed, whichever thread hands it (a reply made on the
-        training thread stays before a pong answered later on the loop)."""
-        with contextlib.suppress(RuntimeError):  # the loop is closed: the server is going down
-            if threading.get_ident() == self.thread:
-                self.loop.call_soon(call, arg)
-            else:
-                self.loop.call_soon_threadsafe(call, arg)
+        training thread stays before a pong answered later on the loop); the calls of every client of the loop share
+        its wakes (loop_calls.py)."""
+        self.calls.call(call, arg)
 
     def drop(self, reason: bytes) -> None:
         self.closed = True
@@ -204,16 +202,13 @@ class ViewHub:
 
     # -- frames ---------------------------------------------------------------------------------------------------
     def _on_frame(self) -> None:
-        """Training thread: wake the loop once for the newest frame."""
+        """Training thread: the newest frame's broadcast handed to the loop once (the rooms of a studio worker share
+        the loop's wakes: loop_calls.py)."""
         with self._scheduled_lock:
             if self._scheduled or not self.clients or self._loop is None:
                 return
             self._scheduled = True
-        try:
-            self._loop.call_soon_threadsafe(self._broadcast)
-        except RuntimeError:  # the loop is closed: the server is going down
-            with self._scheduled_lock:
-                self._scheduled = False
+        calls_for(self._loop).call(self._broadcast)
 
     def _send_frame(self, client: _Client, frame=None) -> None:
         try:
