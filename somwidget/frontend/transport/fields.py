@@ -1,12 +1,15 @@
 """The wire field types of the intents (messages.py): what a JSON value must be to pass, and the message that says why
-it did not. A field declares its type as `Annotated[python type, WireType]`; `parse_intent` calls each field's
-`check`, and the code generator reads `js` for the browser's JSDoc.
+it did not; `declared_fields` reads a message class's fields with their wire types. A field declares its type as
+`Annotated[python type, WireType]`; `parse_intent` calls each field's `check`, and the code generator reads `js` for the
+browser's JSDoc.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import typing
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Annotated
@@ -161,3 +164,40 @@ Point = Annotated[tuple[float, float, float], Coordinates()]
 Polyline = Annotated[tuple[tuple[float, float, float], ...], Points(2, MAX_STROKE_POINTS)]
 Radius = Annotated[float, Number(0.0, MAX_COORDINATE)]
 Value = Annotated[float | bool, Scalar()]
+
+
+@dataclass(frozen=True)
+class Declared:
+    """One field of a message as declared: its name, Python type, wire type (intents), and whether it is required."""
+
+    name: str
+    hint: object
+    wire: WireType | None
+    required: bool
+    browser: bool
+
+    def wire_type(self) -> WireType:
+        """The field's wire type (every intent's field has one: checked as this module loads)."""
+        if self.wire is None:
+            raise TypeError(f"{self.name}: no wire type (declare it as Annotated[type, WireType], fields.py)")
+        return self.wire
+
+
+def declared_fields(cls) -> tuple[Declared, ...]:
+    """The fields of a message class with their types resolved (what validation and the code generator read)."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    out = []
+    for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        out.append(Declared(f.name, hint, _wire_type(hint), f.default is dataclasses.MISSING
+                            and f.default_factory is dataclasses.MISSING, f.metadata.get("browser", True)))
+    return tuple(out)
+
+
+def _wire_type(hint) -> WireType | None:
+    """The WireType in an Annotated hint (also inside `X | None`)."""
+    for arg in (hint, *typing.get_args(hint)):
+        for meta in getattr(arg, "__metadata__", ()):
+            if isinstance(meta, WireType):
+                return meta
+    return None

@@ -20,7 +20,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import struct
-import typing
 from dataclasses import dataclass, field
 from typing import Annotated, ClassVar, Literal
 
@@ -38,7 +37,7 @@ from .fields import (
     Polyline,
     Radius,
     Value,
-    WireType,
+    declared_fields,
     finite,
 )
 
@@ -512,43 +511,6 @@ INTENTS: dict[str, type[Intent]] = {
                         RedoIntent, PingIntent, HelloIntent, SetIntent, AddIntent, RemoveIntent, RadiusIntent,
                         StrokeIntent, HandIntent, RevolveIntent)
 }
-
-
-@dataclass(frozen=True)
-class Declared:
-    """One field of a message as declared: its name, Python type, wire type (intents), and whether it is required."""
-
-    name: str
-    hint: object
-    wire: WireType | None
-    required: bool
-    browser: bool
-
-    def wire_type(self) -> WireType:
-        """The field's wire type (every intent's field has one: checked as this module loads)."""
-        if self.wire is None:
-            raise TypeError(f"{self.name}: no wire type (declare it as Annotated[type, WireType], fields.py)")
-        return self.wire
-
-
-def declared_fields(cls) -> tuple[Declared, ...]:
-    """The fields of a message class with their types resolved (what validation and the code generator read)."""
-    hints = typing.get_type_hints(cls, include_extras=True)
-    out = []
-    for f in dataclasses.fields(cls):
-        hint = hints[f.name]
-        out.append(Declared(f.name, hint, _wire_type(hint), f.default is dataclasses.MISSING
-                            and f.default_factory is dataclasses.MISSING, f.metadata.get("browser", True)))
-    return tuple(out)
-
-
-def _wire_type(hint) -> WireType | None:
-    """The WireType in an Annotated hint (also inside `X | None`)."""
-    for arg in (hint, *typing.get_args(hint)):
-        for meta in getattr(arg, "__metadata__", ()):
-            if isinstance(meta, WireType):
-                return meta
-    return None
 
 
 _DECLARED = {kind: declared_fields(cls) for kind, cls in INTENTS.items()}
