@@ -175,6 +175,7 @@ class BatchSom:
         self._to_anchor: set[int] = set()  # variants whose weights go back to their anchor's before the next step
         self._controls_moved = False  # `_controls` changed since they went up
         self._pool: ThreadPoolExecutor | None = None  # the CPU's threads for the variants' parts, made at the first
+        self._staging = _PinnedStaging(self._c, self._w, B) if self._w.device.is_cuda else None
 
     # -- set-up -------------------------------------------------------------------------------------------
     def _effective(self, controls: np.ndarray) -> np.ndarray:
@@ -260,8 +261,9 @@ class BatchSom:
     def weights(self) -> np.ndarray:
         """(B, N, n) float32 host copy (one transfer from a GPU)."""
         self._settle()
-        w = self._w.numpy().reshape(self.n_variants, self.n_neurons, self.n_dims)
-        return w.copy() if self.device == "cpu" else w  # from a GPU numpy() is a copy already
+        if self._staging is not None:
+            return self._staging.weights(self._w).reshape(self.n_variants, self.n_neurons, self.n_dims)
+        return self._w.numpy().reshape(self.n_variants, self.n_neurons, self.n_dims).copy()
 
     def restart(self) -> None:
         """Every variant continues from its current weights at s0 = floor((1 - reach) S): the local restart that a
@@ -374,7 +376,10 @@ class BatchSom:
         """What `move` left for the device: the moved controls up (one copy), the weights of the variants restarted
         from their anchor back to it (one launch)."""
         if self._controls_moved:
-            self._c.assign(self._effective(self._controls))
+            if self._staging is not None:
+                self._staging.send_controls(self._c, self._effective(self._controls))
+            else:
+                self._c.assign(self._effective(self._controls))
             self._controls_moved = False
         if self._to_anchor:
             anchor = self._anchor
@@ -419,8 +424,11 @@ class BatchSom:
     @warp_exclusive
     def _launch(self, to: np.ndarray) -> None:
         dev, B = self.device, self.n_variants
-        s_from = wp.array(self._s.astype(np.int32), dtype=wp.int32, device=dev)
-        s_to = wp.array(to.astype(np.int32), dtype=wp.int32, device=dev)
+        if self._staging is not None:
+            s_from, s_to = self._staging.send_cycles(self._s, to)
+        else:
+            s_from = wp.array(self._s.astype(np.int32), dtype=wp.int32, device=dev)
+            s_to = wp.array(to.astype(np.int32), dtype=wp.int32, device=dev)
 
         def inputs(first: int) -> list:
             return [self._w, self._moved, self._c, self._k_eff, self._m, self._mask, self._tables, self._table_row,
@@ -445,12 +453,53 @@ class BatchSom:
             shape = cuda_shape(self.n_neurons)
             kernel = self._kernel(True, shape)
             wp.launch_tiled(kernel, dim=[B], block_dim=shape["threads"], device=dev, inputs=inputs(0))
-            wp.synchronize_device(dev)
         self._s = to.astype(np.int64)
 
     def _kernel(self, cuda: bool, shape: dict):
         """The paper's kernel for a launch shape."""
         return variants_kernel(self.n_dims, self._pairs, cuda, unit_metric=self._unit_metric, **(shape if cuda else {}))
+
+
+class _PinnedStaging:
+    """A GPU batch's round through page-locked host buffers: the controls and cycles go up and the weights come down
+    as copies queued on the device's stream, one wait a round (the weights' read). A copy from pageable memory waits
+    for the stream's earlier work first, and on a GPU shared by many processes (a studio's workers) each such wait
+    also waits for the other processes' turns on the GPU. A buffer is written again only after its last copy ran."""
+
+    def __init__(self, controls: wp.array, weights: wp.array, n_variants: int) -> None:
+        dev = weights.device
+        self.stream = wp.get_stream(dev)
+        self.controls = wp.empty(controls.shape, dtype=controls.dtype, device="cpu", pinned=True)
+        self.cycles = wp.empty((2, n_variants), dtype=wp.int32, device="cpu", pinned=True)
+        self.cycles_dev = wp.empty((2, n_variants), dtype=wp.int32, device=dev)
+        self.weights_host = wp.empty(weights.shape, dtype=weights.dtype, device="cpu", pinned=True)
+        self._sent: dict[str, wp.Event] = {}
+
+    def _reuse(self, name: str) -> None:
+        event = self._sent.pop(name, None)
+        if event is not None:
+            wp.synchronize_event(event)
+
+    def send_controls(self, dest: wp.array, values: np.ndarray) -> None:
+        self._reuse("controls")
+        self.controls.numpy()[...] = values.reshape(self.controls.numpy().shape)
+        wp.copy(dest, self.controls, stream=self.stream)
+        self._sent["controls"] = self.stream.record_event()
+
+    def send_cycles(self, s_from: np.ndarray, s_to: np.ndarray) -> tuple[wp.array, wp.array]:
+        self._reuse("cycles")
+        host = self.cycles.numpy()
+        host[0], host[1] = s_from, s_to
+        wp.copy(self.cycles_dev, self.cycles, stream=self.stream)
+        self._sent["cycles"] = self.stream.record_event()
+        return self.cycles_dev[0], self.cycles_dev[1]
+
+    def weights(self, source: wp.array) -> np.ndarray:
+        """The weights (a host copy of their own: frames keep it) after the work queued so far."""
+        wp.copy(self.weights_host, source, stream=self.stream)
+        wp.synchronize_stream(self.stream)
+        self._sent.clear()  # every earlier copy ran
+        return self.weights_host.numpy().copy()
 
 
 def cuda_shape(n_neurons: int) -> dict:

@@ -137,3 +137,32 @@ def test_a_mesh_past_the_batch_limit_is_refused():
     topology = Topology.from_edges(edges, 20001)
     with pytest.raises(ValueError, match="at most 16,384 vertices"):
         BatchSom(topology, np.zeros((20001, 3)), np.zeros((1, 1, 3)), device="cpu")
+
+
+def test_rounds_of_moves_and_steps_equal_single_soms(device):
+    """A studio's rounds as the batch sees them: each round some variants' controls moved (`move_rows`, at the cycle
+    their Som's `set_controls` restarts from), every variant stepped ten cycles (`step_to`) and all weights read back;
+    each round's weights equal those of single Soms given the same moves and steps (on a GPU the controls, the cycles
+    and the weights go through page-locked buffers, one wait a round)."""
+    p = presets.get_preset("car")
+    B, rng = 3, np.random.default_rng(7)
+    kw = {"mirror": p.mirror, "smooth_dims": p.smooth_dims, "device": device}
+    batch = BatchSom(p.topology, p.weights, np.repeat(p.controls[None], B, axis=0), **kw)
+    soms = [Som(p.topology, p.weights, p.controls, **kw) for _ in range(B)]
+    for som in soms:
+        som.step(40)
+    batch.step(40)
+    for r in range(4):
+        moved = [b for b in range(B) if (r + b) % 2 == 0]
+        controls = [(p.controls + rng.normal(0.0, 0.05, p.controls.shape)).astype(np.float32) for _ in moved]
+        for b, c in zip(moved, controls):
+            soms[b].set_controls(c)
+        batch.move_rows(np.array(moved), np.stack(controls), np.array([soms[b].iteration for b in moved]),
+                        np.zeros(len(moved), bool))
+        batch.step_to(batch.iteration + 10)
+        for som in soms:
+            som.step(10)
+        weights = batch.weights
+        assert batch.iteration.tolist() == [som.iteration for som in soms]
+        for b in range(B):
+            _match(device, weights[b], soms[b].weights)
