@@ -7,6 +7,7 @@ from the line it prints once it listens (`somwidget serving ... at http://127.0.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -127,6 +128,43 @@ def wait_for(predicate, timeout: float = 20.0, what: str = "condition", interval
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
         time.sleep(interval)
+
+
+def answers(url: str, any_status: bool = False) -> bool:
+    """The server at `url` answers with a success status (with `any_status`, with any HTTP status: it listens)."""
+    try:
+        with urllib.request.urlopen(url, timeout=5):
+            return True
+    except urllib.error.HTTPError:
+        return any_status
+    except OSError:
+        return False
+
+
+def stop(proc: subprocess.Popen, wait: float = 20.0) -> None:
+    """Terminate a server process, killed if it has not ended within `wait` seconds."""
+    proc.terminate()
+    try:
+        proc.wait(wait)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(5)
+
+
+@contextlib.contextmanager
+def server_process(argv: list[str], log_path: Path, ready_url: str, what: str, *, cwd=None, env: dict | None = None,
+                   timeout: float = 90.0, any_status: bool = False):
+    """Run the server `argv` (its output into `log_path`) until it answers at `ready_url` (`answers`); yields the
+    process, stopped (`stop`) after the block. A server that exits before it answers fails with its log's end."""
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen(argv, cwd=cwd, env=env, stdout=log, stderr=subprocess.STDOUT)
+        try:
+            wait_for(lambda: proc.poll() is not None or answers(ready_url, any_status), timeout=timeout,
+                     what=f"{what} to start")
+            assert proc.poll() is None, f"{what} exited with {proc.returncode}: {Path(log_path).read_text()[-3000:]}"
+            yield proc
+        finally:
+            stop(proc)
 
 
 def insecure_context() -> ssl.SSLContext:

@@ -13,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import urllib.error
@@ -26,14 +25,6 @@ import pytest
 TOKEN = "t0k"
 
 
-def _answers(url: str) -> bool:
-    try:
-        with urllib.request.urlopen(url, timeout=5):
-            return True
-    except OSError:
-        return False
-
-
 @contextlib.contextmanager
 def jupyter_server(app: str, root: Path, *options: str):
     """A real JupyterLab 4 (`app` "jupyterlab") or Notebook 7 ("notebook") server on `root`; yields its port."""
@@ -42,22 +33,11 @@ def jupyter_server(app: str, root: Path, *options: str):
         pytest.skip(f"{helpers.CHROMIUM} is missing")
     port = helpers.free_port()
     env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(root / "data")}
-    with open(root / "lab.log", "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", app, "--allow-root", "--no-browser", f"--port={port}",
+    with helpers.server_process([sys.executable, "-m", app, "--allow-root", "--no-browser", f"--port={port}",
                                  "--ServerApp.ip=127.0.0.1", f"--IdentityProvider.token={TOKEN}",
-                                 f"--ServerApp.root_dir={root}", *options], env=env, stdout=log,
-                                stderr=subprocess.STDOUT)
-        try:
-            api = f"http://127.0.0.1:{port}/api?token={TOKEN}"
-            helpers.wait_for(lambda: proc.poll() is not None or _answers(api), timeout=120, what=f"{app} to start")
-            assert proc.poll() is None, f"{app} exited with {proc.returncode}: {(root / 'lab.log').read_text()[-3000:]}"
-            yield port
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+                                 f"--ServerApp.root_dir={root}", *options], root / "lab.log",
+                                f"http://127.0.0.1:{port}/api?token={TOKEN}", app, env=env, timeout=120):
+        yield port
 
 
 class Jupyter:

@@ -8,9 +8,7 @@ in the first output; the kernel's session moves it, and the second output draws 
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
-import urllib.request
 
 import helpers
 import numpy as np
@@ -57,14 +55,6 @@ VIEWS = """(() => { const out = []; const walk = (root) => { for (const e of roo
   walk(document); return out.map((e) => e.somview); })()"""
 
 
-def _answers(url: str) -> bool:
-    try:
-        with urllib.request.urlopen(url, timeout=5):
-            return True
-    except OSError:
-        return False
-
-
 @pytest.fixture(scope="module")
 def marimo_app(tmp_path_factory):
     """`marimo run` on the notebook above; yields its URL."""
@@ -72,20 +62,11 @@ def marimo_app(tmp_path_factory):
     (root / "clay.py").write_text(NOTEBOOK)
     port = helpers.free_port()
     env = {**os.environ, "PYTHONPATH": str(helpers.ROOT), "SOMWIDGET_DATA_DIR": str(root / "data")}
-    with open(root / "marimo.log", "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", "marimo", "run", "--headless", "--no-token", "--host",
-                                 "127.0.0.1", "--port", str(port), str(root / "clay.py")], env=env, stdout=log,
-                                stderr=subprocess.STDOUT)
-        try:
-            url = f"http://127.0.0.1:{port}/"
-            helpers.wait_for(lambda: _answers(url), timeout=90, what="marimo to start")
-            yield url
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+    url = f"http://127.0.0.1:{port}/"
+    with helpers.server_process([sys.executable, "-m", "marimo", "run", "--headless", "--no-token", "--host",
+                                 "127.0.0.1", "--port", str(port), str(root / "clay.py")], root / "marimo.log", url,
+                                "marimo", env=env):
+        yield url
 
 
 def boxes(page) -> list[dict]:

@@ -24,6 +24,7 @@ import helpers
 import numpy as np
 import pytest
 from helpers import CHROMIUM, CHROMIUM_ARGS
+from panel_fit import check_widths
 
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
@@ -352,7 +353,7 @@ def notebook_file(path, cells: list[str]) -> None:
 @pytest.fixture(scope="module", params=["jupyterlab", "notebook"])
 def lab(request, jupyter):
     """A notebook with the widget's cells, opened in JupyterLab 4 or Notebook 7 (the worker's Jupyter server,
-    conftest.py); yields its URL. Its kernel is shut down after the host's tests."""
+    conftest.py); yields (the host's name, its URL). Its kernel is shut down after the host's tests."""
     root = jupyter.root / f"lab-{request.param}"
     root.mkdir()
     notebook_file(root / "clay.ipynb", [
@@ -364,7 +365,7 @@ def lab(request, jupyter):
         "import hashlib\nassert view.session.wait_idle(120)  # (the weights typed back retrain the car)\n"
         "print('clay', len(view.session.controls), view.session.history[0],\n"
         "      hashlib.md5(view.session.frame.positions.tobytes()).hexdigest())"])
-    yield jupyter.url(root / "clay.ipynb", request.param)
+    yield request.param, jupyter.url(root / "clay.ipynb", request.param)
     jupyter.shut_down_kernels(root)
 
 
@@ -393,13 +394,16 @@ def test_drag_wheel_and_keys_in_the_widget_in_jupyterlab_and_notebook_7(lab):
     """Interaction, in JupyterLab 4 and in Notebook 7: the page runs the cells; the mouse drags control 2 inside the
     widget; the panel's controls table (same output) shows the control moved and the second output of the widget
     draws it there too; the picture a saved notebook keeps (the widget's state) is retaken after the drag. Then, on
-    the same page and kernel (one setup for the three): the keyboard in the panel's metric weight fields
-    (`refused_value_snaps_back`), and the wheel and a double click in the view (`wheel_and_double_click`)."""
+    the same page and kernel (one setup for the four): the keyboard in the panel's metric weight fields
+    (`refused_value_snaps_back`), the wheel and a double click in the view (`wheel_and_double_click`), and last
+    the panel fits the page at 1280 and at 360 pixels wide (panel_fit.py, as test_panel_fits.py checks it in Voila
+    and marimo)."""
+    app, url = lab
     views = "[...document.querySelectorAll('.somview')].map((e) => e.somview)"
     with helpers.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         try:
-            page = open_notebook(browser, lab)
+            page = open_notebook(browser, url)
             run_cell(page, 0)
             run_cell(page, 1)
             try:
@@ -431,6 +435,7 @@ def test_drag_wheel_and_keys_in_the_widget_in_jupyterlab_and_notebook_7(lab):
             assert after[1] > 5000, after  # a PNG of a drawn clay, not an empty canvas
             refused_value_snaps_back(page)
             wheel_and_double_click(page, views)
+            check_widths(page, app)
         finally:
             browser.close()
 

@@ -33,8 +33,11 @@ EXPECTED = ["01_space_grid", "02_car", "03_lines", "04_your_own_mesh", "05_speed
 KERNEL = "somwidget-test"
 CELL_TIMEOUT = 240  # seconds for one cell on a slow, shared machine
 #: What the tests set in a notebook's cell tagged "parameters" (papermill's convention: a cell after it sets them),
-#: where the notebook documents a lighter run: the shape briefs' figures from 2,000 points instead of 10,000.
-PARAMETERS = {"08_shape_briefs": "SAMPLES = 2_000"}
+#: where the notebook documents a lighter run: the speed curve up to 4,096 neurons instead of 8,000, 8 variants of the
+#: car instead of 32, the shape briefs' figures from 2,000 points instead of 10,000. The cells are the same.
+PARAMETERS = {"05_speed": 'SIDES = {"cpu": (6, 8, 12, 16), "cuda:0": (6, 8, 12, 16, 20, 24, 32)}',
+              "07_variants": "N = 256 if DEVICE.startswith('cuda') else 8",
+              "08_shape_briefs": "SAMPLES = 2_000"}
 
 
 @pytest.fixture(scope="module")

@@ -37,11 +37,12 @@ def installed(tmp_path_factory):
     assert out.returncode == 0, (out.stdout + out.stderr)[-3000:]
     assert "somwidget: building the browser client: run build" in out.stdout
     wheel, = (tmp / "dist").glob("somwidget-*.whl")
-    subprocess.run([sys.executable, "-m", "venv", str(tmp / "venv")], check=True, timeout=300)
+    # a fresh venv without a pip of its own (ensurepip takes 5-30 s here): this pip installs into it (--python)
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(tmp / "venv")], check=True, timeout=300)
     py = tmp / "venv" / "bin" / "python"
     own = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}  # a checkout on the path reads as installed
-    subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "--no-index", str(wheel)], check=True,
-                   timeout=300, env=own)
+    subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", "--no-index",
+                    str(wheel)], check=True, timeout=300, env=own)
     # the dependencies come from the test venv's site-packages; the checkout is not on the path
     env = {**os.environ, "PYTHONPATH": sysconfig.get_paths()["purelib"],
            "SOMWIDGET_DATA_DIR": str(tmp / "data")}
