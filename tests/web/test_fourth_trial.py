@@ -132,8 +132,9 @@ SEEN = """() => {
 
 def test_a_symmetry_notice_lies_at_the_views_foot_and_goes_away_by_itself(page, server):
     """The symmetry switch turned (as the person did): its notice shows in full over the view's foot (as a snackbar,
-    the clay in the middle clear), the view keeps its size and the panel's fields stay where they were; some 10 s later
-    it is gone without a click. An error (a refused radius) stays until closed."""
+    the clay in the middle clear), the view keeps its size and the panel's fields stay where they were; NOTICE_SECONDS
+    after the page drew it (not after the server set it: under load that was seconds earlier) it is gone without a
+    click. An error (a refused radius) stays until closed."""
     panel = page.locator("#panel")
     places = lambda: [page.locator(sel).bounding_box()["y"] - panel.bounding_box()["y"]  # noqa: E731
                       for sel in ("#preset-select", "#iteration-text", "#symmetry-switch")]
