@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from somwidget.frontend.model import Session
+from somwidget.frontend.model import Session, timeline
 from somwidget.frontend.model.history import History, Step
 
 
@@ -105,6 +105,21 @@ def test_a_refused_intent_records_no_step(car):
     with pytest.raises(ValueError):
         car.set_smoothing(3.0)
     assert car.history == (0, 0)
+
+
+def test_a_radius_sent_again_unchanged_is_no_step(car, monkeypatch):
+    """A panel's radius field sends its value on Enter and again when it loses focus (the person pressing on the view
+    to drag): the same value again, however late it comes, is no undo step and trains nothing (a loaded machine made
+    it a second step of its own, and a drag after it needed two undos)."""
+    monkeypatch.setattr(timeline, "PARAMETER_STEP_SECONDS", 0.0)  # the value again comes too late to join its step
+    car.set_control_radius(2, 0.4)
+    assert car.wait_idle(60) and car.history == (1, 0)
+    a = still(car)
+    car.set_control_radius(2, 0.4)
+    assert car.history == (1, 0)
+    assert_same(still(car), a)
+    car.set_control_radius(None, 0.4)  # every control's: the others change, so it is a step
+    assert car.history == (2, 0)
 
 
 def test_a_general_shape_is_shown_as_it_is_until_the_person_acts():

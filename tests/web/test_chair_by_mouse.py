@@ -54,11 +54,12 @@ def test_a_side_lifted_by_mouse_rolls_where_its_radius_is_less_than_the_lift(pag
     server.wait(lambda s: abs(s["session"]["radii"][SIDE] - RADIUS) < 1e-6, what="the side's radius")
     st1 = server.idle()
     page.mouse.move(*centre(page, 0, 250))  # over the view: its keys
-    page.keyboard.press("1")  # Front: x to the right, z up
+    page.keyboard.press("1")  # Front (from +x): y across, z up (the radius field, entered, lets the view have them)
     page.keyboard.press("o")
+    page.wait_for_function(f"() => {VIEW}.describe().projection == 'orthographic'")
     page.wait_for_timeout(400)
-    a, b = screen(page, 0), screen(page, SIDE)
-    per_unit = (b[0] - a[0]) / (controls[SIDE, 0] - controls[0, 0])  # pixels right per model unit (orthographic)
+    b = screen(page, SIDE)  # in front of control 0 (x = 0), between the corners 1 (y = 1) and 2 (y = -1)
+    per_unit = abs(screen(page, 1)[0] - screen(page, 2)[0]) / abs(controls[1, 1] - controls[2, 1])  # px a unit
     assert per_unit > 50
     page.mouse.move(*b)
     page.wait_for_timeout(50)

@@ -169,9 +169,16 @@ class ControlEdits:
     def set_radius(self, index, radius) -> None:
         """Control `index`'s radius (its stroke's), or every control's with `index` None; it acts at once: where the
         control was moved last (the latest steps moved it and set nothing else but radii), the move is done again
-        from the shape before it with the new radius, so the clay shows the radius; otherwise a local restart."""
+        from the shape before it with the new radius, so the clay shows the radius; otherwise a local restart.
+        The radius the control has already changes nothing: no undo step, no restart (a panel's field sends its
+        value again when it loses focus, and that must not be a step a person has to undo)."""
         state = self.state
         r = check_radius("every control's radius" if index is None else f"control {index} radius", radius)
+        with state.lock:
+            k = len(state.radii)
+            run = range(k) if index is None else state.run_of(check_index("control", index, k))
+            if k and np.all(state.radii[list(run)] == np.float32(r)):
+                return
         if index is not None:
             self.hands.claim(index)
         with self.timeline.step(f"parameter:radius:{'all' if index is None else index}"), state.lock:

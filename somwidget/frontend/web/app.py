@@ -49,7 +49,7 @@ log = logging.getLogger(__name__)
 #: The page's triggers: each calls the method of the same name of the panel's state (panel_state.py) or the app.
 TRIGGERS = ("set_param", "set_metric", "set_colour", "set_radius", "set_position", "set_features", "add_control",
             "remove_control", "toggle_training", "reset", "undo", "redo", "start_fresh", "reload_preset", "refine",
-            "decimate_upload", "export_mesh", "save_session", "sweep_variants", "pick_variant")
+            "decimate_upload", "export_mesh", "save_session", "sweep_variants", "pick_variant", "notice_shown")
 
 
 class _ClientWatch(LinkProtocol):
@@ -88,7 +88,7 @@ class SomApp:
         if session.preset.name not in _presets.PRESETS:  # started from `somwidget serve --mesh FILE`
             self._uploaded = {session.preset.name: session.preset}
         uploads.sweep_uploads()  # what servers killed mid-upload left behind
-        self.panel_state = PanelState(session, self.state, watched=lambda: bool(self.clients))
+        self.panel_state = PanelState(session, self.state)
         self.panel = self.panel_state.panel
         self._init_state()
         self.layout = build_page(self.server, self.panel)

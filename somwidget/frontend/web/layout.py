@@ -194,20 +194,30 @@ def _alerts() -> None:
                   icon="mdi-content-save-alert", elevation=4)  # until a save is on disk again: not closable
 
 
+def _shown(name: str) -> list[str]:
+    """A notice's time runs from when the page shows it: the alert, made again for each new text, tells the server
+    when it is on the screen (panel_state.py, `notice_shown`), not when the server set it (under load the page showed
+    it seconds later, and it went after less than NOTICE_SECONDS)."""
+    return [f':key="{name}"', f'@vue:mounted="trigger(\'notice_shown\', [\'{name}\', {name}])"']
+
+
 def _notices() -> None:
     """The notices (news, a recovered session, saved sessions set aside) over the clay view's foot (_NOTICES)."""
     with html.Div(id="panel-notices", style=_NOTICES,
                   v_show="(info_message && !error_message) || recovered_message || notice_message"):
         v3.VAlert(v_if="info_message && !error_message", text=("info_message",), type="info", id="info-alert",
-                  density="compact", closable=True, click_close="info_message = ''", style=_NOTICE, elevation=4)
+                  density="compact", closable=True, click_close="info_message = ''", style=_NOTICE, elevation=4,
+                  raw_attrs=_shown("info_message"))
         with v3.VAlert(v_if="recovered_message", type="success", density="compact", style=_NOTICE, elevation=4,
-                       id="recovered-alert", closable=True, click_close="recovered_message = ''"):
+                       id="recovered-alert", closable=True, click_close="recovered_message = ''",
+                       raw_attrs=_shown("recovered_message")):
             html.Div("{{ recovered_message }}")
             v3.VBtn("Start fresh", size="small", variant="tonal", classes="mt-1", id="start-fresh",
                     click="trigger('start_fresh')", title="Load the preset the server was started with (Undo "
                                                        "brings the recovered session back)")
         v3.VAlert(v_if="notice_message", text=("notice_message",), type="warning", density="compact",
-                  id="notice-alert", closable=True, click_close="notice_message = ''", style=_NOTICE, elevation=4)
+                  id="notice-alert", closable=True, click_close="notice_message = ''", style=_NOTICE, elevation=4,
+                  raw_attrs=_shown("notice_message"))
 
 
 def _panel(panel: PanelModel) -> None:

@@ -11,7 +11,6 @@ import base64
 import logging
 import threading
 import time
-from collections.abc import Callable
 
 from ..model import Frame, Session
 from ..model.files import export_stem
@@ -34,10 +33,8 @@ NOTICES = ("info_message", "notice_message", "recovered_message")
 class PanelState:
     """One session's panel model in one trame server's state (see the module's docstring)."""
 
-    def __init__(self, session: Session, state, watched: Callable[[], bool] = lambda: True) -> None:
-        """`watched()`: whether a page shows the panel now (a notice's time runs only then)."""
+    def __init__(self, session: Session, state) -> None:
         self.session = session
-        self.watched = watched
         self._notices_shown: dict[str, tuple[str, float]] = {}  # a notice's text and when a page first showed it
         self.panel = PanelModel(session)
         self.state = state
@@ -128,18 +125,22 @@ class PanelState:
             with self.state:
                 self.state.info_message = settings.notice
 
+    def notice_shown(self, name: str, text: str) -> None:
+        """A page shows notice `name` with `text` now (layout.py, `_shown`): its NOTICE_SECONDS start, unless a page
+        showed that text already."""
+        shown = self._notices_shown.get(name)
+        if name in NOTICES and text and text == self.state[name] and (shown is None or shown[0] != text):
+            self._notices_shown[name] = (text, time.monotonic())
+
     def _expire_notices(self) -> None:
-        """Each notice shown NOTICE_SECONDS on a page is cleared (its clock starts when a page is there to show it,
-        and again with a new text)."""
+        """Each notice is cleared NOTICE_SECONDS after a page first showed it (`notice_shown`; a new text starts
+        again), so a person sees it that long however late the page drew it."""
         now = time.monotonic()
         for name in NOTICES:
             text, shown = self.state[name], self._notices_shown.get(name)
-            if not text:
+            if not text or (shown is not None and shown[0] != text):
                 self._notices_shown.pop(name, None)
-            elif shown is None or shown[0] != text:
-                if self.watched():
-                    self._notices_shown[name] = (text, now)
-            elif now - shown[1] >= NOTICE_SECONDS:
+            elif shown is not None and now - shown[1] >= NOTICE_SECONDS:
                 self._notices_shown.pop(name)
                 with self.state:
                     self.state[name] = ""

@@ -6,7 +6,9 @@
 // A key the view takes goes no further: no panel field, menu or notebook shortcut sees it. The view takes its keys
 // while the focus is in it (a press, or the pointer coming in, gives it the focus), and on the web app's page from
 // anywhere but a field being typed in (`routePageKeys`): a focused menu, switch or button never changes by a view
-// key. There Escape leaves the field (what was typed and not entered is dropped) and gives the view its keys back.
+// key. There Escape leaves the field (what was typed and not entered is dropped) and gives the view its keys back;
+// so does the pointer coming into the view when all that was typed is entered (a radius typed and Enter, then 1 for
+// Front: the 1 went into the field, and its change on the next press made the radius 0.41, a step of its own).
 // In a notebook Escape gives the focus back to the notebook (`focusHost`), whose own keys work again.
 
 const TEXT_TYPES = new Set(['text', 'number', 'search', 'email', 'url', 'tel', 'password', '']);
@@ -56,10 +58,19 @@ export function routePageKeys(view, doc = document) {
     }
     view.desktop.key(ev);
   };
+  const onEnter = () => { // the pointer came into the view: a field with nothing typed and not entered lets go
+    const field = doc.activeElement;
+    if (isTyping(field) && !view.container.contains(field) && entered.get(field) === field.value) {
+      field.blur();
+      view.focus();
+    }
+  };
   doc.addEventListener('focusin', keep, true);
   doc.addEventListener('change', keep, true);
   doc.addEventListener('keydown', onKey, true);
+  view.container.addEventListener('pointerenter', onEnter);
   return () => {
+    view.container.removeEventListener('pointerenter', onEnter);
     doc.removeEventListener('focusin', keep, true);
     doc.removeEventListener('change', keep, true);
     doc.removeEventListener('keydown', onKey, true);
