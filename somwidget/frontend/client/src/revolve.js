@@ -6,9 +6,9 @@
 // that closes about it starts the profile there, on the axis, rather than moving the control (desktop.js).
 
 import * as THREE from 'three';
+import { AXIS_SNAP } from './protocol.js';
 
 const AXIS_COLOUR = 0xd81b60;
-const AXIS_SNAP = 0.08; // backend/revolve.py AXIS_SNAP: an end this share of the clay's size from the axis is on it
 const ON_POLE = 1e-3; // a node this share of the clay's size from the axis is the clay's pole
 
 // The axis a revolve turns about: the radial group's ("radial-8-z" -> 2), else the model's z.
