@@ -24,7 +24,7 @@ from . import checks
 #: A node closer to the axis than this share of the clay's size is on it (a pole): it stays on the axis.
 ON_AXIS = 1e-6
 #: An end of a profile closer to the axis than this share of the clay's size is put on the axis (`profile_of`).
-AXIS_SNAP = 0.08  # (just past a control sphere on the pole: a press nearer moves that control)
+AXIS_SNAP = 0.08  # (past a control sphere on the pole; in the view a press on that control starts the profile)
 
 
 def axis_index(axis) -> int:

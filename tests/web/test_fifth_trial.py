@@ -156,3 +156,62 @@ def test_export_is_in_sight_at_1400_by_900_and_downloads_the_bowl(page, server):
     stamps.add(f"{datetime.datetime.now():%Y-%m-%d-%H%M}")
     assert dl.value.suggested_filename in {f"bowl-{t}.obj" for t in stamps}, dl.value.suggested_filename
     shot(page, "trial5-export-in-the-bar", None)
+
+
+def test_a_press_on_the_bottoms_control_in_revolve_starts_the_profile_on_the_axis(page, server):
+    """The sixth user's press for the bowl's profile landed on control 0's sphere (on the axis): with Revolve on it
+    starts the profile there instead of dragging the control (which had lifted the bowl out of view). Front (1),
+    Revolve (R), a press on the sphere (most of its drawn radius right of its centre, where the hover in Revolve
+    says *new control*) drawn out and up to the rim: control 0 stayed until the revolve (the drawn bowl's lowest
+    point is where it was), one revolve went (the table shows one row, the profile, starting on the axis), and the
+    drawn bottom is closed with no crease over 35 degrees."""
+    start_the_bowl(page, server)
+    steps = server.idle()["session"]["history"][0]
+    lowest = drawn_frame(page)[:, 2].min()
+    press_key_in_view(page, "1")
+    press_key_in_view(page, "r")
+    assert view(page)["tool"] == "revolve"
+    bottom = np.asarray(server.state()["session"]["controls"], float)[0, :3]
+    centre = np.asarray(page.evaluate(f"() => {VIEW}.controlScreen(0)"), float)
+    radius_px = page.evaluate(f"() => {VIEW}.controlScreenRadius(0)")
+    press = centre + [0.7 * radius_px, 0]
+    assert radius_px > 8, radius_px  # a sphere the person can press on
+    # before Revolve (Escape lets it go) the hover there is control 0's; with Revolve on it is a new control's
+    press_key_in_view(page, "Escape")
+    page.mouse.move(*(press + [0, 1]))
+    page.mouse.move(*press)
+    page.wait_for_function(f"() => {VIEW}.describe().hover.includes(0)", timeout=5000)
+    press_key_in_view(page, "r")
+    page.mouse.move(*(press + [0, 1]))
+    page.mouse.move(*press)
+    page.wait_for_function(f"() => {VIEW}.describe().hover.length === 0", timeout=5000)
+    across = max(([1.0, 0, 0], [0, 1.0, 0]), key=lambda e: abs(model_screen(page, bottom + e)[0] -
+                                                                   model_screen(page, bottom)[0]))
+    sign = np.sign(model_screen(page, bottom + across)[0] - model_screen(page, bottom)[0])
+    t = np.linspace(0, 1, 40)[1:]
+    profile = bottom + np.outer(sign * 1.4 * t, across) + np.outer(1.15 * t ** 2, [0, 0, 1.0])
+    drags = view(page)["desktop"]["drags"]
+    page.mouse.down()
+    for p in profile:
+        page.mouse.move(*model_screen(page, p), steps=2)
+    assert view(page)["desktop"]["drags"] == drags  # no control taken
+    np.testing.assert_allclose(np.asarray(server.state()["session"]["controls"], float)[0, :3], bottom, atol=1e-9)
+    page.mouse.up()
+    st = server.wait(lambda s: s["session"]["history"][0] == steps + 1 and s["session"]["pending_intents"] == 0
+                     and not s["session"]["frame"]["running"], timeout=60, what="the revolve")
+    assert view(page)["desktop"]["revolves"] == 1
+    n = st["session"]["strokes"][0]
+    assert len(st["session"]["strokes"]) == 1 and len(st["session"]["controls"]) == n >= 4
+    page.wait_for_function("() => document.querySelectorAll('#controls-table tbody tr').length === 1", timeout=10000)
+    page.wait_for_function(f"() => {VIEW}.describe().kEff === {16 * n}", timeout=10000)
+    xyz = [float(v) for v in page.locator("#controls-table tbody tr").nth(0).locator(".position-cell input")
+           .input_value().split(",")]
+    assert xyz[0] == 0 and xyz[1] == 0, xyz  # the profile starts on the axis
+    w = drawn_frame(page)
+    assert abs(w[:, 2].min() - lowest) <= 0.02, (w[:, 2].min(), lowest)  # the bowl stayed in place
+    radius = np.hypot(w[:, 0], w[:, 1])
+    rings = np.unique(np.round(radius, 4))
+    assert rings[0] == 0 and rings[1] <= 1.5 * np.median(np.diff(rings)), rings[:4]  # the bottom closed
+    angles = metrics.dihedral_angles(w, metrics.triangles_of(BOWL.topology.faces))
+    assert np.isfinite(angles).all() and angles.max() <= 35.0, angles.max()
+    shot(page, "trial6-profile-from-the-bottoms-control", None)

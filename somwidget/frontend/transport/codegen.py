@@ -20,6 +20,7 @@ import types
 import typing
 from pathlib import Path
 
+from ...backend import revolve as lathe_rule
 from . import messages as m
 
 TARGET = Path(__file__).resolve().parents[1] / "client" / "src" / "protocol.js"
@@ -73,6 +74,8 @@ def _constants() -> list[str]:
         f"export const MAX_MESSAGE_BYTES = {m.MAX_MESSAGE_BYTES};",
         f"export const MAX_COORDINATE = {js_number(m.MAX_COORDINATE)};",
         f"export const MAX_STROKE_POINTS = {m.MAX_STROKE_POINTS};",
+        f"export const AXIS_SNAP = {js_number(lathe_rule.AXIS_SNAP)}; // a profile's end this share of the size from "
+        "the axis is on it",
         f"export const HEADER_SIZE = {m.HEADER_SIZE};",
         f"export const MAGIC = [{magic}]; // {m.MAGIC.decode()!r}",
     ]

@@ -1,5 +1,6 @@
 // Mouse, touch and keys on a flat screen. A press goes to what is visible under it: the selected control's handle
-// (handle.js), a control (also while the Stroke or Revolve tool is on; before the clay: a
+// (handle.js), a control (also while the Stroke or Revolve tool is on, save a control on the revolve axis: a press
+// there starts the profile on the axis, revolve.js; before the clay: a
 // control lying on the surface is taken even where the clay shows in front of part of it, and a small one within
 // PICKED_PX of it; a control the clay hides is not; a placed control before its ghosts), the Stroke or Revolve tool
 // while it is on (stroke.js, revolve.js: a press off every control draws), else the orbit (camera.js:
@@ -151,11 +152,14 @@ export class Desktop {
     const hidden = { count: 0 };
     const hit = this.visibleControl(this.ray(ev), hidden);
     this.stats.hiddenPresses += hidden.count;
-    if (!hit && this.drawTool) { // a press off every control draws; one on a control moves it, tool on or off
+    // a press off every control draws, one on a control on the revolve axis starts the profile there (on the axis);
+    // one on any other control moves it, tool on or off
+    const onAxis = hit && this.revolveTool ? this.guide.startOn(hit.index) : null;
+    if ((!hit || onAxis) && this.drawTool) {
       ev.stopImmediatePropagation();
       ev.preventDefault();
       this.renderer.domElement.setPointerCapture?.(ev.pointerId);
-      this.stroke.begin(this.strokePoint(ev));
+      this.stroke.begin(onAxis || this.strokePoint(ev));
       return;
     }
     if (!hit) return;
@@ -226,7 +230,8 @@ export class Desktop {
       }
       const rc = this.ray(ev);
       const hit = this.visibleControl(rc);
-      this.hover(hit ? hit.index : null);
+      // a control on the revolve axis is no grab while the Revolve tool is on: a press there starts the profile
+      this.hover(hit && !(this.revolveTool && this.guide.startOn(hit.index)) ? hit.index : null);
       this.showDisc(ev, rc);
       return;
     }

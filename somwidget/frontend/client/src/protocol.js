@@ -7,6 +7,7 @@ export const PROTOCOL_VERSION = 1;
 export const MAX_MESSAGE_BYTES = 2048;
 export const MAX_COORDINATE = 10000;
 export const MAX_STROKE_POINTS = 64;
+export const AXIS_SNAP = 0.08; // a profile's end this share of the size from the axis is on it
 export const HEADER_SIZE = 32;
 export const MAGIC = [0x53, 0x4f, 0x4d, 0x46]; // 'SOMF'
 export const FLAG_RUNNING = 1;
