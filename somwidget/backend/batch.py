@@ -346,6 +346,10 @@ class BatchSom:
         self._s[rows] = iteration
         self._to_anchor.update(anchored.tolist())
 
+    def restarts_from_anchor(self, b: int) -> bool:
+        """Whether variant b's next step starts by going back to its anchor's weights (a `move` left it waiting)."""
+        return b in self._to_anchor
+
     def forget(self, b: int) -> bool:
         """Variant b is no longer used (its state went back to its Som): a restart from its anchor that `move` left
         for the next step is dropped; whether there was one."""

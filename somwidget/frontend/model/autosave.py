@@ -200,11 +200,17 @@ class SessionAutosave:
             if not self._due():
                 self._save_later()
                 return
-        with state.som_lock, state.lock:
+        with self._som_for_save(), state.lock:
             if not self._due() or not self.quiet():
                 return  # an intent is on its way: the next turn saves with it
             saving = self._take()
         self.writer.submit(saving)
+
+    def _som_for_save(self):
+        """The Som's lock as a save takes it: a studio room's held by a batch stays lent (the save reads its weights
+        from the batch's last round: ModellingState.capture), else the Som's lock."""
+        lent = self.state.lent
+        return self.state.som_lock if lent is None else lent.for_save()
 
     def _save_later(self) -> None:
         """A held drag whose training settled is written AUTOSAVE_SECONDS after the last save: a turn then (a posted

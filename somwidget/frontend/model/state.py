@@ -3,7 +3,9 @@ settings as the views see them (an intent changes them at once; the Som follows 
 flags.
 
 Two locks: `lock` guards this state (`wake` is its condition: waiters wake on every change that matters), `som_lock`
-guards the Som, which the training thread holds while it steps. Whoever needs both takes `som_lock` first.
+guards the Som, which the training thread holds while it steps. Whoever needs both takes `som_lock` first. In a
+studio a batch may hold the Som's state between rounds (studio/batched.py): `lent` is then the room's Som lock, through
+which a save reads the state without taking the Som back (`lent.for_save()`, `lent.state_to_save()`).
 """
 
 from __future__ import annotations
@@ -129,6 +131,7 @@ class ModellingState:
         self.lock = threading.RLock()
         self.wake = threading.Condition(self.lock)
         self.som_lock = threading.RLock()
+        self.lent = None  # a studio room's Som lock (studio/batched.py RoomLock); None in a session of its own
         self.generation = 0
         self.paused = bool(paused)  # the person's Train / Pause choice
         self.hold = False  # nothing trains until the next intent (after an undo, a redo, a loaded session)
@@ -208,10 +211,14 @@ class ModellingState:
         return p
 
     def capture(self) -> Step:
-        """The state now as an undo step (caller holds both locks, with no operation queued)."""
+        """The state now as an undo step (caller holds both locks, with no operation queued). A studio room's Som
+        held by a batch gives the weights and cycle a give-back would leave in it (`lent.state_to_save()`), read
+        together; its own otherwise."""
         params = {name: list(v) if isinstance(v, list) else v for name, v in self.params.items()}
-        return Step(preset=self.preset, controls=self.controls.copy(), parameters=params, weights=self.som.weights,
-                    iteration=int(self.som.iteration), radii=self.radii.copy(), symmetry=self.symmetry,
+        held = None if self.lent is None else self.lent.state_to_save()
+        weights, iteration = held if held is not None else (self.som.weights, int(self.som.iteration))
+        return Step(preset=self.preset, controls=self.controls.copy(), parameters=params, weights=weights,
+                    iteration=iteration, radii=self.radii.copy(), symmetry=self.symmetry,
                     strokes=self.strokes, control_ids=tuple(self.control_ids))
 
     def put_back(self, step: Step) -> None:

@@ -9,12 +9,15 @@ controls, settings, anchor) and follows the cycle (its state's s, through `Som.p
 its own weights are stale until the room is given back (`give_back`: its row of the last copy `restore`d into it),
 which happens before anything else reads or changes the Som: whoever takes the room's Som lock (an undo, a save, a
 preset switch, a setting: `RoomLock`) and any queued operation a batch cannot apply (`applies_in_batch`) gets the
-Som back first. A room given back is held again at its next round that steps it with alike rooms. The weights a
+Som back first. An autosave only reads: it takes the lock as a round's turn does (`RoomLock.for_save`) and reads the
+weights a give-back would restore, the room's row of the last round (`state_to_save`), with no copy to the device
+and back. A room given back is held again at its next round that steps it with alike rooms. The weights a
 batch reaches equal those of the Soms stepped apart (the same kernels' arithmetic; tests/studio/test_batched_rooms.py).
 """
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 import weakref
@@ -133,6 +136,7 @@ class BatchedRooms:
         self._loans: dict[object, _Loan] = {}
         self._topologies: dict = {}
         self.launches = self.batched = self.widest = 0
+        self.given_back = 0  # rooms' Soms given their state back (each an upload, and the next hold another)
 
     def key(self, som) -> tuple | None:
         return batch_key(som, self._topologies)
@@ -143,6 +147,24 @@ class BatchedRooms:
     def host(self, owner) -> np.ndarray:
         """The weights of a held room as its batch's last round (or its lending) left them."""
         return self._loans[owner].host
+
+    def state_to_save(self, owner) -> tuple[np.ndarray, int] | None:
+        """(weights, cycle s) of a held room that a save writes, without giving it back (caller holds its Som lock, as
+        a round's turn takes it): those `give_back` would leave in its Som, a copy of its row of the last round and
+        the cycle that round reached, read together; None when the room is not held. A room whose Som restarted from
+        its anchor since that round (its state is its own anchor's then) is given back and None returned: its Som's
+        own state is the one to save."""
+        with self._lock:
+            loan = self._loans.get(owner)
+            if loan is None:
+                return None
+            group = self._groups.get(loan.key)
+            pending = group is not None and (group.batch.restarts_from_anchor(loan.slot) or any(
+                slot == loan.slot and anchor for slot, _, _, anchor in group.moves))
+            if pending or loan.state.anchor_restarts != loan.restarts:
+                self._give_back(owner)
+                return None
+            return loan.host.copy(), int(loan.state.s)
 
     def hold(self, owner, som: Som, key: tuple) -> None:
         """Before a round steps the room (caller holds its Som lock): held already, its moved controls and cycle go
@@ -196,6 +218,7 @@ class BatchedRooms:
         loan = self._loans.pop(owner, None)
         if loan is None:
             return
+        self.given_back += 1
         loan.state.lend(False)  # the controls its moves left waiting go into its own rows
         group = self._groups.get(loan.key)
         if group is not None:
@@ -259,11 +282,13 @@ class BatchedRooms:
 
 class RoomLock:
     """A room's Som lock (its state's `som_lock`) while a batch may hold its Som's state: whoever takes it gets the
-    Som with its state given back first; the rounds' own turns (`turn`) take it as it is."""
+    Som with its state given back first; the rounds' own turns (`turn`) and a save (`for_save`) take it as it is, a
+    save reading the held room's weights and cycle through `state_to_save` (ModellingState.lent)."""
 
-    def __init__(self, lock, give_back) -> None:
+    def __init__(self, lock, give_back, state_to_save=lambda: None) -> None:
         self._lock = lock
         self._give_back = give_back
+        self.state_to_save = state_to_save
 
     def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
         if not self._lock.acquire(blocking, timeout):
@@ -281,6 +306,15 @@ class RoomLock:
     def turn(self, blocking: bool = True) -> bool:
         """Taken for a round's turn: the Som stays lent."""
         return self._lock.acquire(blocking)
+
+    @contextlib.contextmanager
+    def for_save(self):
+        """Taken for a save (`turn`): the Som stays lent; `state_to_save()` gives the weights and cycle it writes."""
+        self._lock.acquire()
+        try:
+            yield self
+        finally:
+            self._lock.release()
 
     def __enter__(self) -> bool:
         return self.acquire()

@@ -59,7 +59,8 @@ class Rounds:
     def add(self, trainer) -> threading.Thread:
         """Run `trainer`'s turns from now on (its `start`); the loop's thread."""
         state = trainer.state
-        state.som_lock = RoomLock(state.som_lock, lambda: self.batches.give_back(trainer))
+        state.som_lock = state.lent = RoomLock(state.som_lock, lambda: self.batches.give_back(trainer),
+                                               lambda: self.batches.state_to_save(trainer))
 
         def before_apply(ops) -> None:
             if not all(applies_in_batch(op) for op in ops):
