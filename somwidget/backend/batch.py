@@ -261,9 +261,7 @@ class BatchSom:
     def weights(self) -> np.ndarray:
         """(B, N, n) float32 host copy (one transfer from a GPU)."""
         self._settle()
-        if self._staging is not None:
-            return self._staging.weights(self._w).reshape(self.n_variants, self.n_neurons, self.n_dims)
-        return self._w.numpy().reshape(self.n_variants, self.n_neurons, self.n_dims).copy()
+        return _weights_down(self._staging, self._w).reshape(self.n_variants, self.n_neurons, self.n_dims)
 
     def restart(self) -> None:
         """Every variant continues from its current weights at s0 = floor((1 - reach) S): the local restart that a
@@ -380,10 +378,7 @@ class BatchSom:
         """What `move` left for the device: the moved controls up (one copy), the weights of the variants restarted
         from their anchor back to it (one launch)."""
         if self._controls_moved:
-            if self._staging is not None:
-                self._staging.send_controls(self._c, self._effective(self._controls))
-            else:
-                self._c.assign(self._effective(self._controls))
+            _controls_up(self._staging, self._c, self._effective(self._controls))
             self._controls_moved = False
         if self._to_anchor:
             anchor = self._anchor
@@ -428,11 +423,7 @@ class BatchSom:
     @warp_exclusive
     def _launch(self, to: np.ndarray) -> None:
         dev, B = self.device, self.n_variants
-        if self._staging is not None:
-            s_from, s_to = self._staging.send_cycles(self._s, to)
-        else:
-            s_from = wp.array(self._s.astype(np.int32), dtype=wp.int32, device=dev)
-            s_to = wp.array(to.astype(np.int32), dtype=wp.int32, device=dev)
+        s_from, s_to = _cycles_up(self._staging, self._s, to, dev)
 
         def inputs(first: int) -> list:
             return [self._w, self._moved, self._c, self._k_eff, self._m, self._mask, self._tables, self._table_row,
@@ -504,6 +495,26 @@ class _PinnedStaging:
         wp.synchronize_stream(self.stream)
         self._sent.clear()  # every earlier copy ran
         return self.weights_host.numpy().copy()
+
+
+def _weights_down(staging: _PinnedStaging | None, weights: wp.array) -> np.ndarray:
+    """A host copy of the weights of their own (a GPU's through the page-locked buffer)."""
+    return weights.numpy().copy() if staging is None else staging.weights(weights)
+
+
+def _controls_up(staging: _PinnedStaging | None, dest: wp.array, values: np.ndarray) -> None:
+    if staging is None:
+        dest.assign(values)
+    else:
+        staging.send_controls(dest, values)
+
+
+def _cycles_up(staging: _PinnedStaging | None, s_from: np.ndarray, s_to: np.ndarray, device) -> tuple:
+    """Each variant's first and last cycle of a launch, on the device."""
+    if staging is not None:
+        return staging.send_cycles(s_from, s_to)
+    return (wp.array(s_from.astype(np.int32), dtype=wp.int32, device=device),
+            wp.array(s_to.astype(np.int32), dtype=wp.int32, device=device))
 
 
 def cuda_shape(n_neurons: int) -> dict:
