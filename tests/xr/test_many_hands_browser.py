@@ -275,6 +275,8 @@ def test_two_browsers_and_a_headset(browser, server, session):
             controller_to(headset, target + np.array([0.01, 0.008, 0.0]) * s)
             desk2.mouse.move(x - 6 * s, y + 4 * s)
         desk2.mouse.up()
+        # the second desktop's release applied (its moves before it, in order), so no move of its is still on its way
+        wait_for(lambda: set(server.hub.grabs) == {2}, timeout=30, what="the second desktop's release")
         wait_for(lambda: settled(session), timeout=60, what="the clay settled while the trigger is held")
         before = session.frame
         session.add_listener(frames.append, replay=False)
