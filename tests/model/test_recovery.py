@@ -154,10 +154,11 @@ def test_sigkill_mid_drag_brings_back_what_the_message_says(tmp_path):
     rounds = {"pressed": ([{"type": "grab", "index": 2}], 0.3),
               "dragged": ([{"type": "grab", "index": 2}, {"type": "move", "index": 2, "position": target}],
                           autosave.AUTOSAVE_SECONDS + 1.5)}
-    for name, (intents, hold) in rounds.items():
+    for reach, (name, (intents, hold)) in zip((0.12, 0.13), rounds.items()):
         srv = Serve(env=env)
         try:
-            send(srv, [{"type": "set", "name": "reach", "value": 0.12}])
+            send(srv, [{"type": "set", "name": "reach", "value": reach}])  # a step (the session before it is back)
+            srv.wait(lambda s, reach=reach: s["session"]["parameters"]["reach"] == reach, what=f"reach {reach}")
             pre = settled(srv)
 
             async def kill_while_held(hold=hold, srv=srv):

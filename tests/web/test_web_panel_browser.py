@@ -18,6 +18,7 @@ import time
 
 import pytest
 from helpers import Serve, free_port, wait_for
+from playwright import sync_api as playwright_sync
 from test_app_browser import VIEW, VIEWPORT, open_page
 
 pytestmark = pytest.mark.browser
@@ -41,6 +42,19 @@ def type_into(page, name: str, text: str) -> None:
     page.keyboard.press("Control+a")
     page.keyboard.type(text)
     page.keyboard.press("Enter")
+
+
+def field_shows(page, name: str, value: str, server, timeout: float = 5000) -> None:
+    """Wait until the field `name` shows `value`; else fail saying what it shows, what has the focus and the
+    session's undo history."""
+    try:
+        page.wait_for_function("([n, v]) => document.querySelector('#field-' + n).value === v", arg=[name, value],
+                               timeout=timeout)
+    except playwright_sync.TimeoutError:
+        shown, focus = page.evaluate("(n) => [document.querySelector('#field-' + n).value, "
+                                     "document.activeElement?.id || document.activeElement?.tagName]", name)
+        raise AssertionError(f"#field-{name} shows {shown!r}, not {value!r} (focus on {focus}, history "
+                             f"{server.state()['session']['history']})") from None
 
 
 def run_label(page) -> str:
@@ -91,14 +105,14 @@ def test_ctrl_z_in_a_field_undoes_the_typing_there_and_elsewhere_a_step(browser,
         page.keyboard.press("Control+a")
         page.keyboard.type("0.4")
         page.keyboard.press("Control+z")  # the field's own undo: the typing goes
-        page.wait_for_function("() => document.querySelector('#field-smoothing').value === '0.1'", timeout=5000)
+        field_shows(page, "smoothing", "0.1", server)
         page.wait_for_timeout(500)
         st = server.state()
         assert st["session"]["history"] == steps and st["session"]["parameters"]["smoothing"] == 0.1
         page.locator("#iteration-text").click()  # out of the field: Ctrl+Z is the clay's undo
         page.keyboard.press("Control+z")
         server.wait(lambda s: s["session"]["parameters"]["smoothing"] == 0.0, what="the step undone")
-        page.wait_for_function("() => document.querySelector('#field-smoothing').value === '0'", timeout=10000)
+        field_shows(page, "smoothing", "0", server, timeout=10000)
         server.idle()
     finally:
         page.close()
