@@ -130,6 +130,17 @@ def wait_for(predicate, timeout: float = 20.0, what: str = "condition", interval
         time.sleep(interval)
 
 
+def settled_session(preset: str, timeout: float = 120.0):
+    """A CPU Session of `preset` (no autosave) once it has settled, closed after: a fixture's body,
+    `yield from settled_session("car")`."""
+    from somwidget.frontend.model import Session
+
+    s = Session(preset, device="cpu", autosave=False)
+    assert s.wait_idle(timeout), f"the {preset} session did not settle within {timeout:g} s"
+    yield s
+    s.close()
+
+
 def answers(url: str, any_status: bool = False) -> bool:
     """The server at `url` answers with a success status (with `any_status`, with any HTTP status: it listens)."""
     try:

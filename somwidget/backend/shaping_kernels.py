@@ -143,6 +143,30 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         if v == 0:
             counter[1 - parity] = s + 1
 
+    @wp.func
+    def differs(a: vec, b: vec) -> int:
+        """1 where a and b differ in any feature, else 0."""
+        out = int(0)
+        for i in range(wp.static(n_dims)):
+            if a[i] != b[i]:
+                out = 1
+        return out
+
+    @wp.func
+    def place_step(m: vec, p: vec, r: wp.float32, position: vec) -> vec:
+        """A binding's place p one step towards its member m: onto it when within STEP r (over the position
+        features), else STEP r along the way."""
+        gap = wp.length(wp.cw_mul(m - p, position))
+        most = STEP * r
+        if gap <= most:
+            return m
+        return p + (m - p) * (most / gap)
+
+    @wp.func
+    def reach_of(p: vec, start: vec, r: wp.float32, position: vec) -> wp.float32:
+        """The reach of a binding whose place went from `start` to p: its radius r, widened to WIDEN times the way."""
+        return wp.max(r, WIDEN * wp.length(wp.cw_mul(p - start, position)))
+
     @wp.kernel(enable_backward=False, module="unique", module_options=options)
     def advance(slot_of_row: wp.array(dtype=wp.int32), live: wp.array(dtype=wp.int32),
                 members: wp.array(dtype=vec), radius: wp.array(dtype=wp.float32), position: vec,
@@ -157,21 +181,12 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
         rebind[r] = 0
         if live[j] != 0:
             m = members[j]
-            p = places[j]
-            same = int(1)
-            for i in range(wp.static(n_dims)):
-                if m[i] != p[i]:
-                    same = 0
-            if same == 0:
-                gap = wp.length(wp.cw_mul(m - p, position))
-                most = STEP * radius[j]
-                if gap <= most:
-                    p = m
-                else:
-                    p = p + (m - p) * (most / gap)
+            if differs(m, places[j]) != 0:
+                p = place_step(m, places[j], radius[j], position)
+                if differs(m, p) != 0:
                     unarrived[0] = 1
                 places[j] = p
-                reach[j] = wp.max(radius[j], WIDEN * wp.length(wp.cw_mul(p - starts[j], position)))
+                reach[j] = reach_of(p, starts[j], radius[j], position)
                 rebind[r] = 1
                 stepped[0] = 1
                 changed[0] = 1
@@ -299,18 +314,11 @@ def shaping_kernels(n_dims: int) -> SimpleNamespace:
             stops_short = int(0)
             if live[j] != 0:
                 m = members[j]
-                for d in range(wp.static(n_dims)):
-                    if m[d] != p[d]:
-                        moving = 1
+                moving = differs(m, p)
                 if moving != 0:
-                    gap = wp.length(wp.cw_mul(m - p, position))
-                    most = STEP * radius[j]
-                    if gap <= most:
-                        p = m
-                    else:
-                        p = p + (m - p) * (most / gap)
-                        stops_short = 1
-                    ball = wp.max(radius[j], WIDEN * wp.length(wp.cw_mul(p - starts[j], position)))
+                    p = place_step(m, p, radius[j], position)
+                    stops_short = differs(m, p)
+                    ball = reach_of(p, starts[j], radius[j], position)
             if sync_block_any(moving) != 0:
                 first = int(0)
                 if t == 0:

@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 import pytest
+from helpers import settled_session
 
 from somwidget.backend import metrics
 from somwidget.frontend.model import Session
@@ -19,10 +20,7 @@ from somwidget.frontend.model.hands import SILENT_SECONDS
 
 @pytest.fixture
 def session():
-    s = Session("car", device="cpu", autosave=False)
-    assert s.wait_idle(120)
-    yield s
-    s.close()
+    yield from settled_session("car")
 
 
 def drag(session, hand, index, delta, moves=4):

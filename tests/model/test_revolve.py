@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import settled_session
 
 from somwidget.backend import revolve as rule
 from somwidget.frontend.model import Session
@@ -56,10 +57,7 @@ def expected_normal(centre: np.ndarray, profile: np.ndarray) -> np.ndarray:
 
 @pytest.fixture
 def tube():
-    s = Session("tube", device="cpu", autosave=False)
-    assert s.wait_idle(30)
-    yield s
-    s.close()
+    yield from settled_session("tube")
 
 
 def test_a_vase_from_a_tube_and_a_profile(tube):
@@ -192,10 +190,7 @@ def crease(weights: np.ndarray, faces) -> float:
 
 @pytest.fixture
 def bowl():
-    s = Session("bowl", device="cpu", autosave=False)
-    assert s.wait_idle(30)
-    yield s
-    s.close()
+    yield from settled_session("bowl")
 
 
 def test_a_profile_begun_beside_the_axis_starts_on_it_and_the_bowl_stays_closed(bowl):

@@ -21,6 +21,7 @@ import time
 import aiohttp
 import numpy as np
 import pytest
+from helpers import settled_session
 
 from somwidget.frontend.model import Session
 from somwidget.frontend.web.standalone import XRServer
@@ -32,10 +33,7 @@ DRAGS = 7
 
 @pytest.fixture(scope="module")
 def session():
-    s = Session("car", device="cpu", autosave=False)
-    assert s.wait_idle(120)
-    yield s
-    s.close()
+    yield from settled_session("car")
 
 
 async def _watch(cs, base: str, arrivals: list, stop: asyncio.Event) -> None:

@@ -3,6 +3,7 @@ tab on it per test, and where the view draws things (read through its read-only 
 
 from __future__ import annotations
 
+import json
 import os
 
 import numpy as np
@@ -28,6 +29,11 @@ def open_page(browser, server, width: int = 1400, height: int = 900):
     page.wait_for_timeout(400)
     yield page
     page.close()
+
+
+def model_screen(page, p) -> np.ndarray:
+    """Where the model point p lies on the page (pixels), as the view draws it."""
+    return np.asarray(page.evaluate(f"() => {VIEW}.modelScreen({json.dumps([float(x) for x in p])})"), float)
 
 
 def shot(page, name: str, selector: str | None = "#clay-view") -> None:

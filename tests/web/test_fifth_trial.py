@@ -9,13 +9,12 @@ through GET /api/state.
 from __future__ import annotations
 
 import datetime
-import json
 import os
 
 import numpy as np
 import pytest
 from helpers import CHROMIUM
-from sphere_app import VIEW, open_page, press_key_in_view, serve_sphere, shot, view
+from sphere_app import VIEW, model_screen, open_page, press_key_in_view, serve_sphere, shot, view
 
 from somwidget.backend import metrics
 from somwidget.backend.presets import get_preset
@@ -39,10 +38,6 @@ def server():
 @pytest.fixture
 def page(browser, server):
     yield from open_page(browser, server)
-
-
-def model_screen(page, p) -> np.ndarray:
-    return np.asarray(page.evaluate(f"() => {VIEW}.modelScreen({json.dumps([float(x) for x in p])})"), float)
 
 
 def drawn_frame(page) -> np.ndarray:

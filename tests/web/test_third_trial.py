@@ -7,14 +7,13 @@ session's state through GET /api/state. Nothing here sends an intent or sets sta
 
 from __future__ import annotations
 
-import json
 import math
 import os
 
 import numpy as np
 import pytest
 from helpers import CHROMIUM
-from sphere_app import VIEW, drag, open_page, press_key_in_view, screen, serve_sphere, shot, view
+from sphere_app import VIEW, drag, model_screen, open_page, press_key_in_view, screen, serve_sphere, shot, view
 
 pytestmark = pytest.mark.browser
 
@@ -31,10 +30,6 @@ def server():
 @pytest.fixture
 def page(browser, server):
     yield from open_page(browser, server)
-
-
-def model_screen(page, p) -> np.ndarray:
-    return np.asarray(page.evaluate(f"() => {VIEW}.modelScreen({json.dumps(list(p))})"), float)
 
 
 def test_a_drag_of_the_rim_in_the_left_view_keeps_it_in_its_plane_and_the_ring_even(page, server):

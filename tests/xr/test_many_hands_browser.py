@@ -18,7 +18,7 @@ import os
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, wait_for
+from helpers import CHROMIUM, settled_session, wait_for
 
 from somwidget.frontend.client import DIST
 
@@ -36,12 +36,7 @@ if not (DIST / "emulator.html").is_file():  # pragma: no cover
 
 @pytest.fixture(scope="module")
 def session():
-    from somwidget.frontend.model import Session
-
-    s = Session("car", device="cpu", autosave=False)
-    assert s.wait_idle(120), "the session did not converge"
-    yield s
-    s.close()
+    yield from settled_session("car")
 
 
 @pytest.fixture(scope="module")
