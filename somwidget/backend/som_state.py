@@ -95,6 +95,10 @@ class SomState:
             self._waiting = controls
             self.winners_valid = False  # (the next run's set_cycle writes them first)
             return
+        self._write(controls)
+
+    def _write(self, controls: Controls) -> None:
+        """`upload`'s writing of the rows, lent or not (what waited is written)."""
         self._waiting = None
         self._staging_ready()
         rows = self._control_rows
@@ -115,14 +119,12 @@ class SomState:
         """A batch holds this state from now on (`lent`), or gave it back: an upload that waited is made now."""
         self.lent = lent
         if not lent and self._waiting is not None:
-            self.upload(self._waiting)
+            self._write(self._waiting)
 
     def set_cycle(self) -> None:
         """Every cycle counter to s; on CUDA the staged controls go up with them, in one asynchronous copy."""
         if self._waiting is not None:  # a run of a state still lent: its controls first
-            controls, self.lent = self._waiting, False
-            self.upload(controls)
-            self.lent = True
+            self._write(self._waiting)
         self._staging_ready()
         self.counter_words[:] = self.s
         if self.staging is not None:
