@@ -166,7 +166,10 @@ def test_a_mouse_up_on_a_settled_clay_runs_nothing(browser, server, session):
         for s in range(1, 9):
             page.mouse.move(x + 6 * s, y - 5 * s)
             page.wait_for_timeout(30)
-        wait_for(lambda: settled(session) and session.frame.n_controls == 9, timeout=60, what="settled, held")
+        held_at = np.asarray(page.evaluate("somxr.controlModel(4)"), float)[:3]  # where the drag left it
+        # settled on the drag's last move (a late one under load would run its cycles after `before`)
+        wait_for(lambda: settled(session) and session.frame.n_controls == 9
+                 and np.allclose(session.controls[4][:3], held_at, atol=1e-4), timeout=60, what="settled, held")
         page.wait_for_function(f"somxr.state().seq >= {session.frame.seq}", timeout=10000)
         before = session.frame
         shown = np.array(page.evaluate("somxr.positions(602)")).reshape(-1, 3)
