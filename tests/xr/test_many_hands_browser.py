@@ -91,6 +91,14 @@ def settled(session) -> bool:
     return f.iteration == f.iterations and not f.running
 
 
+def settled_with(session, index: int, at) -> bool:
+    """Settled with control `index` at `at`, both read from one frame: `session.controls` shows a move as soon as it
+    is applied, while the frame before it still says settled (under load its cycles then came after the test's read)."""
+    f = session.frame
+    return (f.iteration == f.iterations and not f.running and f.n_controls == 9
+            and np.allclose(f.controls[index][:3], at, atol=1e-4))
+
+
 def test_two_browsers_refusal_presence_two_steps_and_own_undo(browser, server, session):
     a = open_page(browser, server.base + "/xr/")
     b = open_page(browser, server.base + "/xr/")
@@ -167,9 +175,7 @@ def test_a_mouse_up_on_a_settled_clay_runs_nothing(browser, server, session):
             page.mouse.move(x + 6 * s, y - 5 * s)
             page.wait_for_timeout(30)
         held_at = np.asarray(page.evaluate("somxr.controlModel(4)"), float)[:3]  # where the drag left it
-        # settled on the drag's last move (a late one under load would run its cycles after `before`)
-        wait_for(lambda: settled(session) and session.frame.n_controls == 9
-                 and np.allclose(session.controls[4][:3], held_at, atol=1e-4), timeout=60, what="settled, held")
+        wait_for(lambda: settled_with(session, 4, held_at), timeout=60, what="settled on the drag's last move")
         page.wait_for_function(f"somxr.state().seq >= {session.frame.seq}", timeout=10000)
         before = session.frame
         shown = np.array(page.evaluate("somxr.positions(602)")).reshape(-1, 3)
@@ -275,7 +281,8 @@ def test_two_browsers_and_a_headset(browser, server, session):
         desk2.mouse.up()
         # the second desktop's release applied (its moves before it, in order), so no move of its is still on its way
         wait_for(lambda: set(server.hub.grabs) == {2}, timeout=30, what="the second desktop's release")
-        wait_for(lambda: settled(session), timeout=60, what="the clay settled while the trigger is held")
+        held_at = np.asarray(headset.evaluate("somxr.controlModel(2)"), float)[:3]  # where the headset has it
+        wait_for(lambda: settled_with(session, 2, held_at), timeout=60, what="settled, the trigger held")
         before = session.frame
         session.add_listener(frames.append, replay=False)
         headset.evaluate(f"{RIGHT}.updateButtonValue('trigger', 0)")  # let go: nothing runs
