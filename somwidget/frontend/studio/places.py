@@ -161,16 +161,16 @@ class RemotePlace:
         return out
 
     async def socket(self, request, name: str, watch: bool):
-        """The browser's websocket relayed to the room's on the worker, the worker's bytes passed on as they come
+        """The browser's websocket relayed to the room's on the worker, the bytes passed on both ways as they come
         (relay.py)."""
         url = self.url + f"/studio/rooms/{name}/ws" + ("?watch=1" if watch else "")
         try:
-            reader, writer = await relay.open_upstream(url, self.headers)
+            upstream = await relay.open_upstream(url, self.headers)
         except relay.Refused as exc:
             return web.Response(status=exc.status, text=f"somwidget studio: the room's worker refused: {exc.text}\n")
         except (OSError, asyncio.TimeoutError, asyncio.IncompleteReadError, ValueError) as exc:
             raise PlaceDown(f"the worker at {self.url} does not answer: {exc or type(exc).__name__}") from None
-        return await relay.relay(request, reader, writer)
+        return await relay.relay(request, upstream)
 
     async def close(self) -> None:
         if self._http is not None:

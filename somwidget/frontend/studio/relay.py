@@ -1,14 +1,17 @@
-"""A room's websocket through the front to its worker, the worker's bytes passed on as they come (RFC 6455).
+"""A room's websocket through the front to its worker: after the handshakes, bytes passed on as they come (RFC 6455).
 
 The browser's websocket ends at the front (its tokens, Host and Origin checked there: routes.py); the front opens one to
-the worker's room server for it (its handshake made here, `open_upstream`). Frames, the bulk of the traffic, are not
-parsed on the way down: a worker's frames to its client are unmasked, as a browser expects of its server, so the bytes
-the worker sends are written to the browser's connection as they are (only the frames' headers are followed, to know
-where a frame ends: `FrameEnds`). The browser's messages (small: moves, grabs) are read as messages and sent up masked,
-as a client's must be; its pongs and pings go up too, so that the worker's heartbeat sees the browser. Nothing else
-writes to the browser's connection meanwhile (no heartbeat, ping or close of the front's own in between): a frame is
-never cut by another. A slow browser: the front stops reading from the worker while the browser's connection holds more
-than HIGH_WATER bytes unsent, so the worker's hub sees a slow client as it would without the front.
+the worker's room server for it (its handshake made here, `open_upstream`). After the handshakes nothing is parsed
+either way, so that a message costs the front one read and one write:
+- up: the browser's frames are masked, as a client's must be, and the worker is the browser's server: they are written
+  to the worker's connection as they come (`_BrowserSocket` puts them there instead of aiohttp's websocket reader);
+- down: a worker's frames to its client are unmasked, as a browser expects of its server, so they are written to the
+  browser's connection as they come (`Upstream`). Only the frames' headers are followed, to know where a frame ends
+  (`FrameEnds`).
+The worker checks the messages (their size, their kinds) as it would the browser's own. Nothing else writes to either
+connection meanwhile (no heartbeat, ping or close of the front's own in between): a frame is never cut by another.
+A slow reader: the front stops reading from one side while the other side's connection holds more than HIGH_WATER
+bytes unsent, so the worker's hub sees a slow client as it would without the front.
 
 When the worker goes (its connection ends between two frames), the browser's websocket is closed with 1012 (service
 restart): its link connects again, to the room's new place; when the worker closes it, the worker's close frame is what
@@ -19,20 +22,20 @@ from __future__ import annotations
 
 import asyncio
 import base64
-import contextlib
 import hashlib
 import os
 import struct
 from urllib.parse import urlsplit
 
-from aiohttp import WSMsgType, web
+from aiohttp import web
 
-#: Bytes unsent to a browser past which the front stops reading its room's frames from the worker.
+#: Bytes unsent to one side past which the front stops reading from the other.
 HIGH_WATER = 1 << 20
 #: Seconds the worker's handshake may take.
 HANDSHAKE_TIMEOUT = 10.0
+#: Seconds between two looks at a side that was over HIGH_WATER.
+_DRAIN_POLL = 0.005
 _GUID = b"258EAFA5-E914-47DA-95CA-C5AB0DC85B11"
-_OPCODES = {WSMsgType.TEXT: 0x1, WSMsgType.BINARY: 0x2, WSMsgType.PING: 0x9, WSMsgType.PONG: 0xA}
 
 
 class Refused(Exception):
@@ -44,49 +47,167 @@ class Refused(Exception):
         self.text = text
 
 
-async def open_upstream(url: str, headers: dict) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+class Upstream(asyncio.Protocol):
+    """The front's connection to a worker's room socket. Until `pipe`, what the worker sends is kept (the handshake's
+    answer, then any frames); after, it is written to the browser's connection as it comes (the module's docstring)."""
+
+    def __init__(self) -> None:
+        self.transport: asyncio.Transport | None = None
+        self.kept = bytearray()
+        self.lost = False
+        self.ends = FrameEnds()
+        self.browser: asyncio.Transport | None = None
+        self.finished: asyncio.Future | None = None
+        self._waiter: asyncio.Future | None = None
+
+    # -- asyncio.Protocol --------------------------------------------------------------------------------------
+    def connection_made(self, transport) -> None:
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        if self.browser is None:
+            self.kept += data
+            self._wake()
+        else:
+            self._down(data)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.lost = True
+        self._wake()
+        self.finish("worker")
+
+    # -- the handshake ------------------------------------------------------------------------------------------
+    def _wake(self) -> None:
+        if self._waiter is not None and not self._waiter.done():
+            self._waiter.set_result(None)
+
+    async def take(self, until: bytes | None = None, size: int = 0) -> bytes:
+        """The kept bytes up to and with `until`, or the first `size` of them, once they are there."""
+        while True:
+            if until is None:
+                at = size if len(self.kept) >= size else -1
+            else:
+                at = self.kept.find(until)
+                at = at + len(until) if at >= 0 else -1
+            if at >= 0:
+                break
+            if self.lost:
+                raise asyncio.IncompleteReadError(bytes(self.kept), None)
+            self._waiter = asyncio.get_running_loop().create_future()
+            await self._waiter
+        out = bytes(self.kept[:at])
+        del self.kept[:at]
+        return out
+
+    # -- passing the worker's bytes on --------------------------------------------------------------------------
+    def pipe(self, browser, finished: asyncio.Future) -> None:
+        """From now on the worker's bytes go to the `browser`'s transport; `finished` gets which side ended first:
+        "worker" (its connection went), "browser" or "closed" (the worker's close frame passed)."""
+        self.browser, self.finished = browser, finished
+        kept, self.kept = bytes(self.kept), bytearray()
+        if kept:
+            self._down(kept)
+        if self.lost:
+            self.finish("worker")
+
+    def finish(self, why: str) -> None:
+        if self.finished is not None and not self.finished.done():
+            self.finished.set_result(why)
+
+    def _down(self, data: bytes) -> None:
+        browser = self.browser
+        if browser is None or browser.is_closing():
+            self.finish("browser")
+            return
+        self.ends.feed(data)
+        browser.write(data)
+        if self.ends.closed and self.ends.between:
+            self.finish("closed")
+        elif browser.get_write_buffer_size() > HIGH_WATER:
+            _hold_until_drained(self.transport, browser, self.finished)
+
+
+def _hold_until_drained(reading, writing, finished: asyncio.Future | None) -> None:
+    """Stop reading `reading` until `writing` holds at most HIGH_WATER bytes unsent (or `finished` is done)."""
+    reading.pause_reading()
+
+    def look() -> None:
+        if finished is not None and finished.done() or reading.is_closing():
+            return
+        if writing.is_closing() or writing.get_write_buffer_size() <= HIGH_WATER:
+            reading.resume_reading()
+        else:
+            loop.call_later(_DRAIN_POLL, look)
+
+    loop = asyncio.get_running_loop()
+    loop.call_later(_DRAIN_POLL, look)
+
+
+async def open_upstream(url: str, headers: dict) -> Upstream:
     """A websocket to `url` (ws://host:port/path?query, the worker's room socket) with `headers`; Refused when the
     worker answers with anything but 101, OSError / TimeoutError when it cannot be reached."""
     parts = urlsplit(url)
-    reader, writer = await asyncio.wait_for(asyncio.open_connection(parts.hostname, parts.port), HANDSHAKE_TIMEOUT)
+    if parts.hostname is None or parts.port is None:
+        raise ValueError(f"a worker's room socket is ws://host:port/path; got {url!r}")
+    loop = asyncio.get_running_loop()
+    transport, upstream = await asyncio.wait_for(
+        loop.create_connection(Upstream, parts.hostname, parts.port), HANDSHAKE_TIMEOUT)
     try:
         key = base64.b64encode(os.urandom(16)).decode()
         target = parts.path + (f"?{parts.query}" if parts.query else "")
         lines = [f"GET {target} HTTP/1.1", f"Host: {parts.hostname}:{parts.port}", "Upgrade: websocket",
                  "Connection: Upgrade", f"Sec-WebSocket-Key: {key}", "Sec-WebSocket-Version: 13",
                  *(f"{k}: {v}" for k, v in headers.items())]
-        writer.write(("\r\n".join(lines) + "\r\n\r\n").encode("latin-1"))
-        head = (await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), HANDSHAKE_TIMEOUT)).decode("latin-1")
+        transport.write(("\r\n".join(lines) + "\r\n\r\n").encode("latin-1"))
+        head = (await asyncio.wait_for(upstream.take(b"\r\n\r\n"), HANDSHAKE_TIMEOUT)).decode("latin-1")
         status_line, *fields = head.split("\r\n")
         status = int(status_line.split(" ", 2)[1])
         found = {k.strip().lower(): v.strip() for k, _, v in (f.partition(":") for f in fields if f)}
         if status != 101:
             length = int(found.get("content-length", "0") or 0)
-            body = await asyncio.wait_for(reader.readexactly(length), HANDSHAKE_TIMEOUT) if length else b""
+            body = await asyncio.wait_for(upstream.take(size=length), HANDSHAKE_TIMEOUT) if length else b""
             raise Refused(status, body.decode(errors="replace"))
         accept = base64.b64encode(hashlib.sha1(key.encode() + _GUID).digest()).decode()
         if found.get("sec-websocket-accept") != accept:
             raise Refused(502, "the worker's websocket handshake did not match")
     except BaseException:
-        writer.close()
+        transport.close()
         raise
-    return reader, writer
+    return upstream
 
 
-def client_frame(opcode: int, payload: bytes) -> bytes:
-    """One masked frame (a client's, RFC 6455 5.2) of `payload`."""
-    n = len(payload)
-    if n < 126:
-        head = struct.pack("!BB", 0x80 | opcode, 0x80 | n)
-    elif n < 1 << 16:
-        head = struct.pack("!BBH", 0x80 | opcode, 0x80 | 126, n)
-    else:
-        head = struct.pack("!BBQ", 0x80 | opcode, 0x80 | 127, n)
-    mask = os.urandom(4)
-    if not n:
-        return head + mask
-    masked = int.from_bytes(payload, "little") ^ int.from_bytes((mask * (n // 4 + 1))[:n], "little")
-    return head + mask + masked.to_bytes(n, "little")
+class _BrowserSocket(web.WebSocketResponse):
+    """The browser's websocket: its handshake made by aiohttp, then what the browser sends goes to the worker's
+    connection as it comes, in place of aiohttp's websocket reader (aiohttp's payload parser: `feed_data` and
+    `feed_eof`)."""
+
+    def __init__(self, upstream: Upstream):
+        super().__init__(compress=False, autoping=False, autoclose=False)
+        self.upstream = upstream
+        self.browser = None
+
+    def _post_start(self, request, protocol, writer) -> None:
+        self._ws_protocol = protocol
+        self._writer = writer
+        self.browser = request.transport
+        request.protocol.set_parser(self)
+        request.protocol.keep_alive(False)
+
+    def feed_data(self, data: bytes) -> tuple[bool, bytes]:
+        worker = self.upstream.transport
+        if worker is None or worker.is_closing():
+            self.upstream.finish("worker")
+        else:
+            worker.write(data)
+            if worker.get_write_buffer_size() > HIGH_WATER:
+                _hold_until_drained(self.browser, worker, self.upstream.finished)
+        return False, b""
+
+    def feed_eof(self) -> None:
+        self.upstream.finish("browser")
+
+    async def write_eof(self) -> None:  # the relay ends both connections itself
+        return None
 
 
 def close_frame(code: int, reason: bytes = b"") -> bytes:
@@ -136,57 +257,22 @@ class FrameEnds:
             self.head, self.left = b"", size
 
 
-async def relay(request, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> web.WebSocketResponse:
-    """The browser's websocket (`request`, accepted here) and the worker's (`reader`, `writer`), until either ends
-    (the module's docstring)."""
-    browser = web.WebSocketResponse(max_msg_size=64 * 1024, compress=False, autoping=False, autoclose=False)
-    await browser.prepare(request)
-    out = request.transport
-    ends = FrameEnds()
-
-    async def down() -> str:
-        while True:
-            data = await reader.read(1 << 16)
-            if not data:
-                return "worker"
-            ends.feed(data)
-            if out is None or out.is_closing():
-                return "browser"
-            out.write(data)
-            if ends.closed and ends.between:
-                return "closed"
-            while out.get_write_buffer_size() > HIGH_WATER and not out.is_closing():
-                await asyncio.sleep(0.005)
-
-    async def up() -> str:
-        async for msg in browser:
-            opcode = _OPCODES.get(msg.type)
-            if opcode is not None:
-                payload = msg.data.encode() if msg.type == WSMsgType.TEXT else bytes(msg.data or b"")
-                writer.write(client_frame(opcode, payload))
-            elif msg.type == WSMsgType.CLOSE:
-                code = msg.data if isinstance(msg.data, int) else 1000
-                writer.write(client_frame(0x8, struct.pack("!H", code) + (msg.extra or "").encode()[:123]))
-                return "browser"
-            else:
-                return "browser"
-            if writer.transport.get_write_buffer_size() > HIGH_WATER:
-                await writer.drain()
-        return "browser"
-
-    tasks = [asyncio.ensure_future(down()), asyncio.ensure_future(up())]
+async def relay(request, upstream: Upstream) -> web.WebSocketResponse:
+    """The browser's websocket (`request`, accepted here) and the worker's (`upstream`), until either ends (the
+    module's docstring)."""
+    browser = _BrowserSocket(upstream)
+    finished = asyncio.get_running_loop().create_future()
+    upstream.finished = finished  # a browser gone while aiohttp answers it
     try:
-        done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-        first = next(iter(done)).result() if done and not next(iter(done)).exception() else "worker"
-        if first == "browser" and not tasks[0].done():  # the worker's close frame back, for a moment
-            with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(asyncio.shield(tasks[0]), 2.0)
+        await browser.prepare(request)
+        out = request.transport
+        upstream.pipe(out, finished)
+        first = await finished
     finally:
-        for task in tasks:
-            task.cancel()
-        writer.close()
+        if upstream.transport is not None:
+            upstream.transport.close()
     if out is not None and not out.is_closing():
-        if first == "worker" and ends.between and not ends.closed:  # the worker went: the room moves
+        if first == "worker" and upstream.ends.between and not upstream.ends.closed:  # the worker went: the room moves
             out.write(close_frame(1012, b"the room moves to another worker"))
         out.close()
     return browser
