@@ -7,13 +7,17 @@ reads nothing holding the worker back instead of filling the front's memory."""
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import struct
+import subprocess
+import sys
 
 import aiohttp
 import numpy as np
 import pytest
 from aiohttp import WSMsgType, web
+from helpers import ROOT
 
 from somwidget.frontend.studio import relay
 from somwidget.frontend.studio.relay import FrameEnds, Refused, close_frame, open_upstream
@@ -255,3 +259,14 @@ def test_a_browser_that_reads_nothing_holds_the_worker_back_and_then_gets_every_
             await worker.cleanup()
 
     asyncio.run(main())
+
+
+def test_the_relay_benchmark_counts_the_frames_the_relay_passed(tmp_path):
+    """benchmarks/bench_relay.py at its smallest: every designer's moves come back as frames through the real relay,
+    and the relay process's CPU is counted."""
+    out = tmp_path / "relay.json"
+    subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_relay.py"), "--designers", "2", "--seconds",
+                    "1.5", "--rate", "20", "--json", str(out)], check=True, timeout=120, capture_output=True)
+    (row,) = json.loads(out.read_text())
+    assert row["designers"] == 2 and 20 <= row["frames_per_s"] <= 45, row  # two designers at 20 moves a second
+    assert row["front_cpu_ms_a_frame"] > 0 and row["p95_ms"] is not None, row
