@@ -141,11 +141,14 @@ def test_a_ping_behind_a_drags_first_move_comes_back_at_once_and_other_views_kee
         after = np.array([any(0.0 <= a - f <= 0.5 for f in firsts) for a in t[1:]])
         steady = np.array([all(not -0.5 <= a - f <= 1.0 for f in firsts) for a in t[1:]])
         worst = [gaps[(t[1:] >= f) & (t[1:] <= f + 0.5)].max() for f in firsts]
+        before = [gaps[(t[1:] >= f - 0.5) & (t[1:] < f)].max() for f in firsts]  # the same half second, steady
         print(f"another view: steady gaps median {np.median(gaps[steady]) * 1e3:.1f} ms, p90 "
               f"{np.percentile(gaps[steady], 90) * 1e3:.1f} ms; after a first move median "
-              f"{np.median(gaps[after]) * 1e3:.1f} ms, worst per drag {[round(w * 1e3) for w in worst]} ms")
+              f"{np.median(gaps[after]) * 1e3:.1f} ms, worst per drag {[round(w * 1e3) for w in worst]} ms, in the "
+              f"half second before {[round(w * 1e3) for w in before]} ms")
         assert steady.sum() > 30 and after.sum() > 5 * len(firsts), "too few frames to compare"
-        # unchanged: the frames just after a first move come as often as the steady ones (medians), and no drag's
-        # worst gap is past what the steady frames' 90th percentile allows twice over
+        # unchanged: the frames just after a first move come as often as the steady ones (medians), and the worst
+        # gap in the half second after a first move is like the worst in the steady half second before it (medians
+        # over the drags: a stall at each first move shows, the machine's load is in both)
         assert np.median(gaps[after]) <= 1.5 * np.median(gaps[steady]) + 0.005
-        assert np.median(worst) <= 2 * np.percentile(gaps[steady], 90) + 0.010, worst
+        assert np.median(worst) <= 1.5 * np.median(before) + 0.020, (worst, before)
