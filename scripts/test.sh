@@ -14,7 +14,7 @@ fi
 echo "[test] ruff check ."
 .venv/bin/python -m ruff check .
 
-echo "[test] mypy (the package but the studio: pyproject.toml's [tool.mypy] files)"
+echo "[test] mypy (the whole package, the studio included: pyproject.toml's [tool.mypy] files)"
 .venv/bin/python -m mypy
 
 echo "[test] eslint (the browser client)"

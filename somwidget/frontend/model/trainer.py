@@ -25,6 +25,7 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import Future
+from typing import Protocol
 
 import numpy as np
 
@@ -49,6 +50,18 @@ class Pace:
         target = int(budget / self.cycle_time)
         # grow at most x2 a frame so one slow first call does not overshoot
         self.cycles = max(1, min(target, 2 * self.cycles, MAX_ITERATIONS))
+
+
+class TurnDriver(Protocol):
+    """A loop that runs the turns of many sessions from one thread (a studio worker's, studio/rounds.py): `add(trainer)`
+    runs its turns from now on and returns the loop's thread; `remove(trainer)`: no more (closed); `poke()`: an intent
+    arrived, a turn soon."""
+
+    def add(self, trainer: Trainer) -> threading.Thread: ...
+
+    def remove(self, trainer: Trainer) -> None: ...
+
+    def poke(self) -> None: ...
 
 
 class Trainer:
@@ -82,7 +95,7 @@ class Trainer:
         self.posted = 0  # calls posted so far
         self.ran = 0  # calls run so far
         #: The loop that runs this session's turns with others' (studio/rounds.py); None: a thread of its own
-        self.driver = None
+        self.driver: TurnDriver | None = None
         #: Called with the operations `drain` takes, before it applies them (a studio's room: its Som's state back from
         #: the batch that holds it, unless the batch can apply them too: studio/batched.py)
         self.before_apply: Callable[[list[Operation]], None] | None = None

@@ -29,7 +29,7 @@ REFUSED = ("somwidget studio: this page needs its link's token. A room's link (/
 
 
 def _same(a: str | None, b: str | None) -> bool:
-    return bool(a) and bool(b) and hmac.compare_digest(a.encode("utf-8", "replace"), b.encode("utf-8"))
+    return bool(a and b and hmac.compare_digest(a.encode("utf-8", "replace"), b.encode("utf-8")))
 
 
 def _port(request) -> int:

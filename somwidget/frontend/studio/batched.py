@@ -28,6 +28,7 @@ import numpy as np
 from ...backend.batch import MAX_BATCH_NEURONS, BatchSom
 from ...backend.presets import colours_of
 from ...backend.som import Som
+from ...backend.som_state import SomState
 from ..model.operations import Grab, Publish, Release, SetControls
 
 
@@ -80,7 +81,7 @@ class _Loan:
 
     key: tuple
     som: Som
-    state: object  # the Som's state (its s, its anchor's restarts): read every round, found once
+    state: SomState  # the Som's state (its s, its anchor's restarts): read every round, found once
     slot: int
     host: np.ndarray
     restarts: int
@@ -92,12 +93,20 @@ class _Group:
     """One BatchSom of alike rooms, a variant a room; its size doubles as rooms join."""
 
     def __init__(self) -> None:
-        self.batch: BatchSom | None = None
+        self._batch: BatchSom | None = None  # made by the first `slot`
         self.free: list[int] = []
         self.moves: list[tuple] = []  # (slot, controls, s, from anchor): the held rooms' moves, put in at once
         self.rounds = 0  # launches made
-        self.stepped: tuple | None = None  # the last round's copy of every weight and the slots it stepped
+        # the last round's copy of every weight and the slots it stepped
+        self.stepped: tuple[np.ndarray, np.ndarray] | None = None
         self.colours: dict = {}  # layout -> (m, N, 3) their nodes' colours, made when first asked for
+
+    @property
+    def batch(self) -> BatchSom:
+        """The group's BatchSom; a group holds a room (and has moves to put in) only once `slot` made it."""
+        if self._batch is None:
+            raise RuntimeError("a batch group was used before its first room took a slot (_Group.slot)")
+        return self._batch
 
     def put_moves(self) -> None:
         """The moves `hold` noted since the last round into the batch, in one call (BatchSom.move_rows)."""
@@ -112,7 +121,7 @@ class _Group:
         return self.free.pop()
 
     def _grow(self, som: Som) -> None:
-        old = self.batch
+        old = self._batch
         size = 2 if old is None else 2 * old.n_variants
         batch = BatchSom(som.topology, som.start_weights, np.repeat(som.controls[None], size, axis=0),
                          iterations=som.iterations, l_start=som.l_start, l_end=som.l_end, smoothing=som.smoothing,
@@ -122,7 +131,7 @@ class _Group:
             batch.take_over(old)
         first = 0 if old is None else old.n_variants
         self.free = list(range(size - 1, first - 1, -1)) + self.free
-        self.batch = batch
+        self._batch = batch
 
 
 class BatchedRooms:
@@ -196,10 +205,11 @@ class BatchedRooms:
         with self._lock:
             loan = self._loans.get(owner)
             group = None if loan is None else self._groups.get(loan.key)
-            if group is None or loan.stepped != group.rounds or layout.colour_space == "none":
+            if loan is None or group is None or loan.stepped != group.rounds or layout.colour_space == "none":
                 return None
             made = group.colours.get(layout)
             if made is None:
+                assert group.stepped is not None  # the round the loan was stepped by (loan.stepped) set it
                 host, slots = group.stepped
                 rows = host[slots]  # (m, N, n): the rooms that round stepped
                 m, n_nodes, n = rows.shape
@@ -241,14 +251,14 @@ class BatchedRooms:
                     groups.setdefault(loan.key, []).append((owner, loan, cycles))
             for key, items in groups.items():
                 group = self._groups[key]
-                batch = group.batch
                 try:
+                    batch = group.batch
                     group.put_moves()
                     slots = np.fromiter((loan.slot for _, loan, _ in items), np.int64, len(items))
-                    cycles = np.fromiter((c for _, _, c in items), np.int64, len(items))
+                    wanted = np.fromiter((c for _, _, c in items), np.int64, len(items))  # each room's cycles
                     s = batch.iteration
                     to = s.copy()
-                    to[slots] = np.minimum(s[slots] + cycles, batch.iterations[slots])
+                    to[slots] = np.minimum(s[slots] + wanted, batch.iterations[slots])
                     t = time.perf_counter()
                     batch.step_to(to)
                     host = batch.weights

@@ -18,10 +18,16 @@ import asyncio
 import contextlib
 import logging
 import os
+from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
 from .limits import StudioLimits
 from .places import RemotePlace
+
+if TYPE_CHECKING:
+    from distributed import Client
+
+    from .front import StudioFront
 
 log = logging.getLogger(__name__)
 
@@ -65,10 +71,16 @@ class DaskRooms:
         self.secret = secret
         self.limits = limits
         self.frame_rate = frame_rate
-        self.client = None
+        self.client: Client | None = None  # connected by start()
         self.places: dict[str, RemotePlace] = {}  # worker address -> its room server
         self._task: asyncio.Task | None = None
-        self._front = None
+
+    @property
+    def connected(self) -> Client:
+        """The client of the cluster's scheduler (start() connects it)."""
+        if self.client is None:
+            raise RuntimeError(f"not connected to the Dask scheduler {self.scheduler} (DaskRooms.start() first)")
+        return self.client
 
     async def start(self) -> list[RemotePlace]:
         try:
@@ -87,8 +99,8 @@ class DaskRooms:
             return []
         limits = {"rooms": self.limits.rooms, "nodes": self.limits.nodes, "memory_mb": self.limits.memory_mb,
                   "park_after": self.limits.park_after}
-        urls = await self.client.run(start_room_server, self.rooms_dir, self.secret, limits, self.frame_rate,
-                                     workers=workers, on_error="return")
+        urls = await self.connected.run(start_room_server, self.rooms_dir, self.secret, limits, self.frame_rate,
+                                        workers=workers, on_error="return")
         came = []
         for address, url in urls.items():
             if isinstance(url, BaseException):
@@ -102,22 +114,23 @@ class DaskRooms:
             came.append(place)
         return came
 
-    def watch(self, front) -> None:
-        self._front = front
-        self._task = asyncio.ensure_future(self._watch())
+    def watch(self, front: StudioFront) -> None:
+        """Rooms' servers on the workers that come (front.add_place); the rooms of those that go elsewhere
+        (front.lost)."""
+        self._task = asyncio.ensure_future(self._watch(front))
 
-    async def _watch(self) -> None:
+    async def _watch(self, front: StudioFront) -> None:
         while True:
             await asyncio.sleep(WATCH_PERIOD)
             try:
-                workers = set((await self.client.scheduler.identity())["workers"])
+                workers = set((await self.connected.scheduler.identity())["workers"])
             except Exception as exc:  # the scheduler is away: the places' own checks go on
                 log.warning("studio: cannot reach the Dask scheduler: %s", exc)
                 continue
             for address in [a for a in self.places if a not in workers]:
-                await self._front.lost(self.places.pop(address))
+                await front.lost(self.places.pop(address))
             for place in await self._join(sorted(workers - set(self.places))):
-                self._front.add_place(place)
+                front.add_place(place)
 
     async def close(self) -> None:
         if self._task is not None:

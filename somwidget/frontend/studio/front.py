@@ -16,11 +16,12 @@ import contextlib
 import itertools
 import logging
 import time
+from collections.abc import Awaitable, Callable, Collection, Coroutine, Iterable
 from dataclasses import dataclass, field
 
 from ..web import lan
 from .limits import StudioFull, room_name
-from .places import PlaceDown
+from .places import Place, PlaceDown
 from .rooms import RoomBusy
 
 log = logging.getLogger(__name__)
@@ -40,7 +41,7 @@ class Entry:
     name: str
     token: str
     preset: str = "car"
-    place: object | None = None
+    place: Place | None = None
     info: dict = field(default_factory=dict)
     slot: int = 0  # its number on the wall
 
@@ -48,8 +49,8 @@ class Entry:
 class StudioFront:
     """The directory of rooms over `places` (see the module's docstring). `preset`: what a new room starts from."""
 
-    def __init__(self, places, preset: str = "car"):
-        self.places: list = list(places)
+    def __init__(self, places: Iterable[Place], preset: str = "car"):
+        self.places: list[Place] = list(places)
         self.preset = preset
         self.rooms: dict[str, Entry] = {}
         self.moved: list[tuple[str, str, str, float]] = []  # (room, from, to, seconds): rooms brought back elsewhere
@@ -97,10 +98,10 @@ class StudioFront:
         return entry
 
     # -- places -----------------------------------------------------------------------------------------------
-    def alive(self) -> list:
+    def alive(self) -> list[Place]:
         return [p for p in self.places if p.alive]
 
-    def add_place(self, place) -> None:
+    def add_place(self, place: Place) -> None:
         """A worker that came (a Dask worker joining the cluster, a worker process started again): rooms that were live
         on a dead worker and found no place then come back now."""
         self.places.append(place)
@@ -108,12 +109,12 @@ class StudioFront:
         for entry in [e for e in self.rooms.values() if e.place is None and e.info.get("live")]:
             self._later(self._bring_back(entry, "a worker that went"))
 
-    def _later(self, coroutine) -> None:
+    def _later(self, coroutine: Coroutine[object, object, None]) -> None:
         task = asyncio.ensure_future(coroutine)
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
-    def choose(self, exclude=()) -> object:
+    def choose(self, exclude: Collection[Place] = ()) -> Place:
         """The least loaded live place with room for one more; StudioFull when every one is full."""
         open_places = [p for p in self.alive() if p not in exclude and p.load.get("rooms", 0) < p.load.get("limit", 1)]
         if not open_places:
@@ -122,22 +123,23 @@ class StudioFront:
             raise StudioFull(f"the studio is full: {held} live rooms on {len(alive)} worker(s), each at its limit "
                              "(--rooms-per-worker); rooms without a view are parked after a while, or add workers"
                              if alive else "the studio has no worker for rooms now; try again in a moment")
-        gpus: dict = {}  # GPU -> (its workers' rooms, their limits): the least loaded GPU first
+        # GPU -> (its workers' rooms, their limits): the least loaded GPU first
+        gpus: dict[str | None, tuple[int, int]] = {}
         for p in self.alive():
-            gpu = getattr(p, "gpu", None)
+            gpu = p.gpu
             if gpu is not None:
                 rooms, limit = gpus.get(gpu, (0, 0))
                 gpus[gpu] = (rooms + p.load.get("rooms", 0), limit + max(1, p.load.get("limit", 1)))
 
-        def load(p) -> tuple:
-            rooms, limit = gpus.get(getattr(p, "gpu", None), (0, 1))
+        def load(p: Place) -> tuple:
+            rooms, limit = gpus.get(p.gpu, (0, 1))
             return (rooms / limit, p.load.get("rooms", 0) / max(1, p.load.get("limit", 1)), p.load.get("nodes", 0))
 
         place = min(open_places, key=load)
         place.load = dict(place.load, rooms=place.load.get("rooms", 0) + 1)  # until its next report
         return place
 
-    async def lost(self, place) -> None:
+    async def lost(self, place: Place) -> None:
         """`place` is dead: its live rooms come back elsewhere now, its parked ones when next opened."""
         if not place.alive:
             return
@@ -157,6 +159,7 @@ class StudioFront:
             log.warning("studio: room %s could not come back yet: %s", entry.name, exc)
             return
         seconds = time.monotonic() - t0
+        assert entry.place is not None  # open() leaves the room on a place (it raises where none takes it)
         self.moved.append((entry.name, was, entry.place.label, seconds))
         log.info("studio: room %s is back on %s (%.2f s)", entry.name, entry.place.label, seconds)
 
@@ -192,11 +195,11 @@ class StudioFront:
             entry.place, entry.info = await self._place(lambda p: p.open(entry.name))
             return entry
 
-    async def _place(self, action) -> tuple[object, dict]:
+    async def _place(self, action: Callable[[Place], Awaitable[dict]]) -> tuple[Place, dict]:
         """(place, what `action(place)` answered) on the least loaded place that takes it: a place that is down, or
         refuses for its own limit, passes it on to the next; a room still held by a worker going down is tried again
         for BUSY_WAIT seconds. StudioFull (the last place's own words) when none takes it."""
-        tried: list = []
+        tried: list[Place] = []
         refusal: StudioFull | None = None
         deadline = time.monotonic() + BUSY_WAIT
         fresh = False
@@ -239,15 +242,17 @@ class StudioFront:
         for entry in sorted(self.rooms.values(), key=lambda e: e.name):
             info = {"name": entry.name, "preset": entry.preset, "title": entry.preset, "people": [], "watchers": 0,
                     "last_change": 0.0, "live": False, "nodes": None, **entry.info}
-            alive = entry.place is not None and entry.place.alive
-            info.update(slot=entry.slot, place=entry.place.label if alive else None, live=bool(info["live"]) and alive)
+            place = entry.place if entry.place is not None and entry.place.alive else None
+            info.update(slot=entry.slot, place=place.label if place is not None else None,
+                        live=bool(info["live"]) and place is not None)
             out.append(info)
         return out
 
     # -- watching the places ----------------------------------------------------------------------------------
-    def _note(self, place, listing: list[dict]) -> None:
+    def _note(self, place: Place, listing: list[dict]) -> None:
         for item in listing:
-            entry = self.rooms.get(item.get("name"))
+            name = item.get("name")
+            entry = self.rooms.get(name) if isinstance(name, str) else None  # the rooms are named by text
             if entry is None:
                 continue
             if item.get("live") and entry.place is not place:
@@ -255,7 +260,7 @@ class StudioFront:
             if entry.place is place:
                 entry.info = item
 
-    async def check(self, place) -> None:
+    async def check(self, place: Place) -> None:
         """One look at `place`: its load and rooms; DEAD_AFTER failures in a row make it dead."""
         try:
             await place.health()

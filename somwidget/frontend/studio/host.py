@@ -141,7 +141,6 @@ class RoomServer:
         self.bind = host
         self.port = port
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._runner: web.AppRunner | None = None
         self._ready = threading.Event()
         self._error: BaseException | None = None
         self._thread: threading.Thread | None = None
@@ -163,7 +162,7 @@ class RoomServer:
         self._loop = loop
         asyncio.set_event_loop(loop)
         try:
-            loop.run_until_complete(self._start())
+            runner = loop.run_until_complete(self._start())
         except BaseException as exc:
             self._error = exc
             self._ready.set()
@@ -174,15 +173,17 @@ class RoomServer:
             loop.run_forever()
         finally:
             parking.cancel()
-            loop.run_until_complete(self._runner.cleanup())
+            loop.run_until_complete(runner.cleanup())
             loop.close()
 
-    async def _start(self) -> None:
-        self._runner = web.AppRunner(self.host.app(), handle_signals=False, access_log=None)
-        await self._runner.setup()
-        site = web.TCPSite(self._runner, self.bind, self.port)
+    async def _start(self) -> web.AppRunner:
+        """Serve on bind:port (the port chosen now where it is 0); the runner, for the cleanup."""
+        runner = web.AppRunner(self.host.app(), handle_signals=False, access_log=None)
+        await runner.setup()
+        site = web.TCPSite(runner, self.bind, self.port)
         await site.start()
         self.port = site._server.sockets[0].getsockname()[1]
+        return runner
 
     async def _park_loop(self) -> None:
         loop = asyncio.get_running_loop()

@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import logging
+from typing import Protocol
 
 import aiohttp
 from aiohttp import web
@@ -34,12 +35,47 @@ class PlaceDown(RuntimeError):
     """A worker that does not answer."""
 
 
+class Place(Protocol):
+    """What the front (front.py, routes.py, wall.py) asks of a place: `LocalPlace` and `RemotePlace` answer it.
+
+    label: the place as messages name it; alive: False once the front found it dead (front.lost); failures: failed
+    looks in a row; load: its latest report ({"rooms", "nodes", "limit", ...}); gpu: the GPU it shares with other
+    places (None: it shares none). A remote place raises PlaceDown when its worker does not answer."""
+
+    label: str
+    alive: bool
+    failures: int
+    load: dict
+    gpu: str | None
+
+    async def health(self) -> dict: ...
+
+    async def known(self) -> list[dict]: ...
+
+    async def listing(self) -> list[dict]: ...
+
+    async def create(self, name: str, token: str, preset: str) -> dict: ...
+
+    async def open(self, name: str) -> dict: ...
+
+    async def park(self, name: str, force: bool = False) -> bool: ...
+
+    async def park_idle(self) -> list[str]: ...
+
+    async def thumbs(self, seen: dict) -> list[dict]: ...
+
+    async def socket(self, request: web.Request, name: str, watch: bool) -> web.StreamResponse: ...
+
+    async def close(self) -> None: ...
+
+
 class LocalPlace:
     """The rooms of this process."""
 
     def __init__(self, rooms: Rooms):
         self.rooms = rooms
         self.label = rooms.label
+        self.gpu: str | None = None  # shares no GPU with another place
         self.alive = True
         self.failures = 0
         self.load = rooms.load()
@@ -77,7 +113,7 @@ class LocalPlace:
                 out.append(dict(zip(("generation", "seq", "shape", "thumb"), got), name=room.name))
         return out
 
-    async def socket(self, request, name: str, watch: bool):
+    async def socket(self, request: web.Request, name: str, watch: bool) -> web.StreamResponse:
         room = await self._run(self.rooms.open, name)
         return await room.hub.open_socket(request, watch=watch)
 
@@ -108,7 +144,7 @@ class RemotePlace:
         self.gpu: str | None = None  # the GPU it steps its rooms on, where several workers share one (workers.py)
         self.alive = True
         self.failures = 0
-        self.load = {"rooms": 0, "nodes": 0, "limit": 1}
+        self.load: dict = {"rooms": 0, "nodes": 0, "limit": 1}
         self._http: aiohttp.ClientSession | None = None
 
     @property
@@ -160,7 +196,7 @@ class RemotePlace:
             item["thumb"] = base64.b64decode(item["thumb"])
         return out
 
-    async def socket(self, request, name: str, watch: bool):
+    async def socket(self, request: web.Request, name: str, watch: bool) -> web.StreamResponse:
         """The browser's websocket relayed to the room's on the worker, the bytes passed on both ways as they come
         (relay.py)."""
         url = self.url + f"/studio/rooms/{name}/ws" + ("?watch=1" if watch else "")

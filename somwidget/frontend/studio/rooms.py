@@ -292,6 +292,7 @@ class Rooms:
             session.timeline.bring_back(reading.current, reading.undo, reading.redo)
             if on_disk:
                 store.take_over(reading.files, reading.presets, reading.current.key)
+            assert session.autosave is not None  # a session given a store (_options) autosaves into it
             session.autosave.arm(on_disk=on_disk)
         except Exception as exc:  # noqa: BLE001 - the room starts afresh; the folder is kept aside unchanged
             if session is not None:
@@ -313,11 +314,13 @@ class Rooms:
         if room is None:
             return False
         with room.lock:
-            if not room.live or (room.views() and not force):
+            session = room.session
+            if session is None or (room.views() and not force):  # not live, or has views
                 return False
             room.thumb(None)  # the last picture, for the wall
-            session, hub = room.session, room.hub
+            hub = room.hub
             room.session = room.hub = None
+        assert hub is not None  # made with the session (Rooms._start)
         hub.detach()
         for client in list(hub.clients.values()):
             client.drop(b"the room was parked")

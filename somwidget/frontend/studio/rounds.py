@@ -130,7 +130,8 @@ class Rounds:
     def _turns(self, trainers: list, turns: list, now: float) -> float | None:
         """The rooms' turns of a round (`turns`: those that have one); when the next round is due."""
         due: float | None = None
-        asks, counts = [], {}
+        asks = []  # (trainer, cycles): the held rooms' steps, one launch a batch
+        counts: dict[tuple, int] = {}  # rooms of each batch key this round
         for trainer in turns:
             self._last[id(trainer)] = now
             lock = trainer.state.som_lock

@@ -202,6 +202,7 @@ class StudioRoutes:
         entry, _ = gate
         try:
             entry = await self.front.open(entry.name)
+            assert entry.place is not None  # open() leaves the room on a place (it raises where none takes it)
             return await entry.place.socket(request, entry.name, _watching(request))
         except (KeyError, StudioFull, RoomBusy, PlaceDown) as exc:
             return failure(exc)

@@ -17,7 +17,9 @@ import logging
 import secrets
 import signal
 import threading
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from aiohttp import web
 
@@ -26,9 +28,13 @@ from ..web import lan
 from .access import StudioAccess
 from .front import StudioFront
 from .limits import StudioLimits, room_name
-from .places import LocalPlace
+from .places import LocalPlace, Place
 from .rooms import FRAME_RATE, Rooms
 from .routes import StudioRoutes
+
+if TYPE_CHECKING:
+    from .dask_rooms import DaskRooms
+    from .workers import LocalWorkers
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +72,7 @@ class StudioServer:
         self.secret = secrets.token_urlsafe(24)  # the front's, for its workers
         self.front: StudioFront | None = None
         self.routes: StudioRoutes | None = None
-        self.pool = None  # LocalWorkers or DaskRooms
+        self.pool: LocalWorkers | DaskRooms | None = None
         self._runner: web.AppRunner | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
@@ -90,11 +96,13 @@ class StudioServer:
         return f"{self.base}/?token={self.access.join}"
 
     def room_url(self, name: str, watch: bool = False) -> str:
+        if self.front is None:
+            raise RuntimeError("the studio is not started: its rooms have no links yet (start() first)")
         entry = self.front.rooms[room_name(name)]
         return f"{self.base}/r/{entry.name}/{'watch/' if watch else ''}?token={entry.token}"
 
     # -- running ------------------------------------------------------------------------------------------------
-    async def _places(self) -> list:
+    async def _places(self) -> Sequence[Place]:
         if self.scheduler:
             from .dask_rooms import DaskRooms
 
@@ -183,6 +191,8 @@ class StudioServer:
 
     def call(self, coroutine, timeout: float = 60.0):
         """Run a coroutine on the studio's loop from another thread (tests)."""
+        if self._loop is None:
+            raise RuntimeError("the studio is not started: it has no event loop to run on (start() first)")
         return asyncio.run_coroutine_threadsafe(coroutine, self._loop).result(timeout)
 
     def __enter__(self):

@@ -18,9 +18,11 @@ import contextlib
 import json
 import logging
 import struct
+from collections.abc import Callable
 
 from aiohttp import WSMsgType, web
 
+from .front import StudioFront
 from .places import PlaceDown
 
 log = logging.getLogger(__name__)
@@ -32,9 +34,9 @@ THUMB_MAGIC = b"SOMT"
 
 
 class WallFeed:
-    """The feed of the module's docstring over a `StudioFront`; `links(entry)`: the links a wall shows for a room."""
+    """The feed of the module's docstring over a `StudioFront`; `links(name)`: the links a wall shows for a room."""
 
-    def __init__(self, front, links):
+    def __init__(self, front: StudioFront, links: Callable[[str], dict]):
         self.front = front
         self.links = links
         self.pages: set[web.WebSocketResponse] = set()

@@ -10,10 +10,14 @@ import contextlib
 import logging
 import os
 import sys
+from typing import TYPE_CHECKING
 
 from .limits import StudioLimits
 from .places import RemotePlace
 from .worker import ANNOUNCE, SECRET_ENV
+
+if TYPE_CHECKING:
+    from .front import StudioFront
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +56,6 @@ class LocalWorkers:
             raise ValueError(f"--device {device}: no GPU here (CUDA_VISIBLE_DEVICES, or Warp, reports none)")
         self.gpus = gpus
         self.procs: dict[RemotePlace, asyncio.subprocess.Process] = {}
-        self._front = None
         self._task: asyncio.Task | None = None
 
     def gpu_of(self, i: int) -> str | None:
@@ -62,9 +65,9 @@ class LocalWorkers:
     def _device(self, i: int) -> tuple[dict, str, str]:
         """(environment, device, label) of worker i."""
         env = dict(os.environ, **{SECRET_ENV: self.secret})
-        if not self.gpus:
-            return env, "cpu", f"CPU worker {i}"
         gpu = self.gpu_of(i)
+        if gpu is None:  # no GPUs
+            return env, "cpu", f"CPU worker {i}"
         env["CUDA_VISIBLE_DEVICES"] = gpu
         return env, "cuda:0", f"GPU {gpu}" + (f" worker {i}" if self.count > len(self.gpus) else "")
 
@@ -79,9 +82,11 @@ class LocalWorkers:
             args += ["--memory-per-worker", str(lim.memory_mb)]
         proc = await asyncio.create_subprocess_exec(*args, env=env, stdin=asyncio.subprocess.PIPE,
                                                     stdout=asyncio.subprocess.PIPE)
+        stdout = proc.stdout
+        assert stdout is not None  # stdout=PIPE
         try:
             while True:
-                line = (await asyncio.wait_for(proc.stdout.readline(), START_TIMEOUT)).decode(errors="replace")
+                line = (await asyncio.wait_for(stdout.readline(), START_TIMEOUT)).decode(errors="replace")
                 if not line:
                     raise RuntimeError(f"studio worker {label} exited ({await proc.wait()}) before it listened")
                 if line.startswith(ANNOUNCE):
@@ -94,25 +99,24 @@ class LocalWorkers:
         place.index = i
         place.gpu = self.gpu_of(i)
         self.procs[place] = proc
-        asyncio.ensure_future(self._drain(proc))
+        asyncio.ensure_future(self._drain(stdout))
         return place
 
     @staticmethod
-    async def _drain(proc) -> None:
+    async def _drain(stdout: asyncio.StreamReader) -> None:
         with contextlib.suppress(Exception):
-            while await proc.stdout.readline():
+            while await stdout.readline():
                 pass
 
     async def start(self) -> list[RemotePlace]:
         """Start every worker (at once); their places."""
         return list(await asyncio.gather(*(self.spawn(i) for i in range(self.count))))
 
-    def watch(self, front) -> None:
+    def watch(self, front: StudioFront) -> None:
         """Replace a worker that exits (its rooms come back on the others at once, front.lost)."""
-        self._front = front
-        self._task = asyncio.ensure_future(self._watch())
+        self._task = asyncio.ensure_future(self._watch(front))
 
-    async def _watch(self) -> None:
+    async def _watch(self, front: StudioFront) -> None:
         while True:
             await asyncio.sleep(0.5)
             for place, proc in list(self.procs.items()):
@@ -120,9 +124,10 @@ class LocalWorkers:
                     continue
                 del self.procs[place]
                 log.warning("studio: %s exited (%s); starting another", place.label, proc.returncode)
-                await self._front.lost(place)
+                await front.lost(place)
                 try:
-                    self._front.add_place(await self.spawn(place.index))
+                    assert place.index is not None  # numbered by spawn, as every place of procs
+                    front.add_place(await self.spawn(place.index))
                 except Exception as exc:  # the others go on
                     log.error("studio: could not start a worker again: %s", exc)
 
