@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from helpers import insecure_context, request
 
+import somwidget
 from somwidget.frontend.studio.limits import StudioLimits
 from somwidget.frontend.studio.serve import StudioServer
 from somwidget.frontend.transport.frames import decode_frame
@@ -246,11 +247,19 @@ def test_https_beyond_loopback(tmp_path):
     from somwidget.frontend.web import lan
 
     cfg = lan.prepare_lan("127.0.0.1", directory=tmp_path / "cert")
-    with StudioServer(tmp_path / "rooms", device="cpu", lan_config=cfg, rooms=["alice"]) as s:
+    # the room on a worker process: its websocket goes through the front's relay, over TLS to the browser
+    with StudioServer(tmp_path / "rooms", device="cpu", workers=1, lan_config=cfg, rooms=["alice"]) as s:
         assert s.base.startswith("https://")
         ctx = insecure_context()
         with urllib.request.urlopen(s.room_url("alice"), timeout=60, context=ctx) as r:
             assert r.status == 200
+        assert [p.label for p in s.front.places] == ["CPU worker 0"]
+        with somwidget.join(s.room_url("alice"), verify=False) as room:
+            to = room.control_positions[0] + np.float32([0.0, 0.0, 0.1])
+            room.move_control(0, to)
+            np.testing.assert_allclose(room.control_positions[0], to, atol=1e-6)
+            assert room.wait_idle(60)  # the frames came back through the relay
+            assert room.frame["iteration"] == room.frame["iterations"]
         status, _ = request(s.base + "/r/alice/")
         assert status == 403
         with pytest.raises((OSError, http.client.HTTPException)):  # plain HTTP to the TLS port: no answer read
