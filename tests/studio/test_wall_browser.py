@@ -14,6 +14,7 @@ import os
 import numpy as np
 import pytest
 from helpers import CHROMIUM, wait_for
+from room_page import drag
 
 import somwidget
 from somwidget.frontend.client import DIST
@@ -113,28 +114,6 @@ def test_three_rooms_on_the_wall_follow_their_designers(studio, designers, brows
                                    .textContent.includes('changed just now')""", timeout=10000)
     assert errors == [], errors
     page.close()
-
-
-def press_on(page, index: int, k: int) -> tuple[float, float]:
-    """The mouse pressed on control `index` (or its mirrored copy where the clay hides it)."""
-    for j in (index, index + k):
-        x, y = page.evaluate(f"somxr.controlScreen({j})")
-        page.mouse.move(x, y)
-        try:
-            page.wait_for_function(f"somxr.state().hover.some((j) => j % {k} === {index})", timeout=3000)
-        except Exception:
-            continue
-        page.mouse.down()
-        return x, y
-    raise AssertionError(f"control {index} cannot be taken with the mouse")
-
-
-def drag(page, index: int, k: int) -> None:
-    x, y = press_on(page, index, k)
-    for s in range(1, 10):
-        page.mouse.move(x + 8 * s, y - 5 * s)
-        page.wait_for_timeout(40)
-    page.mouse.up()
 
 
 def test_the_teacher_watches_a_room_then_takes_part(studio, designers, browser):
