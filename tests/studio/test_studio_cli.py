@@ -6,12 +6,16 @@ from __future__ import annotations
 
 import json
 import re
+import signal
 import subprocess
 import sys
+import time
 
+import numpy as np
 import pytest
 from helpers import ROOT, Serve
 
+import somwidget
 from somwidget.cli import main
 
 
@@ -41,10 +45,38 @@ def test_serve_studio_prints_its_links_and_keeps_rooms_across_restarts():
     again = Serve("--studio", env={"SOMWIDGET_DATA_DIR": str(data)})
     try:
         assert again.get(alice_path)[0] == 200  # the same link opens the same room
-        status, body = again.get("/api/rooms", links_teacher(again.output()))
+        again_shown = links(again.output() + "  room alice: x\n")
+        # the teacher's and the class's links too (the tokens kept in the rooms folder, for this user alone)
+        assert again_shown["wall"].split("token=")[1] == wall_token
+        assert again_shown["class"].split("token=")[1] == shown["class"].split("token=")[1]
+        assert (data / "studio" / "access.json").stat().st_mode & 0o077 == 0
+        status, body = again.get("/api/rooms", wall_token)
         assert {r["name"] for r in json.loads(body)["rooms"]} == {"alice", "bob"}
     finally:
         again.stop()
+
+
+def test_ctrl_c_with_a_room_open_on_a_worker_stops_the_studio_at_once_and_saves_it():
+    """SIGINT (Ctrl+C) while a notebook holds a room that lives on a worker process, through the front's relay: the
+    studio stops within seconds (it used to wait out its connections: 30 to 60 s), saving the room, and its log says
+    nothing of workers gone or rooms brought back elsewhere (a stop is no worker's death)."""
+    server = Serve("--studio", "--workers", "2", "--rooms", "alice", "--park-after", "0")
+    try:
+        room = somwidget.join(links(server.output())["alice"])
+        room.move_control(0, room.control_positions[0] + np.float32([0.0, 0.0, 0.1]))
+        assert room.wait_idle(60)
+        t0 = time.monotonic()
+        server.proc.send_signal(signal.SIGINT)
+        server.proc.wait(30)
+        took = time.monotonic() - t0
+    finally:
+        server.stop()
+    output = server.output()
+    assert server.proc.returncode == 0, output[-2000:]
+    assert took < 10, f"the studio took {took:.1f} s to stop:\n{output[-2000:]}"
+    assert "is gone" not in output and "bringing back" not in output and "exited" not in output, output[-2000:]
+    assert (server.data_dir / "studio" / "alice" / "session" / "manifest.json").is_file()
+    room.close()
 
 
 def links_teacher(output: str) -> str:

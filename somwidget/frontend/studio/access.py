@@ -15,7 +15,10 @@ runs before any of this on every route.
 from __future__ import annotations
 
 import hmac
+import json
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from aiohttp import web
 
@@ -24,6 +27,8 @@ from ..web import lan
 TEACHER = "teacher"
 MEMBER = "member"
 CLASS = "class"
+#: The studio's teacher and class tokens, in its rooms folder (a room's name has no dot: no room is called so).
+ACCESS_FILE = "access.json"
 REFUSED = ("somwidget studio: this page needs its link's token. A room's link (/r/<name>/?token=...) opens that room "
            "alone; the wall and the other rooms need the teacher's link.\n")
 
@@ -68,6 +73,30 @@ class StudioAccess:
     def __post_init__(self):
         if not self.teacher or not self.join or _same(self.teacher, self.join):
             raise ValueError("the studio's teacher and class tokens must be given and differ")
+
+    @classmethod
+    def kept_in(cls, folder) -> StudioAccess:
+        """The tokens kept in the rooms `folder` (ACCESS_FILE, readable by this user alone): read, or made and written
+        there, so that a restart keeps the wall's and the class's links as it keeps the rooms' own. ValueError naming
+        the file when it is not a studio's tokens."""
+        path = Path(folder) / ACCESS_FILE
+        try:
+            kept = json.loads(path.read_text(encoding="utf-8"))
+            return cls(teacher=str(kept["teacher"]), join=str(kept["join"]))
+        except FileNotFoundError:
+            pass
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"{path}: not the studio's tokens ({type(exc).__name__}: {exc}); expected "
+                             '{"teacher": "...", "join": "..."}; remove it to make new links') from None
+        access = cls()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        part = path.with_name(ACCESS_FILE + ".part")
+        with os.fdopen(os.open(part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "w", encoding="utf-8") as f:
+            json.dump({"teacher": access.teacher, "join": access.join}, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(part, path)
+        return access
 
     def grant(self, request, room: str | None = None, room_token: str | None = None) -> str | None:
         """TEACHER, MEMBER (of `room`, by `room_token`), CLASS, or None: the strongest the request shows."""

@@ -132,11 +132,16 @@ class DaskRooms:
             for place in await self._join(sorted(workers - set(self.places))):
                 front.add_place(place)
 
-    async def close(self) -> None:
+    async def stop_watching(self) -> None:
+        """No worker's coming or going is followed from now on (the studio stops)."""
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
+            self._task = None
+
+    async def close(self) -> None:
+        await self.stop_watching()
         if self.client is not None:
             with contextlib.suppress(Exception):
                 await self.client.close()

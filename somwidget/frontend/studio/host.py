@@ -178,7 +178,7 @@ class RoomServer:
 
     async def _start(self) -> web.AppRunner:
         """Serve on bind:port (the port chosen now where it is 0); the runner, for the cleanup."""
-        runner = web.AppRunner(self.host.app(), handle_signals=False, access_log=None)
+        runner = web.AppRunner(self.host.app(), handle_signals=False, access_log=None, shutdown_timeout=3.0)
         await runner.setup()
         site = web.TCPSite(runner, self.bind, self.port)
         await site.start()

@@ -146,6 +146,7 @@ class RemotePlace:
         self.failures = 0
         self.load: dict = {"rooms": 0, "nodes": 0, "limit": 1}
         self._http: aiohttp.ClientSession | None = None
+        self._relays: set[relay.Upstream] = set()  # the browsers' websockets relayed to this worker now
 
     @property
     def headers(self) -> dict:
@@ -206,8 +207,16 @@ class RemotePlace:
             return web.Response(status=exc.status, text=f"somwidget studio: the room's worker refused: {exc.text}\n")
         except (OSError, asyncio.TimeoutError, asyncio.IncompleteReadError, ValueError) as exc:
             raise PlaceDown(f"the worker at {self.url} does not answer: {exc or type(exc).__name__}") from None
-        return await relay.relay(request, upstream)
+        self._relays.add(upstream)
+        try:
+            return await relay.relay(request, upstream)
+        finally:
+            self._relays.discard(upstream)
 
     async def close(self) -> None:
+        """The browsers' websockets to this worker closed (1001: the studio stops; their pages connect again when it
+        is back), then the front's own connection."""
+        for upstream in list(self._relays):
+            upstream.finish("stopping")
         if self._http is not None:
             await self._http.close()

@@ -15,7 +15,7 @@ bytes unsent, so the worker's hub sees a slow client as it would without the fro
 
 When the worker goes (its connection ends between two frames), the browser's websocket is closed with 1012 (service
 restart): its link connects again, to the room's new place; when the worker closes it, the worker's close frame is what
-the browser gets.
+the browser gets; when the front stops, 1001 (going away).
 """
 
 from __future__ import annotations
@@ -101,8 +101,9 @@ class Upstream(asyncio.Protocol):
 
     # -- passing the worker's bytes on --------------------------------------------------------------------------
     def pipe(self, browser, finished: asyncio.Future) -> None:
-        """From now on the worker's bytes go to the `browser`'s transport; `finished` gets which side ended first:
-        "worker" (its connection went), "browser" or "closed" (the worker's close frame passed)."""
+        """From now on the worker's bytes go to the `browser`'s transport; `finished` gets what ended it first:
+        "worker" (its connection went), "browser", "closed" (the worker's close frame passed) or "stopping" (the
+        front stops)."""
         self.browser, self.finished = browser, finished
         kept, self.kept = bytes(self.kept), bytearray()
         if kept:
@@ -272,7 +273,10 @@ async def relay(request, upstream: Upstream) -> web.WebSocketResponse:
         if upstream.transport is not None:
             upstream.transport.close()
     if out is not None and not out.is_closing():
-        if first == "worker" and upstream.ends.between and not upstream.ends.closed:  # the worker went: the room moves
-            out.write(close_frame(1012, b"the room moves to another worker"))
+        if upstream.ends.between and not upstream.ends.closed:
+            if first == "worker":  # the worker went: the room moves
+                out.write(close_frame(1012, b"the room moves to another worker"))
+            elif first == "stopping":  # the front stops (its pages connect again when it is back)
+                out.write(close_frame(1001, b"the studio stops"))
         out.close()
     return browser

@@ -38,6 +38,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+#: Seconds a stop waits for the connections still open (the pages' websockets) before it ends them.
+SHUTDOWN_TIMEOUT = 3.0
+
 
 def default_rooms_dir() -> Path:
     return data_dir() / "studio"
@@ -64,7 +67,7 @@ class StudioServer:
         self.limits = limits or StudioLimits()
         self.preset = preset
         self.frame_rate = frame_rate
-        self.access = access or StudioAccess()
+        self.access = access or StudioAccess.kept_in(self.rooms_dir)
         self.lan_config = lan_config
         self.scheduler = scheduler
         self.initial_rooms = [room_name(n) for n in rooms]
@@ -128,7 +131,7 @@ class StudioServer:
         app = web.Application(middlewares=[lan.request_guard(check_host=lan.is_loopback(self.host))])
         self.routes.add_routes(app.router)
         self.routes.wall.start()
-        self._runner = web.AppRunner(app, handle_signals=False, access_log=None)
+        self._runner = web.AppRunner(app, handle_signals=False, access_log=None, shutdown_timeout=SHUTDOWN_TIMEOUT)
         await self._runner.setup()
         ssl = self.lan_config.ssl_context() if self.lan_config is not None else None
         site = web.TCPSite(self._runner, self.lan_config.bind if self.lan_config else self.host, self.port,
@@ -140,10 +143,12 @@ class StudioServer:
                 await self.front.create(name)
 
     async def stop_async(self) -> None:
+        if self.pool is not None:
+            await self.pool.stop_watching()  # the workers' exits from now on are the stop's, not deaths
         if self.routes is not None:
             await self.routes.wall.close()
         if self.front is not None:
-            await self.front.close()  # no more looks at the places; this process's rooms saved
+            await self.front.close()  # no more looks at the places; the relays closed; this process's rooms saved
         if self.pool is not None:
             await self.pool.close()  # the workers' rooms saved as they stop
         if self._runner is not None:

@@ -80,8 +80,10 @@ class LocalWorkers:
                 "--frame-rate", str(self.frame_rate)]
         if lim.memory_mb is not None:
             args += ["--memory-per-worker", str(lim.memory_mb)]
+        # a session of its own: a terminal's Ctrl+C reaches the front alone, which stops its workers in turn (and
+        # a front that dies closes their stdin: they stop too)
         proc = await asyncio.create_subprocess_exec(*args, env=env, stdin=asyncio.subprocess.PIPE,
-                                                    stdout=asyncio.subprocess.PIPE)
+                                                    stdout=asyncio.subprocess.PIPE, start_new_session=True)
         stdout = proc.stdout
         assert stdout is not None  # stdout=PIPE
         try:
@@ -131,11 +133,16 @@ class LocalWorkers:
                 except Exception as exc:  # the others go on
                     log.error("studio: could not start a worker again: %s", exc)
 
-    async def close(self) -> None:
+    async def stop_watching(self) -> None:
+        """No worker is replaced from now on (the studio stops: its workers' exits are no deaths)."""
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
+            self._task = None
+
+    async def close(self) -> None:
+        await self.stop_watching()
         for proc in self.procs.values():
             if proc.returncode is None:
                 with contextlib.suppress(ProcessLookupError):
