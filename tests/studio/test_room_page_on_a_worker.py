@@ -43,6 +43,7 @@ def test_a_room_on_a_worker_is_dragged_by_mouse_and_comes_back_to_the_page_after
         page.on("pageerror", lambda e: errors.append(str(e)))
         page.goto(studio.room_url("alice"))
         page.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=30000)
+        assert page.inner_text("#title") == "Room alice: Car"  # the person reads which room this is
 
         drag(page, 3, k)  # through the relay, both ways
         wait_for(lambda: np.linalg.norm(room.control_positions[3] - start[3]) > 0.05, 30, "the drag in the room")

@@ -132,6 +132,7 @@ def test_the_teacher_watches_a_room_then_takes_part(studio, designers, browser):
     watch = opened.value
     watch.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=30000)
     assert watch.title() == "somwidget: alice (watching)"
+    assert watch.inner_text("#title") == "Room alice, watching only: Car"  # said on the page, not only in its tab
     drag(watch, 3, k)
     watch.wait_for_function("(somxr.state().lastError || '').includes('only watches')", timeout=10000)
     assert alice.wait_idle(60)
@@ -154,3 +155,25 @@ def test_the_teacher_watches_a_room_then_takes_part(studio, designers, browser):
     assert wait_drawn_at(wall, studio, "alice")[0] != pixels  # the wall follows the teacher's change too
     part.close()
     context.close()
+
+
+def test_the_lobby_checks_a_name_as_it_is_typed_and_a_refusal_goes_when_the_name_changes(studio, browser):
+    page = browser.new_page(viewport={"width": 800, "height": 600})
+    console = []
+    page.on("console", lambda m: console.append(m.text) if m.type == "error" else None)
+    page.goto(studio.lobby_url)
+    name = page.locator("#name")
+    name.click()
+    page.keyboard.type("my room")  # a space: the browser's own check says no before anything is sent
+    assert page.evaluate("document.getElementById('name').validity.patternMismatch")
+    name.fill("")
+    page.keyboard.type("alice")  # taken
+    assert not page.evaluate("document.getElementById('name').validity.patternMismatch")
+    page.click("button[type=submit]")
+    page.wait_for_function("document.getElementById('error').textContent.includes('exists already')", timeout=10000)
+    name.click()
+    page.keyboard.type("2")  # another name: the refusal of the last one goes
+    assert page.inner_text("#error") == ""
+    # no "not a valid regular expression" for the name's pattern (the refusal's own 400 is logged as a failed load)
+    assert [m for m in console if "Failed to load resource" not in m] == [], console
+    page.close()

@@ -182,7 +182,8 @@ class StudioRoutes:
             return failure(exc)
         title = f"somwidget: {entry.name}" + (" (watching)" if watch else "")
         html = path.read_text(encoding="utf-8").replace("somwidget XR</title>", f"{title}</title>")
-        html = html.replace('<div id="title">somwidget XR</div>', f'<div id="title">{title}</div>')
+        heading = f"Room {entry.name}" + (", watching only" if watch else "")  # the view adds ": <the clay's title>"
+        html = html.replace('<div id="title">somwidget XR</div>', f'<div id="title">{heading}</div>')
         response = web.Response(text=html, content_type="text/html", headers={"Cache-Control": "no-cache"})
         return self.access.remember(request, response, grant, entry.name, entry.token)
 

@@ -142,8 +142,8 @@ class ViewConnection:
             self._refuse(exc, exc.intent)
             return _done(False)
         if self.watch and type(intent) not in WATCHING:
-            self._refuse(ValueError(f"{intent.type}: this view only watches the session; open it with its own link "
-                                    "to take part"), intent.type)
+            self._refuse(ValueError(f"{intent.type}: this view only watches the session; to take part, open its own "
+                                    "link (in a studio: Take part, on the wall)"), intent.type)
             return _done(False)
         if type(intent) in AT_ONCE or (isinstance(intent, PingIntent) and not self._waiting):
             return _done(self._handle(intent))

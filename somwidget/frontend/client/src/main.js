@@ -73,7 +73,9 @@ function showSaving() {
   ui.error.hidden = !state.autosave;
 }
 view.transport = link;
-view.onTopology = (t) => { ui.title.textContent = `somwidget XR: ${t.title}`; };
+// the page's own name first (a studio's room page names its room: "somwidget: alice"), then the clay's
+const pageTitle = ui.title.textContent;
+view.onTopology = (t) => { ui.title.textContent = `${pageTitle}: ${t.title}`; };
 view.onFirstFrame = () => {
   if (xr.session) xr.wantPlace = true;
   else view.frame();
