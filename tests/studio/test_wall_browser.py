@@ -177,3 +177,42 @@ def test_the_lobby_checks_a_name_as_it_is_typed_and_a_refusal_goes_when_the_name
     # no "not a valid regular expression" for the name's pattern (the refusal's own 400 is logged as a failed load)
     assert [m for m in console if "Failed to load resource" not in m] == [], console
     page.close()
+
+
+#: How much of a room's thumbnail is drawn on, and how much of its border (a clay cut by the canvas's edge).
+EXTENT = """(name) => {
+  const canvas = document.querySelector(`section.room[data-name="${name}"] canvas`);
+  const { width: w, height: h } = canvas;
+  const data = canvas.getContext('2d').getImageData(0, 0, w, h).data;
+  let ink = 0, edge = 0;
+  for (let y = 0; y < h; y += 1) {
+    for (let x = 0; x < w; x += 1) {
+      if (data[4 * (y * w + x) + 3] === 0) continue;
+      ink += 1;
+      if (x < 2 || y < 2 || x >= w - 2 || y >= h - 2) edge += 1;
+    }
+  }
+  return [ink / (w * h), edge];
+}"""
+
+
+def test_a_room_made_while_the_wall_is_open_is_framed_whole_once_it_has_trained(studio, browser):
+    """Its first thumbnail is its clay before training: the wall frames the room anew as the clay outgrows that, so the
+    person sees the whole trained clay, not a close-up of it (as a freshly loaded wall shows it)."""
+    settle(studio)
+    page = browser.new_page(viewport={"width": 1100, "height": 700})
+    page.goto(studio.wall_url)
+    page.wait_for_function("somwall.state().rooms.length >= 3", timeout=30000)
+    studio.call(studio.front.create("dora", "car"))
+    assert session_of(studio, "dora").wait_idle(180)
+    wait_drawn_at(page, studio, "dora")
+    share, edge = page.evaluate(EXTENT, "dora")
+    fresh = browser.new_page(viewport={"width": 1100, "height": 700})
+    fresh.goto(studio.wall_url)
+    fresh.wait_for_function("somwall.state().rooms.some((r) => r.name === 'dora' && r.drawn > 0)", timeout=30000)
+    wait_drawn_at(fresh, studio, "dora")
+    fresh_share, _ = fresh.evaluate(EXTENT, "dora")
+    assert edge == 0 and share < 0.6, (share, edge)  # the whole clay inside its thumbnail
+    assert abs(share - fresh_share) < 0.25 * fresh_share, (share, fresh_share)  # framed as a fresh wall frames it
+    page.close()
+    fresh.close()

@@ -183,7 +183,12 @@
     const colours = new Uint8Array(buffer, 16 + 12 * n, 3 * n);
     room.thumb = { positions, colours };
     room.seq = seq;
-    if (!room.view) room.view = viewOf(positions);
+    // framed anew when the clay has outgrown its view, shrunk to under half of it or moved off its centre (a new
+    // room's first thumbnail is its clay before training); small changes keep the view, so the thumbnail stays still
+    const fitted = viewOf(positions);
+    const v = room.view;
+    if (!v || fitted.radius > v.radius * 1.05 || fitted.radius < v.radius * 0.5 ||
+        Math.hypot(...fitted.centre.map((c, a) => c - v.centre[a])) > 0.25 * v.radius) room.view = fitted;
     stats.thumbs += 1;
     draw(room);
   }
