@@ -37,6 +37,8 @@ def test_serve_studio_prints_its_links_and_keeps_rooms_across_restarts():
         assert server.get("/r/bob/", shown["alice"].split("token=")[1])[0] == 403
         status, body = server.get("/api/rooms", wall_token)
         assert status == 200 and {r["name"] for r in json.loads(body)["rooms"]} == {"alice", "bob"}
+        made = {r["name"]: r["last_change"] for r in json.loads(body)["rooms"]}
+        assert made["bob"] > 0
         data = server.data_dir
     finally:
         server.stop()
@@ -51,7 +53,9 @@ def test_serve_studio_prints_its_links_and_keeps_rooms_across_restarts():
         assert again_shown["class"].split("token=")[1] == shown["class"].split("token=")[1]
         assert (data / "studio" / "access.json").stat().st_mode & 0o077 == 0
         status, body = again.get("/api/rooms", wall_token)
-        assert {r["name"] for r in json.loads(body)["rooms"]} == {"alice", "bob"}
+        listed = {r["name"]: r for r in json.loads(body)["rooms"]}
+        assert set(listed) == {"alice", "bob"}
+        assert not listed["bob"]["live"] and listed["bob"]["last_change"] == made["bob"]  # parked: its folder says
     finally:
         again.stop()
 

@@ -72,7 +72,9 @@ class StudioFront:
         for place in self.alive():
             try:
                 for record in await place.known():
-                    self._entry(record["name"], record["token"], record.get("preset", "car"))
+                    entry = self._entry(record["name"], record["token"], record.get("preset", "car"))
+                    # when it last changed, as its folder says (a parked room's place reports nothing of it)
+                    entry.info.setdefault("last_change", float(record.get("last_change", 0.0)))
                 break
             except PlaceDown:
                 continue
