@@ -29,6 +29,10 @@ from ..web import lan
 from .limits import StudioFull
 from .rooms import RoomBusy, Rooms
 
+#: Seconds a stop waits for the connections still open (the pages' websockets) before it ends them: the worker's
+#: room server and the front alike (serve.py).
+SHUTDOWN_TIMEOUT = 3.0
+
 log = logging.getLogger(__name__)
 
 #: Seconds between two looks for idle rooms.
@@ -178,7 +182,8 @@ class RoomServer:
 
     async def _start(self) -> web.AppRunner:
         """Serve on bind:port (the port chosen now where it is 0); the runner, for the cleanup."""
-        runner = web.AppRunner(self.host.app(), handle_signals=False, access_log=None, shutdown_timeout=3.0)
+        runner = web.AppRunner(self.host.app(), handle_signals=False, access_log=None,
+                               shutdown_timeout=SHUTDOWN_TIMEOUT)
         await runner.setup()
         site = web.TCPSite(runner, self.bind, self.port)
         await site.start()

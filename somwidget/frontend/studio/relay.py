@@ -100,11 +100,11 @@ class Upstream(asyncio.Protocol):
         return out
 
     # -- passing the worker's bytes on --------------------------------------------------------------------------
-    def pipe(self, browser, finished: asyncio.Future) -> None:
-        """From now on the worker's bytes go to the `browser`'s transport; `finished` gets what ended it first:
-        "worker" (its connection went), "browser", "closed" (the worker's close frame passed) or "stopping" (the
-        front stops)."""
-        self.browser, self.finished = browser, finished
+    def pipe(self, browser) -> None:
+        """From now on the worker's bytes go to the `browser`'s transport; `finished` (set before) gets what ended it
+        first: "worker" (its connection went), "browser", "closed" (the worker's close frame passed) or "stopping"
+        (the front stops)."""
+        self.browser = browser
         kept, self.kept = bytes(self.kept), bytearray()
         if kept:
             self._down(kept)
@@ -267,7 +267,7 @@ async def relay(request, upstream: Upstream) -> web.WebSocketResponse:
     try:
         await browser.prepare(request)
         out = request.transport
-        upstream.pipe(out, finished)
+        upstream.pipe(out)
         first = await finished
     finally:
         if upstream.transport is not None:

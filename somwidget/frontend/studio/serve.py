@@ -27,6 +27,7 @@ from ..model.storage import data_dir
 from ..web import lan
 from .access import StudioAccess
 from .front import StudioFront
+from .host import SHUTDOWN_TIMEOUT
 from .limits import StudioLimits, room_name
 from .places import LocalPlace, Place
 from .rooms import FRAME_RATE, Rooms
@@ -37,9 +38,6 @@ if TYPE_CHECKING:
     from .workers import LocalWorkers
 
 log = logging.getLogger(__name__)
-
-#: Seconds a stop waits for the connections still open (the pages' websockets) before it ends them.
-SHUTDOWN_TIMEOUT = 3.0
 
 
 def default_rooms_dir() -> Path:
