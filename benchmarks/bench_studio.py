@@ -500,7 +500,7 @@ def run_gpu_counts(args, gpu_counts: list[int], per_gpu: list[int], presets: tup
         return (f"{g} GPU{'s' if g > 1 else ''} x {workers_of(g, w) // g} workers: {n}"
                 + (f" ({n / one:.2f}x one GPU)" if one and g > 1 else ""))
 
-    print(f"# most designers at p95 <= {TARGET_MS:g} ms (car rooms, one a designer): "
+    print(f"# most designers at p95 <= {TARGET_MS:g} ms ({args.presets} rooms, one a designer): "
           + "; ".join(shown(g, w, n) for (g, w), n in best.items()), flush=True)
     if args.kill_worker and best:
         g = max(g for g, _ in best)

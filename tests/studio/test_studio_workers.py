@@ -15,6 +15,7 @@ from helpers import wait_for
 
 import somwidget
 from somwidget.frontend.studio.limits import StudioFull, StudioLimits
+from somwidget.frontend.studio.places import PlaceDown
 from somwidget.frontend.studio.serve import StudioServer
 
 #: How long a dead worker's rooms may take to be back (issue 37).
@@ -121,3 +122,45 @@ def test_a_new_room_goes_to_the_least_loaded_gpu_then_its_least_loaded_worker():
     places[2].alive = False  # a worker gone: its GPU's other worker carries that GPU's share
     loads = {g: sum(p.load["rooms"] for p in places if p.alive and p.gpu == g) for g in "01"}
     assert front.choose().gpu == min(loads, key=lambda g: loads[g] / (20 if g == "0" else 10))
+
+
+class _CallingPlace(_Place):
+    """A place whose calls fail the way a worker's do: `slow` answers its health check but not a room's call in
+    time, `dead` answers neither; a sound one makes the room."""
+
+    def __init__(self, gpu: str, rooms: int, kind: str):
+        super().__init__(gpu, rooms)
+        self.kind, self.made = kind, []
+
+    async def health(self) -> dict:
+        if self.kind == "dead":
+            raise PlaceDown(f"{self.label} does not answer")
+        return {"load": self.load}
+
+    async def create(self, name: str, token: str, preset: str) -> dict:
+        if self.kind != "sound":
+            raise PlaceDown(f"{self.label} does not answer in time")
+        self.made.append(name)
+        return {"name": name, "live": True}
+
+
+def test_a_worker_too_slow_for_one_call_stays_in_service_and_a_silent_one_is_lost():
+    import asyncio
+
+    from somwidget.frontend.studio.front import StudioFront
+
+    slow, dead, sound = _CallingPlace("0", 0, "slow"), _CallingPlace("1", 1, "dead"), _CallingPlace("2", 2, "sound")
+    front = StudioFront([slow, dead, sound])
+    entry = asyncio.run(front.create("alice", "car"))
+    assert entry.place is sound and sound.made == ["alice"]  # tried the least loaded first, in turn
+    assert slow.alive, "a worker that answers its health check was taken for dead after one slow call"
+    assert not dead.alive
+
+
+def test_a_worker_warms_its_kernels_before_it_announces_and_keeps_no_room_of_it(tmp_path):
+    from somwidget.frontend.studio.rooms import Rooms
+
+    rooms = Rooms(tmp_path, device="cpu")
+    rooms.warm()
+    assert rooms.rooms() == [] and list(tmp_path.iterdir()) == []
+    assert rooms.batches.launches == 0  # its own batch, not the worker's

@@ -153,6 +153,16 @@ class StudioFront:
         for entry in [e for e in orphans if e.info.get("live")]:  # in tasks of their own: a caller may hold a lock
             self._later(self._bring_back(entry, place.label))
 
+    async def _failed(self, place: Place) -> None:
+        """A call to `place` failed: it is lost unless it still answers a health check. A call that outlasts its
+        timeout on a busy worker is no death: the next place takes the room, and the monitor's looks decide."""
+        try:
+            await place.health()
+        except PlaceDown:
+            await self.lost(place)
+        else:
+            log.warning("studio: %s answers, but too slowly for a room's call; the next place is tried", place.label)
+
     async def _bring_back(self, entry: Entry, was: str) -> None:
         t0 = time.monotonic()
         try:
@@ -193,7 +203,7 @@ class StudioFront:
                     entry.info = await place.open(entry.name)
                     return entry
                 except PlaceDown:
-                    await self.lost(place)
+                    await self._failed(place)
             entry.place, entry.info = await self._place(lambda p: p.open(entry.name))
             return entry
 
@@ -219,7 +229,7 @@ class StudioFront:
             try:
                 return place, await action(place)
             except PlaceDown:
-                await self.lost(place)
+                await self._failed(place)
                 tried.append(place)
             except StudioFull as exc:
                 refusal = exc

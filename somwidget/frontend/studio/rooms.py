@@ -153,6 +153,19 @@ class Rooms:
         self.batches = BatchedRooms()  # alike rooms held in one batch, stepped in one launch (batched.py)
         self.rounds = Rounds(self.batches, self.frame_rate)  # one loop steps every room (rounds.py)
 
+    def warm(self, preset: str = "car") -> None:
+        """Step a throwaway room of `preset` alone and in a batch on this worker's device, so that the kernels' modules
+        are loaded before the worker takes rooms: a GPU's first launches load them, which takes seconds while eight
+        workers a GPU start at once, and a first room made meanwhile would outlast the front's call."""
+        som = _presets.get_preset(preset).make_som(device=self.device)
+        som.step(2)
+        batches = BatchedRooms()
+        key = batches.key(som)
+        assert key is not None  # a preset's Som of point controls is batched
+        batches.hold(0, som, key)
+        batches.step([(0, 2)])
+        batches.forget()
+
     # -- the rooms --------------------------------------------------------------------------------------------
     def known(self) -> list[RoomRecord]:
         """Every room with a folder (live here, parked, or another worker's), read from the rooms folder."""

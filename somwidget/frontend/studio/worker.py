@@ -45,6 +45,7 @@ def main(argv=None) -> int:
     limits = StudioLimits(args.rooms_per_worker, args.nodes_per_room, args.memory_per_worker, args.park_after)
     rooms = Rooms(args.rooms, device=args.device, limits=limits, frame_rate=args.frame_rate,
                   label=args.label or f"worker {os.getpid()} ({args.device})")
+    rooms.warm()
     server = RoomServer(rooms, secret, host=args.host, port=args.port).start()
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
