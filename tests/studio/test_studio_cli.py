@@ -77,9 +77,9 @@ def test_ctrl_c_with_a_room_open_on_a_worker_stops_the_studio_at_once_and_saves_
         server.stop()
     output = server.output()
     assert server.proc.returncode == 0, output[-2000:]
-    # within seconds here (3 s); under a loaded CI a worker has once in a few runs outlived the front's 20 s wait for
-    # it (then killed): that stall is open (the closing note), the bound below is what always held
-    assert took < 30, f"the studio took {took:.1f} s to stop:\n{output[-2000:]}"
+    # 2 to 8 s here under load. A worker whose SIGTERM another of its threads took used to sleep on until the front's
+    # 20 s wait for it ran out and it was killed (about one stop in eight): under 15 s, every worker stopped by itself
+    assert took < 15, f"the studio took {took:.1f} s to stop:\n{output[-2000:]}"
     assert "is gone" not in output and "bringing back" not in output and "exited" not in output, output[-2000:]
     assert (server.data_dir / "studio" / "alice" / "session" / "manifest.json").is_file()
     room.close()

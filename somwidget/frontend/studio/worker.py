@@ -21,6 +21,8 @@ from .rooms import FRAME_RATE, Rooms
 
 ANNOUNCE = "somwidget studio worker at "
 SECRET_ENV = "SOMWIDGET_STUDIO_SECRET"
+#: Seconds between the main thread's looks for a stop (SIGTERM, SIGINT, the front gone).
+SIGNAL_POLL = 0.2
 
 
 def main(argv=None) -> int:
@@ -60,7 +62,10 @@ def main(argv=None) -> int:
         stop.set()
 
     threading.Thread(target=watch_stdin, daemon=True).start()
-    stop.wait()
+    # in short waits: a signal that another thread of the process took runs its handler only when this (the main)
+    # thread next runs Python, and a wait without end would outlast the front's patience (then it kills the worker)
+    while not stop.wait(SIGNAL_POLL):
+        pass
     server.stop()
     return 0
 
