@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 import pytest
 from helpers import CHROMIUM
 
@@ -66,3 +67,59 @@ def test_a_parked_rooms_thumbnail_is_on_the_wall_after_the_studio_restarts(tmp_p
         assert not studio.front.places[0].rooms.live()  # shown without bringing the room back
         shot(page, "wall_after_restart.png")
         page.close()
+
+
+@pytest.fixture(scope="module")
+def studio(tmp_path_factory):
+    with StudioServer(tmp_path_factory.mktemp("rooms"), device="cpu", limits=StudioLimits(park_after=0)) as s:
+        s.call(s.front.create("bea", "sphere"))
+        assert s.front.places[0].rooms.get("bea").session.wait_idle(180)
+        yield s
+
+
+def session_of(studio, name):
+    return studio.front.places[0].rooms.get(name).session
+
+
+#: The watch page's controls that change the clay: the HUD's buttons and the view's drawing tools.
+EDITING = ("#train", "#undo", "#redo", "#reset", ".somview-stroke", ".somview-revolve")
+
+
+def test_the_watch_page_shows_itself_read_only_and_its_view_still_orbits(studio, browser):
+    session = session_of(studio, "bea")
+    before, steps = session.controls.copy(), session.history[0]
+    page = browser.new_page(viewport={"width": 1000, "height": 640})
+    page.goto(studio.room_url("bea", watch=True))
+    page.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=30000)
+    page.wait_for_timeout(300)
+    shot(page, "watch_page.png")
+    for selector in EDITING:  # what the person sees: greyed out, and the tooltip says why and what to do instead
+        control = page.locator(selector)
+        assert control.is_disabled(), f"{selector} looks enabled on a page that only watches"
+        title = control.get_attribute("title") or ""
+        assert "watching only" in title and "Take part" in title, (selector, title)
+    assert page.locator(".somview-fit").is_enabled() and page.locator(".somview-display").is_enabled()
+
+    # a drag that starts on a control turns the view (the camera moves round the clay)
+    camera = "document.getElementById('view').somview.rig.camera.position.toArray()"
+    eye = np.array(page.evaluate(camera))
+    x, y = page.evaluate("somxr.controlScreen(0)")
+    page.mouse.move(x, y)
+    page.wait_for_timeout(150)
+    assert page.evaluate("somxr.state().hover") == []  # no control lights up to be taken
+    page.mouse.down()
+    for s in range(1, 10):
+        page.mouse.move(x + 15 * s, y - 4 * s)
+        page.wait_for_timeout(30)
+    page.mouse.up()
+    page.wait_for_timeout(200)
+    moved = np.linalg.norm(np.array(page.evaluate(camera)) - eye)
+    assert moved > 0.1 * np.linalg.norm(eye), f"the view did not orbit (its camera moved {moved:.3g})"
+    page.keyboard.press("Control+z")  # and the keys that change the clay do nothing
+    page.keyboard.press("Delete")
+    page.wait_for_timeout(500)
+    assert page.evaluate("somxr.state().errors") == []  # nothing was sent to be refused
+    assert session.wait_idle(60)
+    np.testing.assert_array_equal(session.controls, before)
+    assert session.history[0] == steps
+    page.close()
