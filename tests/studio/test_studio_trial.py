@@ -18,6 +18,7 @@ import os
 import numpy as np
 import pytest
 from helpers import CHROMIUM
+from room_page import press_on
 
 from somwidget.frontend.client import DIST
 from somwidget.frontend.studio.limits import StudioLimits
@@ -123,3 +124,121 @@ def test_the_watch_page_shows_itself_read_only_and_its_view_still_orbits(studio,
     np.testing.assert_array_equal(session.controls, before)
     assert session.history[0] == steps
     page.close()
+
+
+#: The elements the person sees that say `text` themselves (their own text nodes), as [selector-ish, rect].
+SAYING = """(text) => {
+  const out = [];
+  for (const el of document.querySelectorAll('body *')) {
+    const own = [...el.childNodes].filter((n) => n.nodeType === 3).map((n) => n.textContent).join('');
+    if (!own.includes(text)) continue;
+    const r = el.getBoundingClientRect();
+    const style = getComputedStyle(el);
+    if (r.width && r.height && style.visibility !== 'hidden' && el.checkVisibility({ opacityProperty: true })) {
+      out.push({ id: el.id, cls: el.className, x: r.x + r.width / 2, y: r.y + r.height / 2 });
+    }
+  }
+  return out;
+}"""
+
+
+def test_an_error_on_a_rooms_page_is_said_once_where_it_can_be_read(studio, browser):
+    k = session_of(studio, "bea").n_controls
+    context = browser.new_context(viewport={"width": 1000, "height": 640})
+    first, second = context.new_page(), context.new_page()
+    for page in (first, second):
+        page.goto(studio.room_url("bea"))
+        page.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=30000)
+    press_on(first, 2, k)  # the first person holds control 2
+    first.wait_for_timeout(300)
+    x, y = press_on(second, 2, k)  # the second tries to drag it too: refused, told who holds it
+    for s in range(1, 5):
+        second.mouse.move(x - 6 * s, y + 4 * s)
+        second.wait_for_timeout(40)
+    second.mouse.up()
+    second.wait_for_function("(somxr.state().lastError || '').includes('held by')", timeout=10000)
+    shot(second, "room_page_error.png")
+    shown = second.evaluate(SAYING, "held by")
+    assert len(shown) == 1, f"the error is shown {len(shown)} times: {shown}"
+    (where,) = shown
+    assert where["id"] == "error", where  # in the panel
+    on_top = second.evaluate(f"document.elementFromPoint({where['x']}, {where['y']}).id")
+    assert on_top == "error", f"the error is covered by #{on_top}"
+    first.mouse.up()
+    context.close()
+
+
+def open_wall(context, studio):
+    wall = context.new_page()
+    wall.goto(studio.wall_url)
+    wall.wait_for_function("somwall.state().rooms.some((r) => r.name === 'bea' && r.drawn > 0)", timeout=30000)
+    return wall
+
+
+def test_copy_link_says_copied_or_shows_the_link_to_copy_by_hand(studio, browser):
+    link = studio.room_url("bea")
+    context = browser.new_context(viewport={"width": 900, "height": 600})
+    context.grant_permissions(["clipboard-read", "clipboard-write"], origin=studio.base)
+    wall = open_wall(context, studio)
+    copy = wall.locator('section.room[data-name="bea"] a.copy')
+    copy.click()
+    wall.wait_for_function("""document.querySelector('section.room[data-name="bea"] a.copy').textContent
+                              === 'Copied'""", timeout=3000)
+    shot(wall, "wall_copied.png")
+    assert wall.evaluate("navigator.clipboard.readText()") == link
+    wall.wait_for_function("""document.querySelector('section.room[data-name="bea"] a.copy').textContent
+                              === 'Copy link'""", timeout=6000)  # for a moment
+    context.close()
+
+    # a browser that refuses the clipboard (a page over plain http beyond this machine): the link to copy by hand
+    context = browser.new_context(viewport={"width": 900, "height": 600})
+    context.add_init_script("""navigator.clipboard.writeText = () =>
+        Promise.reject(new DOMException('Write permission denied.', 'NotAllowedError'));""")
+    wall = open_wall(context, studio)
+    wall.locator('section.room[data-name="bea"] a.copy').click()
+    field = wall.locator('section.room[data-name="bea"] .by-hand input')
+    field.wait_for(state="visible", timeout=3000)
+    assert field.input_value() == link
+    assert wall.evaluate("[document.activeElement.selectionStart, document.activeElement.selectionEnd]") == \
+        [0, len(link)]  # selected: Ctrl+C copies it
+    assert "Copy this link" in wall.inner_text('section.room[data-name="bea"] .by-hand')
+    shot(wall, "wall_copy_by_hand.png")
+    context.close()
+
+
+def test_the_radius_label_beside_the_cursor_stays_on_screen_at_the_right_edge(studio, browser):
+    width, height = 640, 600
+    page = browser.new_page(viewport={"width": width, "height": height})
+    page.goto(studio.room_url("bea"))
+    page.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=30000)
+    label = page.locator(".somview-radius")
+    for x in range(width - 40, width // 2, -20):  # the pointer on the clay as near the window's right edge as it goes
+        page.mouse.move(x, height // 2)
+        page.wait_for_timeout(120)
+        if label.is_visible():
+            break
+    shot(page, "radius_label_at_the_edge.png")
+    assert label.is_visible(), "no radius label beside the cursor"
+    box = label.bounding_box()
+    assert box["x"] >= 0 and box["x"] + box["width"] <= width, f"the label is cut off at the side: {box}"
+    assert box["y"] >= 0 and box["y"] + box["height"] <= height, f"the label is cut off: {box}"
+    page.mouse.move(x - 10, height - 20)  # and near the bottom edge: it goes above the cursor
+    page.wait_for_timeout(120)
+    if label.is_visible():
+        box = label.bounding_box()
+        assert box["y"] + box["height"] <= height, f"the label is cut off at the bottom: {box}"
+    page.close()
+
+
+def test_a_click_on_a_thumbnail_says_the_room_is_opening_until_its_tab_shows_it(studio, browser):
+    context = browser.new_context(viewport={"width": 900, "height": 600})
+    wall = open_wall(context, studio)
+    note = wall.locator('section.room[data-name="bea"] .opening')
+    with context.expect_page() as opened:
+        wall.click('section.room[data-name="bea"] canvas')
+    assert note.is_visible() and "Opening bea" in note.inner_text()  # at once, on the card clicked
+    shot(wall, "wall_opening.png")
+    tab = opened.value
+    tab.wait_for_function("window.somxr && somxr.state().frames > 0", timeout=30000)
+    note.wait_for(state="hidden", timeout=5000)  # gone once the room shows in its tab
+    context.close()

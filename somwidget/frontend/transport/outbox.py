@@ -115,7 +115,8 @@ class Outbox:
         radii = [round(float(r), 6) for r in frame.radii]
         controls = (frame.control_ids, frame.group, tuple(radii), frame.strokes)
         if peer.generation != frame.generation:
-            out.append(replace(topology, client=peer.id, watching=peer.watching, control_ids=list(frame.control_ids), group=frame.group,
+            out.append(replace(topology, client=peer.id, watching=peer.watching,
+                               control_ids=list(frame.control_ids), group=frame.group,
                                group_maps=group_maps(frame.group), mirror_axes=mirror_axes(frame.group),
                                n_controls=frame.n_controls, n_effective=len(frame.effective_controls), radii=radii,
                                strokes=list(frame.strokes)))

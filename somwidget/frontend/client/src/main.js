@@ -52,13 +52,6 @@ link = new Link(socketURL(), {
     if (s === 'connected' && state.mode) link.send(intents.hand('headset')); // a new connection starts as a desktop
     showStatus();
   },
-  onError: (e) => {
-    handlers.onError(e);
-    ui.error.textContent = e.message;
-    ui.error.hidden = false;
-    clearTimeout(state.hudErrorTimer);
-    state.hudErrorTimer = setTimeout(showSaving, 4000);
-  },
   // a failed autosave stays on the HUD (and the headset menu's status) until a save is on disk again
   onAutosave: (msg) => {
     state.autosave = msg.ok ? null : msg.message;
@@ -66,6 +59,14 @@ link = new Link(socketURL(), {
     showStatus();
   },
 });
+
+// A refused intent, on the HUD's error line for 4 s (not over the view as well: the panel is where it is read).
+view.onError = (e) => {
+  ui.error.textContent = e.message;
+  ui.error.hidden = false;
+  clearTimeout(state.hudErrorTimer);
+  state.hudErrorTimer = setTimeout(showSaving, 4000);
+};
 
 // The HUD's error line: the autosave's failure while saves fail, else nothing (a refused intent shows for 4 s).
 function showSaving() {

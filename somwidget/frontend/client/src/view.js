@@ -305,16 +305,21 @@ export class ClayView {
     this.hintTimer = setTimeout(() => { this.hint.hidden = true; }, HINT_MS);
   }
 
+  // An error the server sent (a refused intent): kept for describe(), shown for 4 s over the view, or by the page's
+  // own `onError` where it has one.
   showError(e) {
     const s = this.state;
     s.lastError = e.message;
     s.errors.push(e);
     if (s.errors.length > 50) s.errors.shift();
+    if (this.onError) { // the page shows it itself (the XR page's panel): said once, where it is read
+      this.onError(e);
+      return;
+    }
     this.errorBox.textContent = e.message;
     this.errorBox.hidden = false;
     clearTimeout(s.errorTimer);
     s.errorTimer = setTimeout(() => { this.errorBox.hidden = true; }, 4000);
-    this.onError?.(e);
   }
 
   resize() {
