@@ -37,11 +37,11 @@
     el.insertAdjacentHTML('afterbegin', '<div class="opening" hidden></div>');
     room = { card: el, canvas: el.querySelector('canvas'), info: null, shape: null, generation: -1, thumb: null,
       view: null, drawn: 0, seq: -1 };
-    room.canvas.addEventListener('click', () => open(room, room.info.watch));
+    room.canvas.addEventListener('click', () => openRoom(room, room.info.watch));
     for (const a of el.querySelectorAll('a.watch, a.part')) {
       a.addEventListener('click', (ev) => {
         ev.preventDefault();
-        open(room, a.href);
+        openRoom(room, a.href);
       });
     }
     el.querySelector('.copy').addEventListener('click', (ev) => {
@@ -53,7 +53,7 @@
   }
 
   // The room in a new tab, the card saying "Opening" until that tab shows the clay (a busy studio takes seconds).
-  function open(room, url) {
+  function openRoom(room, url) {
     const tab = window.open(url, '_blank');
     const note = room.card.querySelector('.opening');
     note.textContent = `Opening ${room.info.name}\u2026`;
