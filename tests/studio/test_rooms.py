@@ -12,6 +12,7 @@ import pytest
 
 from somwidget.frontend.studio.limits import StudioFull, StudioLimits, room_name
 from somwidget.frontend.studio.rooms import RoomRecord, Rooms
+from somwidget.frontend.studio.thumbs import THUMB_FILE, thumbnail
 
 
 @pytest.fixture
@@ -28,6 +29,25 @@ def drag(session, index: int, by) -> np.ndarray:
         session.move_control(index, to)
     assert session.wait_idle(120)
     return to
+
+
+def test_a_parked_rooms_last_thumbnail_is_read_from_its_folder_by_a_worker_that_never_held_it(rooms, tmp_path):
+    room = rooms.create("alice", "t", "sphere")
+    assert room.session.wait_idle(120)
+    frame = room.session.frame
+    assert rooms.park("alice")
+    other = Rooms(tmp_path / "rooms", device="cpu")  # as after a restart, or another worker of the studio
+    try:
+        (got,) = other.thumbs({"alice": None, "nobody": None})
+        assert got["name"] == "alice" and got["seq"] == frame.seq and got["shape"]["n"] == len(frame.positions)
+        # the bytes of the frame the room parked with: its float32 positions, then its colours as RGB bytes
+        assert got["thumb"] == thumbnail(frame, {"nodes": None})
+        assert other.thumbs({"alice": frame.seq}) == []  # the wall has it already
+        assert not other.live()  # read without bringing the room back
+        (tmp_path / "rooms" / "alice" / THUMB_FILE).write_bytes(b"SOMTHUMB1\n\x05\x00\x00\x00{}")
+        assert other.thumbs({"alice": None}) == []  # a broken file shows nothing (and is logged), nothing crashes
+    finally:
+        other.close()
 
 
 def test_each_room_is_its_own_session(rooms, tmp_path):
@@ -60,7 +80,7 @@ def test_an_idle_room_is_parked_and_back_within_a_second(rooms):
     room.last_active = time.monotonic() - 1.0  # no view for a second, past park_after
     assert rooms.park_idle() == ["alice"]
     assert not room.live and session.closed
-    assert room.info()["live"] is False and room.thumb(None) is not None  # the wall keeps its picture
+    assert room.info()["live"] is False and room.latest_thumb() is not None  # the wall keeps its picture
     t0 = time.perf_counter()
     again = rooms.open("alice")
     took = time.perf_counter() - t0

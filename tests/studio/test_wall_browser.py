@@ -1,8 +1,9 @@
 """The wall in Chromium (studio/static/wall.js) against a real studio on 127.0.0.1: three rooms modelled by three
 designers (each a notebook's `somwidget.join`, a hand of its own room) appear on the wall with their names and who is
 in them, and each thumbnail follows its room's changes (its pixels change when that room's clay does, the others'
-stay). The teacher then clicks a thumbnail: the room opens to watch, where a drag with the mouse is refused and moves
-nothing; "Take part" opens it to act, where the same drag moves the room's control, and the wall follows.
+stay). The teacher then clicks a thumbnail: the room opens to watch, shown read-only, where a drag with the mouse
+turns the view and moves nothing; "Take part" opens it to act, where the same drag moves the room's control, and the
+wall follows.
 
 Needs /usr/bin/chromium, Python Playwright and the built client (npm run build).
 """
@@ -133,8 +134,16 @@ def test_the_teacher_watches_a_room_then_takes_part(studio, designers, browser):
     watch.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=30000)
     assert watch.title() == "somwidget: alice (watching)"
     assert watch.inner_text("#title") == "Room alice, watching only: Car"  # said on the page, not only in its tab
-    drag(watch, 3, k)
-    watch.wait_for_function("(somxr.state().lastError || '').includes('only watches')", timeout=10000)
+    assert watch.evaluate("somxr.state().watching") and watch.locator("#reset").is_disabled()  # shown read-only
+    x, y = watch.evaluate("somxr.controlScreen(3)")  # a drag from the control turns the view, and sends nothing
+    watch.mouse.move(x, y)
+    watch.mouse.down()
+    for s in range(1, 10):
+        watch.mouse.move(x + 8 * s, y - 5 * s)
+        watch.wait_for_timeout(40)
+    watch.mouse.up()
+    watch.wait_for_timeout(300)
+    assert watch.evaluate("somxr.state().errors") == [] and watch.evaluate("somxr.state().held") == []
     assert alice.wait_idle(60)
     np.testing.assert_array_equal(alice.controls, before)
     wait_for(lambda: room_state(wall, "alice")["people"] == ["notebook 1"], 10, "the watcher not listed as a designer")

@@ -127,7 +127,7 @@ def test_two_browsers_refusal_presence_two_steps_and_own_undo(browser, server, s
         b.mouse.up()
         b.wait_for_function(f"(somxr.state().lastError || '').includes('control 2 is held by {ha['name']}')",
                             timeout=10000)
-        assert f"held by {ha['name']}" in b.inner_text(".somview-error")  # on screen
+        assert f"held by {ha['name']}" in b.inner_text("#error")  # on screen, in the panel
         np.testing.assert_array_equal(session.controls[2], start[2])
 
         # two drags at once: A goes on with control 2 while B drags control 1; A lets go first

@@ -8,7 +8,7 @@ tokens and relays each room's websocket here (places.py).
     POST /studio/rooms                  {"name", "token", "preset"}: a new room
     POST /studio/rooms/{name}/open      bring it back here (or find it live)
     POST /studio/rooms/{name}/park      park it now (?force=1: whatever views it has)
-    POST /studio/thumbs                 {"seen": {name: seq}}: the thumbnails newer than those
+    POST /studio/thumbs                 {"seen": {name: seq or null}}: those rooms' thumbnails newer than those
     GET  /studio/rooms/{name}/ws        the room's view websocket (?watch=1: a view that only watches)
 
 `RoomServer` runs it on an event loop of its own in a daemon thread (a worker process's, or a Dask worker's), parking
@@ -119,13 +119,9 @@ class RoomHost:
 
     async def thumbs(self, request):
         seen = dict((await request.json()).get("seen", {}))
-        out = []
-        for room in self.rooms.rooms():
-            got = room.thumb(seen.get(room.name))
-            if got is not None:
-                generation, seq, shape, data = got
-                out.append({"name": room.name, "generation": generation, "seq": seq, "shape": shape,
-                            "thumb": base64.b64encode(data).decode("ascii")})
+        out = await self._run(self.rooms.thumbs, seen)
+        for item in out:
+            item["thumb"] = base64.b64encode(item["thumb"]).decode("ascii")
         return web.json_response(out)
 
     async def socket(self, request):

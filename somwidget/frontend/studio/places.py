@@ -62,7 +62,10 @@ class Place(Protocol):
 
     async def park_idle(self) -> list[str]: ...
 
-    async def thumbs(self, seen: dict) -> list[dict]: ...
+    async def thumbs(self, seen: dict) -> list[dict]:
+        """The thumbnails of the rooms named in `seen` ({name: seq the wall has, or None}) newer than it has: the
+        rooms live or parked here, and any other from its folder (Rooms.thumbs)."""
+        ...
 
     async def socket(self, request: web.Request, name: str, watch: bool) -> web.StreamResponse: ...
 
@@ -106,12 +109,7 @@ class LocalPlace:
         return await self._run(self.rooms.park_idle)
 
     async def thumbs(self, seen: dict) -> list[dict]:
-        out = []
-        for room in self.rooms.rooms():
-            got = room.thumb(seen.get(room.name))
-            if got is not None:
-                out.append(dict(zip(("generation", "seq", "shape", "thumb"), got), name=room.name))
-        return out
+        return await self._run(self.rooms.thumbs, seen)
 
     async def socket(self, request: web.Request, name: str, watch: bool) -> web.StreamResponse:
         room = await self._run(self.rooms.open, name)

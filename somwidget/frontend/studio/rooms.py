@@ -5,13 +5,15 @@ brought back from its folder on the next open.
 A room's folder, under the studio's rooms folder (one folder every worker of a cluster reaches):
 
     <rooms>/<name>/room.json    its name, token, preset, when it was made and last changed (written atomically)
+    <rooms>/<name>/thumb.bin    its last thumbnail for the wall (thumbs.py; written atomically)
     <rooms>/<name>/session/     its autosave (model/store.py): each completed step with the undo history, locked while
                                 a process has the room
 
 Parking (`park`, `park_idle`): a room with no view for `limits.park_after` seconds is closed: what changed since its
-last save is written, its Som (GPU memory) and Session (CPU memory) go; its last thumbnail stays for the wall. `open`
-brings it back from its folder as the autosave left it (its last completed step with its undo history; nothing trains
-until the next intent), as it does after a crash or on another worker after this one died.
+last save is written, its Som (GPU memory) and Session (CPU memory) go; its last thumbnail stays for the wall (and in
+its folder, for the wall after a restart). `open` brings it back from its folder as the autosave left it (its last
+completed step with its undo history; nothing trains until the next intent), as it does after a crash or on another
+worker after this one died.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from ..web.hub import ViewHub
 from .batched import BatchedRooms
 from .limits import StudioFull, StudioLimits, check_new_room, device_used_bytes, resident_bytes, room_name
 from .rounds import Rounds
-from .thumbs import public_shape, shape_of, thumbnail
+from .thumbs import THUMB_FILE, public_shape, read_thumb, save_thumb, shape_of, thumbnail
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +47,8 @@ RECORD = "room.json"
 SESSION = "session"
 #: Frames a second a room's views get (and its training thread aims at).
 FRAME_RATE = 30.0
+#: Seconds at least between two writes of a changing room's thumbnail into its folder.
+THUMB_SAVE_PERIOD = 10.0
 
 
 class RoomBusy(RuntimeError):
@@ -87,6 +91,8 @@ class Room:
         self.notices: list[str] = []
         self._applied = 0
         self._thumb: tuple[int, int, dict, bytes] | None = None  # (generation, seq, shape, bytes), kept when parked
+        self._thumb_unsaved = False  # _thumb is not in the folder yet
+        self._thumb_saved = 0.0  # when it was last written there (monotonic)
 
     @property
     def name(self) -> str:
@@ -122,17 +128,30 @@ class Room:
                 "saves": session.autosave.writer.saves if session is not None and session.autosave else 0,
                 "error": session.error if session is not None else None, "notices": list(self.notices)}
 
-    def thumb(self, seen: int | None) -> tuple[int, int, dict, bytes] | None:
-        """(generation, seq, shape, thumbnail bytes) of the latest frame unless its seq is `seen`."""
+    def latest_thumb(self) -> tuple[int, int, dict, bytes] | None:
+        """(generation, seq, shape, thumbnail bytes) of the room's latest frame (parked: of its last one); kept in its
+        folder when it changed, at most every THUMB_SAVE_PERIOD seconds (and when it parks: `save_thumb`)."""
         session = self.session
         if session is not None:
             frame = session.frame
             if self._thumb is None or self._thumb[1] != frame.seq:
                 shape = shape_of(frame.preset or session.preset)
                 self._thumb = (frame.generation, frame.seq, public_shape(shape), thumbnail(frame, shape))
-        if self._thumb is None or self._thumb[1] == seen:
-            return None
+                self._thumb_unsaved = True
+                if time.monotonic() - self._thumb_saved >= THUMB_SAVE_PERIOD:
+                    self.save_thumb()
         return self._thumb
+
+    def save_thumb(self) -> None:
+        """The latest thumbnail into the room's folder (thumbs.py), unless it is there already."""
+        if self._thumb is None or not self._thumb_unsaved:
+            return
+        try:
+            save_thumb(self.folder, self._thumb)
+        except OSError as exc:  # the wall shows it while this process lives; only a restart would miss it
+            log.warning("studio: room %s: its thumbnail cannot be kept in %s: %s", self.name, self.folder, exc)
+        self._thumb_unsaved = False
+        self._thumb_saved = time.monotonic()
 
 
 class Rooms:
@@ -150,6 +169,7 @@ class Rooms:
         self._rooms: dict[str, Room] = {}
         self._lock = threading.Lock()
         self._closed = False
+        self._kept_thumbs: dict[str, tuple[int, tuple | None]] = {}  # name -> (mtime_ns, read_thumb) of a folder
         self.batches = BatchedRooms()  # alike rooms held in one batch, stepped in one launch (batched.py)
         self.rounds = Rounds(self.batches, self.frame_rate)  # one loop steps every room (rounds.py)
 
@@ -330,7 +350,8 @@ class Rooms:
             session = room.session
             if session is None or (room.views() and not force):  # not live, or has views
                 return False
-            room.thumb(None)  # the last picture, for the wall
+            room.latest_thumb()  # the last picture, for the wall (kept in its folder for after a restart)
+            room.save_thumb()
             hub = room.hub
             room.session = room.hub = None
         assert hub is not None  # made with the session (Rooms._start)
@@ -362,6 +383,40 @@ class Rooms:
         return parked
 
     # -- for the front ----------------------------------------------------------------------------------------
+    def thumbs(self, seen: dict) -> list[dict]:
+        """The thumbnails of the rooms named in `seen` ({name: the seq the wall has, or None}) other than those it has:
+        a room held here from its frame (or its last), any other from its folder (a room parked before a restart).
+        Each {"name", "generation", "seq", "shape", "thumb": bytes}."""
+        out = []
+        for name, last in seen.items():
+            try:
+                name = room_name(name)
+            except ValueError:
+                continue
+            room = self.get(name)
+            kept = room.latest_thumb() if room is not None else None
+            kept = kept if kept is not None else self._kept_thumb(name)
+            if kept is not None and kept[1] != last:
+                out.append(dict(zip(("generation", "seq", "shape", "thumb"), kept), name=name))
+        return out
+
+    def _kept_thumb(self, name: str) -> tuple | None:
+        """What the room's folder keeps of its last thumbnail (read again only when the file changed)."""
+        path = self.folder / name / THUMB_FILE
+        try:
+            mtime = path.stat().st_mtime_ns
+        except OSError:
+            return None
+        cached = self._kept_thumbs.get(name)
+        if cached is None or cached[0] != mtime:
+            try:
+                kept = read_thumb(path.parent)
+            except (OSError, ValueError) as exc:
+                log.warning("studio: room %s: its kept thumbnail is not shown: %s", name, exc)
+                kept = None
+            cached = self._kept_thumbs[name] = (mtime, kept)
+        return cached[1]
+
     def listing(self) -> list[dict]:
         return [room.info() for room in self.rooms()]
 

@@ -3,19 +3,34 @@
 A room's *shape* (once per preset: `shape_of`) says what to draw: triangles (a surface), segments (the paper's lines,
 drawn as the roots' mesh edges) or points, over at most THUMB_NODES nodes (a bigger clay is clustered on a grid by
 the view's own decimation, transport/display.py). A *thumbnail* (`thumbnail`) is one frame of those nodes: float32
-positions, then RGB bytes; about 7 KB for the car. Nothing here runs unless a wall is open.
+positions, then RGB bytes; about 7 KB for the car. Nothing here runs unless a wall is open, or a room parks.
+
+A room's last thumbnail is kept in its folder (`save_thumb`, THUMB_FILE, written atomically) so that the wall shows a
+parked room's last clay after the studio restarts (`read_thumb`):
+
+    b"SOMTHUMB1\n", a little-endian uint32 (the header's length), the header (JSON: generation, seq, shape), the bytes
 """
 
 from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
 
 import numpy as np
 
 from ...backend import io as _io
 from ...backend import presets as _presets
+from ...backend.session_file import write_atomic
 from ..transport.display import PerPreset, decimate_display
 
 #: Most nodes a thumbnail carries.
 THUMB_NODES = 2048
+
+#: The file in a room's folder that keeps its last thumbnail.
+THUMB_FILE = "thumb.bin"
+_MAGIC = b"SOMTHUMB1\n"
+_LENGTH = struct.Struct("<I")
 
 _SHAPES = PerPreset(64)  # each preset's shape while it lives
 
@@ -58,3 +73,34 @@ def thumbnail(frame, shape: dict) -> bytes:
 def public_shape(shape: dict) -> dict:
     """The shape as the wall's page takes it (JSON)."""
     return {k: v for k, v in shape.items() if k != "nodes"}
+
+
+def save_thumb(folder: Path, kept: tuple[int, int, dict, bytes]) -> None:
+    """Keep (generation, seq, public shape, thumbnail bytes) in `folder`'s THUMB_FILE, written atomically."""
+    generation, seq, shape, data = kept
+    header = json.dumps({"generation": int(generation), "seq": int(seq), "shape": shape}).encode("utf-8")
+    write_atomic(folder / THUMB_FILE, lambda f: f.write(_MAGIC + _LENGTH.pack(len(header)) + header + data))
+
+
+def read_thumb(folder: Path) -> tuple[int, int, dict, bytes] | None:
+    """What `save_thumb` kept in `folder`; None when there is none. ValueError (naming the file) when it is not one
+    or its bytes do not match its shape."""
+    path = folder / THUMB_FILE
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        return None
+    start = len(_MAGIC) + _LENGTH.size
+    if not raw.startswith(_MAGIC) or len(raw) < start:
+        raise ValueError(f"{path}: not a room's thumbnail (it should start with {_MAGIC!r})")
+    (length,) = _LENGTH.unpack_from(raw, len(_MAGIC))
+    try:
+        header = json.loads(raw[start:start + length])
+        generation, seq, shape = int(header["generation"]), int(header["seq"]), header["shape"]
+        n = int(shape["n"])
+    except (ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: its header cannot be read ({exc})") from None
+    data = raw[start + length:]
+    if len(data) != 15 * n:  # n float32 x, y, z and n RGB bytes
+        raise ValueError(f"{path}: {len(data)} bytes of thumbnail, expected {15 * n} for its {n} nodes")
+    return generation, seq, shape, data

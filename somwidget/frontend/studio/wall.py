@@ -1,8 +1,9 @@
 """The wall's feed: every room's list entry and thumbnail, once a second, to every wall page open (the websocket
 /wall/ws; nothing is made while no wall is open).
 
-Each WALL_PERIOD the feed asks each place for the thumbnails newer than those it has (thumbs.py: a room's clay at
-most THUMB_NODES nodes, about 7 KB for the car, made only when its frame changed) and sends the wall pages, in order:
+Each WALL_PERIOD the feed asks each room's place for its thumbnail when newer than the one it has (thumbs.py: a room's
+clay at most THUMB_NODES nodes, about 7 KB for the car, made only when its frame changed; a room without a place,
+parked before the studio restarted, is read from its folder by any place) and sends the wall pages, in order:
 
     {"type": "rooms", "rooms": [...]}                    the list (front.listing), when it changed
     {"type": "shape", "slot", "name", "generation", "shape"}   a room's shape, when its generation is new
@@ -98,6 +99,18 @@ class WallFeed:
                 except Exception:  # pragma: no cover - a wall must not stop the studio
                     log.exception("studio: updating the wall failed")
 
+    def _asks(self) -> dict:
+        """place -> {name: the seq the wall has, or None}: each room asked of its place; a room without one (parked
+        before the studio restarted, or its place gone) of the first live place, which reads it from its folder."""
+        alive = self.front.alive()
+        asks: dict = {}
+        for entry in list(self.front.rooms.values()):
+            place = entry.place if entry.place is not None and entry.place.alive else (alive[0] if alive else None)
+            if place is not None:
+                kept = self.kept.get(entry.name)
+                asks.setdefault(place, {})[entry.name] = kept[1] if kept is not None else None
+        return asks
+
     async def tick(self) -> None:
         """One update of every wall page."""
         packets: list = []
@@ -105,8 +118,7 @@ class WallFeed:
         if listing != self._listing:
             self._listing = listing
             packets.append(listing)
-        seen = {name: kept[1] for name, kept in self.kept.items()}
-        for place in self.front.alive():
+        for place, seen in self._asks().items():
             try:
                 updates = await place.thumbs(seen)
             except PlaceDown:

@@ -83,7 +83,7 @@ class ViewConnection:
         self.name = name
         self.watch = watch  # a view that only watches (a studio's wall opens rooms so): WATCHING intents alone
         self.outbox = outbox_for(session)
-        self.peer = Peer(id=client_id)
+        self.peer = Peer(id=client_id, watching=watch)
         self.intents = 0  # intents done
         self.refused = 0  # messages refused
         self._lock = threading.Lock()

@@ -169,8 +169,9 @@ class TopologyMessage(ServerMessage):
     root -> tip for "lines"); `points`: draw each vertex as a point; `bounds`: {"min": [x, y, z], "max": [...]} of the
     start mesh and controls; `control_radius`: a control's drawn radius; `off_clay_gap`: past this distance from the
     clay a control gets a line to its nearest node (0: none); `parameters`: the settings a "set" may name.
-    The fields after `parameters` are the view's own: its client id (None over the notebook's comm) and the
-    controls as a `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates), `n_controls`
+    The fields after `parameters` are the view's own: its client id (None over the notebook's comm), `watching`
+    (the view only watches: its intents other than hello, hand and ping are refused, so it shows itself read-only) and
+    the controls as a `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates), `n_controls`
     and `n_effective` (originals, then mirrored copies)."""
 
     type: ClassVar[str] = "topology"
@@ -194,6 +195,7 @@ class TopologyMessage(ServerMessage):
     max_message_bytes: int = MAX_MESSAGE_BYTES
     parameters: list[dict] = field(default_factory=settings_schema)
     client: int | None = None
+    watching: bool = False
     control_ids: list[int] = field(default_factory=list)
     group: str = "none"
     group_maps: list[list[float]] = field(default_factory=lambda: [list(IDENTITY_MAP)])

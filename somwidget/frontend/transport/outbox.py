@@ -36,6 +36,7 @@ class Peer:
     """What one view has been sent: its generation, the control ids it knows, when it last had a status line."""
 
     id: int | None = None  # the client id its topology message carries (None: the notebook widget)
+    watching: bool = False  # the view only watches (its topology message says so: the page shows itself read-only)
     generation: int = -1
     control_ids: tuple = ()  # with the group, radii and strokes: the controls it knows
     last_status: float = 0.0
@@ -114,7 +115,8 @@ class Outbox:
         radii = [round(float(r), 6) for r in frame.radii]
         controls = (frame.control_ids, frame.group, tuple(radii), frame.strokes)
         if peer.generation != frame.generation:
-            out.append(replace(topology, client=peer.id, control_ids=list(frame.control_ids), group=frame.group,
+            out.append(replace(topology, client=peer.id, watching=peer.watching,
+                               control_ids=list(frame.control_ids), group=frame.group,
                                group_maps=group_maps(frame.group), mirror_axes=mirror_axes(frame.group),
                                n_controls=frame.n_controls, n_effective=len(frame.effective_controls), radii=radii,
                                strokes=list(frame.strokes)))

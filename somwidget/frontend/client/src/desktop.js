@@ -19,6 +19,7 @@ import { intents } from './protocol.js';
 const PAD = 1.2; // a control is hit within this many times its drawn radius
 const CLICK_PX = 4; // a press and release closer than this is a click
 const KEY_NOTCH = 100; // [ and ] turn a radius as one wheel notch does
+const READ_ONLY_KEYS = new Set(['fit', 'ortho', 'escape']); // a view that only watches: these and the looks
 const MERIDIAN_FACING = (30 * Math.PI) / 180; // a radial copy faced this near its meridian plane is dragged in it
 
 export class Desktop {
@@ -46,6 +47,7 @@ export class Desktop {
     this.strokeTool = false;
     this.revolveTool = false; // a profile drawn beside the axis lathes the clay
     this.hovered = null; // the effective control under the pointer
+    this.readOnly = false; // the view only watches: a press orbits, nothing is sent (view.js setReadOnly)
     this.pointer = null; // the last pointer event over the view (null: the pointer is elsewhere)
     this.onGroundStop = null; // an orbit drag upward met the ground (the view says so)
     this.onEscape = null; // after Escape's own work (a notebook: the focus goes back to it, keys.js focusHost)
@@ -120,7 +122,7 @@ export class Desktop {
   // over the clay (or while the Stroke tool is on); hidden elsewhere, while orbiting and while the handle moves.
   showDisc(ev, rc = this.ray(ev)) {
     if (!this.disc) return;
-    if (!ev || this.handle.held || (ev.buttons && !this.drag && !this.stroke.drawing)) {
+    if (!ev || this.readOnly || this.handle.held || (ev.buttons && !this.drag && !this.stroke.drawing)) {
       this.disc.hide();
       return;
     }
@@ -149,6 +151,7 @@ export class Desktop {
       return;
     }
     this.press = { x: ev.clientX, y: ev.clientY, control: null };
+    if (this.readOnly) return; // the orbit takes it
     const hidden = { count: 0 };
     const hit = this.visibleControl(this.ray(ev), hidden);
     this.stats.hiddenPresses += hidden.count;
@@ -172,7 +175,7 @@ export class Desktop {
   // A press on the dimmed label of a control the clay hides (labels.js): the control is dragged as a press on its
   // sphere would drag it (the clay in front of it still turns the view when pressed).
   pressLabel(j, ev) {
-    if (this.presenting || ev.button !== 0 || this.drag) return;
+    if (this.presenting || ev.button !== 0 || this.drag || this.readOnly) return;
     ev.preventDefault();
     this.renderer.domElement.focus({ preventScroll: true });
     this.ray(ev);
@@ -229,7 +232,7 @@ export class Desktop {
         return;
       }
       const rc = this.ray(ev);
-      const hit = this.visibleControl(rc);
+      const hit = this.readOnly ? null : this.visibleControl(rc);
       // a control on the revolve axis is no grab while the Revolve tool is on: a press there starts the profile
       this.hover(hit && !(this.revolveTool && this.guide.startOn(hit.index)) ? hit.index : null);
       this.showDisc(ev, rc);
@@ -307,7 +310,7 @@ export class Desktop {
     ev.preventDefault();
     ev.stopImmediatePropagation();
     const j = this.drag ? this.drag.j : this.hovered;
-    if (j !== null && j !== undefined && !this.drawTool) { // over a control (Alt or not): its radius
+    if (j !== null && j !== undefined && !this.drawTool && !this.readOnly) { // over a control (Alt or not): its radius
       this.radius.show(j);
       this.radius.turn(j, ev.deltaY);
       this.stats.radii += 1;
@@ -316,7 +319,7 @@ export class Desktop {
     }
     const rc = this.ray(ev);
     const surface = this.clay.surfaceHit(rc);
-    if (ev.altKey) { // over bare clay: the radius a new control gets
+    if (ev.altKey && !this.readOnly) { // over bare clay: the radius a new control gets
       this.radius.turnNew(ev.deltaY);
       this.stats.radii += 1;
       this.showDisc(ev, rc);
@@ -329,7 +332,7 @@ export class Desktop {
   // A double click on the clay (not on a control) adds a control at that point of its surface, of the radius the
   // disc showed there.
   doubleClick(ev) {
-    if (this.presenting || this.drawTool) return;
+    if (this.presenting || this.drawTool || this.readOnly) return;
     const rc = this.ray(ev);
     if (this.visibleControl(rc)) return;
     const surface = this.clay.surfaceHit(rc);
@@ -343,7 +346,7 @@ export class Desktop {
   key(ev) {
     if (this.presenting || isTyping(ev.composedPath?.()[0] || ev.target)) return;
     const action = viewAction(ev);
-    if (!action) return;
+    if (!action || (this.readOnly && !READ_ONLY_KEYS.has(action) && !action.startsWith('look:'))) return;
     if (action.startsWith('look:')) {
       const view = Object.entries(VIEWS).find(([, v]) => v.key === action.slice(5));
       this.act.look(view[0]);

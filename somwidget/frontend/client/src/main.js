@@ -6,7 +6,7 @@ import { HUD_ACTIONS, trainLabel } from './actions.js';
 import { Link, socketURL } from './link.js';
 import { Menu } from './menu.js';
 import { intents } from './protocol.js';
-import { ClayView } from './view.js';
+import { ClayView, WATCHING_TIP } from './view.js';
 import { XRApp } from './xr.js';
 import { HandTools } from './xrtools.js';
 
@@ -52,13 +52,6 @@ link = new Link(socketURL(), {
     if (s === 'connected' && state.mode) link.send(intents.hand('headset')); // a new connection starts as a desktop
     showStatus();
   },
-  onError: (e) => {
-    handlers.onError(e);
-    ui.error.textContent = e.message;
-    ui.error.hidden = false;
-    clearTimeout(state.hudErrorTimer);
-    state.hudErrorTimer = setTimeout(showSaving, 4000);
-  },
   // a failed autosave stays on the HUD (and the headset menu's status) until a save is on disk again
   onAutosave: (msg) => {
     state.autosave = msg.ok ? null : msg.message;
@@ -66,6 +59,14 @@ link = new Link(socketURL(), {
     showStatus();
   },
 });
+
+// A refused intent, on the HUD's error line for 4 s (not over the view as well: the panel is where it is read).
+view.onError = (e) => {
+  ui.error.textContent = e.message;
+  ui.error.hidden = false;
+  clearTimeout(state.hudErrorTimer);
+  state.hudErrorTimer = setTimeout(showSaving, 4000);
+};
 
 // The HUD's error line: the autosave's failure while saves fail, else nothing (a refused intent shows for 4 s).
 function showSaving() {
@@ -75,7 +76,24 @@ function showSaving() {
 view.transport = link;
 // the page's own name first (a studio's room page names its room: "somwidget: alice"), then the clay's
 const pageTitle = ui.title.textContent;
-view.onTopology = (t) => { ui.title.textContent = `${pageTitle}: ${t.title}`; };
+const noXR = $('no-xr');
+const noXRText = noXR.textContent;
+// the actions that change the clay: disabled on a page that only watches, their tooltip saying why
+const EDITS = ['train', 'undo', 'redo', 'reset', 'stroke'];
+const watching = () => !!state.topology?.watching;
+view.onTopology = (t) => {
+  ui.title.textContent = `${pageTitle}: ${t.title}`;
+  for (const name of EDITS) {
+    const b = buttons[name];
+    if (!b) continue;
+    b.dataset.title ??= b.title;
+    b.title = t.watching ? WATCHING_TIP : b.dataset.title;
+  }
+  document.body.classList.toggle('watching', !!t.watching);
+  noXR.textContent = t.watching ? `Watching only: drag to orbit, wheel to zoom. To change the clay, ${
+    WATCHING_TIP.replace('watching only: ', '')}.` : noXRText;
+  showStatus();
+};
 view.onFirstFrame = () => {
   if (xr.session) xr.wantPlace = true;
   else view.frame();
@@ -128,6 +146,9 @@ const xr = new XRApp({
   },
 });
 
+for (const [name, action] of Object.entries(perform)) { // a page that only watches sends no change
+  if (EDITS.includes(name)) perform[name] = () => (watching() ? undefined : action());
+}
 for (const [name, button] of Object.entries(buttons)) button.addEventListener('click', () => perform[name]());
 // Ctrl+Z undoes, Ctrl+Shift+Z (or Ctrl+Y) redoes; Cmd on a Mac
 window.addEventListener('keydown', (e) => {
@@ -160,8 +181,10 @@ function showStatus() {
   const text = parts.join(' \u00b7 ');
   ui.status.textContent = text;
   ui.train.textContent = trainLabel(f);
-  ui.undo.disabled = !(f && f.canUndo);
-  ui.redo.disabled = !(f && f.canRedo);
+  ui.undo.disabled = watching() || !(f && f.canUndo);
+  ui.redo.disabled = watching() || !(f && f.canRedo);
+  ui.train.disabled = watching();
+  buttons.reset.disabled = watching();
   menu.setLabel('train', trainLabel(f));
   const others = view.presence.summary(); // who else is on the session, in the headset's menu
   menu.setStatus(state.autosave ? 'NOT SAVED: autosave failed, trying again' : f ? `${t ? t.title : ''}  ${
@@ -188,7 +211,7 @@ window.somxr = {
     connected: state.connected, hasTopology: !!state.topology, frames: state.frames, fps: state.fps,
     seq: state.frame ? state.frame.seq : null, generation: state.frame ? state.frame.generation : null,
     iteration: state.frame ? state.frame.iteration : null, paused: state.paused, running: state.running,
-    mode: state.mode, transparent: scene.background === null, xrFrames: state.xrFrames, presenting: renderer.xr.isPresenting, supported: state.supported || null,
+    watching: watching(), mode: state.mode, transparent: scene.background === null, xrFrames: state.xrFrames, presenting: renderer.xr.isPresenting, supported: state.supported || null,
     digest: state.digest, k: clay.k, kEff: clay.kEff, held: [...clay.held], local: [...clay.local.keys()],
     group: clay.group, groupMaps: clay.groupMaps.map((m) => [...m]),
     hover: [...clay.hover], errors: state.errors.map((e) => e.message), lastError: state.lastError,

@@ -92,9 +92,10 @@ export const FRAME_MESSAGE = 'frame';
  * root -> tip for "lines"); `points`: draw each vertex as a point; `bounds`: {"min": [x, y, z], "max": [...]} of
  * the start mesh and controls; `control_radius`: a control's drawn radius; `off_clay_gap`: past this distance
  * from the clay a control gets a line to its nearest node (0: none); `parameters`: the settings a "set" may
- * name. The fields after `parameters` are the view's own: its client id (None over the notebook's comm) and the
- * controls as a `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy negates),
- * `n_controls` and `n_effective` (originals, then mirrored copies).
+ * name. The fields after `parameters` are the view's own: its client id (None over the notebook's comm),
+ * `watching` (the view only watches: its intents other than hello, hand and ping are refused, so it shows itself
+ * read-only) and the controls as a `ControlsMessage` gives them, with `mirror_axes` (the axes a mirrored copy
+ * negates), `n_controls` and `n_effective` (originals, then mirrored copies).
  * @typedef {object} TopologyMessage
  * @property {'topology'} type
  * @property {number} protocol
@@ -117,6 +118,7 @@ export const FRAME_MESSAGE = 'frame';
  * @property {number} max_message_bytes
  * @property {object[]} parameters
  * @property {number|null} client
+ * @property {boolean} watching
  * @property {number[]} control_ids
  * @property {string} group
  * @property {number[][]} group_maps

@@ -110,6 +110,7 @@ export class RadiusBall {
 const DISC_COLOUR = 0x3d7be0;
 const DISC_SEGMENTS = 72;
 const LABEL_OFFSET = [16, 18]; // px from the cursor to the label's corner
+const EDGE_PX = 4; // the label keeps this far inside the view's edges
 
 // The radius under the cursor: a disc on the clay (its rim drawn, filled faintly unless it is a new control's radius
 // the person has not chosen) and a label by the cursor.
@@ -180,11 +181,24 @@ export class RadiusDisc {
     const text = r > 0 ? `radius ${Number(r.toPrecision(3))} \u00b7 ${(100 * r / size).toFixed(r / size < 0.1 ? 1 : 0)}%`
       + ` of the size \u00b7 ${who}` : `radius 0 (a point control) \u00b7 ${who}`;
     if (this.label.textContent !== text) this.label.textContent = text;
+    this.label.hidden = !at;
     if (at) {
-      const place = `translate(${(at[0] + LABEL_OFFSET[0]).toFixed(0)}px, ${(at[1] + LABEL_OFFSET[1]).toFixed(0)}px)`;
+      const [x, y] = this.labelPlace(at);
+      const place = `translate(${x.toFixed(0)}px, ${y.toFixed(0)}px)`;
       if (this.label.style.transform !== place) this.label.style.transform = place;
     }
-    this.label.hidden = !at;
+  }
+
+  // Where the label's corner goes for the cursor at `at`: below right of it, else (near the view's right or bottom
+  // edge) on the cursor's other side, so that the whole label stays in the view.
+  labelPlace(at) {
+    const box = this.label.parentElement;
+    const [w, h] = [this.label.offsetWidth, this.label.offsetHeight];
+    let x = at[0] + LABEL_OFFSET[0];
+    let y = at[1] + LABEL_OFFSET[1];
+    if (box && x + w > box.clientWidth - EDGE_PX) x = Math.max(EDGE_PX, at[0] - LABEL_OFFSET[0] - w);
+    if (box && y + h > box.clientHeight - EDGE_PX) y = Math.max(EDGE_PX, at[1] - LABEL_OFFSET[1] - h);
+    return [x, y];
   }
 
   // The radius shown, for describe(): what it is of, its value, its share of the size, the label's text.

@@ -93,6 +93,15 @@ export class Toolbar {
     return menu;
   }
 
+  // The tools that change the clay (Stroke, Revolve) disabled, their tooltip `why` (on), or as they were.
+  setReadOnly(on, why) {
+    for (const b of [this.stroke, this.revolve]) {
+      b.dataset.title ??= b.title;
+      b.disabled = on;
+      b.title = on ? why : b.dataset.title;
+    }
+  }
+
   toggleMenu() {
     this.menu.hidden = !this.menu.hidden;
     this.refresh();

@@ -37,6 +37,7 @@ const CSS = `
   background: #eef0f4; pointer-events: none; }
 .somview-hint { position: absolute; left: 50%; top: 40px; transform: translateX(-50%); font-size: 13px;
   padding: 4px 10px; border-radius: 4px; background: rgba(29, 66, 138, 0.88); color: white; pointer-events: none; }
+.somview-bar button:disabled { cursor: not-allowed; opacity: 0.45; }
 .somview-error { position: absolute; left: 6px; top: 36px; right: 6px; font-size: 12px; padding: 3px 6px;
   background: #fde2e2; color: #8a1010; border-radius: 4px; pointer-events: none; }
 ${LABEL_CSS}${TOOLBAR_CSS}${PRESENCE_CSS}`;
@@ -63,6 +64,8 @@ const HINT_MS = 3000;
 const GROUND_HINT = 'The camera stays above the ground: 6 looks from below';
 const SAME_CLAY = 0.02; // a new topology whose clay's bounds moved less than this share of its size is the same clay
 const DRAG_REDRAW_MS = 50;
+// The tooltip of what a view that only watches (a studio's watch page: topology.watching) cannot do.
+export const WATCHING_TIP = 'watching only: open the room with its own link, or Take part on the wall';
 
 // A software rasteriser (SwiftShader, llvmpipe: a browser without a GPU) draws every pixel on the CPU that also
 // trains the clay: there the view skips multisampling and draws at one pixel per CSS pixel.
@@ -129,8 +132,8 @@ export class ClayView {
         this.rig.setOrthographic(on);
         this.handle.controls.camera = this.rig.camera; // aimed and sized for the camera now drawing
       },
-      stroke: (on) => this.useTool(on ? 'stroke' : null),
-      revolve: (on) => this.useTool(on ? 'revolve' : null),
+      stroke: (on) => this.useTool(on && !this.readOnly ? 'stroke' : null),
+      revolve: (on) => this.useTool(on && !this.readOnly ? 'revolve' : null),
       display: (name, value) => this.display.set(name, value),
     };
     const refreshBar = (f) => (...args) => { f(...args); this.toolbar.refresh(); };
@@ -149,11 +152,12 @@ export class ClayView {
       const drag = this.desktop.drag;
       if (drag && this.grabs.current(drag.i) === i && j >= 0) drag.j = j + drag.copy * k;
     };
-    this.labels = new ControlLabels({ clay: this.clay, display: this.display, onPick: (j) => this.handle.select(j),
+    this.labels = new ControlLabels({ clay: this.clay, display: this.display,
+      onPick: (j) => this.handle.select(this.readOnly ? null : j),
       onPress: (j, ev) => this.desktop.pressLabel(j, ev),
       onMarker: (j) => { // centred and selected: its handle moves it
         this.rig.centreOn(this.clay.controlWorld(j));
-        this.handle.select(j);
+        this.handle.select(this.readOnly ? null : j);
       } });
     this.statusLine = document.createElement('div');
     this.statusLine.className = 'somview-status';
@@ -219,6 +223,7 @@ export class ClayView {
     this.disc.hide();
     this.clay.setTopology(t);
     this.display.apply();
+    this.setReadOnly(!!t.watching);
     this.state.needsFrame = true;
     this.onTopology?.(t);
   }
@@ -300,16 +305,21 @@ export class ClayView {
     this.hintTimer = setTimeout(() => { this.hint.hidden = true; }, HINT_MS);
   }
 
+  // An error the server sent (a refused intent): kept for describe(), shown for 4 s over the view, or by the page's
+  // own `onError` where it has one.
   showError(e) {
     const s = this.state;
     s.lastError = e.message;
     s.errors.push(e);
     if (s.errors.length > 50) s.errors.shift();
+    if (this.onError) { // the page shows it itself (the XR page's panel): said once, where it is read
+      this.onError(e);
+      return;
+    }
     this.errorBox.textContent = e.message;
     this.errorBox.hidden = false;
     clearTimeout(s.errorTimer);
     s.errorTimer = setTimeout(() => { this.errorBox.hidden = true; }, 4000);
-    this.onError?.(e);
   }
 
   resize() {
@@ -393,7 +403,7 @@ export class ClayView {
       synapsesShown: this.clay.segments ? this.clay.segments.visible : null,
       ...this.labels.describe(), // labels, behind, markers
       ...this.rig.describe(), // camera, target, distance (to the target), fitDistance, projection, zoom
-      display: this.display.describe(), selected: this.handle.selected,
+      display: this.display.describe(), selected: this.handle.selected, readOnly: !!this.readOnly,
       tool: this.desktop.strokeTool ? 'stroke' : this.desktop.revolveTool ? 'revolve' : null,
       radii: [...clay.radii], strokes: [...clay.strokes], controlIds: [...clay.controlIds],
       radiusBall: { of: this.radius.shownFor, shown: this.radius.ball.visible, radius: this.radius.ball.scale.x },
@@ -437,6 +447,16 @@ export class ClayView {
 
   // Select control j (its handle shows and moves it), as a click on it does; the web panel's table calls this.
   // The drawing tool in use: 'stroke', 'revolve' (the axis shown) or null (grab and orbit).
+  // A view that only watches (the server refuses its changes): it orbits, zooms and changes its display, but takes no
+  // control and draws nothing; its bar's tools are disabled with WATCHING_TIP.
+  setReadOnly(on) {
+    this.readOnly = on;
+    this.desktop.readOnly = on;
+    if (on) this.useTool(null);
+    this.toolbar.setReadOnly(on, WATCHING_TIP);
+    this.container.classList.toggle('somview-watching', on);
+  }
+
   useTool(name) {
     this.desktop.strokeTool = name === 'stroke';
     this.desktop.revolveTool = name === 'revolve';

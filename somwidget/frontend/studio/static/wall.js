@@ -12,6 +12,8 @@
   let latest = null; // the latest list of rooms
   const main = document.getElementById('rooms');
   const summary = document.getElementById('summary');
+  const OPENING_MS = 60000; // the longest a card says its room is opening
+  const COPIED_MS = 2500; // how long "Copied" shows
   const AZIMUTH = (-55 * Math.PI) / 180;
   const ELEVATION = (25 * Math.PI) / 180;
 
@@ -32,15 +34,70 @@
     el.innerHTML = '<canvas width="320" height="240"></canvas><div class="caption"><span class="state"></span>' +
       '<div class="name"></div><div class="people"></div><div class="links"><a class="watch" target="_blank">' +
       'Watch</a><a class="part" target="_blank">Take part</a><a class="copy" href="#">Copy link</a></div></div>';
+    el.insertAdjacentHTML('afterbegin', '<div class="opening" hidden></div>');
     room = { card: el, canvas: el.querySelector('canvas'), info: null, shape: null, generation: -1, thumb: null,
       view: null, drawn: 0, seq: -1 };
-    room.canvas.addEventListener('click', () => window.open(room.info.watch, '_blank'));
+    room.canvas.addEventListener('click', () => openRoom(room, room.info.watch));
+    for (const a of el.querySelectorAll('a.watch, a.part')) {
+      a.addEventListener('click', (ev) => {
+        ev.preventDefault();
+        openRoom(room, a.href);
+      });
+    }
     el.querySelector('.copy').addEventListener('click', (ev) => {
       ev.preventDefault();
-      navigator.clipboard?.writeText(new URL(room.info.link, location.href).href);
+      copyLink(room, ev.currentTarget);
     });
     rooms.set(slot, room);
     return room;
+  }
+
+  // The room in a new tab, the card saying "Opening" until that tab shows the clay (a busy studio takes seconds).
+  function openRoom(room, url) {
+    const tab = window.open(url, '_blank');
+    const note = room.card.querySelector('.opening');
+    note.textContent = `Opening ${room.info.name}\u2026`;
+    note.hidden = false;
+    room.card.classList.add('busy');
+    const started = Date.now();
+    clearInterval(room.opening);
+    room.opening = setInterval(() => {
+      let shown = false;
+      try {
+        shown = !tab || tab.closed || (tab.somxr && tab.somxr.state().frames > 0);
+      } catch {
+        shown = true; // the tab went elsewhere: nothing more to tell here
+      }
+      if (shown || Date.now() - started > OPENING_MS) {
+        clearInterval(room.opening);
+        note.hidden = true;
+        room.card.classList.remove('busy');
+      }
+    }, 200);
+  }
+
+  // The room's own link to the clipboard, the link saying "Copied" for a moment; where the browser refuses the
+  // clipboard, the link in a field, selected, to copy by hand.
+  async function copyLink(room, a) {
+    const link = new URL(room.info.link, location.href).href;
+    const caption = room.card.querySelector('.caption');
+    caption.querySelector('.by-hand')?.remove();
+    try {
+      await navigator.clipboard.writeText(link);
+      a.textContent = 'Copied';
+      clearTimeout(room.copied);
+      room.copied = setTimeout(() => { a.textContent = 'Copy link'; }, COPIED_MS);
+    } catch {
+      const by = document.createElement('label');
+      by.className = 'by-hand';
+      by.textContent = 'Copy this link (Ctrl+C): ';
+      const field = Object.assign(document.createElement('input'), { value: link, readOnly: true });
+      by.append(field);
+      caption.append(by);
+      field.focus();
+      field.select();
+      field.addEventListener('blur', () => setTimeout(() => by.remove(), COPIED_MS));
+    }
   }
 
   function showRooms(list) {
