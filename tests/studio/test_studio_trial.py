@@ -206,7 +206,7 @@ def test_copy_link_says_copied_or_shows_the_link_to_copy_by_hand(studio, browser
     context.close()
 
 
-def test_the_radius_label_beside_the_cursor_stays_on_screen_at_the_right_edge(studio, browser):
+def test_the_radius_label_and_the_status_line_stay_on_screen_and_clear_of_the_bar_in_a_narrow_window(studio, browser):
     width, height = 640, 600
     page = browser.new_page(viewport={"width": width, "height": height})
     page.goto(studio.room_url("bea"))
@@ -227,6 +227,13 @@ def test_the_radius_label_beside_the_cursor_stays_on_screen_at_the_right_edge(st
     if label.is_visible():
         box = label.bounding_box()
         assert box["y"] + box["height"] <= height, f"the label is cut off at the bottom: {box}"
+    # in a window this narrow the status line at the foot stays clear of the view's bar of buttons
+    status = page.locator(".somview-status").bounding_box()
+    for button in page.locator(".somview-bar button").all():
+        b = button.bounding_box()
+        apart = (status["x"] + status["width"] <= b["x"] or b["x"] + b["width"] <= status["x"]
+                 or status["y"] + status["height"] <= b["y"] or b["y"] + b["height"] <= status["y"])
+        assert apart, f"the status line {status} runs under the button {button.inner_text()!r} {b}"
     page.close()
 
 
