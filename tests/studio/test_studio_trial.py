@@ -100,6 +100,12 @@ def test_the_watch_page_shows_itself_read_only_and_its_view_still_orbits(studio,
         title = control.get_attribute("title") or ""
         assert "watching only" in title and "Take part" in title, (selector, title)
     assert page.locator(".somview-fit").is_enabled() and page.locator(".somview-display").is_enabled()
+    # the headset's menu (drawn in the room around the clay) greys the same buttons, and a press on one does nothing
+    for name in ("train", "undo", "redo", "reset", "stroke"):
+        button = page.evaluate(f"somxr.button('{name}')")
+        assert not button["enabled"] and max(button["face"]) > 60, (name, button)  # the dim grey face, not the dark one
+    assert page.evaluate("somxr.button('here')")["enabled"]
+    assert page.evaluate("somxr.state().menuStatus").startswith("WATCHING ONLY")
 
     # a drag that starts on a control turns the view (the camera moves round the clay)
     camera = "document.getElementById('view').somview.rig.camera.position.toArray()"

@@ -89,6 +89,7 @@ view.onTopology = (t) => {
     b.dataset.title ??= b.title;
     b.title = t.watching ? WATCHING_TIP : b.dataset.title;
   }
+  for (const name of EDITS) menu.setEnabled(name, !t.watching); // the headset's menu greys them too
   document.body.classList.toggle('watching', !!t.watching);
   noXR.textContent = t.watching ? `Watching only: drag to orbit, wheel to zoom. To change the clay, ${
     WATCHING_TIP.replace('watching only: ', '')}.` : noXRText;
@@ -187,7 +188,8 @@ function showStatus() {
   buttons.reset.disabled = watching();
   menu.setLabel('train', trainLabel(f));
   const others = view.presence.summary(); // who else is on the session, in the headset's menu
-  menu.setStatus(state.autosave ? 'NOT SAVED: autosave failed, trying again' : f ? `${t ? t.title : ''}  ${
+  menu.setStatus(state.autosave ? 'NOT SAVED: autosave failed, trying again' : f ? `${watching() ? 'WATCHING ONLY  ' : ''}${
+    t ? t.title : ''}  ${
     f.iteration}/${f.iterations}  ${f.running ? 'training' : f.paused ? 'paused' : 'converged'}${
     others ? `  ${others}` : ''}` : text);
 }

@@ -10,14 +10,15 @@ const W = 0.07;
 const H = 0.034;
 const GAP = 0.008;
 
-function drawLabel(canvas, text, active, bg = '#24283a') {
+// A button's face: red while it flashes from a press, greyed (dim face, dim text) while it is disabled.
+function drawLabel(canvas, text, active, enabled = true) {
   const ctx = canvas.getContext('2d');
-  ctx.fillStyle = active ? '#c62828' : bg;
+  ctx.fillStyle = active ? '#c62828' : enabled ? '#24283a' : '#4a4c56';
   ctx.fillRect(0, 0, canvas.width, canvas.height);
-  ctx.strokeStyle = '#8890b0';
+  ctx.strokeStyle = enabled ? '#8890b0' : '#6a6c76';
   ctx.lineWidth = 4;
   ctx.strokeRect(2, 2, canvas.width - 4, canvas.height - 4);
-  ctx.fillStyle = '#ffffff';
+  ctx.fillStyle = enabled ? '#ffffff' : '#9a9ca6';
   ctx.font = `bold ${Math.round(canvas.height * 0.42)}px sans-serif`;
   ctx.textAlign = 'center';
   ctx.textBaseline = 'middle';
@@ -41,7 +42,7 @@ export class Menu {
         new THREE.MeshBasicMaterial({ map: tex, transparent: true, opacity: 0.95, side: THREE.DoubleSide }));
       mesh.position.x = -total / 2 + W / 2 + i * (W + GAP);
       mesh.name = `button-${name}`;
-      mesh.userData = { name, label, canvas, tex, flash: 0 };
+      mesh.userData = { name, label, canvas, tex, flash: 0, enabled: true };
       this.group.add(mesh);
       this.buttons.push(mesh);
     });
@@ -64,7 +65,19 @@ export class Menu {
     const b = this.buttons.find((m) => m.userData.name === name);
     if (!b || b.userData.label === label) return;
     b.userData.label = label;
-    drawLabel(b.userData.canvas, label, b.userData.flash > 0);
+    this.redraw(b);
+  }
+
+  // A disabled button is drawn greyed and a press on it does nothing (a page that only watches).
+  setEnabled(name, enabled) {
+    const b = this.buttons.find((m) => m.userData.name === name);
+    if (!b || b.userData.enabled === enabled) return;
+    b.userData.enabled = enabled;
+    this.redraw(b);
+  }
+
+  redraw(b) {
+    drawLabel(b.userData.canvas, b.userData.label, b.userData.flash > 0, b.userData.enabled);
     b.userData.tex.needsUpdate = true;
   }
 
@@ -86,10 +99,10 @@ export class Menu {
     this.pressed.push(name);
     if (this.pressed.length > 100) this.pressed.shift();
     const b = this.buttons.find((m) => m.userData.name === name);
+    if (b && !b.userData.enabled) return;
     if (b) {
       b.userData.flash = 12;
-      drawLabel(b.userData.canvas, b.userData.label, true);
-      b.userData.tex.needsUpdate = true;
+      this.redraw(b);
     }
     this.perform[name]?.();
   }
@@ -119,7 +132,9 @@ export class Menu {
     b.updateWorldMatrix(true, false);
     const centre = new THREE.Vector3().setFromMatrixPosition(b.matrixWorld);
     const normal = new THREE.Vector3(0, 0, 1).transformDirection(b.matrixWorld);
-    return { centre: centre.toArray(), normal: normal.toArray(), label: b.userData.label };
+    const [r, g, bl] = b.userData.canvas.getContext('2d').getImageData(8, 8, 1, 1).data; // the face's colour
+    return { centre: centre.toArray(), normal: normal.toArray(), label: b.userData.label, enabled: b.userData.enabled,
+      face: [r, g, bl] };
   }
 
   // Finger-tip touches: press a button when a tip comes within 1.5 cm of its face, once per touch.
@@ -135,10 +150,7 @@ export class Menu {
     for (const b of this.buttons) {
       if (b.userData.flash > 0) {
         b.userData.flash -= 1;
-        if (b.userData.flash === 0) {
-          drawLabel(b.userData.canvas, b.userData.label, false);
-          b.userData.tex.needsUpdate = true;
-        }
+        if (b.userData.flash === 0) this.redraw(b);
       }
     }
   }
