@@ -69,7 +69,8 @@ def designers(studio):
 
 
 def room_state(page, name) -> dict:
-    return next(r for r in page.evaluate("somwall.state().rooms") if r["name"] == name)
+    """Room `name` as the wall shows it ({} while the wall has not listed it yet: a room just made)."""
+    return next((r for r in page.evaluate("somwall.state().rooms") if r["name"] == name), {})
 
 
 def caption(page, name) -> str:
@@ -79,7 +80,7 @@ def caption(page, name) -> str:
 def wait_drawn_at(page, studio, name, timeout=20.0):
     """Until the wall drew room `name`'s latest frame; its pixels then."""
     seq = session_of(studio, name).frame.seq
-    wait_for(lambda: room_state(page, name)["seq"] >= seq, timeout, f"the wall to draw {name}'s frame {seq}")
+    wait_for(lambda: room_state(page, name).get("seq", -1) >= seq, timeout, f"the wall to draw {name}'s frame {seq}")
     page.wait_for_timeout(50)
     return page.evaluate(PIXELS, name)
 
@@ -186,6 +187,29 @@ def test_the_lobby_checks_a_name_as_it_is_typed_and_a_refusal_goes_when_the_name
     # no "not a valid regular expression" for the name's pattern (the refusal's own 400 is logged as a failed load)
     assert [m for m in console if "Failed to load resource" not in m] == [], console
     page.close()
+
+
+def test_a_student_who_gives_a_name_in_the_lobby_is_named_on_the_wall_and_to_the_others(studio, browser):
+    context = browser.new_context(viewport={"width": 900, "height": 640})
+    lobby = context.new_page()
+    lobby.goto(studio.lobby_url)
+    lobby.click("#name")
+    lobby.keyboard.type("dave")
+    lobby.click("#who")
+    lobby.keyboard.type("Dave  Li")
+    lobby.click("button[type=submit]")
+    lobby.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=60000)
+    wall = context.new_page()
+    wall.goto(studio.wall_url)
+    wall.wait_for_function("""document.querySelector('section.room[data-name="dave"] .people')?.innerText
+                              .includes('Dave Li')""", timeout=30000)  # one space: as a name is shown
+    other = context.new_page()  # someone else on dave's room sees him by name
+    other.goto(studio.room_url("dave"))
+    other.wait_for_function("window.somxr && somxr.state().connected && somxr.state().frames > 0", timeout=30000)
+    other.wait_for_function("document.querySelector('.somview-presence')?.innerText.includes('Dave Li')",
+                            timeout=10000)
+    assert "desktop" in other.inner_text(".somview-presence")  # the one who gave no name keeps the view's kind
+    context.close()
 
 
 #: How much of a room's thumbnail is drawn on, and how much of its border (a clay cut by the canvas's edge).

@@ -198,6 +198,10 @@ BAD_MESSAGES = [
     ('{"type": "radius", "index": 0, "radius": "big"}', "must be a number"),
     ('{"type": "stroke", "points": [[0, 0, 0]]}', "2 to 64 points"),
     ('{"type": "stroke", "points": [[0, 0, 0], [0, 0]]}', "list of 3 numbers"),
+    ('{"type": "hand", "kind": "desktop", "name": "' + "x" * 41 + '"}', "1 to 40 printable characters"),
+    ('{"type": "hand", "kind": "desktop", "name": "   "}', "1 to 40 printable characters"),
+    ('{"type": "hand", "kind": "desktop", "name": "a\\u0000b"}', "1 to 40 printable characters"),
+    ('{"type": "hand", "kind": "desktop", "name": 7}', "1 to 40 printable characters"),
 ]
 
 
@@ -214,6 +218,8 @@ def test_parse_intent_accepts():
         index=3, position=(1.0, -2.5, 0.25))
     assert wire.parse_intent('{"type": "release", "index": 8}', 9).position is None
     assert wire.parse_intent('{"type": "ping", "t": 12.5}', 9).t == 12.5
+    assert wire.parse_intent('{"type": "hand", "kind": "desktop", "name": " Dave   Li "}', 9).name == "Dave Li"
+    assert wire.parse_intent('{"type": "hand", "kind": "headset"}', 9).name is None
     for kind in ("reset", "train", "pause"):
         assert wire.parse_intent(json.dumps({"type": kind}), 9).type == kind
 

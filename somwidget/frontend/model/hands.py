@@ -39,16 +39,17 @@ SILENT_SECONDS = 10.0
 
 
 class Hand:
-    """One hand on a session: a view (its kind, a colour) or Python."""
+    """One hand on a session: a view (its kind, a colour, the person's name where they gave one) or Python."""
 
-    __slots__ = ("id", "kind", "colour")
+    __slots__ = ("id", "kind", "colour", "person")
 
     def __init__(self, id: int, kind: str, colour: str) -> None:
         self.id, self.kind, self.colour = id, kind, colour
+        self.person = ""
 
     @property
     def name(self) -> str:
-        return "Python" if self.kind == "python" else f"{self.kind} {self.id}"
+        return "Python" if self.kind == "python" else self.person or f"{self.kind} {self.id}"
 
     def __repr__(self) -> str:
         return f"Hand({self.name})"
@@ -97,11 +98,13 @@ class Hands:
         self._tell()
         return hand
 
-    def set_kind(self, hand: Hand, kind: str) -> None:
-        """A view says what it is now (a headset's page entering or leaving its immersive session)."""
+    def set_kind(self, hand: Hand, kind: str, person: str | None = None) -> None:
+        """A view says what it is now (a headset's page entering or leaving its immersive session), and who uses it
+        where the person gave their name (None: as it was)."""
         check_kind(kind)
-        if hand.kind != kind:
-            hand.kind = kind
+        person = hand.person if person is None else person
+        if (hand.kind, hand.person) != (kind, person):
+            hand.kind, hand.person = kind, person
             self._tell()
 
     def leave(self, hand: Hand) -> None:

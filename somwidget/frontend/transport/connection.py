@@ -224,7 +224,7 @@ def _hello(c: ViewConnection, _: HelloIntent) -> None:
 
 
 def _hand(c: ViewConnection, intent: HandIntent) -> None:
-    c.holders.set_kind(c, intent.kind)
+    c.holders.set_kind(c, intent.kind, intent.name)
 
 
 def _grab(c: ViewConnection, intent: GrabIntent) -> None:

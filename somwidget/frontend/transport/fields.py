@@ -148,6 +148,21 @@ class OneOf(WireType):
 
 
 @dataclass(frozen=True)
+class Words(WireType):
+    """A short line of printable text (a person's name): 1 to `most` characters once its runs of spaces are one."""
+
+    most: int
+    js = "string"
+
+    def check(self, value, name: str, kind: str, n_controls: int = 0) -> str:
+        text = " ".join(value.split()) if isinstance(value, str) else ""
+        if not text or len(text) > self.most or not text.isprintable():
+            raise IntentError(f"{kind}: {name} must be 1 to {self.most} printable characters, got {_shown(value, 60)}",
+                              kind)
+        return text
+
+
+@dataclass(frozen=True)
 class Scalar(WireType):
     """A number or true / false, as it came: the intent checks it against what it names (`Intent.checked`)."""
 
@@ -164,6 +179,9 @@ Point = Annotated[tuple[float, float, float], Coordinates()]
 Polyline = Annotated[tuple[tuple[float, float, float], ...], Points(2, MAX_STROKE_POINTS)]
 Radius = Annotated[float, Number(0.0, MAX_COORDINATE)]
 Value = Annotated[float | bool, Scalar()]
+#: Longest name a person gives themselves (shown to the others and on a studio's wall).
+MAX_PERSON_NAME = 40
+PersonName = Annotated[str, Words(MAX_PERSON_NAME)]
 
 
 @dataclass(frozen=True)

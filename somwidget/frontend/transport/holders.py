@@ -78,10 +78,10 @@ class HolderRegistry:
         with self._lock:
             return self._views.get(view)
 
-    def set_kind(self, view: View, kind: str) -> None:
+    def set_kind(self, view: View, kind: str, person: str | None = None) -> None:
         hand = self.hand_of(view)
         if hand is not None:
-            self.hands.set_kind(hand, kind)
+            self.hands.set_kind(hand, kind, person)
 
     # -- what views are told ------------------------------------------------------------------------------------
     def held(self) -> dict[int, View | None]:

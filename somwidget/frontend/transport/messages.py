@@ -33,6 +33,7 @@ from .fields import (
     IntentError,
     Number,
     OneOf,
+    PersonName,
     Point,
     Polyline,
     Radius,
@@ -466,10 +467,12 @@ class HelloIntent(Intent):
 @dataclass(frozen=True, kw_only=True)
 class HandIntent(Intent):
     """What this view is, as the others see it (a `PresenceMessage`): "desktop" (a view's connection starts as one;
-    a notebook's as "notebook"), or "headset" while the page is in its immersive session."""
+    a notebook's as "notebook"), or "headset" while the page is in its immersive session; `name`: the person's name
+    as they gave it (a studio's lobby), shown in place of "desktop 2" to the others and on the wall."""
 
     type: ClassVar[str] = "hand"
     kind: HandKind
+    name: PersonName | None = None
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -44,12 +44,15 @@ state.xrFrames = 0;
 state.paused = false;
 state.running = false;
 
+// the person's name where they gave one (a studio's lobby passes it on as ?who=): the others see it, not "desktop 2"
+const who = (new URLSearchParams(location.search).get('who') || '').trim().slice(0, 40) || undefined;
 const handlers = view.handlers;
 link = new Link(socketURL(), {
   ...handlers,
   onStatus: (s) => {
     handlers.onStatus(s);
-    if (s === 'connected' && state.mode) link.send(intents.hand('headset')); // a new connection starts as a desktop
+    // a new connection starts as a desktop with no name
+    if (s === 'connected' && (state.mode || who)) link.send(intents.hand(state.mode ? 'headset' : 'desktop', who));
     showStatus();
   },
   // a failed autosave stays on the HUD (and the headset menu's status) until a save is on disk again
@@ -137,7 +140,7 @@ const xr = new XRApp({
   renderer, scene, clay, grabs, menu, tools, radius: view.radius,
   onMode: (mode) => {
     state.mode = mode;
-    link.send(intents.hand(mode ? 'headset' : 'desktop')); // what the others see this view as
+    link.send(intents.hand(mode ? 'headset' : 'desktop', who)); // what the others see this view as
     if (!mode) {
       scene.background = view.background;
       if (state.frame) view.frame();

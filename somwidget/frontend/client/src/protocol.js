@@ -241,9 +241,11 @@ export const intents = {
   // (points: number[][], radius: number (optional))
   stroke: (points, radius) => compact({ type: 'stroke', points, radius }),
   // What this view is, as the others see it (a `PresenceMessage`): "desktop" (a view's connection starts as
-  // one; a notebook's as "notebook"), or "headset" while the page is in its immersive session.
-  // (kind: string)
-  hand: (kind) => ({ type: 'hand', kind }),
+  // one; a notebook's as "notebook"), or "headset" while the page is in its immersive session; `name`: the
+  // person's name as they gave it (a studio's lobby), shown in place of "desktop 2" to the others and on the
+  // wall.
+  // (kind: string, name: string (optional))
+  hand: (kind, name) => compact({ type: 'hand', kind, name }),
   // A profile of 2 to MAX_STROKE_POINTS points drawn beside the axis of the radial group in effect (none: the
   // z-axis, 16 copies): the clay is lathed around it and the profile becomes its stroke control
   // (Session.revolve); radius optional.
