@@ -22,9 +22,9 @@ echo "[test] eslint (the browser client)"
 
 # two workers (CI has two cores), each taking whole test files so a file's server or JupyterLab starts once;
 # the slowest tests are listed at the end
-echo "[test] pytest -q -n 2 --dist loadfile --durations=60 $*"
+echo "[test] pytest -q -n 3 --dist loadfile --no-loadscope-reorder --durations=60 $*"
 rc=0
-.venv/bin/python -m pytest -q -n 2 --dist loadfile --durations=60 "$@" || rc=$?
+.venv/bin/python -m pytest -q -n 3 --dist loadfile --no-loadscope-reorder --durations=60 "$@" || rc=$?
 if [ "$rc" -eq 5 ]; then
     echo "[test] pytest collected no tests: that is a failure here" >&2
 fi
