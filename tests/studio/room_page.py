@@ -7,10 +7,13 @@ from __future__ import annotations
 def press_on(page, index: int, k: int) -> tuple[float, float]:
     """The mouse pressed on control `index` (or its mirrored copy where the clay hides it); k: the room's controls."""
     for j in (index, index + k):
-        x, y = page.evaluate(f"somxr.controlScreen({j})")
+        at = page.evaluate(f"somxr.controlScreen({j})")
+        if at is None:  # no such copy drawn (a clay without a mirror)
+            continue
+        x, y = at
         page.mouse.move(x, y)
-        try:
-            page.wait_for_function(f"somxr.state().hover.some((j) => j % {k} === {index})", timeout=3000)
+        try:  # the page lights the control up under the pointer (seconds on a loaded machine)
+            page.wait_for_function(f"somxr.state().hover.some((j) => j % {k} === {index})", timeout=8000)
         except Exception:
             continue
         page.mouse.down()

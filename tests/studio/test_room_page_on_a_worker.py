@@ -63,7 +63,8 @@ def test_a_room_on_a_worker_is_dragged_by_mouse_and_comes_back_to_the_page_after
                  and e.info.get("live"), 20, "the room back on the other worker")
         page.wait_for_function(f"somxr.state().link.reconnects > {reconnects} && somxr.state().connected "
                                f"&& somxr.state().link.closeCode === 1012", timeout=30000)
-        page.wait_for_function("somxr.state().frames > 0", timeout=30000)
+        # the room's controls drawn again on the new connection (its topology came, then a frame)
+        page.wait_for_function("somxr.state().frames > 0 && somxr.controlModel(3) !== null", timeout=30000)
         shown = np.asarray(page.evaluate("somxr.controlModel(3)"), float)
         np.testing.assert_allclose(shown, dragged, atol=1e-5)  # the completed drag came back with the room
 

@@ -125,7 +125,9 @@ def test_a_view_is_answered_at_once_while_another_views_first_move_waits_for_a_b
         trip, busy = asyncio.run(asyncio.wait_for(_busy(srv.base, session), 120))
     print(f"another view's ping: {trip:.1f} ms, while the set and the first move took {busy:.0f} ms")
     assert busy > 300, "the set did not keep the training thread busy: nothing was shown"
-    assert trip <= MAX_ROUND_TRIP_MS, (trip, busy)
+    # at once, not behind the busy trainer: within 50 ms, or a tenth of the time the trainer was busy where a loaded
+    # machine delays the one ping (111 ms against 2,137 ms in a CI run); a ping that waits for the trainer takes it all
+    assert trip <= max(MAX_ROUND_TRIP_MS, 0.1 * busy), (trip, busy)
 
 
 def test_a_ping_behind_a_drags_first_move_comes_back_at_once_and_other_views_keep_their_frames(session):
