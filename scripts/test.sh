@@ -22,10 +22,10 @@ echo "[test] eslint (the browser client)"
 
 # two workers on CI's two cores (three took as long on a quiet box, 1,364 s against 1,371-1,406 s, and timed
 # checks failed under the load), each taking whole test files so a file's server or JupyterLab starts once, the longest files first (tests/
-# conftest.py orders them; --no-loadscope-reorder keeps that order); the slowest tests are listed at the end
-echo "[test] pytest -q -n 2 --dist loadfile --no-loadscope-reorder --durations=60 $*"
+# conftest.py orders them; keeps that order); the slowest tests are listed at the end
+echo "[test] pytest -q -n 2 --dist loadfile --durations=60 $*"
 rc=0
-.venv/bin/python -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder --durations=60 "$@" || rc=$?
+.venv/bin/python -m pytest -q -n 2 --dist loadfile --durations=60 "$@" || rc=$?
 if [ "$rc" -eq 5 ]; then
     echo "[test] pytest collected no tests: that is a failure here" >&2
 fi
