@@ -21,8 +21,8 @@ echo "[test] eslint (the browser client)"
 (cd somwidget/frontend/client && npm run --silent lint)
 
 # two workers on CI's two cores (three took as long on a quiet box, 1,364 s against 1,371-1,406 s, and timed
-# checks failed under the load), each taking whole test files so a file's server or JupyterLab starts once, the longest files first (tests/
-# conftest.py orders them; keeps that order); the slowest tests are listed at the end
+# checks failed under the load), each taking whole test files so a file's server or JupyterLab starts once; the
+# slowest tests are listed at the end
 echo "[test] pytest -q -n 2 --dist loadfile --durations=60 $*"
 rc=0
 .venv/bin/python -m pytest -q -n 2 --dist loadfile --durations=60 "$@" || rc=$?

@@ -77,33 +77,3 @@ def browser():
         yield b
         b.close()
 
-
-#: The test files that took longest in a full run (`pytest -n 2 --dist loadfile --durations=0`, summed per file, most
-#: first; 2026-11-28 on the 2-core CI box). xdist hands out whole files in the order of the collection, so these go
-#: first: a long file started last would keep one worker busy while the others have run out of work. Order only: a
-#: file that is missing here (or gone) runs after them, in the order pytest collects it.
-LONGEST_FILES = (
-    "web/test_app_browser.py", "notebook/test_notebooks.py", "notebook/test_notebook_panel.py",
-    "web/test_view_modelling.py", "model/test_recovery.py", "web/test_modelling_by_hand.py", "xr/test_xr_browser.py",
-    "web/test_web_panel_browser.py", "web/test_view_handling.py", "web/test_fifth_trial.py",
-    "notebook/test_saved_notebook.py", "studio/test_batched_rooms.py", "package/test_wheel.py",
-    "web/test_shaping_panels.py", "notebook/test_panel_fits.py", "web/test_fourth_trial.py",
-    "engine/test_handles_reference.py", "web/test_third_trial.py", "xr/test_many_hands_browser.py",
-    "model/test_memory_bounds.py", "package/test_api_docs.py", "model/test_session.py",
-    "notebook/test_marimo_browser.py", "model/test_save_failures.py", "transport/test_clean_failures.py",
-    "studio/test_wall_browser.py", "web/test_panel_hints.py", "transport/test_slow_clients.py",
-    "notebook/test_notebook_and_browser.py", "engine/test_handles.py", "xr/test_xr_serve.py",
-    "model/test_recovery_damaged.py", "engine/test_clay.py", "web/test_client_state.py",
-)
-
-
-def pytest_collection_modifyitems(config, items) -> None:
-    """The longest files first (LONGEST_FILES), each file's tests kept together and in their order; scripts/test.sh
-    passes --no-loadscope-reorder so that xdist keeps this order instead of putting the files with most tests first."""
-    rank = {name: i for i, name in enumerate(LONGEST_FILES)}
-
-    def file_rank(item) -> int:
-        path = os.path.relpath(str(item.path), _HERE).replace(os.sep, "/")
-        return rank.get(path, len(rank))
-
-    items[:] = sorted(items, key=file_rank)  # a stable sort: the rest keep pytest's order
