@@ -59,10 +59,11 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from studio_load import back_after_cut, drive, summarise  # noqa: E402 (benchmarks/, next to this file)
+from studio_load import back_after_cut, drive, loop_lags, summarise  # noqa: E402 (benchmarks/, next to this file)
 
 MOVE_INTERVAL = 1.0 / 30.0  # s: 30 moves a second
 TARGET_MS = 50.0
+LOOK_SHADOW = 0.25  # s after the front's look at its places in which a slow move counts as near it
 MIXED = ("car", "sphere", "torus", "lines")
 HEAVY = ("trame", "pyvista", "trimesh", "vtk", "vtkmodules", "wslink", "ipywidgets", "anywidget")
 
@@ -104,6 +105,73 @@ def memory(studio) -> tuple[float, float]:
     for place, r in zip(studio.front.alive(), reports):
         gpus[getattr(place, "label", "").split(" worker")[0]] = r.get("gpu_mb", 0.0)
     return rss, sum(gpus.values())
+
+
+def round_timings(studio) -> list[dict]:
+    """Each worker's latest rounds as it reports them (rounds.py `timings`)."""
+    async def loads():
+        return [await p.health() for p in studio.front.alive()]
+
+    return [r["load"].get("round", {}) for r in studio.call(loads())]
+
+
+def timed_checks(front) -> list[tuple[float, float]]:
+    """The front's looks at its places from now on, each (began: time.time, seconds it took), in the list returned."""
+    looks: list[tuple[float, float]] = []
+    check = front.check
+
+    async def timed(place):
+        began, t = time.time(), time.perf_counter()
+        try:
+            await check(place)
+        finally:
+            looks.append((began, time.perf_counter() - t))
+
+    front.check = timed
+    return looks
+
+
+def tail_causes(views: list, looks: list, rounds: list[dict], window: tuple[float, float]) -> dict:
+    """Where the slow moves came from: the workers' rounds (median, p95, longest of any worker), the front's looks at
+    its places (p95 and longest seconds), and the share of slow moves sent within LOOK_SHADOW of a look's start
+    against the share of the moving time that lies there (alike: the looks do not make them)."""
+    slow = np.array([t for v in views for t in v.get("slow", []) if window[0] <= t <= window[1]])
+    starts = np.array(sorted({round(b, 2) for b, _ in looks if window[0] - 1 <= b <= window[1]}))
+    took = np.array([d for b, d in looks if window[0] <= b <= window[1]] or [0.0])
+    near = chance = float("nan")
+    if len(starts):
+        after = slow[:, None] - starts[None, :] if len(slow) else np.zeros((0, 1))
+        near = float(np.mean(((after >= 0) & (after <= LOOK_SHADOW)).any(axis=1))) if len(slow) else float("nan")
+        grid = np.linspace(window[0], window[1], 2000)
+        chance = float(np.mean(((grid[:, None] - starts[None, :] >= 0)
+                                & (grid[:, None] - starts[None, :] <= LOOK_SHADOW)).any(axis=1)))
+    timed = [r for r in rounds if r.get("rounds")]
+    # how periodic the slow moves are: the mean resultant length of their phases (0: spread evenly, 1: all at one
+    # phase) for a period of 1 s (the front's looks) and of 2 s (the rooms' autosaves while a drag is held)
+    phase = {f"slow_phase_{p:g}s": float(abs(np.mean(np.exp(2j * np.pi * slow / p)))) if len(slow) else float("nan")
+             for p in (1.0, 2.0)}
+    return {**phase, "slow_moves": int(len(slow)), "slow_near_look": near, "look_shadow_share": chance,
+            "look_p95_ms": float(np.percentile(took, 95) * 1e3), "look_max_ms": float(took.max() * 1e3),
+            "round_median_ms": max((r["median_ms"] for r in timed), default=float("nan")),
+            "round_p95_ms": max((r["p95_ms"] for r in timed), default=float("nan")),
+            "round_max_ms": max((r["max_ms"] for r in timed), default=float("nan"))}
+
+
+def lag_figures(role: str, lags: list, window: tuple[float, float]) -> dict:
+    """The event loops' lags of `role` (studio_load.loop_lags) in the moving window: the seconds late in all (summed
+    over the role's loops) and the longest."""
+    late = [d for t, d in lags if window[0] <= t <= window[1]]
+    return {f"{role}_lag_s": float(sum(late)), f"{role}_lag_max_ms": 1e3 * max(late, default=0.0)}
+
+
+def causes_line(c: dict) -> str:
+    return (f"#   slow moves {c['slow_moves']}: {c['slow_near_look']:.0%} sent within {LOOK_SHADOW:g} s of the "
+            f"front's look at its places (that window is {c['look_shadow_share']:.0%} of the time); a look p95 "
+            f"{c['look_p95_ms']:.0f} ms, longest {c['look_max_ms']:.0f}; their phase at 1 s {c['slow_phase_1s']:.2f}, "
+            f"at 2 s {c['slow_phase_2s']:.2f} (0 even, 1 at one phase); the front's loop late "
+            f"{c['front_lag_s']:.2f} s in all, at most {c['front_lag_max_ms']:.0f} ms; the designers' loops "
+            f"{c['designers_lag_s']:.2f} s, at most {c['designers_lag_max_ms']:.0f} ms; the slowest worker's rounds "
+            f"median {c['round_median_ms']:.1f} ms, p95 {c['round_p95_ms']:.1f}, longest {c['round_max_ms']:.1f}")
 
 
 def server_pids(studio) -> list[int]:
@@ -164,6 +232,8 @@ def run_rooms(count: int, presets: tuple[str, ...], seconds: float, device: str,
                               limits=limits), max(180.0, deadline - time.time() - 60.0)) as studio:
         left = lambda: max(1.0, deadline - time.time())  # noqa: E731
         studio.call(_workers_up(studio.front, max(1, workers), left() - 30.0), timeout=left())
+        looks = timed_checks(studio.front)
+        front_lags: list = []
         # a room on each place first: what the first room loads is not a room's
         studio.call(_make_rooms(studio.front, [f"warm{p}" for p in range(max(1, workers))], presets, 64),
                     timeout=left())
@@ -192,8 +262,10 @@ def run_rooms(count: int, presets: tuple[str, ...], seconds: float, device: str,
             killed = {}
             threading.Thread(target=killer, daemon=True).start()
         moving_end = time.time() + lead + seconds + 1.0
-        views, designer_cpu = drive(urls, seconds, procs, lead, min(deadline - 20.0, moving_end + 30.0))
+        asyncio.run_coroutine_threadsafe(loop_lags(front_lags, moving_end), studio._loop)
+        views, designer_cpu, designer_lags = drive(urls, seconds, procs, lead, min(deadline - 20.0, moving_end + 30.0))
         wall = time.perf_counter() - t0
+        rounds = round_timings(studio) if not kill else []
         front_cores = (cpu_seconds(front) - c0) / wall
         worker_cores = (cpu_seconds(workers_pids) - w0) / wall if kill is False else float("nan")
     out = summarise(views, seconds)
@@ -205,6 +277,9 @@ def run_rooms(count: int, presets: tuple[str, ...], seconds: float, device: str,
                designer_ms_frame=1e3 * designer_cpu / frames,
                ok=out["p95_ms"] <= TARGET_MS and out["answered"] >= 0.9 and not out["silent"])
     out["cpu_ms_frame"] = out["front_ms_frame"] + out["worker_ms_frame"]
+    window = (moving_end - seconds - 1.0, moving_end)
+    out.update(tail_causes(views, looks, rounds, window))
+    out.update(lag_figures("front", front_lags, window), **lag_figures("designers", designer_lags, window))
     if killed is not None:
         out.update(killed=killed, **back_after_cut(views, killed.get("at", float("nan"))))
     return out
@@ -425,7 +500,7 @@ def run_dask(count: int, seconds: float) -> list[dict]:
                 studio.call(studio.front.create(name, "car"), timeout=600)
             time.sleep(15)
             urls = [studio.room_url(n).replace("http", "ws", 1).replace("/?token=", "/view/ws?token=") for n in names]
-            views, _ = drive(urls, seconds, 1, 10.0, time.time() + seconds + 120)
+            views, _, _ = drive(urls, seconds, 1, 10.0, time.time() + seconds + 120)
             out.append(dict(summarise(views, seconds), path="front -> workers' own servers", rooms=count))
 
         async def actors():
@@ -440,8 +515,10 @@ def run_dask(count: int, seconds: float) -> list[dict]:
 
 # -- GPU counts, the deadline --------------------------------------------------------------------------------------
 def default_procs(count: int) -> int:
-    """Designer processes: one per 48 designers, at most a quarter of the cores (the studio has the rest)."""
-    return max(1, min(math.ceil(count / 48), (os.cpu_count() or 4) // 4))
+    """Designer processes: one per 24 designers, at most a quarter of the cores (the studio has the rest). At 48 a
+    process, 512 designers on a 64-core host answered 86% of their moves where 22 processes answered 99%
+    (BENCHMARKS.md, "The tail at four GPUs")."""
+    return max(1, min(math.ceil(count / 24), (os.cpu_count() or 4) // 4))
 
 
 def trial_seconds(count: int, seconds: float) -> float:
@@ -487,6 +564,7 @@ def run_gpu_counts(args, gpu_counts: list[int], per_gpu: list[int], presets: tup
                 r.update(gpus=g, workers=workers)
                 results.append(r)
                 print(rooms_line(r, g, workers), flush=True)
+                print(causes_line(r), flush=True)
                 if not r["ok"]:
                     break
                 best[g, w] = count
@@ -590,7 +668,7 @@ def main(argv=None) -> int:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--workers", type=int, default=0, help="worker processes (0: the rooms in the server's own)")
     parser.add_argument("--client-procs", type=int, default=0,
-                        help="designer processes (0: one per 48 designers, at most a quarter of the cores)")
+                        help="designer processes (0: one per 24 designers, at most a quarter of the cores)")
     parser.add_argument("--gpus", default="", help="rooms mode: GPU counts to run in turn (e.g. 1,2,4): --rooms per "
                         "GPU, --workers-per-gpu workers a GPU; the most designers at p95 <= 50 ms each and the ratio")
     parser.add_argument("--workers-per-gpu", default="0", help="with --gpus: worker processes a GPU, or several to "
@@ -635,6 +713,7 @@ def main(argv=None) -> int:
                 r = run_rooms(count, presets, args.seconds, args.device, args.workers, procs, time.time() + args.budget)
                 results.append(r)
                 print(rooms_line(r, "-", args.workers), flush=True)
+                print(causes_line(r), flush=True)
             passing = [r["rooms"] for r in results if r["ok"]]
             print(f"# most rooms with p95 <= {TARGET_MS:g} ms: {max(passing) if passing else 'none'} "
                   f"(of {', '.join(map(str, counts))}; presets {args.presets})", flush=True)

@@ -26,6 +26,8 @@ import numpy as np
 
 MOVE_INTERVAL = 1.0 / 30.0  # s: 30 moves a second
 RECONNECT_PAUSE = 0.2  # s between two tries to reach a room again
+SLOW = 0.050  # s: a move answered later than this is slow (its time kept: when the slow ones come)
+LAG_NOTED = 0.010  # s: an event loop this late is noted (`loop_lags`)
 
 
 class _Designer:
@@ -34,6 +36,7 @@ class _Designer:
     def __init__(self, index: int) -> None:
         self.index = index
         self.latencies: list[float] = []
+        self.slow: list[float] = []  # when each move answered after SLOW was sent (time.time)
         self.sent = 0
         self.frames = 0
         self.seconds = 0.0
@@ -69,7 +72,7 @@ async def designer(url: str, d: _Designer, seconds: float, start_at: float, dead
     from somwidget.frontend.transport.messages import HEADER_FORMAT, HEADER_SIZE
 
     header = struct.Struct(HEADER_FORMAT)
-    pending: list[tuple[float, bytes]] = []  # (sent at, the position's float32 bytes)
+    pending: list[tuple[float, float, bytes]] = []  # (sent at: perf_counter, time.time; the position's float32s)
     state = {"t0": None}
     async with aiohttp.ClientSession() as cs:
         while time.time() < deadline:
@@ -112,10 +115,12 @@ async def _drag(ws, d: _Designer, cid: int, at: int, pending: list, state: dict,
                 continue
             d.frames += 1
             shown = msg.data[at:at + 12]
-            for m, (t, p) in enumerate(pending):
+            for m, (t, wall, p) in enumerate(pending):
                 if p == shown:
                     now = time.perf_counter()
                     d.latencies.append(now - t)
+                    if now - t > SLOW:
+                        d.slow.append(wall)
                     del pending[:m + 1]
                     if d.cuts and d.cuts[-1][1] is None:
                         d.cuts[-1] = (d.cuts[-1][0], time.time())
@@ -139,7 +144,7 @@ async def _drag(ws, d: _Designer, cid: int, at: int, pending: list, state: dict,
             p = (round(hx + r * math.cos(a), 6), round(hy + r * math.sin(a), 6),
                  round(hz + 0.5 * r * math.sin(2 * a), 6))
             await ws.send_str(f'{{"type":"move","id":{cid},"position":[{p[0]!r},{p[1]!r},{p[2]!r}]}}')
-            pending.append((time.perf_counter(), struct.pack("<3f", *p)))
+            pending.append((time.perf_counter(), time.time(), struct.pack("<3f", *p)))
             d.sent += 1
             tick += MOVE_INTERVAL
             await asyncio.sleep(max(0.0, tick - time.perf_counter()))
@@ -156,12 +161,26 @@ async def _drag(ws, d: _Designer, cid: int, at: int, pending: list, state: dict,
         await ws.close()
 
 
+async def loop_lags(lags: list, until: float, tick: float = 0.005) -> None:
+    """Until `until` (time.time): how late this loop wakes from a `tick` sleep, each lag over LAG_NOTED kept in `lags`
+    as (when: time.time, seconds late)."""
+    while time.time() < until:
+        t = time.perf_counter()
+        await asyncio.sleep(tick)
+        late = time.perf_counter() - t - tick
+        if late > LAG_NOTED:
+            lags.append((time.time(), late))
+
+
 def run_designers(urls: list[str], first: int, seconds: float, start_at: float, deadline: float, out) -> None:
-    """A process of designers (one asyncio loop): their results and this process's CPU seconds into `out`."""
+    """A process of designers (one asyncio loop): their results, this process's CPU seconds and its loop's lags into
+    `out`."""
     cpu0 = time.process_time()
     ds = [_Designer(first + i) for i in range(len(urls))]
+    lags: list = []
 
     async def main():
+        asyncio.ensure_future(loop_lags(lags, start_at + seconds + 1.0))
         tasks = [asyncio.ensure_future(designer(u, d, seconds, start_at, deadline)) for u, d in zip(urls, ds)]
         done, pending = await asyncio.wait(tasks, timeout=max(1.0, deadline - time.time()))
         for t in pending:
@@ -175,13 +194,13 @@ def run_designers(urls: list[str], first: int, seconds: float, start_at: float, 
     asyncio.run(main())
     if os.environ.get("SOMWIDGET_PROFILE_DIR") and "sitecustomize" in sys.modules:  # benchmarks/profile_hook
         getattr(sys.modules["sitecustomize"], "dump", lambda role: None)("designers")
-    out.put(([d.result() for d in ds], time.process_time() - cpu0))
+    out.put(([d.result() for d in ds], time.process_time() - cpu0, lags))
 
 
-def drive(urls: list[str], seconds: float, procs: int, lead: float, deadline: float) -> tuple[list, float]:
+def drive(urls: list[str], seconds: float, procs: int, lead: float, deadline: float) -> tuple[list, float, list]:
     """The designers of `urls` in `procs` processes, moving from `lead` seconds on for `seconds`; (their results, the
-    designers' CPU seconds). Processes that do not report by `deadline` (time.time) are ended, their designers
-    counted as never answered."""
+    designers' CPU seconds, their loops' lags: `loop_lags`). Processes that do not report by `deadline` (time.time)
+    are ended, their designers counted as never answered."""
     ctx = multiprocessing.get_context("spawn")
     out = ctx.Queue()
     start_at = time.time() + lead
@@ -190,21 +209,22 @@ def drive(urls: list[str], seconds: float, procs: int, lead: float, deadline: fl
                            daemon=True) for i, chunk in chunks]
     for w in workers:
         w.start()
-    results, cpu = [], 0.0
+    results, cpu, lags = [], 0.0, []
     for _ in workers:
         try:
-            got, used = out.get(timeout=max(1.0, deadline + 15.0 - time.time()))
+            got, used, late = out.get(timeout=max(1.0, deadline + 15.0 - time.time()))
         except queues.Empty:
             break
         results += got
         cpu += used
+        lags += late
     for w in workers:
         w.join(5)
         if w.is_alive():
             w.kill()
     missing = len(urls) - len(results)
     results += [dict(vars(_Designer(-1)), error="its process did not report by the deadline")] * missing
-    return results, cpu
+    return results, cpu, lags
 
 
 def summarise(views: list, seconds: float) -> dict:

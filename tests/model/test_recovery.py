@@ -148,12 +148,12 @@ def test_sigterm_and_sigint_keep_the_work_and_its_undo(tmp_path):
 def test_sigkill_mid_drag_brings_back_what_the_message_says(tmp_path):
     """A kill during a drag: the last completed step comes back, or the drag as a step of its own that Undo removes;
     the message says which, and what came back is that. A control pressed but not moved yet is the first (nothing
-    changed), a drag moved and held (past AUTOSAVE_SECONDS, so it was written) the second."""
+    changed), a drag moved and held (past its longest wait for a save, so it was written) the second."""
     env = {"SOMWIDGET_DATA_DIR": str(tmp_path / "data")}
     target = [3.2, 0.5, 0.3]
     rounds = {"pressed": ([{"type": "grab", "index": 2}], 0.3),
               "dragged": ([{"type": "grab", "index": 2}, {"type": "move", "index": 2, "position": target}],
-                          autosave.AUTOSAVE_SECONDS + 1.5)}
+                          autosave.AUTOSAVE_SECONDS * (1 + autosave.AUTOSAVE_JITTER) + 1.5)}
     for reach, (name, (intents, hold)) in zip((0.12, 0.13), rounds.items()):
         srv = Serve(env=env)
         try:

@@ -192,3 +192,18 @@ def test_a_held_rooms_autosave_during_a_drag_gives_nothing_back(tmp_path, monkey
                 np.testing.assert_array_equal(session.modelling.som.weights, session.frame.weights)
     finally:
         rooms.close()
+
+
+def test_the_saves_of_rooms_dragged_together_drift_apart():
+    """Each wait for a drag's next save is drawn within AUTOSAVE_JITTER of AUTOSAVE_SECONDS: the rooms of a worker
+    whose drags began in the same moment do not all write in the same round, every two seconds (that lockstep made a
+    periodic tail of slow frames: BENCHMARKS.md, "The tail at four GPUs")."""
+    seconds, jitter = autosave_module.AUTOSAVE_SECONDS, autosave_module.AUTOSAVE_JITTER
+    assert 0.1 <= jitter <= 0.5
+    now = time.monotonic()
+    waits = np.array([autosave_module.next_due() for _ in range(400)]) - now
+    assert waits.min() >= seconds * (1 - jitter) - 1e-3 and waits.max() <= seconds * (1 + jitter) + 0.1
+    # spread over the band: two rooms that saved together are a tenth of a second apart or more, most times
+    assert waits.min() < seconds * (1 - jitter / 2) and waits.max() > seconds * (1 + jitter / 2)
+    pairs = np.abs(waits[::2] - waits[1::2])
+    assert np.mean(pairs > 0.1) > 0.5, np.sort(pairs)[:10]

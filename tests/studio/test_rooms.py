@@ -150,3 +150,17 @@ def test_a_rooms_slow_call_does_not_hold_up_the_other_rooms(rooms):
     call.result(60)
     assert a.session.wait_idle(120) and a.session.preset.name == "sphere"
     assert b.session.preset.name == "car"
+
+
+def test_a_worker_reports_how_long_its_rounds_take(rooms):
+    """The load a worker reports (the front's looks, bench_studio.py) carries its latest rounds: how many, their median,
+    95th percentile and longest, each within the time the rounds had."""
+    began = time.monotonic()
+    assert rooms.load()["round"] == {"rounds": 0}  # no room: no round timed
+    room = rooms.create("alice", "token-a", "car")
+    assert room.session.wait_idle(120)
+    drag(room.session, 0, [0.0, 0.0, 0.1])
+    took_ms = 1e3 * (time.monotonic() - began)
+    r = rooms.load()["round"]
+    assert 2 <= r["rounds"] <= rooms.rounds.rounds, r
+    assert 0 < r["median_ms"] <= r["p95_ms"] <= r["max_ms"] < took_ms, (r, took_ms)

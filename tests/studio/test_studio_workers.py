@@ -164,3 +164,50 @@ def test_a_worker_warms_its_kernels_before_it_announces_and_keeps_no_room_of_it(
     rooms.warm()
     assert rooms.rooms() == [] and list(tmp_path.iterdir()) == []
     assert rooms.batches.launches == 0  # its own batch, not the worker's
+
+
+class _LookedAtPlace(_Place):
+    """A place that notes when the front looks at it (its health check, its rooms, its idle rooms)."""
+
+    def __init__(self, gpu: str, looks: list):
+        super().__init__(gpu, 0)
+        self.looks = looks
+
+    async def health(self) -> dict:
+        import time
+
+        self.looks.append((time.monotonic(), self.label))
+        return {"load": self.load}
+
+    async def listing(self) -> list[dict]:
+        return []
+
+    async def park_idle(self) -> list[str]:
+        return []
+
+
+def test_the_front_spreads_its_looks_at_the_places_over_the_period(monkeypatch):
+    """Eight places looked at once a period each, one after another: never all in the same moment (their replies
+    arriving together held up every room's relaying), and none left out."""
+    import asyncio
+
+    from somwidget.frontend.studio import front as front_module
+
+    period = 0.4
+    monkeypatch.setattr(front_module, "MONITOR_PERIOD", period)
+    looks: list = []
+    places = [_LookedAtPlace(str(i), looks) for i in range(8)]
+
+    async def watch():
+        front = front_module.StudioFront(places)
+        front._task = asyncio.ensure_future(front._monitor())
+        await asyncio.sleep(3 * period + 0.05)
+        await front.close()
+
+    asyncio.run(watch())
+    assert {label for _, label in looks} == {p.label for p in places}  # every place looked at
+    times = sorted(t for t, _ in looks)
+    assert len(times) >= 2 * len(places), len(times)  # once a period each, or about
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    # spread: about period / 8 apart (0.05 s); all at once they were microseconds apart
+    assert min(gaps) > 0.3 * period / len(places), gaps

@@ -2,10 +2,13 @@
 that recovery.py can bring back a stopped session, however it stopped.
 
 When a session writes (`SessionAutosave`): at once when a step completes (a drag released, a control added, a
-setting, a reset, an undo...); while training goes on, when training settles or every AUTOSAVE_SECONDS; while a drag
-is held, every AUTOSAVE_SECONDS (its moves settle one after another, a fast engine's every frame); never what is not
-whole. A save of a drag not yet released is marked as one: brought back, the drag
-is a step of its own that Undo removes, and the message says so.
+setting, a reset, an undo...); while training goes on, when training settles or about every AUTOSAVE_SECONDS; while
+a drag is held, about every AUTOSAVE_SECONDS (its moves settle one after another, a fast engine's every frame); never
+what is not whole. "About": each wait is drawn within AUTOSAVE_JITTER of it, so that the sessions of one process (a
+studio's rooms, whose drags may all begin at once) do not all write in the same moment, every time.
+
+A save of a drag not yet released is marked as one: brought back, the drag is a step of its own that Undo removes,
+and the message says so.
 
 A save that fails (a full disk, a folder that cannot be written) is kept and tried again every RETRY_SECONDS, a newer
 state taking its place, until one is on disk; meanwhile `Autosave.error` says what is wrong and where, and the
@@ -18,6 +21,7 @@ stays as it was if the start fails, and a session that never finished starting i
 from __future__ import annotations
 
 import logging
+import random
 import threading
 import time
 from collections.abc import Callable
@@ -33,8 +37,15 @@ log = logging.getLogger(__name__)
 #: While training or dragging, a session writes at most this often (it writes at once when a step completes, and
 #: when training settles with no drag held).
 AUTOSAVE_SECONDS = 2.0
+#: ...give or take this share of it, drawn afresh after each save.
+AUTOSAVE_JITTER = 0.25
 #: A failed save is tried again after this many seconds.
 RETRY_SECONDS = 1.0
+
+
+def next_due() -> float:
+    """When the next save of a changing session is due (time.monotonic): about AUTOSAVE_SECONDS from now."""
+    return time.monotonic() + AUTOSAVE_SECONDS * (1.0 + AUTOSAVE_JITTER * random.uniform(-1.0, 1.0))
 
 
 class Autosave:
@@ -131,7 +142,7 @@ class SessionAutosave:
         self.timeline = timeline
         self.trainer = trainer
         self.writer = Autosave(store, self._publish)
-        self._saved_at = 0.0
+        self._due_at = 0.0
         self._completed = -1  # state.completed at the latest save (-1: a new session's first state is due)
         self._timer: threading.Timer | None = None  # a held drag settled: the turn that saves it, when it is due
 
@@ -172,7 +183,7 @@ class SessionAutosave:
         if state.completed != self._completed:
             return True
         return state.unsaved and ((self.settled() and not state.gesture)
-                                  or time.monotonic() - self._saved_at >= AUTOSAVE_SECONDS)
+                                  or time.monotonic() >= self._due_at)
 
     @property
     def armed(self) -> bool:
@@ -187,7 +198,7 @@ class SessionAutosave:
             if on_disk:
                 state.unsaved = False
                 self._completed = state.completed
-                self._saved_at = time.monotonic()
+                self._due_at = next_due()
             self.writer.store.allow_writes()
 
     def if_due(self) -> None:
@@ -213,7 +224,7 @@ class SessionAutosave:
         return self.state.som_lock if lent is None else lent.for_save()
 
     def _save_later(self) -> None:
-        """A held drag whose training settled is written AUTOSAVE_SECONDS after the last save: a turn then (a posted
+        """A held drag whose training settled is written when its next save is due (`next_due`): a turn then (a posted
         call, nothing else) asks again, since a settled session has no turns of its own (caller holds the state
         lock)."""
         state = self.state
@@ -226,7 +237,7 @@ class SessionAutosave:
             if not self.trainer.closed:
                 self.trainer.post(lambda: None, quick=True)  # the training thread's turn after it saves (`if_due`)
 
-        delay = max(0.0, self._saved_at + AUTOSAVE_SECONDS - time.monotonic()) + 0.01
+        delay = max(0.0, self._due_at - time.monotonic()) + 0.01
         self._timer = threading.Timer(delay, turn)
         self._timer.daemon = True
         self._timer.start()
@@ -236,7 +247,7 @@ class SessionAutosave:
         saving = self.snapshot()
         self.state.unsaved = False
         self._completed = self.state.completed
-        self._saved_at = time.monotonic()
+        self._due_at = next_due()
         return saving
 
     def flush(self, timeout: float = 10.0) -> bool:

@@ -26,7 +26,13 @@ from .rooms import RoomBusy
 
 log = logging.getLogger(__name__)
 
-#: Seconds between two looks at every place.
+
+def _logged(task: asyncio.Future) -> None:
+    """A task of the front's that failed in a way it does not handle: logged, never left unretrieved."""
+    if not task.cancelled() and task.exception() is not None:
+        log.error("studio: %s failed", task, exc_info=task.exception())
+
+#: Seconds between two looks at a place (the places' looks spread over them).
 MONITOR_PERIOD = 1.0
 #: Failed looks in a row after which a place is dead.
 DEAD_AFTER = 2
@@ -111,10 +117,13 @@ class StudioFront:
         for entry in [e for e in self.rooms.values() if e.place is None and e.info.get("live")]:
             self._later(self._bring_back(entry, "a worker that went"))
 
-    def _later(self, coroutine: Coroutine[object, object, None]) -> None:
+    def _later(self, coroutine: Coroutine[object, object, None]) -> asyncio.Task:
+        """`coroutine` run as a task of the front's (ended when it closes); a failure it does not handle is logged."""
         task = asyncio.ensure_future(coroutine)
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
+        task.add_done_callback(_logged)
+        return task
 
     def choose(self, exclude: Collection[Place] = ()) -> Place:
         """The least loaded live place with room for one more; StudioFull when every one is full."""
@@ -286,6 +295,18 @@ class StudioFront:
                 await self.lost(place)
 
     async def _monitor(self) -> None:
+        """Each place looked at once a MONITOR_PERIOD, the looks spread over the period: all at once, the replies of
+        thirty workers arrived together and held up the relaying of every room's moves and frames for tens of ms
+        (BENCHMARKS.md, "The tail at four GPUs"). A place whose last look is still under way is skipped."""
+        looking: dict[int, asyncio.Task] = {}
         while True:
-            await asyncio.sleep(MONITOR_PERIOD)
-            await asyncio.gather(*(self.check(p) for p in self.alive()), return_exceptions=True)
+            places = self.alive()
+            if not places:
+                await asyncio.sleep(MONITOR_PERIOD)
+            for place in places:
+                await asyncio.sleep(MONITOR_PERIOD / len(places))
+                last = looking.get(id(place))
+                if not place.alive or (last is not None and not last.done()):
+                    continue
+                looking[id(place)] = self._later(self.check(place))
+            looking = {key: look for key, look in looking.items() if not look.done()}

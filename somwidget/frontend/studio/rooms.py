@@ -421,11 +421,11 @@ class Rooms:
         return [room.info() for room in self.rooms()]
 
     def load(self) -> dict:
-        """How loaded this worker is: live rooms and their nodes."""
+        """How loaded this worker is: live rooms and their nodes, its memory, its latest rounds' durations."""
         live = self.live()
         return {"rooms": len(live), "nodes": sum(int(r.session.preset.n_vertices) for r in live if r.session),
                 "limit": self.limits.rooms, "rss_mb": resident_bytes() / 2**20,
-                "gpu_mb": device_used_bytes(self.device) / 2**20}
+                "gpu_mb": device_used_bytes(self.device) / 2**20, "round": self.rounds.timings()}
 
     def close(self) -> None:
         """Close every live room (each saved; the folders stay)."""

@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 
 from ..model.trainer import step_alone
@@ -35,6 +36,8 @@ EARLY = 0.002
 IDLE_LOOK = 0.25
 #: Threads that run rooms' slow calls (a preset switch, a refine, an undo, a save) off the loop.
 CALL_THREADS = 4
+#: Rounds whose durations `timings` reports (the latest; about 10 s of a busy loop).
+TIMED_ROUNDS = 2048
 
 
 class Rounds:
@@ -54,6 +57,7 @@ class Rounds:
         self._calls = ThreadPoolExecutor(CALL_THREADS, thread_name_prefix="somwidget-room-calls")
         self.thread = threading.Thread(target=self._run, name="somwidget-rounds", daemon=True)
         self.rounds = 0
+        self._durations: deque[float] = deque(maxlen=TIMED_ROUNDS)  # s, the latest rounds' (with rooms in them)
 
     # -- rooms come and go --------------------------------------------------------------------------------------
     def add(self, trainer) -> threading.Thread:
@@ -87,6 +91,14 @@ class Rounds:
         with trainer.state.som_lock:  # RoomLock: given back
             pass
 
+    def timings(self) -> dict:
+        """The latest rounds (TIMED_ROUNDS at most): how many, their median, 95th percentile and longest (ms)."""
+        ms = sorted(1e3 * d for d in list(self._durations))
+        if not ms:
+            return {"rounds": 0}
+        return {"rounds": len(ms), "median_ms": round(ms[len(ms) // 2], 2),
+                "p95_ms": round(ms[min(len(ms) - 1, int(0.95 * len(ms)))], 2), "max_ms": round(ms[-1], 2)}
+
     def poke(self) -> None:
         """An intent arrived: the next round soon."""
         self._poked.set()
@@ -109,6 +121,8 @@ class Rounds:
                 log.exception("studio: a round failed")
                 due = began + self.period
             self.rounds += 1
+            if self._trainers:
+                self._durations.append(time.monotonic() - began)
             wait = IDLE_LOOK if due is None else due - time.monotonic()
             if wait > 0:
                 self._poked.wait(wait)
