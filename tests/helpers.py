@@ -28,6 +28,20 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
 ANNOUNCED = re.compile(r"somwidget serving .* at (http)://(\S+?):(\d+)/|desktop: (https)://(\S+?):(\d+)/")
 
 
+def skip_unless_browser_and_client() -> None:
+    """Skip the calling test file (at its top) unless Playwright, Debian's Chromium and the built client are here."""
+    import pytest
+
+    from somwidget.frontend.client import DIST
+
+    pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
+    if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
+        pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
+    if not all((DIST / page).is_file() for page in ("index.html", "emulator.html")):  # pragma: no cover
+        pytest.skip("the client is not built (npm ci && npm run build in somwidget/frontend/client)",
+                    allow_module_level=True)
+
+
 def wave_mesh(path: Path, side: int) -> Path:
     """A side x side wave sheet (triangles) written to `path` (binary PLY: a big mesh uploads in a few MB); 513 makes
     263,169 vertices, just past a CPU session's 262,144."""

@@ -13,22 +13,16 @@ import signal
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM, wait_for
+from helpers import skip_unless_browser_and_client, wait_for
 from room_page import drag
 
 import somwidget
-from somwidget.frontend.client import DIST
 from somwidget.frontend.studio.limits import StudioLimits
 from somwidget.frontend.studio.serve import StudioServer
 
 pytestmark = pytest.mark.browser
 
-playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
-if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
-    pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
-if not (DIST / "index.html").is_file():  # pragma: no cover
-    pytest.skip("the client is not built (npm ci && npm run build in somwidget/frontend/client)",
-                allow_module_level=True)
+skip_unless_browser_and_client()
 
 
 def test_a_room_on_a_worker_is_dragged_by_mouse_and_comes_back_to_the_page_after_its_worker_dies(tmp_path, browser):

@@ -17,21 +17,15 @@ import os
 
 import numpy as np
 import pytest
-from helpers import CHROMIUM
+from helpers import skip_unless_browser_and_client
 from room_page import press_on
 
-from somwidget.frontend.client import DIST
 from somwidget.frontend.studio.limits import StudioLimits
 from somwidget.frontend.studio.serve import StudioServer
 
 pytestmark = pytest.mark.browser
 
-playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
-if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
-    pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
-if not (DIST / "index.html").is_file():  # pragma: no cover
-    pytest.skip("the client is not built (npm ci && npm run build in somwidget/frontend/client)",
-                allow_module_level=True)
+skip_unless_browser_and_client()
 
 SHOTS = os.environ.get("SOMWIDGET_SHOTS")  # a folder to keep the pages' screenshots in (looked at by a person)
 #: What the wall's person sees of a room: how many of its thumbnail's pixels are drawn on.

@@ -10,26 +10,18 @@ Needs /usr/bin/chromium, Python Playwright and the built client (npm run build).
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import pytest
-from helpers import CHROMIUM, wait_for
+from helpers import skip_unless_browser_and_client, wait_for
 from room_page import drag
 
 import somwidget
-from somwidget.frontend.client import DIST
 from somwidget.frontend.studio.limits import StudioLimits
 from somwidget.frontend.studio.serve import StudioServer
 
 pytestmark = pytest.mark.browser
 
-playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
-if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
-    pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
-if not (DIST / "index.html").is_file():  # pragma: no cover
-    pytest.skip("the client is not built (npm ci && npm run build in somwidget/frontend/client)",
-                allow_module_level=True)
+skip_unless_browser_and_client()
 
 ROOMS = {"alice": "car", "bob": "sphere", "carol": "torus"}
 #: What the wall's person sees of a room: a digest of its thumbnail's pixels.

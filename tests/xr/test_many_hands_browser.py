@@ -14,24 +14,15 @@ Needs /usr/bin/chromium, Python Playwright and the built client (npm run build).
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import pytest
-from helpers import CHROMIUM, settled_session, wait_for
-
-from somwidget.frontend.client import DIST
+from helpers import settled_session, skip_unless_browser_and_client, wait_for
 
 pytestmark = pytest.mark.browser
 
 VIEWPORT = {"width": 520, "height": 520}  # small (SwiftShader renders on the CPU), tall enough for the HUD
 
-playwright_sync = pytest.importorskip("playwright.sync_api", reason="Python Playwright is not installed")
-if not os.path.exists(CHROMIUM):  # pragma: no cover - depends on the machine
-    pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium)", allow_module_level=True)
-if not (DIST / "emulator.html").is_file():  # pragma: no cover
-    pytest.skip("the client is not built (npm ci && npm run build in somwidget/frontend/client)",
-                allow_module_level=True)
+skip_unless_browser_and_client()
 
 
 @pytest.fixture(scope="module")
