@@ -164,3 +164,33 @@ def test_a_worker_reports_how_long_its_rounds_take(rooms):
     r = rooms.load()["round"]
     assert 2 <= r["rounds"] <= rooms.rounds.rounds, r
     assert 0 < r["median_ms"] <= r["p95_ms"] <= r["max_ms"] < took_ms, (r, took_ms)
+
+
+def test_a_live_rooms_thumbnail_is_kept_in_its_folder_without_a_wall(tmp_path, monkeypatch):
+    """No wall open and no parking: the worker's look at its rooms keeps a changing room's thumbnail in its folder at
+    most every THUMB_SAVE_PERIOD seconds, so that after its worker dies (here: another worker reads the folder, as a
+    studio restarted does) the wall shows the room's clay as it was then."""
+    from somwidget.frontend.studio import rooms as rooms_module
+
+    monkeypatch.setattr(rooms_module, "THUMB_SAVE_PERIOD", 30.0)
+    rooms = Rooms(tmp_path / "rooms", device="cpu", limits=StudioLimits(park_after=0))  # never parked
+    room = rooms.create("alice", "t", "sphere")
+    assert room.session.wait_idle(120)
+    kept = tmp_path / "rooms" / "alice" / THUMB_FILE
+    rooms.park_idle()  # the worker's look (every PARK_PERIOD seconds)
+    assert kept.is_file(), "no thumbnail kept for a live room without a wall"
+    first = kept.stat().st_mtime_ns
+    drag(room.session, 0, [0.0, 0.0, 0.1])
+    rooms.park_idle()  # changed, but within the period: not written again yet
+    assert kept.stat().st_mtime_ns == first
+    monkeypatch.setattr(rooms_module, "THUMB_SAVE_PERIOD", 0.0)  # the period over
+    rooms.park_idle()
+    frame = room.session.frame
+    other = Rooms(tmp_path / "rooms", device="cpu")  # the room's worker gone without parking it
+    try:
+        (got,) = other.thumbs({"alice": None})
+        assert got["seq"] == frame.seq and got["thumb"] == thumbnail(frame, {"nodes": None})  # the dragged clay
+        assert room.live  # never parked: the worker's look kept it
+    finally:
+        other.close()
+        rooms.close()

@@ -11,9 +11,10 @@ A room's folder, under the studio's rooms folder (one folder every worker of a c
 
 Parking (`park`, `park_idle`): a room with no view for `limits.park_after` seconds is closed: what changed since its
 last save is written, its Som (GPU memory) and Session (CPU memory) go; its last thumbnail stays for the wall (and in
-its folder, for the wall after a restart). `open` brings it back from its folder as the autosave left it (its last
-completed step with its undo history; nothing trains until the next intent), as it does after a crash or on another
-worker after this one died.
+its folder, for the wall after a restart; a live room's is written there too, at most every THUMB_SAVE_PERIOD seconds
+while it changes, so a room whose worker died shows its clay after a restart). `open` brings it back from its folder
+as the autosave left it (its last completed step with its undo history; nothing trains until the next intent), as it
+does after a crash or on another worker after this one died.
 """
 
 from __future__ import annotations
@@ -141,6 +142,14 @@ class Room:
                 if time.monotonic() - self._thumb_saved >= THUMB_SAVE_PERIOD:
                     self.save_thumb()
         return self._thumb
+
+    def keep_thumb(self) -> None:
+        """The room's latest thumbnail into its folder when its clay changed and THUMB_SAVE_PERIOD passed since the
+        last one went there, whether or not a wall is open: a room whose worker dies without parking it shows its
+        clay on the wall after a restart, as it was at most THUMB_SAVE_PERIOD seconds before."""
+        if time.monotonic() - self._thumb_saved >= THUMB_SAVE_PERIOD:
+            self.latest_thumb()
+            self.save_thumb()
 
     def save_thumb(self) -> None:
         """The latest thumbnail into the room's folder (thumbs.py), unless it is there already."""
@@ -370,7 +379,11 @@ class Rooms:
         return True
 
     def park_idle(self) -> list[str]:
-        """Park the rooms without a view for `limits.park_after` seconds (none when it is 0); their names."""
+        """The worker's look at its rooms every few seconds: each live room's thumbnail kept in its folder when due
+        (`Room.keep_thumb`), then the rooms without a view for `limits.park_after` seconds parked (none when it is
+        0); their names."""
+        for room in self.live():
+            room.keep_thumb()
         after = self.limits.park_after
         if after <= 0:
             return []
