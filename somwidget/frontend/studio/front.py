@@ -26,18 +26,18 @@ from .rooms import RoomBusy
 
 log = logging.getLogger(__name__)
 
-
-def _logged(task: asyncio.Future) -> None:
-    """A task of the front's that failed in a way it does not handle: logged, never left unretrieved."""
-    if not task.cancelled() and task.exception() is not None:
-        log.error("studio: %s failed", task, exc_info=task.exception())
-
 #: Seconds between two looks at a place (the places' looks spread over them).
 MONITOR_PERIOD = 1.0
 #: Failed looks in a row after which a place is dead.
 DEAD_AFTER = 2
 #: Seconds to keep trying a room whose folder another process still holds (a worker going down lets go of it).
 BUSY_WAIT = 8.0
+
+
+def _logged(task: asyncio.Future) -> None:
+    """A task of the front's that failed in a way it does not handle: logged, never left unretrieved."""
+    if not task.cancelled() and task.exception() is not None:
+        log.error("studio: %s failed", task, exc_info=task.exception())
 
 
 @dataclass
