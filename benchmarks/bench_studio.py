@@ -63,7 +63,6 @@ from studio_load import back_after_cut, drive, loop_lags, summarise  # noqa: E40
 
 MOVE_INTERVAL = 1.0 / 30.0  # s: 30 moves a second
 TARGET_MS = 50.0
-LOOK_SHADOW = 0.25  # s after the front's look at its places in which a slow move counts as near it
 MIXED = ("car", "sphere", "torus", "lines")
 HEAVY = ("trame", "pyvista", "trimesh", "vtk", "vtkmodules", "wslink", "ipywidgets", "anywidget")
 
@@ -132,25 +131,16 @@ def timed_checks(front) -> list[tuple[float, float]]:
 
 
 def tail_causes(views: list, looks: list, rounds: list[dict], window: tuple[float, float]) -> dict:
-    """Where the slow moves came from: the workers' rounds (median, p95, longest of any worker), the front's looks at
-    its places (p95 and longest seconds), and the share of slow moves sent within LOOK_SHADOW of a look's start
-    against the share of the moving time that lies there (alike: the looks do not make them)."""
+    """Where the slow moves came from: how periodic they are, the front's looks at its places (p95 and longest
+    ms) and the workers' rounds (median, p95, longest of any worker)."""
     slow = np.array([t for v in views for t in v.get("slow", []) if window[0] <= t <= window[1]])
-    starts = np.array(sorted({round(b, 2) for b, _ in looks if window[0] - 1 <= b <= window[1]}))
     took = np.array([d for b, d in looks if window[0] <= b <= window[1]] or [0.0])
-    near = chance = float("nan")
-    if len(starts):
-        after = slow[:, None] - starts[None, :] if len(slow) else np.zeros((0, 1))
-        near = float(np.mean(((after >= 0) & (after <= LOOK_SHADOW)).any(axis=1))) if len(slow) else float("nan")
-        grid = np.linspace(window[0], window[1], 2000)
-        chance = float(np.mean(((grid[:, None] - starts[None, :] >= 0)
-                                & (grid[:, None] - starts[None, :] <= LOOK_SHADOW)).any(axis=1)))
     timed = [r for r in rounds if r.get("rounds")]
     # how periodic the slow moves are: the mean resultant length of their phases (0: spread evenly, 1: all at one
     # phase) for a period of 1 s (the front's looks) and of 2 s (the rooms' autosaves while a drag is held)
     phase = {f"slow_phase_{p:g}s": float(abs(np.mean(np.exp(2j * np.pi * slow / p)))) if len(slow) else float("nan")
              for p in (1.0, 2.0)}
-    return {**phase, "slow_moves": int(len(slow)), "slow_near_look": near, "look_shadow_share": chance,
+    return {**phase, "slow_moves": int(len(slow)),
             "look_p95_ms": float(np.percentile(took, 95) * 1e3), "look_max_ms": float(took.max() * 1e3),
             "round_median_ms": max((r["median_ms"] for r in timed), default=float("nan")),
             "round_p95_ms": max((r["p95_ms"] for r in timed), default=float("nan")),
@@ -165,10 +155,9 @@ def lag_figures(role: str, lags: list, window: tuple[float, float]) -> dict:
 
 
 def causes_line(c: dict) -> str:
-    return (f"#   slow moves {c['slow_moves']}: {c['slow_near_look']:.0%} sent within {LOOK_SHADOW:g} s of the "
-            f"front's look at its places (that window is {c['look_shadow_share']:.0%} of the time); a look p95 "
-            f"{c['look_p95_ms']:.0f} ms, longest {c['look_max_ms']:.0f}; their phase at 1 s {c['slow_phase_1s']:.2f}, "
-            f"at 2 s {c['slow_phase_2s']:.2f} (0 even, 1 at one phase); the front's loop late "
+    return (f"#   slow moves {c['slow_moves']}: their phase at 1 s {c['slow_phase_1s']:.2f}, "
+            f"at 2 s {c['slow_phase_2s']:.2f} (0 even, 1 at one phase); the front's look at a place p95 "
+            f"{c['look_p95_ms']:.0f} ms, longest {c['look_max_ms']:.0f}; the front's loop late "
             f"{c['front_lag_s']:.2f} s in all, at most {c['front_lag_max_ms']:.0f} ms; the designers' loops "
             f"{c['designers_lag_s']:.2f} s, at most {c['designers_lag_max_ms']:.0f} ms; the slowest worker's rounds "
             f"median {c['round_median_ms']:.1f} ms, p95 {c['round_p95_ms']:.1f}, longest {c['round_max_ms']:.1f}")

@@ -179,6 +179,9 @@ class _LookedAtPlace(_Place):
         self.looks.append((time.monotonic(), self.label))
         return {"load": self.load}
 
+    async def known(self) -> list[dict]:
+        return []
+
     async def listing(self) -> list[dict]:
         return []
 
@@ -200,7 +203,8 @@ def test_the_front_spreads_its_looks_at_the_places_over_the_period(monkeypatch):
 
     async def watch():
         front = front_module.StudioFront(places)
-        front._task = asyncio.ensure_future(front._monitor())
+        await front.start()
+        looks.clear()  # the start's one look at each place, together: then the monitor's
         await asyncio.sleep(3 * period + 0.05)
         await front.close()
 
