@@ -155,11 +155,13 @@ def test_a_studio_steps_its_car_rooms_in_one_launch(tmp_path):
     rooms = Rooms(tmp_path / "rooms", device="cpu", limits=StudioLimits(park_after=0))
     try:
         made = [rooms.create(f"r{i}", f"token-{i}-abcdefgh", "car") for i in range(3)]
-        for room in made:  # each room's designer drags: its session trains again
-            session = room.session
-            session.move_control(0, np.asarray(session.controls[0][:3]) + 0.05)
         deadline = time.monotonic() + 120
         while rooms.batches.widest < 2 and time.monotonic() < deadline:
+            # each room's designer drags on (a room that settled before another's move came steps alone: under
+            # load one move each could leave every round with one room)
+            for room in made:
+                session = room.session
+                session.move_control(0, np.asarray(session.controls[0][:3]) + 0.01)
             time.sleep(0.1)
         assert rooms.batches.widest >= 2 and rooms.batches.launches >= 1  # one launch stepped several rooms
         for room in made:
